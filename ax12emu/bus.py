@@ -1,0 +1,210 @@
+"""A half-duplex bus of virtual AX-12 servos: bytes in, timed status packets out.
+
+Why it exists: it is the one place that owns the servos, their shared table
+array, the model behind them and the framer, and decides who hears a packet.
+It does no I/O: a transport loop (``server.py``) or a test feeds it bytes with
+the time they arrived and sends what it returns after each reply's delay.
+
+Hardware semantics kept: every servo sees every packet and acts on its own
+ID or the broadcast ID; a servo listening at a baud rate more than 3 % away
+from the line's hears only garbage and stays silent; two servos given the
+same ID both act and both answer (the server merges colliding replies); an ID
+written by a client moves the servo at once.  Not modelled here: bit timing
+and collisions on the wire (``server.py``), electrical faults.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Iterable, Sequence
+from typing import NamedTuple
+
+import numpy as np
+
+from firmware_model import KinematicModel
+from firmware_model.interface import ServoModel
+
+from .clock import VirtualClock, WallClock
+from .control_table import TABLE_SIZE
+from .describe import describe_error, describe_instruction
+from .framing import Framer
+from .packets import BROADCAST_ID, MAX_ID, Instruction, InstructionPacket
+from .plant import Plant
+from .request_handler import handle
+from .servo import ServoOptions, VirtualServo
+from .state_store import StateStore
+
+__all__ = ["Bus", "Reply", "BAUD_TOLERANCE", "parse_ids"]
+
+log = logging.getLogger(__name__)
+
+#: A UART samples mid-bit; beyond about 3 % rate mismatch the stop bit is missed.
+BAUD_TOLERANCE = 0.03
+
+
+class Reply(NamedTuple):
+    """A status packet to put on the line ``delay_s`` after the instruction ended."""
+
+    servo_id: int
+    data: bytes
+    delay_s: float
+    #: The replying servo's bit rate, for pacing and collision timing.
+    baud_bps: float
+
+
+def parse_ids(text: str) -> list[int]:
+    """Parse "1,2,5" or "1-18" (or a mix) into a list of distinct servo IDs 0..253."""
+    ids: list[int] = []
+    for part in text.split(","):
+        part = part.strip()
+        if not part:
+            raise ValueError(f"empty item in ID list {text!r}")
+        low, sep, high = part.partition("-")
+        try:
+            first, last = (int(low), int(high)) if sep else (int(part), int(part))
+        except ValueError:
+            raise ValueError(f"{part!r} is not an ID or range of IDs (e.g. 1,2,5 or 1-18)") from None
+        if first > last:
+            raise ValueError(f"range {part!r} runs backwards")
+        for servo_id in range(first, last + 1):
+            if not 0 <= servo_id <= MAX_ID:
+                raise ValueError(f"ID {servo_id} is outside 0..{MAX_ID}")
+            if servo_id in ids:
+                raise ValueError(f"ID {servo_id} is listed twice")
+            ids.append(servo_id)
+    return ids
+
+
+class Bus:
+    """Virtual servos on one wire, with their model, in wall-clock or virtual time."""
+
+    def __init__(
+        self,
+        ids: Iterable[int],
+        *,
+        options: ServoOptions = ServoOptions(),
+        model: ServoModel | None = None,
+        clock: WallClock | VirtualClock | None = None,
+        state_store: StateStore | None = None,
+        framer: Framer | None = None,
+    ) -> None:
+        slots = list(ids)
+        if not slots:
+            raise ValueError("a bus needs at least one servo")
+        if len(set(slots)) != len(slots):
+            raise ValueError(f"duplicate IDs in {slots}")
+        for servo_id in slots:
+            if not 0 <= servo_id <= MAX_ID:
+                raise ValueError(f"ID {servo_id} is outside 0..{MAX_ID}")
+        self.slots = slots
+        self.options = options
+        self.clock = clock if clock is not None else WallClock()
+        self.framer = framer if framer is not None else Framer()
+        self.state_store = state_store
+        self.rows = np.zeros((len(slots), TABLE_SIZE), dtype=np.uint8)
+        self.servos: list[VirtualServo] = [
+            VirtualServo.fresh(slot, options, index=index, row=self.rows[index]) for index, slot in enumerate(slots)
+        ]
+        if state_store is not None:
+            for slot, servo in zip(slots, self.servos):
+                state_store.load(slot, servo.table)
+        self.model = model if model is not None else KinematicModel(len(slots))
+        self.plant = Plant(self.model, self.rows, self.servos)
+        for servo in self.servos:
+            servo.power_on()
+        self._by_id: dict[int, list[VirtualServo]] = {}
+        self._reindex()
+        self._closed = False
+
+    # -- lookup ------------------------------------------------------------------------
+    def _reindex(self) -> None:
+        by_id: dict[int, list[VirtualServo]] = {}
+        for servo in self.servos:
+            by_id.setdefault(servo.id, []).append(servo)
+        self._by_id = by_id
+
+    def servo(self, servo_id: int) -> VirtualServo:
+        """The (first) servo answering to ``servo_id`` now."""
+        try:
+            return self._by_id[servo_id][0]
+        except KeyError:
+            raise KeyError(f"no servo with ID {servo_id} on the bus (IDs now: {sorted(self._by_id)})") from None
+
+    @property
+    def ids(self) -> list[int]:
+        """Present IDs, in slot order."""
+        return [servo.id for servo in self.servos]
+
+    # -- time --------------------------------------------------------------------------
+    def advance(self) -> bool:
+        """Bring the physics up to the clock's present time; True if a step was taken."""
+        return self.plant.advance(self.clock.now_s())
+
+    # -- bytes in, replies out ---------------------------------------------------------
+    def receive(self, data: bytes, now_s: float | None = None, *, line_bps: float | None = None) -> list[Reply]:
+        """Feed bytes that arrived at wall time ``now_s``; return the replies they cause.
+
+        ``line_bps`` is the rate the host transmits at, when the transport
+        knows it (a pty's termios speed); None means every servo hears.
+        """
+        replies: list[Reply] = []
+        for packet in self.framer.feed(data, now_s):
+            replies.extend(self.dispatch(packet, line_bps=line_bps))
+        return replies
+
+    def expire(self, now_s: float) -> None:
+        """Let the framer drop a partial packet after silence."""
+        if self.framer.expire(now_s):
+            log.debug("dropped a partial packet after %.0f ms of silence", self.framer.silence_timeout_s * 1e3)
+
+    def dispatch(self, packet: InstructionPacket, *, line_bps: float | None = None) -> list[Reply]:
+        """Run one decoded packet on the servos it addresses; return their replies."""
+        self.plant.advance(self.clock.now_s())
+        targets = self.servos if packet.id == BROADCAST_ID else self._by_id.get(packet.id, ())
+        debug = log.isEnabledFor(logging.DEBUG)
+        if debug:
+            log.debug("rx %s -> IDs %s", describe_instruction(packet, self.options.profile), [s.id for s in targets])
+        replies: list[Reply] = []
+        moved = False
+        for servo in targets:
+            baud = servo.baud_bps
+            if line_bps is not None and abs(line_bps - baud) > BAUD_TOLERANCE * baud:
+                if debug:
+                    log.debug("ID %d listens at %.0f bps, the host sends at %.0f: it hears garbage", servo.id, baud, line_bps)
+                continue
+            old_id = servo.id
+            outcome = handle(servo, packet)
+            moved = moved or servo.id != old_id
+            if outcome.reply is not None:
+                replies.append(Reply(outcome.reply_id, outcome.reply, outcome.delay_s, baud))
+                if debug:
+                    log.debug("tx id=%d %s after %.0f us", outcome.reply_id, describe_error(outcome.reply[4]), outcome.delay_s * 1e6)
+            if servo.eeprom_dirty:
+                servo.eeprom_dirty = False
+                if self.state_store is not None:
+                    self.state_store.save(self.slots[servo.index], servo.table)
+        self.plant.tables_changed()
+        if packet.instruction == Instruction.RESET:
+            self.plant.refresh()
+        if moved:
+            self._reindex()
+        return replies
+
+    # -- life cycle --------------------------------------------------------------------
+    def save_state(self) -> None:
+        """Write every servo's EEPROM to the state store (if any)."""
+        if self.state_store is not None:
+            for slot, servo in zip(self.slots, self.servos):
+                self.state_store.save(slot, servo.table)
+
+    def close(self) -> None:
+        """Save state; safe to call more than once."""
+        if not self._closed:
+            self._closed = True
+            self.save_state()
+
+    def __enter__(self) -> "Bus":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

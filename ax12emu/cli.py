@@ -1,0 +1,197 @@
+"""Command line: ``ax12emu serve`` (and ``python -m ax12emu``).
+
+Why it exists: argument parsing lives in a pure :func:`parse_args` that tests
+call directly; :func:`main` turns every user error (a bad flag, a bad ID
+list, an unusable state file, a port in use) into one line on stderr and a
+non-zero exit, never a traceback.  ``print`` is used only here: the first
+line on stdout is the port to open (the pty's slave path, or the
+``socket://`` URL for TCP), so scripts can read it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import ipaddress
+import logging
+import signal
+import sys
+from collections.abc import Sequence
+
+from . import __version__
+from .bus import Bus, parse_ids
+from .clock import WallClock
+from .control_table import DEFAULT_PROFILE, PROFILES
+from .servo import ServoOptions
+from .state_store import StateFileError, StateStore
+
+__all__ = ["parse_args", "main", "build_parser"]
+
+log = logging.getLogger("ax12emu")
+
+
+def _ids(text: str) -> list[int]:
+    try:
+        return parse_ids(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not value > 0 or value != value or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"must be a positive finite number, got {text}")
+    return value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser for all subcommands."""
+    parser = argparse.ArgumentParser(prog="ax12emu", description="A virtual Dynamixel AX-12+ bus (Protocol 1.0).")
+    parser.add_argument("--version", action="version", version=f"ax12emu {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    serve = sub.add_parser("serve", help="serve a bus of virtual servos on a pty or TCP")
+    serve.add_argument("--ids", type=_ids, default=[1], metavar="LIST", help="servo IDs, e.g. 1,2,5 or 1-18 (default 1)")
+    where = serve.add_mutually_exclusive_group()
+    where.add_argument("--pty", action="store_true", help="serve on a pseudo-terminal (the default)")
+    where.add_argument("--tcp", metavar="HOST:PORT", help="serve the raw byte stream on TCP instead (PORT 0: pick one)")
+    serve.add_argument("--link", metavar="PATH", help="with a pty: symlink PATH to its slave side (removed on exit)")
+    serve.add_argument(
+        "--allow-remote", action="store_true", help="allow --tcp to bind an address other than loopback"
+    )
+    serve.add_argument("--state-dir", metavar="DIR", help="persist each servo's EEPROM area in DIR")
+    serve.add_argument(
+        "--factory-reset", action="store_true", help="ignore saved state and start from factory defaults"
+    )
+    serve.add_argument("--profile", choices=sorted(PROFILES), default=DEFAULT_PROFILE, help="control-table defaults")
+    serve.add_argument("--pace", action="store_true", help="send and receive at the wire speed of the servo's baud")
+    serve.add_argument("--echo", action="store_true", help="echo the host's bytes back, like a half-duplex adapter")
+    serve.add_argument(
+        "--time-scale", type=_positive_float, default=1.0, metavar="K", help="simulated seconds per wall second"
+    )
+    serve.add_argument(
+        "--checksum-error",
+        choices=("reply", "silent"),
+        default="reply",
+        help="answer a bad checksum with the Checksum Error bit (default) or stay silent",
+    )
+    serve.add_argument(
+        "--broadcast-ping",
+        choices=("reply", "silent"),
+        default="reply",
+        help="servos answer PING to the broadcast ID (2006 manual, default) or stay silent",
+    )
+    serve.add_argument(
+        "--reset-reply-id",
+        choices=("old", "new"),
+        default="old",
+        help="RESET's status packet comes from the old ID (e-manual example, default) or the new ID 1",
+    )
+    serve.add_argument("-v", "--verbose", action="store_true", help="log every packet, one line each")
+    return parser
+
+
+def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
+    """Parse and cross-check arguments; errors exit through argparse with a usage line."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.command == "serve":
+        if args.link and args.tcp:
+            parser.error("--link applies to a pty, not to --tcp")
+        if args.tcp:
+            from .transports.tcp import parse_host_port
+
+            try:
+                host, port = parse_host_port(args.tcp)
+            except ValueError as exc:
+                parser.error(f"--tcp: {exc}")
+            if not _is_loopback(host) and not args.allow_remote:
+                parser.error(f"--tcp {host}: binding beyond loopback needs --allow-remote")
+            args.tcp_address = (host, port)
+    return args
+
+
+def _is_loopback(host: str) -> bool:
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+def _serve(args: argparse.Namespace) -> int:
+    from .server import BusServer
+    from .transports.pty import PtyTransport
+    from .transports.tcp import TcpTransport
+
+    options = ServoOptions(
+        profile=args.profile,
+        reply_on_checksum_error=args.checksum_error == "reply",
+        reply_to_broadcast_ping=args.broadcast_ping == "reply",
+        reset_reply_from_new_id=args.reset_reply_id == "new",
+    )
+    store = StateStore(args.state_dir) if args.state_dir else None
+    bus = Bus(
+        args.ids,
+        options=options,
+        clock=WallClock(args.time_scale),
+        state_store=None if args.factory_reset else store,
+    )
+    if args.factory_reset:
+        bus.state_store = store
+    if args.tcp:
+        host, port = args.tcp_address
+        if not _is_loopback(host):
+            log.warning("serving on %s:%d, reachable from other machines", host, port)
+        transport = TcpTransport(host, port)
+        where = f"socket://{transport.host}:{transport.port}"
+    else:
+        transport = PtyTransport(args.link)
+        where = transport.slave_path
+    server = BusServer(bus, transport, pace=args.pace, echo=args.echo)
+
+    def _stop(signum: int, frame: object) -> None:
+        server.stop()
+
+    signal.signal(signal.SIGINT, _stop)
+    signal.signal(signal.SIGTERM, _stop)
+    print(where, flush=True)
+    log.info(
+        "serving IDs %s on %s (profile %s%s%s)",
+        ",".join(map(str, bus.ids)),
+        transport.name,
+        args.profile,
+        ", paced" if args.pace else "",
+        ", echo" if args.echo else "",
+    )
+    try:
+        server.serve_forever()
+    finally:
+        transport.close()
+        bus.close()
+        log.info("stopped; %d packets served", server.packets_in)
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``ax12emu`` console script."""
+    args = parse_args(argv)
+    logging.basicConfig(
+        level=logging.DEBUG if getattr(args, "verbose", False) else logging.INFO,
+        format="%(asctime)s.%(msecs)03d %(name)s %(levelname)s %(message)s",
+        datefmt="%H:%M:%S",
+        stream=sys.stderr,
+    )
+    try:
+        if args.command == "serve":
+            return _serve(args)
+    except (StateFileError, FileExistsError) as exc:
+        print(f"ax12emu: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"ax12emu: {exc}", file=sys.stderr)
+        return 1
+    return 2

@@ -1,0 +1,70 @@
+"""Human-readable one-line descriptions of packets, for logs and decoders.
+
+Why it exists: ``-v`` logging (and later trace decoding) should say
+"WRITE id=1 goal_position=512" rather than a hex dump, and the control table
+is the one place that knows register names.
+"""
+
+from __future__ import annotations
+
+from .control_table import DEFAULT_PROFILE, layout
+from .packets import Instruction, InstructionPacket, StatusError
+
+__all__ = ["describe_instruction", "describe_error"]
+
+
+def describe_error(error: int) -> str:
+    """Error byte as names, e.g. "RANGE|OVERLOAD", or "ok"."""
+    if not error:
+        return "ok"
+    names = [flag.name for flag in StatusError if flag and error & flag and flag.name]
+    if error & 0x80:
+        names.append("BIT7")
+    return "|".join(names)
+
+
+def _registers(address: int, data: bytes, profile: str) -> str:
+    lay = layout(profile)
+    parts = []
+    offset = 0
+    while offset < len(data):
+        at = address + offset
+        index = int(lay.owner[at]) if 0 <= at < len(lay.owner) else -1
+        if index < 0:
+            parts.append(f"[{at}]={data[offset]}")
+            offset += 1
+            continue
+        entry = lay.entries[index]
+        start = at - entry.address
+        chunk = data[offset : offset + entry.size - start]
+        value = int.from_bytes(chunk, "little")
+        suffix = "" if start == 0 and len(chunk) == entry.size else f"(byte{start}+{len(chunk)})"
+        parts.append(f"{entry.name}{suffix}={value}")
+        offset += len(chunk)
+    return " ".join(parts)
+
+
+def describe_instruction(packet: InstructionPacket, profile: str = DEFAULT_PROFILE) -> str:
+    """One line: instruction, ID and what it asks, in register names."""
+    try:
+        name = Instruction(packet.instruction).name
+    except ValueError:
+        name = f"INSTR_{packet.instruction:#04x}"
+    head = f"{name} id={packet.id}"
+    if not packet.checksum_ok:
+        head += " BAD-CHECKSUM"
+    params = packet.params
+    if packet.instruction == Instruction.READ and len(params) == 2:
+        entries = layout(profile).owner[params[0] : params[0] + params[1]]
+        names = sorted({layout(profile).entries[i].name for i in entries if i >= 0}, key=str)
+        return f"{head} address={params[0]} length={params[1]} ({', '.join(names) or 'unused'})"
+    if packet.instruction in (Instruction.WRITE, Instruction.REG_WRITE) and len(params) >= 2:
+        return f"{head} {_registers(params[0], bytes(params[1:]), profile)}"
+    if packet.instruction == Instruction.SYNC_WRITE and len(params) >= 2 and params[1]:
+        size = params[1]
+        blocks = [
+            f"[id={params[i]} {_registers(params[0], bytes(params[i + 1 : i + 1 + size]), profile)}]"
+            for i in range(2, len(params) - size, size + 1)
+        ]
+        return f"{head} " + " ".join(blocks)
+    return f"{head} params={params.hex(' ')}" if params else head

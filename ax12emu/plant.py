@@ -1,0 +1,104 @@
+"""The adapter between control tables and a servo model: commands out, sensed values in.
+
+Why it exists: it is the only place that knows both the control table's byte
+layout and the model's interface, so the model stays free of packets and the
+protocol code free of physics.  All N servos are read and written at once
+from the bus's shared ``(N, 50)`` byte array.
+
+It also applies the firmware's reaction to alarms: Alarm Shutdown (address
+18) acts on the bits it selects, as the table's profile says (e-manual:
+Torque Limit set to 0; 2006 manual: torque off).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from firmware_model.interface import Commands, Sensed, ServoModel
+
+from .control_table import Layout
+from .servo import VirtualServo
+
+__all__ = ["Plant"]
+
+
+def _columns(lay: Layout, names: Sequence[str]) -> dict[str, tuple[int, int]]:
+    return {name: (lay.by_name[name].address, lay.by_name[name].size) for name in names}
+
+
+class Plant:
+    """Runs ``model`` behind the servos whose tables are the rows of ``rows``."""
+
+    def __init__(self, model: ServoModel, rows: np.ndarray, servos: Sequence[VirtualServo]) -> None:
+        if model.n != len(servos) or rows.shape[0] != len(servos):
+            raise ValueError(f"model has {model.n} servos, bus has {len(servos)}")
+        self.model = model
+        self.rows = rows
+        self.servos = servos
+        lay = servos[0].table.layout
+        self._profile = lay.profile
+        self._commands = _columns(lay, Commands.field_names())
+        self._sensed = _columns(lay, [n for n in Sensed.field_names() if n != "alarms"])
+        self._torque_limit = lay.by_name["torque_limit"].address
+        self._torque_enable = lay.by_name["torque_enable"].address
+        self._shutdown = lay.by_name["shutdown"].address
+        self._cached_commands: Commands | None = None
+        self._any_alarm = True
+        for name, (address, size) in {**self._commands, **self._sensed}.items():
+            if size == 2 and address % 2:
+                raise AssertionError(f"{name} at odd address {address}: the word view cannot read it")
+        self.refresh()
+
+    def commands(self) -> Commands:
+        """The command registers of every servo, as int64 arrays (cached until a table changes)."""
+        if self._cached_commands is None:
+            as_bytes = self.rows.astype(np.int64)
+            # Every 2-byte entry starts at an even address, so a little-endian word view reads it.
+            as_words = self.rows.view("<u2").astype(np.int64)
+            self._cached_commands = Commands(
+                **{
+                    name: as_words[:, address // 2] if size == 2 else as_bytes[:, address]
+                    for name, (address, size) in self._commands.items()
+                }
+            )
+        return self._cached_commands
+
+    def tables_changed(self) -> None:
+        """Tell the plant a client may have written commands."""
+        self._cached_commands = None
+
+    def advance(self, sim_time_s: float) -> bool:
+        """Advance the model to ``sim_time_s`` if a whole step is due; True if it moved."""
+        model = self.model
+        if sim_time_s < model.time_s + model.step_s:
+            return False
+        self._write_back(model.advance(sim_time_s, self.commands()))
+        return True
+
+    def refresh(self) -> None:
+        """Copy the model's present sensed values into the tables without advancing."""
+        self._write_back(self.model.sense())
+
+    def _write_back(self, sensed: Sensed) -> None:
+        rows = self.rows
+        words = rows.view("<u2")
+        for name, (address, size) in self._sensed.items():
+            if size == 2:
+                words[:, address // 2] = getattr(sensed, name)
+            else:
+                rows[:, address] = getattr(sensed, name)
+        alarms = np.asarray(sensed.alarms, dtype=np.int64) & 0x7F
+        if not (self._any_alarm or alarms.any()):
+            return
+        self._any_alarm = bool(alarms.any())
+        for servo, bits in zip(self.servos, alarms.tolist()):
+            servo.alarms = bits
+        tripped = (alarms & rows[:, self._shutdown]) != 0
+        if tripped.any():
+            self._cached_commands = None
+            if self._profile.shutdown_clears == "torque_enable":
+                rows[tripped, self._torque_enable] = 0
+            else:
+                words[tripped, self._torque_limit // 2] = 0

@@ -1,0 +1,203 @@
+"""What a servo does with one instruction packet, and whether it answers.
+
+Why it exists: the policy of Protocol 1.0 (who answers, with which error
+bits, what is written) lives here in one place, with one small handler per
+instruction in a table keyed by instruction code, not an if-chain.  Wire
+errors are values (:class:`StatusError`); nothing here raises on bad input.
+
+Policy, with sources (ROBOTIS e-manual "Protocol 1.0", "Status Return Level";
+the 2006 AX-12 User's Manual):
+
+* the error byte of every status packet is the servo's present alarm bits
+  OR'd with the errors of this instruction; bit 7 is never set;
+* Status Return Level 0 answers PING only, 1 answers PING and READ, 2 all;
+* the broadcast ID is executed by every servo and answered by none, except
+  PING (see :class:`ServoOptions`);
+* an undefined instruction, BULK_READ included (the AX-12 lacks it), and
+  ACTION with nothing registered: Instruction Error;
+* a write out of range, to a read-only or unused byte, past the table, or
+  outside the Lock's window: Range Error, and nothing is written;
+* Goal Position outside CW..CCW Angle Limit in joint mode: Angle Limit Error,
+  nothing written;
+* the status packet is built before the write takes effect on ID, baud and
+  return delay (reverse-engineered AX-12 timing notes, xevelabs: "sent after
+  everything has been checked but applied after"), so a servo whose ID is
+  changed answers from its old ID and then answers to the new one.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import NamedTuple
+
+import numpy as np
+
+from .control_table import EEPROM_END
+from .packets import BROADCAST_ID, Instruction, InstructionPacket, StatusError, encode_status
+from .servo import VirtualServo
+
+__all__ = ["Outcome", "handle", "HANDLERS"]
+
+#: The largest READ reply that fits in one status packet (LENGTH is one byte).
+MAX_READ_BYTES = 253
+
+
+class Outcome(NamedTuple):
+    """What one servo does in answer to one packet (a NamedTuple: built per request)."""
+
+    #: Encoded status packet, or None for silence.
+    reply: bytes | None
+    #: ID the reply carries (the ID at reception unless a policy says otherwise).
+    reply_id: int
+    #: Return delay to apply before the reply, seconds (the value at reception).
+    delay_s: float
+    #: Error bits of this instruction (also in the reply, when there is one).
+    error: StatusError = StatusError.NONE
+
+
+# A handler returns the instruction's error bits and the reply's data bytes.
+Handler = Callable[[VirtualServo, InstructionPacket], tuple[StatusError, bytes]]
+
+
+def _ping(servo: VirtualServo, packet: InstructionPacket) -> tuple[StatusError, bytes]:
+    return StatusError.NONE, b""
+
+
+def _read(servo: VirtualServo, packet: InstructionPacket) -> tuple[StatusError, bytes]:
+    if len(packet.params) != 2:
+        return StatusError.RANGE, b""
+    address, length = packet.params
+    data, error = servo.table.read(address, min(length, MAX_READ_BYTES))
+    if length > MAX_READ_BYTES:
+        error |= StatusError.RANGE
+    return error, data
+
+
+def _angle_error(servo: VirtualServo, candidate: np.ndarray) -> StatusError:
+    """Angle Limit Error if the resulting Goal Position lies outside the limits in joint mode."""
+    cw = int(candidate[6]) | int(candidate[7]) << 8
+    ccw = int(candidate[8]) | int(candidate[9]) << 8
+    goal = int(candidate[30]) | int(candidate[31]) << 8
+    if (cw or ccw) and not cw <= goal <= ccw:
+        return StatusError.ANGLE_LIMIT
+    return StatusError.NONE
+
+
+def _apply_write(servo: VirtualServo, address: int, data: bytes) -> StatusError:
+    """Validate and commit one write, all-or-nothing, with the firmware's side effects."""
+    table = servo.table
+    candidate, error = table.check_write(address, data)
+    if candidate is None:
+        return error
+    if table.row[47] and not candidate[47]:
+        return StatusError.RANGE  # Lock is released only by power-off (e-manual, Lock)
+    if address <= 31 and address + len(data) > 30:
+        error |= _angle_error(servo, candidate)
+        if error:
+            return error
+    if address < EEPROM_END:
+        servo.eeprom_dirty = True
+    table.row[:] = candidate
+    return StatusError.NONE
+
+
+def _write(servo: VirtualServo, packet: InstructionPacket) -> tuple[StatusError, bytes]:
+    if len(packet.params) < 2:
+        return StatusError.RANGE, b""
+    return _apply_write(servo, packet.params[0], bytes(packet.params[1:])), b""
+
+
+def _reg_write(servo: VirtualServo, packet: InstructionPacket) -> tuple[StatusError, bytes]:
+    if len(packet.params) < 2:
+        return StatusError.RANGE, b""
+    address, data = packet.params[0], bytes(packet.params[1:])
+    candidate, error = servo.table.check_write(address, data)
+    if candidate is None:
+        return error, b""
+    servo.registered_write = (address, data)
+    servo.table.set("registered", 1)
+    return StatusError.NONE, b""
+
+
+def _action(servo: VirtualServo, packet: InstructionPacket) -> tuple[StatusError, bytes]:
+    if servo.registered_write is None:
+        return StatusError.INSTRUCTION, b""
+    address, data = servo.registered_write
+    servo.registered_write = None
+    servo.table.set("registered", 0)
+    return _apply_write(servo, address, data), b""
+
+
+def _reset(servo: VirtualServo, packet: InstructionPacket) -> tuple[StatusError, bytes]:
+    present = servo.table.get("present_position")
+    servo.table.factory_reset()
+    servo.table.set("present_position", present)
+    servo.power_on()
+    servo.eeprom_dirty = True
+    return StatusError.NONE, b""
+
+
+def _sync_write(servo: VirtualServo, packet: InstructionPacket) -> tuple[StatusError, bytes]:
+    """SYNC_WRITE: start address, data length L, then (ID, L bytes) per servo."""
+    params = packet.params
+    if len(params) < 2 or params[1] == 0 or (len(params) - 2) % (params[1] + 1):
+        return StatusError.RANGE, b""
+    address, size = params[0], params[1]
+    for start in range(2, len(params), size + 1):
+        if params[start] == servo.id:
+            return _apply_write(servo, address, bytes(params[start + 1 : start + 1 + size])), b""
+    return StatusError.NONE, b""
+
+
+HANDLERS: dict[int, Handler] = {
+    Instruction.PING: _ping,
+    Instruction.READ: _read,
+    Instruction.WRITE: _write,
+    Instruction.REG_WRITE: _reg_write,
+    Instruction.ACTION: _action,
+    Instruction.RESET: _reset,
+    Instruction.SYNC_WRITE: _sync_write,
+}
+
+
+def _answers(servo: VirtualServo, packet: InstructionPacket) -> bool:
+    """Whether this servo sends a status packet for this packet (before errors)."""
+    instruction = packet.instruction
+    if packet.id == BROADCAST_ID:
+        return instruction == Instruction.PING and servo.options.reply_to_broadcast_ping
+    if instruction == Instruction.PING:
+        return True
+    level = servo.status_return_level
+    return level >= 2 or (level == 1 and instruction == Instruction.READ)
+
+
+def _silent_read_length(packet: InstructionPacket) -> int:
+    """Bytes a READ asked for, so an erroring reply still carries them (dynamixel-sdk indexes them)."""
+    if packet.instruction == Instruction.READ and len(packet.params) == 2:
+        return min(packet.params[1], MAX_READ_BYTES)
+    return 0
+
+
+def handle(servo: VirtualServo, packet: InstructionPacket) -> Outcome:
+    """Execute ``packet`` on ``servo`` (already known to be addressed to it) and build its answer."""
+    reply_id = servo.id
+    delay_s = servo.return_delay_s
+    answers = _answers(servo, packet)
+    if not packet.checksum_ok:
+        error = StatusError.CHECKSUM
+        data = bytes(_silent_read_length(packet))
+        answers = answers and servo.options.reply_on_checksum_error
+    else:
+        handler = HANDLERS.get(packet.instruction)
+        if handler is None:
+            error, data = StatusError.INSTRUCTION, bytes(_silent_read_length(packet))
+        else:
+            error, data = handler(servo, packet)
+            if packet.instruction == Instruction.RESET and servo.options.reset_reply_from_new_id:
+                reply_id = servo.id
+        if error and packet.instruction == Instruction.READ:
+            data = data.ljust(_silent_read_length(packet), b"\x00")
+    if not answers:
+        return Outcome(None, reply_id, delay_s, error)
+    status = (int(error) | servo.alarms) & 0x7F
+    return Outcome(encode_status(reply_id, status, data), reply_id, delay_s, error)

@@ -1,0 +1,192 @@
+"""The real-time serving loop: one thread, select on the transport, timed replies.
+
+Why it exists: a client such as dynamixel-sdk busy-waits on a core for its
+reply with a ~34 ms timeout, so the emulator must react to input at once (no
+sleeps in the serving path) and put each status packet on the line exactly
+Return Delay Time after the instruction ended.  It sleeps in ``select`` until
+the next event (input, a reply falling due, a physics tick) and spins only
+for the last fraction of a millisecond before a reply, where a timeout
+would be too coarse.
+
+The wire, as it is modelled here:
+
+* replies are released ``delay`` after the instruction's last byte arrived;
+* ``pace``: bytes take 10 bit-times each (start, 8 data, stop) at the servo's
+  baud, both the host's instruction and the reply, so throughput is the
+  wire's; host bytes arriving while a reply is still on the wire collide and
+  both come out garbled (wired-AND: each bit is the AND of both drivers);
+* replies of several servos to one packet (broadcast PING, duplicate IDs)
+  that overlap in time are merged the same way, slot by slot;
+* ``echo``: the adapter reads back its own transmission, so the host sees its
+  instruction bytes before the status packet.
+"""
+
+from __future__ import annotations
+
+import bisect
+import logging
+import select
+import time
+
+from .bus import Bus, Reply
+from .transports.base import Transport
+
+__all__ = ["BusServer", "merge_replies"]
+
+log = logging.getLogger(__name__)
+
+#: Bits per byte on the wire: start + 8 data + stop (8N1, e-manual).
+BITS_PER_BYTE = 10
+#: Below this much time to the next reply, busy-wait instead of sleeping in select.
+SPIN_S = 0.0003
+#: A physics step is put off while a reply is due sooner than this, so it cannot delay the reply.
+PHYSICS_DEFER_S = 0.001
+
+
+def merge_replies(replies: list[Reply], start_s: float, *, per_byte: bool) -> list[tuple[float, bytes]]:
+    """Lay replies on the wire as (release time, bytes) chunks; colliding byte slots are AND-ed.
+
+    Each reply starts ``delay_s`` after ``start_s`` and takes one byte time
+    (10 bits at its servo's baud) per byte.  Bytes of different replies that
+    fall in the same byte slot are AND-ed, as on an open-drain TTL line.
+    With ``per_byte`` each byte is released when its last bit has arrived
+    (wire pacing); otherwise a single reply goes out whole at its due time.
+    """
+    if len(replies) == 1 and not per_byte:
+        reply = replies[0]
+        return [(start_s + reply.delay_s, reply.data)]
+    byte_s = BITS_PER_BYTE / replies[0].baud_bps
+    slots: dict[int, int] = {}
+    for reply in replies:
+        first_slot = round(reply.delay_s / byte_s)
+        for i, value in enumerate(reply.data):
+            slots[first_slot + i] = slots.get(first_slot + i, 0xFF) & value
+    ordered = sorted(slots)
+    if per_byte:
+        return [(start_s + (slot + 1) * byte_s, bytes((slots[slot],))) for slot in ordered]
+    return [(start_s + ordered[0] * byte_s, bytes(slots[slot] for slot in ordered))]
+
+
+class BusServer:
+    """Serves ``bus`` over ``transport`` until :meth:`stop`."""
+
+    def __init__(
+        self,
+        bus: Bus,
+        transport: Transport,
+        *,
+        pace: bool = False,
+        echo: bool = False,
+        physics_period_s: float = 1e-3,
+    ) -> None:
+        self.bus = bus
+        self.transport = transport
+        self.pace = pace
+        self.echo = echo
+        self.physics_period_s = physics_period_s
+        self._queue: list[_Scheduled] = []
+        self._seq = 0
+        self._stop = False
+        self._rx_busy_until = 0.0
+        self._next_physics = time.monotonic()
+        #: Counters for diagnostics and tests.
+        self.packets_in = 0
+        self.bytes_dropped = 0
+        self.collisions = 0
+
+    def stop(self) -> None:
+        """Ask the loop to end after the current iteration (safe from a signal handler)."""
+        self._stop = True
+
+    # -- output ------------------------------------------------------------------------
+    # The queue holds [release_s, seq, data, is_reply] lists, sorted; seq breaks ties.
+    def _schedule(self, chunks: list[tuple[float, bytes]], *, is_reply: bool = True) -> None:
+        for release_s, data in chunks:
+            self._seq += 1
+            bisect.insort(self._queue, [release_s, self._seq, bytearray(data), is_reply])
+
+    def _flush(self, now: float) -> None:
+        queue = self._queue
+        count = 0
+        while count < len(queue) and queue[count][0] <= now:
+            count += 1
+        if not count:
+            return
+        data = queue[0][2] if count == 1 else b"".join(item[2] for item in queue[:count])
+        del queue[:count]
+        sent = self.transport.write(bytes(data))
+        if sent < len(data):
+            self.bytes_dropped += len(data) - sent  # nobody is reading: the bytes are lost, as on a bus
+
+    def _byte_s(self) -> float:
+        return BITS_PER_BYTE / self.bus.servos[0].baud_bps
+
+    # -- input -------------------------------------------------------------------------
+    def _on_bytes(self, data: bytes, now: float) -> None:
+        line_bps = self.transport.line_bps()
+        end = now
+        if self.pace:
+            byte_s = BITS_PER_BYTE / line_bps if line_bps else self._byte_s()
+            begin = max(now, self._rx_busy_until)
+            end = begin + len(data) * byte_s
+            self._rx_busy_until = end
+            data = self._collide(data, begin, byte_s)
+            if self.echo:
+                self._schedule([(begin + (i + 1) * byte_s, bytes((b,))) for i, b in enumerate(data)], is_reply=False)
+        elif self.echo:
+            self._schedule([(now, data)], is_reply=False)
+        for packet in self.bus.framer.feed(data, now):
+            self.packets_in += 1
+            replies = self.bus.dispatch(packet, line_bps=line_bps)
+            # dispatch brought physics up to now: the idle tick can wait a period.
+            self._next_physics = now + self.physics_period_s
+            if replies:
+                self._schedule(merge_replies(replies, end, per_byte=self.pace))
+                if not self.pace and replies[0].delay_s == 0.0:
+                    self._flush(now)
+
+    def _collide(self, data: bytes, begin: float, byte_s: float) -> bytes:
+        """Host bytes overlapping reply bytes still on the wire: both become their AND."""
+        horizon = begin + len(data) * byte_s
+        on_wire = [item for item in self._queue if item[3] and item[0] - byte_s < horizon]
+        if not on_wire:
+            return data
+        garbled = bytearray(data)
+        for k, item in enumerate(on_wire[: len(data)]):
+            mixed = garbled[k] & item[2][0]
+            garbled[k] = mixed
+            item[2][0] = mixed
+        self.collisions += 1
+        log.debug("collision: host sent %d bytes while a servo was replying", len(data))
+        return bytes(garbled)
+
+    # -- loop --------------------------------------------------------------------------
+    def serve_forever(self) -> None:
+        """Run until :meth:`stop` is called."""
+        while not self._stop:
+            self.run_once()
+
+    def run_once(self) -> None:
+        """Wait for the next event and handle everything that is due."""
+        now = time.monotonic()
+        deadline = self._next_physics
+        if self._queue:
+            deadline = min(deadline, self._queue[0][0])
+        wait_s = deadline - now
+        if self._queue and self._queue[0][0] - now < SPIN_S:
+            wait_s = 0.0
+        else:
+            wait_s = max(0.0, wait_s - (SPIN_S if self._queue else 0.0))
+        # select() takes microseconds; poll/epoll round a timeout up to whole milliseconds.
+        readable, _, _ = select.select(self.transport.fds(), (), (), wait_s)
+        now = time.monotonic()
+        for fd in readable:
+            data = self.transport.on_readable(fd)
+            if data:
+                self._on_bytes(data, now)
+        self._flush(time.monotonic())
+        reply_soon = bool(self._queue) and self._queue[0][0] - now < PHYSICS_DEFER_S
+        if now >= self._next_physics and not reply_soon:
+            self.bus.expire(now)
+            self.bus.advance()
+            self._next_physics = max(self._next_physics + self.physics_period_s, now)

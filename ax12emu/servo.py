@@ -1,0 +1,95 @@
+"""One virtual servo's protocol state: control table, options, alarms, registered write.
+
+Why it exists: the request handler needs a small object holding what a real
+servo's firmware holds between packets, and the bus needs to know a servo's
+ID, baud and return delay without knowing the table's layout.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .control_table import DEFAULT_PROFILE, PROFILES, ControlTable
+
+__all__ = ["ServoOptions", "VirtualServo", "baud_bps"]
+
+
+def baud_bps(value: int) -> float:
+    """Baud Rate register to bits per second: 2,000,000 / (value + 1) (e-manual, Baud Rate)."""
+    return 2_000_000.0 / (value + 1)
+
+
+@dataclass(frozen=True)
+class ServoOptions:
+    """Behaviours where the sources are silent or disagree; defaults follow the documented one."""
+
+    #: Control-table profile: "ax12a" (e-manual) or "ax12-2006" (2006 User's Manual).
+    profile: str = DEFAULT_PROFILE
+    #: A packet with a wrong checksum gets a status packet with the Checksum Error
+    #: bit (the e-manual defines the bit, so it is meant to be reported); False:
+    #: stay silent, as some firmware is reported to do.
+    reply_on_checksum_error: bool = True
+    #: PING to the broadcast ID is answered (2006 manual: "regardless of whether
+    #: the Broadcasting ID is used ... a Status Packet is always returned by the
+    #: PING instruction"); with several servos the replies collide.  False: silent.
+    reply_to_broadcast_ping: bool = True
+    #: RESET's status packet comes from the ID the packet was sent to (e-manual
+    #: example: RESET to ID 0 answered by ID 0); True: from the new ID 1.
+    reset_reply_from_new_id: bool = False
+
+    def __post_init__(self) -> None:
+        if self.profile not in PROFILES:
+            raise ValueError(f"unknown profile {self.profile!r}; choose one of: {', '.join(PROFILES)}")
+
+
+class VirtualServo:
+    """Firmware-side state of one AX-12 on the bus."""
+
+    def __init__(self, table: ControlTable, options: ServoOptions, *, index: int) -> None:
+        self.table = table
+        self.options = options
+        #: Position in the bus's arrays (rows, model state), fixed for life.
+        self.index = index
+        #: Physical alarm bits raised by the model (voltage, overheating, overload).
+        self.alarms = 0
+        #: The REG_WRITE waiting for ACTION: (address, data), or None.
+        self.registered_write: tuple[int, bytes] | None = None
+        #: Set when a write changed the EEPROM area; the bus persists and clears it.
+        self.eeprom_dirty = False
+
+    @classmethod
+    def fresh(cls, servo_id: int, options: ServoOptions, *, index: int, row: np.ndarray | None = None) -> "VirtualServo":
+        """A servo at factory defaults with its ID set."""
+        servo = cls(ControlTable(row, profile=options.profile), options, index=index)
+        servo.table.set("id", servo_id)
+        return servo
+
+    @property
+    def id(self) -> int:
+        """Present ID (address 3)."""
+        return int(self.table.row[3])
+
+    @property
+    def baud_bps(self) -> float:
+        """The rate this servo listens and talks at."""
+        return baud_bps(int(self.table.row[4]))
+
+    @property
+    def return_delay_s(self) -> float:
+        """Return Delay Time in seconds: 2 us per unit (e-manual)."""
+        return int(self.table.row[5]) * 2e-6
+
+    @property
+    def status_return_level(self) -> int:
+        """0: answer PING only; 1: PING and READ; 2: everything (e-manual)."""
+        return int(self.table.row[16])
+
+    def power_on(self) -> None:
+        """Power-up rules: Torque Limit loads Max Torque; Goal Position follows Present Position."""
+        table = self.table
+        table.set("torque_limit", table.get("max_torque"))
+        table.set("goal_position", table.get("present_position"))
+        table.set("registered", 0)
+        self.registered_write = None

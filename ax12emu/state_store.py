@@ -1,0 +1,90 @@
+"""Persisted EEPROM areas: one JSON file per servo slot, written atomically.
+
+Why it exists: a real servo keeps its ID, baud, limits across power cycles;
+``ax12emu serve --state-dir DIR`` does the same.  A servo is keyed by the ID
+it was launched with (its slot), so a servo launched as ``--ids 1`` whose ID
+a client changed to 5 comes back as 5 when launched as ``--ids 1`` again.
+
+Files hold register values by name (readable, diffable) and are replaced
+atomically (temporary file, fsync, rename), so a crash mid-write leaves the
+old or the new state, never a mix.  Names are built only from integers, so
+no input can make the store touch a file outside its directory.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from pathlib import Path
+
+from .control_table import Access, Area, ControlTable
+
+__all__ = ["StateStore", "StateFileError"]
+
+
+class StateFileError(ValueError):
+    """A state file exists but cannot be used; the message names the file."""
+
+
+class StateStore:
+    """Reads and writes the EEPROM image of each servo slot under ``directory``."""
+
+    def __init__(self, directory: str | os.PathLike[str]) -> None:
+        self.directory = Path(directory)
+        self.directory.mkdir(parents=True, exist_ok=True)
+
+    def path_for(self, slot: int) -> Path:
+        """The file of the servo launched with ID ``slot``."""
+        return self.directory / f"servo-{int(slot):03d}.json"
+
+    def load(self, slot: int, table: ControlTable) -> bool:
+        """Load the slot's EEPROM into ``table``; False if there is no file yet."""
+        path = self.path_for(slot)
+        if not path.exists():
+            return False
+        try:
+            document = json.loads(path.read_text(encoding="utf-8"))
+            registers = document["eeprom"]
+            if not isinstance(registers, dict):
+                raise TypeError("'eeprom' must be an object")
+            image = bytearray(table.eeprom_bytes())
+            for entry in table.layout.entries:
+                if entry.area is Area.EEPROM and entry.access is Access.RW and entry.name in registers:
+                    value = registers[entry.name]
+                    if not isinstance(value, int) or isinstance(value, bool):
+                        raise TypeError(f"{entry.name} must be an integer, got {value!r}")
+                    if not 0 <= value < 256**entry.size:
+                        raise ValueError(f"{entry.name} = {value} does not fit in {entry.size} byte(s)")
+                    image[entry.address : entry.end] = value.to_bytes(entry.size, "little")
+            table.load_eeprom(bytes(image))
+        except (OSError, ValueError, TypeError, KeyError) as exc:
+            raise StateFileError(f"{path}: unusable state file ({exc}); remove it or start with --factory-reset") from exc
+        return True
+
+    def save(self, slot: int, table: ControlTable) -> None:
+        """Write the slot's EEPROM atomically."""
+        registers = {
+            entry.name: table.get(entry.name)
+            for entry in table.layout.entries
+            if entry.area is Area.EEPROM and entry.access is Access.RW
+        }
+        document = {"format": "ax12emu-eeprom/1", "profile": table.profile.name, "eeprom": registers}
+        path = self.path_for(slot)
+        fd, tmp = tempfile.mkstemp(prefix=path.name, suffix=".tmp", dir=self.directory)
+        try:
+            with os.fdopen(fd, "w", encoding="utf-8") as handle:
+                json.dump(document, handle, indent=1, sort_keys=True)
+                handle.write("\n")
+                handle.flush()
+                os.fsync(handle.fileno())
+            os.replace(tmp, path)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
+        dir_fd = os.open(self.directory, os.O_RDONLY)
+        try:
+            os.fsync(dir_fd)
+        finally:
+            os.close(dir_fd)
+

@@ -1,0 +1,124 @@
+"""Pseudo-terminal transport: the host opens the slave side as if it were a USB2Dynamixel.
+
+URL format: ``pty://[?link=PATH]``
+
+Why the details matter (each one checked with dynamixel-sdk on Linux):
+
+* the slave is made raw at creation, or the line discipline echoes our own
+  replies back to us and mangles 0x0D/0x0A bytes;
+* the emulator keeps its own handle on the slave open for its whole life, or
+  the master fails with EIO the moment a client closes the port (dynamixel-sdk
+  closes and reopens it inside ``setBaudRate``), and termios settings would
+  be lost between opens;
+* the master is non-blocking: about 17 KB of unread replies fill a pty, and a
+  blocked write would freeze every servo;
+* the host's bit rate is read from the slave's termios (``TCGETS2`` gives the
+  exact rate, also for non-standard ones set with ``BOTHER``), so a servo at
+  another baud can be deaf to the host, as on hardware.
+"""
+
+from __future__ import annotations
+
+import errno
+import fcntl
+import os
+import pty
+import struct
+import termios
+import tty
+from pathlib import Path
+
+from .base import Transport
+
+__all__ = ["PtyTransport"]
+
+# struct termios2 on Linux: 4 tcflag_t, c_line, 19 cc, then c_ispeed, c_ospeed.
+_TERMIOS2 = struct.Struct("4IB19B2I")
+_TCGETS2 = getattr(termios, "TCGETS2", 0x802C542A)
+_SPEEDS = {
+    getattr(termios, f"B{rate}"): float(rate)
+    for rate in (
+        50, 75, 110, 134, 150, 200, 300, 600, 1200, 1800, 2400, 4800, 9600, 19200, 38400, 57600,
+        115200, 230400, 460800, 500000, 576000, 921600, 1000000, 1152000, 1500000, 2000000,
+        2500000, 3000000, 3500000, 4000000,
+    )
+    if hasattr(termios, f"B{rate}")
+}
+
+
+class PtyTransport(Transport):
+    """A pty pair; ``link`` makes a symlink to the slave that is removed on close."""
+
+    def __init__(self, link: str | os.PathLike[str] | None = None) -> None:
+        self._master, self._slave = pty.openpty()
+        tty.setraw(self._slave)
+        flags = fcntl.fcntl(self._master, fcntl.F_GETFL)
+        fcntl.fcntl(self._master, fcntl.F_SETFL, flags | os.O_NONBLOCK)
+        self.slave_path = os.ttyname(self._slave)
+        self.link: Path | None = None
+        self._closed = False
+        self._termios2 = True
+        self._termios2_buffer = bytes(_TERMIOS2.size)
+        if link is not None:
+            path = Path(link)
+            if path.is_symlink():
+                path.unlink()  # a stale link from a crashed run
+            elif path.exists():
+                self.close()
+                raise FileExistsError(f"{path} exists and is not a symlink; refusing to replace it")
+            try:
+                path.symlink_to(self.slave_path)
+            except OSError:
+                self.close()
+                raise
+            self.link = path
+        self.name = str(self.link or self.slave_path)
+
+    def fds(self) -> list[int]:
+        return [self._master]
+
+    def on_readable(self, fd: int) -> bytes:
+        try:
+            return os.read(self._master, 4096)
+        except BlockingIOError:
+            return b""
+        except OSError as exc:
+            if exc.errno == errno.EIO:  # no reader on the other side (cannot happen while we hold the slave)
+                return b""
+            raise
+
+    def write(self, data: bytes) -> int:
+        try:
+            return os.write(self._master, data)
+        except BlockingIOError:
+            return 0
+        except OSError as exc:
+            if exc.errno == errno.EIO:
+                return 0
+            raise
+
+    def line_bps(self) -> float | None:
+        if self._termios2:
+            try:
+                ospeed = _TERMIOS2.unpack(fcntl.ioctl(self._slave, _TCGETS2, self._termios2_buffer))[-1]
+                if ospeed:
+                    return float(ospeed)
+            except OSError:
+                self._termios2 = False  # not Linux, or an old kernel: fall back to termios constants
+        return _SPEEDS.get(termios.tcgetattr(self._slave)[5])
+
+    def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        if self.link is not None:
+            try:
+                if self.link.is_symlink():
+                    self.link.unlink()
+            except OSError:
+                pass
+        for fd in (self._master, self._slave):
+            try:
+                os.close(fd)
+            except OSError:
+                pass

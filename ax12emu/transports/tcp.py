@@ -1,0 +1,122 @@
+"""TCP transport: the same raw byte stream as the pty, on a socket.
+
+URL format: ``tcp://HOST:PORT`` (PORT 0 picks a free port).
+
+pyserial's ``socket://HOST:PORT`` is a ready client.  One host at a time, as
+on a real bus with one master: while a client is connected, a second one is
+accepted and closed at once (it sees EOF), so bytes of two hosts never
+interleave.  A client that disconnects, even mid-packet, leaves the bus
+serving; its partial packet is dropped by the framer's silence timeout.
+TCP carries no line speed, so every servo hears whatever its baud setting.
+"""
+
+from __future__ import annotations
+
+import logging
+import socket
+
+from .base import Transport
+
+__all__ = ["TcpTransport", "parse_host_port"]
+
+log = logging.getLogger(__name__)
+
+
+def parse_host_port(text: str) -> tuple[str, int]:
+    """"HOST:PORT", "[v6]:PORT" or ":PORT" (loopback) to a pair, with clear errors."""
+    host, sep, port_text = text.rpartition(":")
+    if not sep:
+        raise ValueError(f"expected HOST:PORT, got {text!r}")
+    host = host.strip("[]") or "127.0.0.1"
+    try:
+        port = int(port_text)
+    except ValueError:
+        raise ValueError(f"port must be a number, got {port_text!r}") from None
+    if not 0 <= port <= 65535:
+        raise ValueError(f"port must be 0..65535, got {port}")
+    return host, port
+
+
+class TcpTransport(Transport):
+    """Listens on ``host:port`` and serves one client at a time."""
+
+    def __init__(self, host: str = "127.0.0.1", port: int = 0) -> None:
+        family = socket.AF_INET6 if ":" in host else socket.AF_INET
+        self._listener = socket.socket(family, socket.SOCK_STREAM)
+        try:
+            self._listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            self._listener.bind((host, port))
+            self._listener.listen(4)
+        except OSError:
+            self._listener.close()
+            raise
+        self._listener.setblocking(False)
+        self._client: socket.socket | None = None
+        self.host, self.port = self._listener.getsockname()[:2]
+        self.name = f"tcp://{self.host}:{self.port}"
+        #: Clients turned away because one was already connected.
+        self.refused = 0
+
+    @property
+    def connected(self) -> bool:
+        """Whether a host is connected."""
+        return self._client is not None
+
+    def fds(self) -> list[int]:
+        fds = [self._listener.fileno()]
+        if self._client is not None:
+            fds.append(self._client.fileno())
+        return fds
+
+    def on_readable(self, fd: int) -> bytes:
+        if fd == self._listener.fileno():
+            self._accept()
+            return b""
+        if self._client is None:
+            return b""
+        try:
+            data = self._client.recv(4096)
+        except (BlockingIOError, InterruptedError):
+            return b""
+        except OSError as exc:
+            log.info("client connection failed: %s", exc)
+            data = b""
+        if not data:
+            self._drop_client()
+        return data
+
+    def _accept(self) -> None:
+        try:
+            conn, peer = self._listener.accept()
+        except (BlockingIOError, InterruptedError):
+            return
+        if self._client is not None:
+            self.refused += 1
+            log.warning("refused a second client from %s: one host at a time", peer)
+            conn.close()
+            return
+        conn.setblocking(False)
+        conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        self._client = conn
+        log.info("client connected from %s", peer)
+
+    def _drop_client(self) -> None:
+        if self._client is not None:
+            log.info("client disconnected")
+            self._client.close()
+            self._client = None
+
+    def write(self, data: bytes) -> int:
+        if self._client is None:
+            return 0
+        try:
+            return self._client.send(data)
+        except (BlockingIOError, InterruptedError):
+            return 0
+        except OSError:
+            self._drop_client()
+            return 0
+
+    def close(self) -> None:
+        self._drop_client()
+        self._listener.close()

@@ -1,0 +1,121 @@
+"""The seam between the bus and any servo model: commands in, sensed values out.
+
+Why it exists: the protocol side (``ax12emu``) owns the control table and its
+byte layout; a model owns firmware and physics.  Neither imports the other.
+Every model of N servos takes the same :class:`Commands` (the registers that
+steer motion, in raw control-table units, one array element per servo) and
+returns the same :class:`Sensed` (the registers the firmware writes back).
+Raw units are used on purpose: they are what the AX-12's own firmware works
+with (10-bit position, 0.111 rpm speed units, 0.1 % load, 0.1 V), so a model
+reproduces the firmware's integer quirks instead of an idealised SI version.
+
+Alarm bits use the Protocol 1.0 status-byte layout (e-manual, "Status Packet"):
+the model raises the physical ones (input voltage, overheating, overload);
+instruction-level errors (range, checksum, instruction, angle limit on a
+write) belong to the protocol side.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from typing import Protocol
+
+import numpy as np
+
+__all__ = [
+    "ALARM_INPUT_VOLTAGE",
+    "ALARM_ANGLE_LIMIT",
+    "ALARM_OVERHEATING",
+    "ALARM_OVERLOAD",
+    "Commands",
+    "Sensed",
+    "ServoModel",
+]
+
+#: Status-byte bits a model may raise (e-manual Protocol 1.0, error field).
+ALARM_INPUT_VOLTAGE = 0x01
+ALARM_ANGLE_LIMIT = 0x02
+ALARM_OVERHEATING = 0x04
+ALARM_OVERLOAD = 0x20
+
+
+@dataclass
+class Commands:
+    """Registers that steer the servos, raw units, arrays of shape (N,)."""
+
+    #: Torque Enable (24): 0 = motor free, 1 = driven.
+    torque_enable: np.ndarray
+    #: Goal Position (30): 0..1023 over 0..300 degrees.
+    goal_position: np.ndarray
+    #: Moving Speed (32): joint mode 0..1023 (0 = no limit), wheel mode bit 10 = CW.
+    moving_speed: np.ndarray
+    #: Torque Limit (34): 0..1023 of maximum torque.
+    torque_limit: np.ndarray
+    #: CW / CCW Angle Limit (6, 8): both 0 selects wheel mode.
+    cw_angle_limit: np.ndarray
+    ccw_angle_limit: np.ndarray
+    #: Compliance Margin (26, 27) and Slope (28, 29), raw.
+    cw_compliance_margin: np.ndarray
+    ccw_compliance_margin: np.ndarray
+    cw_compliance_slope: np.ndarray
+    ccw_compliance_slope: np.ndarray
+    #: Punch (48): minimum drive, 0..1023.
+    punch: np.ndarray
+    #: Temperature Limit (11), degrees C.
+    temperature_limit: np.ndarray
+    #: Min / Max Voltage Limit (12, 13), units of 0.1 V.
+    min_voltage_limit: np.ndarray
+    max_voltage_limit: np.ndarray
+
+    @classmethod
+    def field_names(cls) -> tuple[str, ...]:
+        """Names of all command registers, in declaration order."""
+        return tuple(f.name for f in fields(cls))
+
+
+@dataclass
+class Sensed:
+    """Registers the firmware writes back, raw units, arrays of shape (N,)."""
+
+    #: Present Position (36): 0..1023.
+    present_position: np.ndarray
+    #: Present Speed (38): magnitude 0..1023 in 0.111 rpm, bit 10 set when turning CW.
+    present_speed: np.ndarray
+    #: Present Load (40): magnitude 0..1023 in 0.1 % of maximum, bit 10 set when CW.
+    present_load: np.ndarray
+    #: Present Voltage (42): units of 0.1 V.
+    present_voltage: np.ndarray
+    #: Present Temperature (43): degrees C.
+    present_temperature: np.ndarray
+    #: Moving (46): 1 while the servo is moving toward its goal.
+    moving: np.ndarray
+    #: Present alarm bits (ALARM_* above), 0 when all is well.
+    alarms: np.ndarray
+
+    @classmethod
+    def field_names(cls) -> tuple[str, ...]:
+        """Names of all sensed registers, in declaration order."""
+        return tuple(f.name for f in fields(cls))
+
+
+class ServoModel(Protocol):
+    """What the bus needs from a model of N servos."""
+
+    #: Number of servos simulated.
+    n: int
+    #: Fixed integration step, seconds; ``advance`` moves in whole steps.
+    step_s: float
+    #: Simulated time reached so far, seconds.
+    time_s: float
+
+    def advance(self, to_time_s: float, commands: Commands) -> Sensed:
+        """Integrate from ``time_s`` to ``to_time_s`` holding ``commands``; return the sensors."""
+        ...
+
+    def sense(self) -> Sensed:
+        """The sensed registers at ``time_s`` without advancing."""
+        ...
+
+    def set_external_torque(self, torque_nm: np.ndarray) -> None:
+        """Set a torque acting on each output shaft (N·m, positive = CCW)."""
+        ...
