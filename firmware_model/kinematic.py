@@ -96,11 +96,13 @@ class KinematicModel:
         error = np.asarray(c.goal_position) * RAD_PER_POSITION_UNIT - self.angle_rad
         reach = joint_speed * dt_s
         # Joint mode: the mean velocity over the interval (the last one may end early at the goal).
-        joint_velocity = np.clip(error, -reach, reach) / dt_s
+        step = np.clip(error, -reach, reach)
         wheel_velocity = np.where(speed_raw & DIRECTION_BIT, -speed, speed)
-        self.speed_rad_s = np.where(wheel, wheel_velocity, joint_velocity) * enabled
+        self.speed_rad_s = np.where(wheel, wheel_velocity, step / dt_s) * enabled
         self.angle_rad = np.mod(self.angle_rad + self.speed_rad_s * dt_s, 2.0 * np.pi)
-        self._moving = (self.speed_rad_s != 0).astype(np.int64)
+        # Moving: still short of the goal at the end of the interval (wheel mode: turning).
+        still_going = np.where(wheel, speed != 0, np.abs(error - step) > 1e-9)
+        self._moving = (enabled & still_going).astype(np.int64)
         self._sensed = None
 
     def sense(self) -> Sensed:

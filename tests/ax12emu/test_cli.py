@@ -1,0 +1,58 @@
+"""The command line: bad input gives one line and a non-zero exit, never a traceback."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+from ax12emu.cli import parse_args
+
+
+def run(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "ax12emu", *args], capture_output=True, text=True, timeout=30)
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["serve", "--ids", "1-x"], "not an ID"),
+        (["serve", "--tcp", "localhost"], "HOST:PORT"),
+        (["serve", "--tcp", "0.0.0.0:0"], "--allow-remote"),
+        (["serve", "--time-scale", "-2"], "positive"),
+        (["serve", "--profile", "ax18"], "invalid choice"),
+        (["serve", "--link", "/tmp/x", "--tcp", "127.0.0.1:0"], "not allowed with|not to --tcp"),
+        (["bogus"], "invalid choice"),
+    ],
+)
+def test_bad_flags_exit_2_with_usage(args, message):
+    """argparse rejects bad flags with exit 2 and a usage line naming the problem."""
+    result = run(*args)
+    assert result.returncode == 2
+    assert "Traceback" not in result.stderr
+    assert any(part in result.stderr for part in message.split("|")), result.stderr
+
+
+def test_corrupt_state_file_is_one_line(tmp_path):
+    """A corrupt state file stops start-up with one line naming the file."""
+    (tmp_path / "servo-001.json").write_text("garbage")
+    result = run("serve", "--state-dir", str(tmp_path))
+    assert result.returncode == 2
+    assert "servo-001.json" in result.stderr and "Traceback" not in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+
+
+def test_link_over_a_regular_file_is_refused(tmp_path):
+    """--link never replaces a file that is not a symlink."""
+    target = tmp_path / "precious"
+    target.write_text("keep me")
+    result = run("serve", "--link", str(target))
+    assert result.returncode == 2 and "not a symlink" in result.stderr
+    assert target.read_text() == "keep me"
+
+
+def test_parse_args_defaults():
+    """Defaults: ID 1 on a pty, e-manual profile, real time."""
+    args = parse_args(["serve"])
+    assert args.ids == [1] and not args.tcp and args.profile == "ax12a" and args.time_scale == 1.0

@@ -1,0 +1,91 @@
+"""One servo's answers to instructions, in process: reply policy, errors as values, options."""
+
+from __future__ import annotations
+
+from ax12emu.packets import BROADCAST_ID, InstructionPacket, StatusError, encode_status
+from ax12emu.request_handler import handle
+from ax12emu.servo import ServoOptions, VirtualServo
+
+
+def servo(**options) -> VirtualServo:
+    s = VirtualServo.fresh(1, ServoOptions(**options), index=0)
+    s.power_on()
+    return s
+
+
+def send(s, instruction, params=b"", packet_id=1, checksum_ok=True):
+    return handle(s, InstructionPacket(packet_id, instruction, bytes(params), checksum_ok))
+
+
+def test_emanual_examples():
+    """PING and READ temperature answer as the e-manual's examples (temperature 32 C there)."""
+    s = servo()
+    assert send(s, 0x01).reply == bytes.fromhex("ffff010200fc")
+    s.table.set("present_temperature", 32)
+    assert send(s, 0x02, [0x2B, 1]).reply == bytes.fromhex("ffff01030020db")
+
+
+def test_alarms_appear_in_every_status_byte():
+    """The present alarm bits are OR'd into the error byte; bit 7 never appears."""
+    s = servo()
+    s.alarms = 0x24 | 0x80
+    assert send(s, 0x01).reply == encode_status(1, 0x24)
+    assert send(s, 0x03, [24, 5]).reply == encode_status(1, 0x24 | StatusError.RANGE)
+
+
+def test_checksum_error_reply_or_silence():
+    """A bad checksum is answered with bit 0x10 by default and ignored when configured silent."""
+    bad_read = dict(instruction=0x02, params=[36, 2], checksum_ok=False)
+    outcome = send(servo(), **bad_read)
+    assert outcome.reply == encode_status(1, StatusError.CHECKSUM, b"\x00\x00")
+    assert send(servo(reply_on_checksum_error=False), **bad_read).reply is None
+
+
+def test_broadcast_is_silent_except_ping_by_option():
+    """Broadcast WRITE is executed silently; broadcast PING answers unless configured silent."""
+    s = servo()
+    assert send(s, 0x03, [25, 1], packet_id=BROADCAST_ID).reply is None
+    assert s.table.get("led") == 1
+    assert send(s, 0x01, packet_id=BROADCAST_ID).reply == encode_status(1, 0)
+    assert send(servo(reply_to_broadcast_ping=False), 0x01, packet_id=BROADCAST_ID).reply is None
+
+
+def test_reset_reply_id_option():
+    """RESET answers from the old ID by default, from the new ID 1 when configured."""
+    for new_id, expected in ((False, 7), (True, 1)):
+        s = servo(reset_reply_from_new_id=new_id)
+        s.table.set("id", 7)
+        outcome = send(s, 0x06, packet_id=7)
+        assert outcome.reply == encode_status(expected, 0)
+        assert s.id == 1 and s.table.get("baud_rate") == 1
+
+
+def test_lock_cannot_be_released_by_a_write():
+    """Once Lock is 1 only a power cycle releases it (e-manual): writing 0 is a Range Error."""
+    s = servo()
+    assert send(s, 0x03, [47, 1]).error == StatusError.NONE
+    assert send(s, 0x03, [47, 0]).error == StatusError.RANGE
+    assert s.table.get("lock") == 1
+    assert send(s, 0x03, [3, 5]).error == StatusError.RANGE
+
+
+def test_malformed_parameters_are_range_errors():
+    """READ without its two parameters, WRITE without data: Range Error, nothing changes."""
+    s = servo()
+    assert send(s, 0x02, [36]).error == StatusError.RANGE
+    assert send(s, 0x03, [25]).error == StatusError.RANGE
+    assert send(s, 0x83, [30, 2, 1, 0]).error == StatusError.RANGE  # block of the wrong size
+
+
+def test_wheel_mode_skips_angle_check():
+    """With both angle limits 0 (wheel mode) any Goal Position is accepted."""
+    s = servo()
+    assert send(s, 0x03, [8, 0, 0]).error == StatusError.NONE
+    assert send(s, 0x03, [30, 0xFF, 3]).error == StatusError.NONE
+
+
+def test_reg_write_validated_at_registration():
+    """An invalid REG_WRITE is refused at once and nothing is registered."""
+    s = servo()
+    assert send(s, 0x04, [24, 9]).error == StatusError.RANGE
+    assert s.table.get("registered") == 0 and s.registered_write is None

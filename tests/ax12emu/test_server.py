@@ -1,0 +1,80 @@
+"""The wire model: merged replies, and pacing, echo and collisions on a real pty."""
+
+from __future__ import annotations
+
+import time
+
+import serial
+
+from ax12emu.bus import Reply
+from ax12emu.packets import encode_instruction, encode_status
+from ax12emu.server import merge_replies
+
+PING = encode_instruction(1, 0x01)
+
+
+def test_single_reply_released_whole_at_its_delay():
+    """Unpaced, one reply goes out whole, delay after the instruction ended."""
+    reply = Reply(1, b"\xff\xff\x01\x02\x00\xfc", 0.0005, 1e6)
+    assert merge_replies([reply], 10.0, per_byte=False) == [(10.0005, reply.data)]
+
+
+def test_paced_reply_bytes_take_ten_bit_times():
+    """Paced at 1 Mbps each byte is released 10 us after the previous one."""
+    reply = Reply(1, b"\xaa\xbb", 0.0, 1e6)
+    chunks = merge_replies([reply], 0.0, per_byte=True)
+    assert [c[1] for c in chunks] == [b"\xaa", b"\xbb"]
+    assert abs(chunks[0][0] - 10e-6) < 1e-12 and abs(chunks[1][0] - 20e-6) < 1e-12
+
+
+def test_simultaneous_replies_are_anded():
+    """Two servos answering in the same slots produce the AND of their bytes (wired-AND line)."""
+    a, b = encode_status(1, 0), encode_status(2, 0)
+    merged = merge_replies([Reply(1, a, 0.0005, 1e6), Reply(2, b, 0.0005, 1e6)], 0.0, per_byte=False)
+    assert merged[0][1] == bytes(x & y for x, y in zip(a, b))
+
+
+def _open(port: str, baud: int = 1_000_000) -> serial.Serial:
+    return serial.Serial(port, baud, timeout=0.5)
+
+
+def test_echo_shows_instruction_before_status(emulator):
+    """--echo: the host reads its own PING back, then the status packet."""
+    served = emulator("--echo")
+    with _open(served.port) as link:
+        link.reset_input_buffer()
+        link.write(PING)
+        assert link.read(12) == PING + encode_status(1, 0)
+
+
+def test_pace_takes_wire_time(emulator):
+    """--pace at Baud Rate 34 (57,142 bps): PING + reply (12 bytes) take at least 2.1 ms plus the delay."""
+    served = emulator("--pace")
+    with _open(served.port) as link:
+        link.write(encode_instruction(1, 0x03, bytes([4, 34])))
+        time.sleep(0.05)
+        link.baudrate = 57600
+        link.reset_input_buffer()
+        start = time.perf_counter()
+        link.write(PING)
+        reply = link.read(6)
+        elapsed = time.perf_counter() - start
+    assert reply == encode_status(1, 0)
+    assert elapsed >= 12 * 10 / 57142 + 0.0005 - 1e-4, elapsed
+
+
+def test_pace_collision_garbles_both(emulator):
+    """--pace: a host packet sent while a slow reply is on the wire garbles it, as on a half-duplex bus."""
+    served = emulator("--pace")
+    with _open(served.port) as link:
+        link.write(encode_instruction(1, 0x03, bytes([4, 207])))  # 9,615 bps: about 1 ms per byte
+        time.sleep(0.05)
+        link.baudrate = 9600
+        link.reset_input_buffer()
+        link.write(PING)
+        assert link.read(6) == encode_status(1, 0), "alone on the wire the reply is clean"
+        link.write(PING)
+        time.sleep(0.0075)  # the reply starts after 6 ms of PING and 0.5 ms of delay
+        link.write(b"\x00\x00\x00")
+        garbled = link.read(6)
+    assert garbled != encode_status(1, 0)

@@ -1,0 +1,28 @@
+"""Helpers shared by the end-to-end tests (dynamixel-sdk ports, result unwrapping)."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+from dynamixel_sdk import COMM_SUCCESS, PacketHandler, PortHandler
+
+
+@contextmanager
+def sdk_port(path: str, baud: int = 1_000_000) -> Iterator[tuple[PortHandler, PacketHandler]]:
+    """An open dynamixel-sdk port and a Protocol 1.0 packet handler; closed afterwards."""
+    port = PortHandler(path)
+    assert port.openPort(), f"could not open {path}"
+    assert port.setBaudRate(baud)
+    try:
+        yield port, PacketHandler(1.0)
+    finally:
+        port.closePort()
+
+
+def ok(result: tuple) -> object:
+    """Unwrap an SDK (value, comm_result, error) triple that must have succeeded cleanly."""
+    value, comm, error = result
+    assert comm == COMM_SUCCESS, f"communication failed: {comm}"
+    assert error == 0, f"status error {error:#x}"
+    return value
