@@ -39,6 +39,9 @@ log = logging.getLogger(__name__)
 BITS_PER_BYTE = 10
 #: Below this much time to the next reply, busy-wait instead of sleeping in select.
 SPIN_S = 0.0003
+#: After input, keep polling without sleeping this long: the host's next packet usually
+#: follows within a few tens of microseconds, and waking from a sleep costs about as much.
+HOT_S = 0.0002
 #: A physics step is put off while a reply is due sooner than this, so it cannot delay the reply.
 PHYSICS_DEFER_S = 0.001
 
@@ -88,6 +91,7 @@ class BusServer:
         self._seq = 0
         self._stop = False
         self._rx_busy_until = 0.0
+        self._hot_until = 0.0
         self._next_physics = time.monotonic()
         #: Counters for diagnostics and tests.
         self.packets_in = 0
@@ -169,14 +173,12 @@ class BusServer:
     def run_once(self) -> None:
         """Wait for the next event and handle everything that is due."""
         now = time.monotonic()
-        deadline = self._next_physics
-        if self._queue:
-            deadline = min(deadline, self._queue[0][0])
-        wait_s = deadline - now
-        if self._queue and self._queue[0][0] - now < SPIN_S:
-            wait_s = 0.0
+        queue = self._queue
+        if queue and queue[0][0] - now < SPIN_S or now < self._hot_until:
+            wait_s = 0.0  # a reply is nearly due, or a host is mid-conversation: spin
         else:
-            wait_s = max(0.0, wait_s - (SPIN_S if self._queue else 0.0))
+            deadline = min(self._next_physics, queue[0][0] - SPIN_S) if queue else self._next_physics
+            wait_s = max(0.0, deadline - now)
         # select() takes microseconds; poll/epoll round a timeout up to whole milliseconds.
         readable, _, _ = select.select(self.transport.fds(), (), (), wait_s)
         now = time.monotonic()
@@ -184,9 +186,10 @@ class BusServer:
             data = self.transport.on_readable(fd)
             if data:
                 self._on_bytes(data, now)
-        self._flush(time.monotonic())
-        reply_soon = bool(self._queue) and self._queue[0][0] - now < PHYSICS_DEFER_S
-        if now >= self._next_physics and not reply_soon:
+                self._hot_until = now + HOT_S
+        if queue:
+            self._flush(time.monotonic())
+        if now >= self._next_physics and not (queue and queue[0][0] - now < PHYSICS_DEFER_S):
             self.bus.expire(now)
             self.bus.advance()
             self._next_physics = max(self._next_physics + self.physics_period_s, now)
