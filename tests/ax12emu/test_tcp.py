@@ -37,3 +37,39 @@ def test_second_client_refused_and_reconnect_after_mid_packet_drop(emulator):
     with serial.serial_for_url(served.port, timeout=1.0) as link:
         link.write(PING)
         assert link.read(6) == encode_status(1, 0)
+
+
+class UrlPortHandler:
+    """The README's PortHandler subclass, built here from dynamixel-sdk's own class."""
+
+    @staticmethod
+    def make(url: str):
+        from dynamixel_sdk import PortHandler
+
+        class _UrlPortHandler(PortHandler):
+            def setupPort(self, cflag_baud):
+                if self.is_open:
+                    self.closePort()
+                self.ser = serial.serial_for_url(self.port_name, baudrate=self.baudrate, timeout=0)
+                self.is_open = True
+                self.ser.reset_input_buffer()
+                self.tx_time_per_byte = (1000.0 / self.baudrate) * 10.0
+                return True
+
+        return _UrlPortHandler(url)
+
+
+def test_dynamixel_sdk_over_tcp_with_url_port_handler(emulator):
+    """dynamixel-sdk drives the TCP bus through the README's three-line PortHandler subclass."""
+    from dynamixel_sdk import COMM_SUCCESS, PacketHandler
+
+    served = emulator("--tcp", "127.0.0.1:0", "--ids", "3")
+    port = UrlPortHandler.make(served.port)
+    assert port.openPort()
+    try:
+        ph = PacketHandler(1.0)
+        assert ph.ping(port, 3) == (12, COMM_SUCCESS, 0)
+        assert ph.write2ByteTxRx(port, 3, 32, 123) == (COMM_SUCCESS, 0)
+        assert ph.read2ByteTxRx(port, 3, 32) == (123, COMM_SUCCESS, 0)
+    finally:
+        port.closePort()
