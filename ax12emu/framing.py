@@ -86,10 +86,14 @@ class Framer:
     def feed(self, data: bytes | bytearray, now_s: float | None = None) -> list[InstructionPacket]:
         """Add bytes received at ``now_s`` (None: ignore timing); return the packets completed."""
         self.expire(now_s)
+        if now_s is not None and data:
+            self._last_byte_s = now_s
+        # Fast path: one whole well-formed packet and nothing pending (the usual request).
+        if not self._buf and len(data) >= 6 and data[0] == 0xFF == data[1] and data[3] + 4 == len(data):
+            if data[2] != 0xFF and data[3] <= self.max_length and ~sum(data[2:-1]) & 0xFF == data[-1]:
+                return [InstructionPacket(data[2], data[4], bytes(data[5:-1]), True)]
         if data:
             self._buf += data
-            if now_s is not None:
-                self._last_byte_s = now_s
         return self._extract()
 
     def _drop(self, count: int) -> None:
