@@ -1,0 +1,365 @@
+"""The physical model of N AX-12+ servos behind the bus: firmware and physics stepped together.
+
+Why it exists: it is the :class:`~firmware_model.interface.ServoModel` a
+client should meet, with acceleration limits, overshoot, sag under load,
+stalls, heating and the slow Present Speed / Load of the real servo.  It
+wires the one-job modules together; each step is
+
+    setpoint (joint) or speed reference (wheel)  ->  controller drive
+    ->  motor current and torque  ->  friction, stick-slip, shaft motion
+
+and every thermal period (10 ms) heating and the overload timer, every
+sample period (``sample_hold_s``) the held Present Speed and Load.
+
+Integration is a fixed step (1 kHz by default), so results depend only on
+the commands and the simulated times asked for, never on wall-clock speed.
+``advance`` runs whole steps; the time asked for is rounded down to one.
+Commands are decoded only when they change (the bus hands over the same
+object until a register changes; otherwise their bytes are compared), and
+the registers that change only at events are cached, so a call per step
+stays cheap.  One servo runs on plain floats, more on numpy arrays
+(:mod:`firmware_model.backend`); the numbers agree.
+
+Controllers: ``controller="compliance"`` (default, the e-manual's) or
+``"pid"`` (the report's), see :mod:`firmware_model.controller`.
+
+Joint mode: the controller sees the quantised position (``rint(angle /
+unit)``, not pinned in the dead zone, where a driven servo never goes) and
+the reference in units.  Goal Position is clamped to the angle limits (the firmware does not
+move past them; the protocol side reports the Angle Limit error).  Moving
+Speed 0 means the register's full scale, 114 rpm, which no supply reaches, so
+the servo then runs at its top speed.  Wheel mode (both angle limits 0): the
+lower ten bits of Moving Speed ask for ``N * 0.111 rpm``, bit 10 for CW; a
+speed loop with feed-forward drives it, and the position wraps through the
+dead zone.  With torque off the bridge is open and the reference follows the
+shaft, so enabling torque never jumps.
+"""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+
+from .backend import NUMPY, SCALAR
+from .controller import PidGains, compliance_drive, compliance_plan, pid_drive, symmetric_compliance_drive
+from .interface import Commands, Sensed
+from .motor import GRAVITY_M_S2, arm_gravity_torque_nm, mechanics_step
+from .params import ServoParams
+from .protection import alarm_bits, overload_timer_step, thermal_step
+from .sensors import held_speed_rad_s, registers
+from .setpoint import apply_dead_zone, setpoint_step
+from .units import (
+    DIRECTION_BIT,
+    POSITION_MAX_RAW,
+    POSITION_RANGE_RAD,
+    RAD_PER_POSITION_UNIT,
+    RAD_S_PER_SPEED_UNIT,
+    position_rad_to_raw,
+)
+
+__all__ = ["PhysicalModel", "CONTROLLERS"]
+
+#: Selectable position controllers.
+CONTROLLERS = ("compliance", "pid")
+#: Heating and the overload timer are updated this often.
+THERMAL_PERIOD_S = 0.01
+#: Moving Speed 0 in joint mode: the register's full scale, 114 rpm (e-manual).
+FULL_SCALE_SPEED_RAD_S = float(1023 * RAD_S_PER_SPEED_UNIT)
+_TWO_PI = 2.0 * math.pi
+_COMMAND_FIELDS = Commands.field_names()
+_RANGE_RAD, _UNIT_RAD = float(POSITION_RANGE_RAD), float(RAD_PER_POSITION_UNIT)
+_STATE = ("angle", "speed", "ref", "ref_vel", "drive", "demand", "integral", "prev_error", "current_sq_sum",
+          "temperature", "overload_timer", "sample_angle", "held_speed", "held_drive", "ext_nm", "weight_nm")
+
+
+def _position_raw(angle_rad: float) -> int:
+    """:func:`~firmware_model.units.position_rad_to_raw` for one float (tests check they agree)."""
+    wrapped = angle_rad % _TWO_PI
+    if wrapped > _RANGE_RAD:
+        return POSITION_MAX_RAW if wrapped - _RANGE_RAD < _TWO_PI - wrapped else 0
+    return min(max(round(wrapped / _UNIT_RAD), 0), POSITION_MAX_RAW)
+
+
+class PhysicalModel:
+    """N servos with firmware and physics; implements :class:`~firmware_model.interface.ServoModel`."""
+
+    def __init__(
+        self,
+        n: int,
+        params: ServoParams = ServoParams(),
+        step_s: float = 1e-3,
+        initial_position_raw: int | np.ndarray = 512,
+        *,
+        controller: str = "compliance",
+        pid_gains: PidGains = PidGains(),
+        backend: str = "auto",
+    ) -> None:
+        if n < 1:
+            raise ValueError(f"need at least one servo, got n={n}")
+        if not step_s > 0:
+            raise ValueError(f"step_s must be positive, got {step_s}")
+        if controller not in CONTROLLERS:
+            raise ValueError(f"controller must be one of {CONTROLLERS}, got {controller!r}")
+        if backend not in ("auto", "numpy", "scalar") or (backend == "scalar" and n != 1):
+            raise ValueError(f"backend must be 'auto', 'numpy' or (for n=1) 'scalar', got {backend!r}")
+        self.n = n
+        self.params = params
+        self.step_s = step_s
+        self.controller = controller
+        self.pid_gains = pid_gains
+        self.time_s = 0.0
+        self._steps = 0
+        self._xp = SCALAR if (backend == "scalar" or (backend == "auto" and n == 1)) else NUMPY
+        self._thermal_steps = max(1, round(THERMAL_PERIOD_S / step_s))
+        self._hold_steps = max(1, round(params.sample_hold_s / step_s))
+        self.supply_voltage_v = params.supply_voltage_v
+        angle = np.broadcast_to(np.asarray(initial_position_raw, dtype=float) * RAD_PER_POSITION_UNIT, (n,)).copy()
+        zeros = np.zeros(n)
+        values = {name: zeros.copy() for name in _STATE}
+        values.update(angle=angle, ref=angle.copy(), sample_angle=angle.copy(),
+                      temperature=np.full(n, params.ambient_temperature_c))
+        self._s = SimpleNamespace(**{k: self._to_backend(v) for k, v in values.items()})
+        #: Decoded commands, keyed by the registers' bytes (and the object, for a quick check).
+        self._plan_cache: tuple[bytes, SimpleNamespace] | None = None
+        self._plan_commands: Commands | None = None
+        #: Registers for sense() that change only at events (held speed/load, temperature, alarms).
+        self._slow: dict[str, np.ndarray] | None = None
+        self._sensing: SimpleNamespace | None = None
+
+    # ------------------------------------------------------------------ run-time inputs
+    def set_supply_voltage(self, volts: float) -> None:
+        """Change the supply (V); must lie in the parameters' valid range."""
+        self.params.check_supply(float(volts))
+        self.supply_voltage_v = float(volts)
+        self._plan_cache = self._slow = None
+
+    def set_external_torque(self, torque_nm: np.ndarray) -> None:
+        """Set a constant torque on each output shaft (N m, positive = CCW), added to any arm's gravity."""
+        self._s.ext_nm = self._to_backend(np.broadcast_to(np.asarray(torque_nm, dtype=float), (self.n,)))
+        self._plan_cache = None
+
+    def set_arm(self, mass_kg, length_m) -> None:
+        """Hang an arm (point mass at ``length_m``) on each shaft; convention in :mod:`firmware_model.motor`."""
+        moment = np.asarray(mass_kg, dtype=float) * GRAVITY_M_S2 * np.asarray(length_m, dtype=float)
+        if np.any(moment < 0):
+            raise ValueError("arm mass and length must be >= 0")
+        self._s.weight_nm = self._to_backend(np.broadcast_to(moment, (self.n,)))
+        self._plan_cache = None
+
+    # ------------------------------------------------------------------ state views
+    @property
+    def angle_rad(self) -> np.ndarray:
+        """Shaft angles, radians from the CW end, wrapped to [0, 2 pi)."""
+        return np.mod(self._array("angle"), _TWO_PI)
+
+    @property
+    def speed_rad_s(self) -> np.ndarray:
+        """True shaft speeds (not the held register), rad/s, positive CCW."""
+        return self._array("speed")
+
+    @property
+    def reference_rad(self) -> np.ndarray:
+        """The setpoint generator's reference, radians."""
+        return self._array("ref")
+
+    @property
+    def drive(self) -> np.ndarray:
+        """Present controller output, duty in [-1, 1]."""
+        return self._array("drive")
+
+    @property
+    def temperature_c(self) -> np.ndarray:
+        """Thermal node temperature, degrees C (unrounded)."""
+        return self._array("temperature")
+
+    # ------------------------------------------------------------------ the seam
+    def advance(self, to_time_s: float, commands: Commands) -> Sensed:
+        """Step from ``time_s`` to ``to_time_s`` (whole steps) holding ``commands``; return the sensors."""
+        target = int(math.floor(to_time_s / self.step_s + 1e-9))
+        plan = self._cached_plan(commands)
+        if target > self._steps:
+            self._run(plan, self._steps, target)
+            self._steps = target
+            self.time_s = self._steps * self.step_s
+        return self.sense()
+
+    def sense(self) -> Sensed:
+        """The registers at ``time_s`` without advancing."""
+        if self._slow is None:
+            self._slow = self._slow_registers()
+        slow = {k: v.copy() for k, v in self._slow.items()}
+        c = self._sensing
+        if self._xp is SCALAR:  # one servo: plain Python is several times cheaper than numpy here
+            st = self._s
+            busy = (c.wheel_turning[0] if c.wheel[0] else abs(st.ref_vel) > 1e-9) if c is not None else False
+            moving = int(c is not None and c.enabled[0] and (busy or abs(st.speed) > RAD_S_PER_SPEED_UNIT))
+            return Sensed(present_position=np.array([_position_raw(st.angle)], dtype=np.int64),
+                          moving=np.array([moving], dtype=np.int64), **slow)
+        if c is None:
+            moving = np.zeros(self.n, dtype=np.int64)
+        else:
+            busy = np.where(c.wheel, c.wheel_turning, np.abs(self._array("ref_vel")) > 1e-9)
+            moving = (c.enabled & (busy | (np.abs(self._array("speed")) > RAD_S_PER_SPEED_UNIT))).astype(np.int64)
+        return Sensed(present_position=position_rad_to_raw(self._array("angle")), moving=moving, **slow)
+
+    def _slow_registers(self) -> dict[str, np.ndarray]:
+        """Present Speed / Load / Voltage / Temperature and the alarms, recomputed after an event."""
+        regs = registers(self._array("held_speed"), self._array("held_drive"), self.supply_voltage_v,
+                         self._array("temperature"))
+        c = self._sensing
+        if c is None:
+            regs["alarms"] = np.zeros(self.n, dtype=np.int64)
+        else:
+            regs["alarms"] = alarm_bits(regs["present_temperature"], c.temperature_limit, self._array("overload_timer"),
+                                        self.params.overload_delay_s, self.supply_voltage_v,
+                                        c.min_voltage_limit, c.max_voltage_limit)
+        return regs
+
+    # ------------------------------------------------------------------ internals
+    def _to_backend(self, values: np.ndarray):
+        return float(values[0]) if self._xp is SCALAR else np.array(values, dtype=float)
+
+    def _array(self, name: str) -> np.ndarray:
+        value = getattr(self._s, name)
+        return np.array([value]) if self._xp is SCALAR else value.copy()
+
+    def _cached_plan(self, commands: Commands) -> SimpleNamespace:
+        """The decoded plan, rebuilt only when a register, the supply or an external load changed."""
+        if self._plan_cache is not None and commands is self._plan_commands:
+            return self._plan_cache[1]  # the bus hands over the same object until a register changes
+        key = b"".join([np.ascontiguousarray(getattr(commands, name), dtype=np.int64).tobytes() for name in _COMMAND_FIELDS])
+        if self._plan_cache is None or self._plan_cache[0] != key:
+            self._plan_cache = (key, self._plan(commands))
+            self._sensing, self._slow = self._plan_cache[1].sensing, None
+        self._plan_commands = commands
+        return self._plan_cache[1]
+
+    def _plan(self, c: Commands) -> SimpleNamespace:
+        """Decode the command registers into per-servo constants for the step loop."""
+        p, n = self.params, self.n
+        raw = {name: np.broadcast_to(np.asarray(getattr(c, name)), (n,)) for name in Commands.field_names()}
+        enabled = raw["torque_enable"] != 0
+        wheel = (raw["cw_angle_limit"] == 0) & (raw["ccw_angle_limit"] == 0)
+        speed_raw = raw["moving_speed"].astype(np.int64)
+        magnitude = (speed_raw & 0x3FF) * RAD_S_PER_SPEED_UNIT
+        goal_raw = np.clip(raw["goal_position"], raw["cw_angle_limit"], np.maximum(raw["ccw_angle_limit"], raw["cw_angle_limit"]))
+        comp = compliance_plan(raw["cw_compliance_margin"], raw["ccw_compliance_margin"], raw["cw_compliance_slope"],
+                               raw["ccw_compliance_slope"], raw["punch"], raw["torque_limit"])
+        c_hold = p.holding_slope_nm_v
+        volts = self.supply_voltage_v
+        wheel_ref = np.where(speed_raw & DIRECTION_BIT, -magnitude, magnitude)
+        wheel_ff = (c_hold * p.torque_constant_nm_a * wheel_ref + p.viscous_friction_nm_s_rad * wheel_ref
+                    + p.coulomb_friction_nm * np.sign(wheel_ref)) / (c_hold * volts)
+        per_servo = dict(
+            enabled=enabled, wheel=wheel, goal_rad=goal_raw * RAD_PER_POSITION_UNIT,
+            max_speed=np.where((speed_raw & 0x3FF) == 0, FULL_SCALE_SPEED_RAD_S, magnitude),
+            wheel_ref=wheel_ref, wheel_ff=wheel_ff, cw_margin=comp.cw_margin, ccw_margin=comp.ccw_margin,
+            cw_gain=comp.cw_gain, ccw_gain=comp.ccw_gain, punch=comp.punch, limit=comp.limit,
+            en=enabled.astype(float), volts_r=np.where(enabled, volts / p.winding_resistance_ohm, 0.0),
+        )
+        plan = SimpleNamespace(**{k: self._to_backend(v.astype(float)) for k, v in per_servo.items()})
+        plan.enabled, plan.wheel = (bool(enabled[0]), bool(wheel[0])) if self._xp is SCALAR else (enabled, wheel)
+        plan.sensing = SimpleNamespace(
+            enabled=enabled, wheel=wheel, wheel_turning=(speed_raw & 0x3FF) != 0,
+            temperature_limit=raw["temperature_limit"].copy(), min_voltage_limit=raw["min_voltage_limit"].copy(),
+            max_voltage_limit=raw["max_voltage_limit"].copy(),
+        )
+        plan.any_wheel, plan.any_joint = bool(wheel.any()), bool((~wheel).any())
+        plan.any_disabled = bool((~enabled).any())
+        plan.any_arm = bool(np.any(self._array("weight_nm") != 0))
+        plan.any_ext = bool(np.any(self._array("ext_nm") != 0))
+        plan.symmetric = bool(np.all(comp.cw_margin == comp.ccw_margin) and np.all(comp.cw_gain == comp.ccw_gain))
+        # In wheel mode the reference is unused; entering or leaving it restarts the reference at the shaft.
+        was_wheel = self._sensing.wheel if self._sensing is not None else np.zeros(n, dtype=bool)
+        restart = wheel | was_wheel
+        ref = np.where(restart, self._array("angle"), self._array("ref"))
+        ref_vel = np.where(restart, 0.0, self._array("ref_vel"))
+        self._s.ref = self._to_backend(apply_dead_zone(ref, ref_vel, per_servo["goal_rad"], p.setpoint_eps_rad))
+        self._s.ref_vel = self._to_backend(ref_vel)
+        return plan
+
+    def _run(self, plan: SimpleNamespace, first: int, last: int) -> None:
+        """Steps ``first + 1 .. last``: setpoint, controller, motor, mechanics, and the periodic events.
+
+        The hot loop keeps the state in locals; it writes it back only around
+        an event (every thermal period) and at the end.
+        """
+        xp, p, s, dt = self._xp, self.params, self._s, self.step_s
+        a, unit = p.max_acceleration_rad_s2, float(RAD_PER_POSITION_UNIT)
+        inv_unit, k_r, eta_k = 1.0 / unit, p.torque_constant_nm_a / p.winding_resistance_ohm, p.gearbox_efficiency * p.torque_constant_nm_a
+        ts, tc, b, vs, dt_j = (p.static_friction_nm, p.coulomb_friction_nm, p.viscous_friction_nm_s_rad,
+                               p.stribeck_velocity_rad_s, dt / p.total_inertia_kg_m2)
+        pid, gains, symmetric = self.controller == "pid", self.pid_gains, plan.symmetric
+        any_joint, any_wheel, mixed, any_disabled = plan.any_joint, plan.any_wheel, plan.any_joint and plan.any_wheel, plan.any_disabled
+        goal, max_speed, enabled, wheel, en, volts_r = plan.goal_rad, plan.max_speed, plan.enabled, plan.wheel, plan.en, plan.volts_r
+        cw_margin, ccw_margin, cw_gain, ccw_gain, punch, limit = (plan.cw_margin, plan.ccw_margin, plan.cw_gain,
+                                                                  plan.ccw_gain, plan.punch, plan.limit)
+        wheel_ff, wheel_ref, kv = plan.wheel_ff, plan.wheel_ref, p.wheel_speed_gain_s_rad
+        angle, speed, ref, ref_vel = s.angle, s.speed, s.ref, s.ref_vel
+        drive, demand, integral, prev_error, i2_sum = s.drive, s.demand, s.integral, s.prev_error, s.current_sq_sum
+        ext, weight, any_ext, any_arm = s.ext_nm, s.weight_nm, plan.any_ext, plan.any_arm
+        thermal_steps, hold_steps = self._thermal_steps, self._hold_steps
+        for step in range(first + 1, last + 1):
+            if any_joint:
+                ref, ref_vel = setpoint_step(xp, ref, ref_vel, goal, max_speed, a, dt)
+                if any_disabled:
+                    ref = xp.where(enabled, ref, angle)
+                    ref_vel = ref_vel * en
+                error = ref * inv_unit - xp.rint(angle * inv_unit)
+                if pid:
+                    error = error * unit
+                    drive, demand, integral = pid_drive(xp, error, integral, prev_error, dt, gains, limit)
+                    prev_error = error
+                elif symmetric:
+                    drive, demand = symmetric_compliance_drive(xp, error, ccw_margin, ccw_gain, punch, limit)
+                else:
+                    drive, demand = compliance_drive(xp, error, cw_margin, ccw_margin, cw_gain, ccw_gain, punch, limit)
+            if any_wheel:
+                wanted = wheel_ff + kv * (wheel_ref - speed)
+                wheel_drive = xp.minimum(xp.maximum(wanted, -limit), limit)
+                drive = xp.where(wheel, wheel_drive, drive) if mixed else wheel_drive
+                demand = xp.where(wheel, xp.abs(wanted), demand) if mixed else xp.abs(wanted)
+            if any_disabled:  # open bridge: no drive, no current (Present Load reads 0)
+                drive = drive * en
+                current = (drive * volts_r - k_r * speed) * en
+            else:
+                current = drive * volts_r - k_r * speed
+            applied = eta_k * current
+            if any_ext:
+                applied = applied + ext
+            if any_arm:
+                applied = applied + arm_gravity_torque_nm(xp, angle, weight)
+            angle, speed = mechanics_step(xp, angle, speed, applied, ts, tc, b, vs, dt_j, dt)
+            i2_sum = i2_sum + current * current
+            if step % thermal_steps == 0:
+                s.angle, s.speed, s.ref, s.ref_vel = angle, speed, ref, ref_vel
+                s.drive, s.demand, s.current_sq_sum = drive, demand, i2_sum
+                self._thermal_event(plan)
+                if step % hold_steps == 0:
+                    self._sample_event()
+                self._slow = None
+                angle, ref, i2_sum = s.angle, s.ref, s.current_sq_sum
+        s.angle, s.speed, s.ref, s.ref_vel = angle, speed, ref, ref_vel
+        s.drive, s.demand, s.integral, s.prev_error, s.current_sq_sum = drive, demand, integral, prev_error, i2_sum
+
+    def _thermal_event(self, plan: SimpleNamespace) -> None:
+        """Heating, the overload timer and angle wrapping, once per thermal period."""
+        xp, p, s = self._xp, self.params, self._s
+        period = self._thermal_steps * self.step_s
+        decay = math.exp(-period / (p.thermal_resistance_k_w * p.heat_capacity_j_k))
+        s.temperature = thermal_step(xp, s.temperature, s.current_sq_sum / self._thermal_steps, p.winding_resistance_ohm,
+                                     p.thermal_resistance_k_w, p.ambient_temperature_c, decay)
+        s.current_sq_sum = s.current_sq_sum * 0.0
+        s.overload_timer = overload_timer_step(xp, s.overload_timer, plan.enabled, s.demand, plan.limit, s.speed,
+                                               p.stall_speed_rad_s, period)
+        shift = xp.floor(s.angle / _TWO_PI) * _TWO_PI
+        s.angle, s.sample_angle, s.ref = s.angle - shift, s.sample_angle - shift, s.ref - shift
+
+    def _sample_event(self) -> None:
+        """Latch Present Speed and Present Load, once per sample period."""
+        s = self._s
+        s.held_speed = held_speed_rad_s(s.angle, s.sample_angle, self._hold_steps * self.step_s)
+        s.held_drive = s.drive
+        s.sample_angle = s.angle

@@ -1,0 +1,53 @@
+"""Motor, friction and stick-slip, on the bare mechanics step."""
+
+import numpy as np
+import pytest
+
+from firmware_model.backend import NUMPY
+from firmware_model.motor import ARM_HORIZONTAL_RAD, arm_gravity_torque_nm, mechanics_step, motor_current_a
+from firmware_model.params import ServoParams
+
+P = ServoParams()
+DT = 1e-3
+
+
+def _step(angle, speed, applied):
+    return mechanics_step(NUMPY, angle, speed, applied, P.static_friction_nm, P.coulomb_friction_nm,
+                          P.viscous_friction_nm_s_rad, P.stribeck_velocity_rad_s, DT / P.total_inertia_kg_m2, DT)
+
+
+def test_sliding_to_rest_sticks_without_chatter():
+    """A sliding shaft under a torque below static friction stops at exactly 0 and never flips sign."""
+    angle, speed = np.zeros(1), np.array([2.0])
+    speeds = []
+    for _ in range(2000):
+        angle, speed = _step(angle, speed, np.array([0.05]))  # helps the motion, but less than friction
+        speeds.append(speed[0])
+    speeds = np.array(speeds)
+    stop = np.argmax(speeds == 0.0)
+    assert stop > 0 and np.all(speeds[stop:] == 0.0) and np.all(speeds[:stop] > 0)
+
+
+def test_breakaway_above_static_and_slip_at_coulomb():
+    """From rest: 0.129 N m leaves it stuck, 0.131 N m starts it; once fast, friction falls toward Coulomb (Stribeck)."""
+    for torque, moves in ((0.129, False), (0.131, True)):
+        angle, speed = np.zeros(1), np.zeros(1)
+        angle, speed = _step(angle, speed, np.array([torque]))
+        assert (speed[0] > 0) == moves
+    angle, speed = np.zeros(1), np.array([5.0])
+    _, slower = _step(angle, speed, np.array([0.0]))
+    decel = (5.0 - slower[0]) / DT * P.total_inertia_kg_m2
+    assert decel == pytest.approx(P.coulomb_friction_nm + P.viscous_friction_nm_s_rad * 5.0, rel=0.01)
+
+
+def test_motor_current_back_emf():
+    """At the no-load speed the back-EMF cancels the supply: no current; at stall the current is V / R."""
+    assert motor_current_a(1.0, 9.6, 9.6 / P.torque_constant_nm_a, P.torque_constant_nm_a, 6.3) == pytest.approx(0.0)
+    assert motor_current_a(1.0, 9.6, 0.0, P.torque_constant_nm_a, 6.3) == pytest.approx(9.6 / 6.3)
+
+
+def test_arm_gravity_convention():
+    """Arm horizontal at raw 512 pulls CW with m g L; pointing straight up it pulls nothing."""
+    moment = 0.1 * 9.80665 * 0.1
+    assert arm_gravity_torque_nm(NUMPY, np.array([ARM_HORIZONTAL_RAD]), moment)[0] == pytest.approx(-moment)
+    assert arm_gravity_torque_nm(NUMPY, np.array([ARM_HORIZONTAL_RAD + np.pi / 2]), moment)[0] == pytest.approx(0.0, abs=1e-12)

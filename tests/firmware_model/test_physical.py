@@ -1,0 +1,158 @@
+"""PhysicalModel as a ServoModel: modes, determinism, vectorisation, run-time inputs."""
+
+import numpy as np
+import pytest
+
+from firmware_model.interface import ServoModel
+from firmware_model.physical import PhysicalModel
+from firmware_model.units import signed_raw_to_value
+
+
+def test_is_a_servo_model():
+    """It provides what the bus needs."""
+    model: ServoModel = PhysicalModel(3)
+    assert model.n == 3 and model.time_s == 0.0
+    assert model.sense().present_position.tolist() == [512, 512, 512]
+
+
+def test_wheel_mode_turns_endlessly_and_wraps(commands):
+    """Both angle limits 0: Moving Speed 400 CCW turns at 400 x 0.111 rpm, the position wraps 1023 -> 0."""
+    model = PhysicalModel(1)
+    cmds = commands(cw_angle_limit=0, ccw_angle_limit=0, moving_speed=400)
+    positions = [model.advance(i * 0.005, cmds).present_position[0] for i in range(1, 601)]
+    assert model.speed_rad_s[0] == pytest.approx(400 * 0.111 * 2 * np.pi / 60, rel=0.02)
+    wraps = sum(1 for a, b in zip(positions, positions[1:]) if b < a - 500)
+    assert wraps >= 1  # 4.65 rad/s for 3 s is 2.2 turns
+    assert signed_raw_to_value(model.sense().present_speed)[0] > 0
+
+
+def test_wheel_mode_direction_bit_turns_cw(commands):
+    """Bit 10 of Moving Speed turns CW: Present Speed and Load carry the CW bit."""
+    model = PhysicalModel(1)
+    sensed = model.advance(0.5, commands(cw_angle_limit=0, ccw_angle_limit=0, moving_speed=1024 | 300))
+    assert model.speed_rad_s[0] == pytest.approx(-300 * 0.111 * 2 * np.pi / 60, rel=0.02)
+    assert sensed.present_speed[0] & 1024 and sensed.present_load[0] & 1024
+
+
+def test_same_result_whatever_the_advance_chunks(commands):
+    """Deterministic fixed step: 1 ms, 7 ms or one 0.5 s advance give identical states."""
+    cmds = commands(goal_position=800)
+    results = []
+    for chunk in (0.001, 0.007, 0.5):
+        model = PhysicalModel(1)
+        t = 0.0
+        while t < 0.5 - 1e-12:
+            t = min(0.5, t + chunk)
+            model.advance(t, cmds)
+        results.append((model.angle_rad[0], model.speed_rad_s[0], model.temperature_c[0]))
+    assert results[0] == results[1] == results[2]
+
+
+def test_scalar_and_numpy_backends_agree(commands):
+    """One servo on floats and on numpy give the same trajectory (to rounding)."""
+    runs = []
+    for backend in ("scalar", "numpy"):
+        model = PhysicalModel(1, backend=backend)
+        model.set_external_torque(0.2)
+        model.advance(0.8, commands(goal_position=300, moving_speed=500))
+        runs.append((model.angle_rad[0], model.speed_rad_s[0], model.sense().present_load[0]))
+    assert runs[0][0] == pytest.approx(runs[1][0], abs=1e-9)
+    assert runs[0][2] == runs[1][2]
+
+
+def test_servos_are_independent(commands):
+    """Three different servos in one model move as each would alone."""
+    goals, speeds = [300, 700, 512], [0, 200, 0]
+    together = PhysicalModel(3)
+    together.set_external_torque([0.0, 0.3, 0.0])
+    sensed = together.advance(0.7, commands(3, goal_position=goals, moving_speed=speeds))
+    for i in range(3):
+        alone = PhysicalModel(1, backend="numpy")
+        alone.set_external_torque([0.0, 0.3, 0.0][i])
+        assert alone.advance(0.7, commands(1, goal_position=goals[i], moving_speed=speeds[i])).present_position[0] == sensed.present_position[i]
+
+
+def test_torque_off_servo_is_free_and_reference_follows(commands):
+    """Torque off: no drive, the shaft coasts under a torque; re-enabling does not jump back to an old reference."""
+    model = PhysicalModel(1)
+    model.set_external_torque(0.2)
+    sensed = model.advance(0.3, commands(torque_enable=0))
+    assert sensed.present_load[0] == 0 and sensed.present_position[0] > 600
+    model.set_external_torque(0.0)
+    model.advance(2.0, commands(torque_enable=0))  # Coulomb friction stops it
+    assert model.speed_rad_s[0] == 0.0
+    pushed = model.sense().present_position[0]
+    sensed = model.advance(2.5, commands(goal_position=pushed))
+    assert abs(sensed.present_position[0] - pushed) <= 3
+
+
+def test_arm_gravity_sags_into_the_compliance_slope(commands):
+    """A 0.3 kg arm at 0.1 m held horizontally (0.29 N m) sags CW by a few units, more with a softer slope."""
+    sags = []
+    for slope in (32, 128):
+        model = PhysicalModel(1)
+        model.set_arm(0.3, 0.1)
+        sensed = model.advance(1.0, commands(cw_compliance_slope=slope, ccw_compliance_slope=slope))
+        sags.append(512 - int(sensed.present_position[0]))
+    assert 1 <= sags[0] < sags[1] <= 40
+
+
+def test_pid_controller_reaches_goal_with_overshoot(commands):
+    """The report's PID (selectable): overshoots a 60-degree step and settles within 2 units."""
+    model = PhysicalModel(1, controller="pid")
+    positions = [model.advance(i * 1e-3, commands(goal_position=717)).present_position[0] for i in range(1, 1201)]
+    assert max(positions) > 717 and abs(positions[-1] - 717) <= 2
+
+
+def test_goal_clamped_to_angle_limits_and_moving_flag(commands):
+    """Goal beyond CCW Angle Limit stops at the limit; Moving is 1 on the way and 0 at rest."""
+    model = PhysicalModel(1)
+    cmds = commands(goal_position=900, ccw_angle_limit=600)
+    assert model.advance(0.05, cmds).moving[0] == 1
+    sensed = model.advance(1.0, cmds)
+    assert abs(sensed.present_position[0] - 600) <= 3 and sensed.moving[0] == 0
+
+
+def test_supply_voltage_checked():
+    """Supply outside the valid 7-12 V raises ValueError."""
+    with pytest.raises(ValueError, match="outside"):
+        PhysicalModel(1).set_supply_voltage(15.0)
+
+
+def test_constructor_rejects_bad_arguments():
+    """n, step, controller and backend are validated."""
+    for kwargs in ({"n": 0}, {"n": 1, "step_s": 0.0}, {"n": 1, "controller": "bang"}, {"n": 2, "backend": "scalar"}):
+        with pytest.raises(ValueError):
+            PhysicalModel(**kwargs)
+
+
+def test_scalar_position_quantiser_matches_units():
+    """The one-servo fast path of Present Position agrees with units.position_rad_to_raw everywhere, dead zone included."""
+    from firmware_model.physical import _position_raw
+    from firmware_model.units import position_rad_to_raw
+
+    angles = np.linspace(-7.0, 13.0, 20011)
+    assert [_position_raw(float(a)) for a in angles] == position_rad_to_raw(angles).tolist()
+
+
+def test_sense_agrees_between_backends_while_moving(commands):
+    """Sensed registers (position, moving, speed, load) are equal on the float and numpy paths mid-move."""
+    outs = []
+    for backend in ("scalar", "numpy"):
+        model = PhysicalModel(1, backend=backend)
+        model.advance(0.15, commands(goal_position=800))
+        s = model.sense()
+        outs.append([int(getattr(s, f)[0]) for f in s.field_names()])
+    assert outs[0] == outs[1]
+
+
+def test_leaving_wheel_mode_starts_from_the_shaft(commands):
+    """After endless turning, joint mode moves from where the shaft is, at the setpoint's pace (no jump, no stale reference)."""
+    model = PhysicalModel(1)
+    model.advance(0.7, commands(cw_angle_limit=0, ccw_angle_limit=0, moving_speed=300))
+    model.advance(1.5, commands(cw_angle_limit=0, ccw_angle_limit=0, moving_speed=0))
+    start = int(model.sense().present_position[0])
+    goal = 300 if start > 600 else 800
+    model.advance(1.501, commands(goal_position=goal))
+    assert abs(model.reference_rad[0] - model.angle_rad[0]) < 0.01
+    assert abs(model.advance(2.5, commands(goal_position=goal)).present_position[0] - goal) <= 3

@@ -1,0 +1,81 @@
+"""ServoParams: derivation, validation and the TOML round trip."""
+
+import dataclasses
+
+import pytest
+
+from firmware_model.params import DERIVED, ServoParams
+
+
+def test_defaults_reproduce_the_holding_torques():
+    """Step 1 of the derivation: c V + static friction gives 1.18 / 1.62 N m (data sheet) within 1 %."""
+    p = ServoParams()
+    assert p.holding_torque_nm(7.0) == pytest.approx(1.18, rel=0.01)
+    assert p.holding_torque_nm(10.0) == pytest.approx(1.62, rel=0.01)
+
+
+def test_derived_constants_are_physical():
+    """Efficiency below 1, motor constant a few mN m/A at the motor, rotor ~0.5 g cm^2, top speed below no-load speed."""
+    p = ServoParams()
+    assert 0.5 < p.gearbox_efficiency < 0.95
+    assert 2e-3 < p.torque_constant_nm_a / p.gear_ratio < 10e-3
+    assert 1e-8 < p.rotor_inertia_reflected_kg_m2 / p.gear_ratio**2 < 2e-7
+    assert p.top_speed_rad_s(9.6) < p.no_load_speed_rad_s(9.6)
+    assert p.torque_constant_nm_a == pytest.approx(DERIVED["torque_constant_nm_a"], rel=1e-3)
+    # The report's 6.6 "N/A" taken as k would give a 1.5 rad/s no-load speed: not this model.
+    assert p.no_load_speed_rad_s(9.6) > 5 * 9.6 / 6.6
+
+
+@pytest.mark.parametrize(
+    ("change", "field"),
+    [
+        ({"coulomb_friction_nm": -0.1}, "coulomb_friction_nm"),
+        ({"static_friction_nm": 0.05}, "static_friction_nm"),
+        ({"load_inertia_kg_m2": -1e-4}, "load_inertia_kg_m2"),
+        ({"rotor_inertia_reflected_kg_m2": 0.0}, "rotor_inertia_reflected_kg_m2"),
+        ({"gearbox_efficiency": 1.2}, "gearbox_efficiency"),
+        ({"winding_resistance_ohm": float("nan")}, "winding_resistance_ohm"),
+        ({"supply_voltage_v": 14.0}, "supply_voltage_v"),
+        ({"sample_hold_s": 0.0}, "sample_hold_s"),
+    ],
+)
+def test_invalid_values_name_the_field(change, field):
+    """Each physically impossible value raises ValueError naming its field."""
+    with pytest.raises(ValueError, match=field):
+        ServoParams(**change)
+
+
+def test_toml_round_trip(tmp_path):
+    """to_toml then from_toml gives equal parameters, including changed ones."""
+    p = dataclasses.replace(ServoParams(), supply_voltage_v=11.5, coulomb_friction_nm=0.07, load_inertia_kg_m2=2.5e-4)
+    path = tmp_path / "servo.toml"
+    p.to_toml(path)
+    assert ServoParams.from_toml(path) == p
+
+
+def test_toml_partial_file_keeps_defaults(tmp_path):
+    """A file with a few keys overrides only those."""
+    path = tmp_path / "fit.toml"
+    path.write_text("static_friction_nm = 0.2\nsample_hold_s = 0.13\n")
+    p = ServoParams.from_toml(path)
+    assert (p.static_friction_nm, p.sample_hold_s, p.gear_ratio) == (0.2, 0.13, 254.0)
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("gear_ratio = 254\nmotor_colour = 3\n", "motor_colour"),
+        ('gear_ratio = "254"\n', "gear_ratio"),
+        ("gear_ratio = true\n", "gear_ratio"),
+        ("[servo]\ngear_ratio = 254\n", "servo"),
+        ("gear_ratio = = 1\n", "not valid TOML"),
+        ("coulomb_friction_nm = 0.5\n", "static_friction_nm"),
+    ],
+)
+def test_toml_errors_name_file_and_key(tmp_path, text, message):
+    """Unknown keys, wrong types, bad syntax and bad values raise ValueError naming the file and the key."""
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(ValueError, match=message) as info:
+        ServoParams.from_toml(path)
+    assert "bad.toml" in str(info.value)

@@ -1,0 +1,87 @@
+#!/usr/bin/env python3
+"""Benchmark the physical model: simulated seconds per wall second at a fixed step.
+
+Why it exists: the model must keep ahead of the wall clock behind a live bus
+(issue 3's goals: >= 100x real time for 1 servo, >= 20x for 253, one core,
+1 kHz).  Two scenarios, because the cost per step does not depend on what the
+servos do but a bus's use does: ``moving`` (every servo on a full-speed move,
+then holding: every step computed) is the worst case, and it is the figure
+compared with the goals.
+
+Timing on a shared machine is noisy, so each count runs ``--repeat`` times
+and the best run is reported (as ``timeit`` does), with the worst beside it.
+
+Usage: ``python tools/bench_physics.py [--seconds S] [--step-s DT] [--poll-s P] [--counts 1,18,253] [--repeat R]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from firmware_model.interface import Commands  # noqa: E402
+from firmware_model.physical import PhysicalModel  # noqa: E402
+
+#: Issue 3's goals, simulated seconds per wall second.
+GOALS = {1: 100.0, 253: 20.0}
+
+
+def commands(n: int, goal: np.ndarray) -> Commands:
+    """Joint-mode commands with e-manual defaults, Moving Speed 0 (full speed)."""
+    full = lambda v: np.full(n, v, dtype=np.int64)  # noqa: E731
+    return Commands(
+        torque_enable=full(1), goal_position=goal.astype(np.int64), moving_speed=full(0), torque_limit=full(1023),
+        cw_angle_limit=full(0), ccw_angle_limit=full(1023), cw_compliance_margin=full(1), ccw_compliance_margin=full(1),
+        cw_compliance_slope=full(32), ccw_compliance_slope=full(32), punch=full(32), temperature_limit=full(70),
+        min_voltage_limit=full(60), max_voltage_limit=full(140),
+    )
+
+
+def rate(n: int, seconds: float, step_s: float, poll_s: float) -> float:
+    """Simulated seconds per wall second for ``n`` servos moving back and forth, polled every ``poll_s``."""
+    model = PhysicalModel(n, step_s=step_s)
+    # Every servo swings 123 degrees and back each second: always moving or settling.
+    swings = [commands(n, np.resize(g, n)) for g in (np.array([300, 724]), np.array([724, 300]))]
+    start = time.perf_counter()
+    t = 0.0
+    while t < seconds - 1e-12:
+        t = min(seconds, t + poll_s)
+        model.advance(t, swings[int(t / 0.5) % 2])
+    return seconds / (time.perf_counter() - start)
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    """Command line."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=float, default=5.0, help="simulated seconds per servo count (default 5)")
+    parser.add_argument("--step-s", type=float, default=1e-3, help="integration step (default 1 ms)")
+    parser.add_argument("--poll-s", type=float, default=0.01, help="simulated time between advance() calls (default 10 ms)")
+    parser.add_argument("--counts", default="1,18,253", help="servo counts, comma-separated")
+    parser.add_argument("--repeat", type=int, default=3, help="runs per count; the best is reported (default 3)")
+    return parser.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Print the rate for each servo count and its ratio to the goal."""
+    args = parse_args(argv)
+    print(f"step {args.step_s * 1e3:g} ms, {args.seconds:g} s simulated, advance() every {args.poll_s * 1e3:g} ms")
+    worst = float("inf")
+    for n in (int(c) for c in args.counts.split(",")):
+        runs = sorted(rate(n, args.seconds, args.step_s, args.poll_s) for _ in range(max(1, args.repeat)))
+        r = runs[-1]
+        goal = GOALS.get(n)
+        verdict = f"goal {goal:g}x -> {r / goal:.2f} of goal" if goal else "no goal"
+        print(f"{n:4d} servos: {r:8.1f} x real time   (worst of {len(runs)}: {runs[0]:.1f}; {verdict})")
+        if goal:
+            worst = min(worst, r / goal)
+    return 0 if worst >= 1.0 else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,116 @@
+#!/usr/bin/env python3
+"""Plot a step response of the physical model: position, reference, speed, load; data-sheet figures annotated.
+
+Why it exists: a picture of the model against the data sheet for the README
+and for eyeballing a fitted parameter set (``--params FILE``).  Present Speed
+and Present Load are drawn as a client polling at 100 Hz sees them (held
+about 0.1 s), beside the true shaft speed.
+
+Usage: ``python tools/plot_step.py [--out step.png] [--volts 9.6] [--degrees 60] [--moving-speed 0] [--params FILE]``
+Needs matplotlib (not a dependency of the package).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from firmware_model.interface import Commands  # noqa: E402
+from firmware_model.params import HOLDING_TORQUE_NM, MOVE_60_DEG_S, ServoParams  # noqa: E402
+from firmware_model.physical import PhysicalModel  # noqa: E402
+from firmware_model.units import RAD_PER_POSITION_UNIT, RAD_S_PER_SPEED_UNIT, signed_raw_to_value  # noqa: E402
+
+
+def simulate(params: ServoParams, volts: float, degrees: float, moving_speed: int, duration_s: float) -> dict:
+    """Run one step from raw 512 and record everything at 1 kHz."""
+    n_units = int(round(degrees / 300.0 * 1023))
+    full = lambda v: np.full(1, v, dtype=np.int64)  # noqa: E731
+    cmds = Commands(
+        torque_enable=full(1), goal_position=full(512 + n_units), moving_speed=full(moving_speed), torque_limit=full(1023),
+        cw_angle_limit=full(0), ccw_angle_limit=full(1023), cw_compliance_margin=full(1), ccw_compliance_margin=full(1),
+        cw_compliance_slope=full(32), ccw_compliance_slope=full(32), punch=full(32), temperature_limit=full(70),
+        min_voltage_limit=full(60), max_voltage_limit=full(140),
+    )
+    model = PhysicalModel(1, params=params)
+    model.set_supply_voltage(volts)
+    rec = {k: [] for k in ("t", "pos", "ref", "speed", "held_speed", "load", "drive")}
+    for i in range(1, int(round(duration_s * 1000)) + 1):
+        s = model.advance(i * 1e-3, cmds)
+        rec["t"].append(model.time_s)
+        rec["pos"].append(np.degrees(s.present_position[0] * RAD_PER_POSITION_UNIT))
+        rec["ref"].append(np.degrees(model.reference_rad[0]))
+        rec["speed"].append(model.speed_rad_s[0])
+        rec["held_speed"].append(signed_raw_to_value(s.present_speed)[0] * RAD_S_PER_SPEED_UNIT)
+        rec["load"].append(signed_raw_to_value(s.present_load)[0] / 10.23)
+        rec["drive"].append(model.drive[0] * 100.0)
+    out = {k: np.array(v) for k, v in rec.items()}
+    out["goal_deg"] = np.degrees((512 + n_units) * RAD_PER_POSITION_UNIT)
+    return out
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    """Command line."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", default="step_response.png", help="PNG to write (default step_response.png)")
+    parser.add_argument("--volts", type=float, default=9.6, help="supply voltage (default 9.6)")
+    parser.add_argument("--degrees", type=float, default=60.0, help="step size in degrees (default 60)")
+    parser.add_argument("--moving-speed", type=int, default=0, help="Moving Speed register (default 0 = full)")
+    parser.add_argument("--duration", type=float, default=0.6, help="simulated seconds (default 0.6)")
+    parser.add_argument("--params", type=Path, help="TOML parameter file (default: built-in)")
+    return parser.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Simulate, plot, write the PNG."""
+    args = parse_args(argv)
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        print("plot_step needs matplotlib: pip install matplotlib", file=sys.stderr)
+        return 2
+    params = ServoParams.from_toml(args.params) if args.params else ServoParams()
+    runs = {v: simulate(params, v, args.degrees, args.moving_speed, args.duration) for v in sorted({7.0, args.volts, 10.0})}
+    main_run = runs[args.volts]
+    fig, (ax_pos, ax_speed, ax_load) = plt.subplots(3, 1, sharex=True, figsize=(8, 9))
+    start_deg = np.degrees(512 * RAD_PER_POSITION_UNIT)
+    for volts, run in runs.items():
+        style = "-" if volts == args.volts else ":"
+        ax_pos.plot(run["t"], run["pos"] - start_deg, style, label=f"Present Position, {volts:g} V")
+    ax_pos.plot(main_run["t"], main_run["ref"] - start_deg, "k--", lw=1, label="reference (setpoint generator)")
+    if args.degrees == 60.0:
+        for volts, t60 in MOVE_60_DEG_S.items():
+            ax_pos.axvline(t60, color="grey", lw=0.8)
+            ax_pos.annotate(f"data sheet 60 deg @{volts:g} V: {t60} s", (t60, 5 + 8 * (volts == 7.0)), fontsize=8, rotation=90)
+    ax_pos.set_ylabel("degrees from start")
+    ax_pos.legend(fontsize=8, loc="lower right")
+    ax_speed.plot(main_run["t"], main_run["speed"], label="true shaft speed")
+    ax_speed.step(main_run["t"], main_run["held_speed"], where="post", label="Present Speed (held ~0.1 s)")
+    top = params.top_speed_rad_s(args.volts)
+    ax_speed.axhline(top, color="grey", lw=0.8)
+    ax_speed.annotate(f"model top speed @{args.volts:g} V: {top:.2f} rad/s", (0.0, top + 0.2), fontsize=8)
+    ax_speed.set_ylabel("rad/s")
+    ax_speed.legend(fontsize=8)
+    ax_load.plot(main_run["t"], main_run["drive"], label="controller drive")
+    ax_load.step(main_run["t"], main_run["load"], where="post", label="Present Load (held)")
+    ax_load.set_ylabel("% of full drive")
+    ax_load.set_xlabel("s")
+    ax_load.legend(fontsize=8)
+    holding = ", ".join(f"{params.holding_torque_nm(v):.2f} N m @{v:g} V (data sheet {h})" for v, h in HOLDING_TORQUE_NM.items())
+    fig.suptitle(f"AX-12+ model: {args.degrees:g} deg step at {args.volts:g} V, Moving Speed {args.moving_speed}\n"
+                 f"holding torque {holding}", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(args.out, dpi=110)
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
