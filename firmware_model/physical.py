@@ -354,7 +354,9 @@ class PhysicalModel:
         s.current_sq_sum = s.current_sq_sum * 0.0
         s.overload_timer = overload_timer_step(xp, s.overload_timer, plan.enabled, s.demand, plan.limit, s.speed,
                                                p.stall_speed_rad_s, period)
-        shift = xp.floor(s.angle / _TWO_PI) * _TWO_PI
+        # Only wheel mode turns endlessly; a joint-mode shaft keeps a continuous angle, so an
+        # overshoot below 0 reads as a small negative error, not as a jump to the far end.
+        shift = xp.where(plan.wheel, xp.floor(s.angle / _TWO_PI) * _TWO_PI, 0.0 * s.angle)
         s.angle, s.sample_angle, s.ref = s.angle - shift, s.sample_angle - shift, s.ref - shift
 
     def _sample_event(self) -> None:

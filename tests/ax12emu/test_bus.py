@@ -5,6 +5,7 @@ from __future__ import annotations
 import pytest
 
 from ax12emu.bus import Bus, parse_ids
+from firmware_model import KinematicModel
 from ax12emu.clock import VirtualClock
 from ax12emu.packets import BROADCAST_ID, encode_instruction, encode_status
 from ax12emu.servo import ServoOptions
@@ -61,9 +62,9 @@ def test_servo_at_another_baud_is_deaf():
 
 
 def test_physics_runs_in_virtual_time():
-    """A commanded move progresses only as the virtual clock advances, and reaches the goal."""
+    """A commanded move progresses only as the virtual clock advances, and reaches the goal (kinematic model)."""
     clock = VirtualClock()
-    bus = Bus([1], clock=clock)
+    bus = Bus([1], clock=clock, model=KinematicModel(1))
     bus.receive(encode_instruction(1, 0x03, bytes([24, 1])))
     bus.receive(encode_instruction(1, 0x03, bytes([30, 0x00, 0x03])))  # goal 768 from 512
     table = bus.servo(1).table

@@ -262,7 +262,11 @@ def test_state_dir_persists_id_and_limits_over_restart(emulator, tmp_path):
 
 
 def test_moving_servo_reaches_goal(bus):
-    """With torque on, Present Position moves to Goal Position and Moving drops back to 0."""
+    """With torque on, Present Position moves to Goal Position and Moving drops back to 0.
+
+    The physical model stops within a few units of the goal, as a real AX-12 does with its
+    default compliance (margin 1, slope 32) against static friction.
+    """
     with sdk_port(bus.port) as (port, ph):
         ph.write1ByteTxRx(port, 1, 24, 1)
         start = ok(ph.read2ByteTxRx(port, 1, 36))
@@ -272,4 +276,7 @@ def test_moving_servo_reaches_goal(bus):
         deadline = time.monotonic() + 3.0
         while ok(ph.read1ByteTxRx(port, 1, 46)) and time.monotonic() < deadline:
             time.sleep(0.01)
-        assert ok(ph.read2ByteTxRx(port, 1, 36)) == 800 != start
+        time.sleep(0.3)
+        final = ok(ph.read2ByteTxRx(port, 1, 36))
+        assert abs(final - 800) <= 4 and start < 700, (start, final)
+        assert ok(ph.read1ByteTxRx(port, 1, 46)) == 0
