@@ -56,3 +56,24 @@ def test_parse_args_defaults():
     """Defaults: ID 1 on a pty, e-manual profile, real time."""
     args = parse_args(["serve"])
     assert args.ids == [1] and not args.tcp and args.profile == "ax12a" and args.time_scale == 1.0
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["serve", "--voltage", "20"], "supply"),
+        (["serve", "--model", "kinematic", "--arm", "0.1,0.1"], "physical model"),
+        (["serve", "--params", "/nonexistent/params.toml"], "params.toml"),
+    ],
+)
+def test_model_errors_are_one_line(args, message):
+    """Model configuration errors (voltage out of 7-12 V, flags the model lacks, a missing file) are one line."""
+    result = run(*args)
+    assert result.returncode != 0 and "Traceback" not in result.stderr
+    assert message in result.stderr and len(result.stderr.strip().splitlines()) == 1, result.stderr
+
+
+def test_arm_flag_is_validated():
+    """--arm takes MASS_KG,LENGTH_M as two non-negative numbers."""
+    result = run("serve", "--arm", "heavy")
+    assert result.returncode == 2 and "MASS_KG,LENGTH_M" in result.stderr
