@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 import time
 
 import pytest
@@ -280,3 +281,15 @@ def test_moving_servo_reaches_goal(bus):
         final = ok(ph.read2ByteTxRx(port, 1, 36))
         assert abs(final - 800) <= 4 and start < 700, (start, final)
         assert ok(ph.read1ByteTxRx(port, 1, 46)) == 0
+
+
+def test_verbose_logs_every_packet_with_timestamps(emulator):
+    """-v logs each decoded packet on one timestamped line, with register names."""
+    served = emulator("-v", "--ids", "1")
+    with sdk_port(served.port) as (port, ph):
+        assert ph.write2ByteTxRx(port, 1, 30, 600) == (COMM_SUCCESS, 0)
+        assert ok(ph.read1ByteTxRx(port, 1, 43)) > 0
+    assert served.stop() == 0
+    log = served.process.stderr.read()
+    assert re.search(r"^\d\d:\d\d:\d\d\.\d{3} .*rx WRITE id=1 goal_position=600", log, re.M), log
+    assert re.search(r"rx READ id=1 address=43 length=1 \(present_temperature\)", log), log
