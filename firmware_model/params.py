@@ -78,9 +78,14 @@ supply.
 from __future__ import annotations
 
 import math
-import tomllib
+import sys
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # Python 3.10: the same parser, from PyPI
+    import tomli as tomllib
 
 __all__ = ["ServoParams", "DERIVED", "REPORT_VISCOUS_NM_S_RAD", "derive_holding_slope", "derive_total_inertia"]
 
