@@ -17,22 +17,25 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Iterable, Sequence
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
-from firmware_model import KinematicModel
 from firmware_model.interface import ServoModel
 
 from .clock import VirtualClock, WallClock
 from .control_table import TABLE_SIZE
 from .describe import describe_error, describe_instruction
 from .framing import Framer
+from .model_factory import ModelChoice, build_model
 from .packets import BROADCAST_ID, MAX_ID, Instruction, InstructionPacket
 from .plant import Plant
 from .request_handler import handle
 from .servo import ServoOptions, VirtualServo
 from .state_store import StateStore
+
+if TYPE_CHECKING:
+    from .faults import Faults
 
 __all__ = ["Bus", "Reply", "BAUD_TOLERANCE", "parse_ids"]
 
@@ -108,12 +111,18 @@ class Bus:
         if state_store is not None:
             for slot, servo in zip(slots, self.servos):
                 state_store.load(slot, servo.table)
-        self.model = model if model is not None else KinematicModel(len(slots))
+        self.model = model if model is not None else build_model(ModelChoice(), len(slots))
         self.plant = Plant(self.model, self.rows, self.servos)
         for servo in self.servos:
             servo.power_on()
         self._by_id: dict[int, list[VirtualServo]] = {}
         self._reindex()
+        #: How far behind the clock physics may be when a packet is served.  0 (the
+        #: default) brings it to the present first; a serving loop that steps physics
+        #: between packets sets one step, so requests rarely pay for a step.
+        self.request_lag_s = 0.0
+        #: Injected faults (``faults.Faults``); None costs one test per packet.
+        self.faults: Faults | None = None
         self._closed = False
 
     # -- lookup ------------------------------------------------------------------------
@@ -138,7 +147,10 @@ class Bus:
     # -- time --------------------------------------------------------------------------
     def advance(self) -> bool:
         """Bring the physics up to the clock's present time; True if a step was taken."""
-        return self.plant.advance(self.clock.now_s())
+        moved = self.plant.advance(self.clock.now_s())
+        if self.faults is not None:
+            self.faults.after_physics()
+        return moved
 
     # -- bytes in, replies out ---------------------------------------------------------
     def receive(self, data: bytes, now_s: float | None = None, *, line_bps: float | None = None) -> list[Reply]:
@@ -159,7 +171,10 @@ class Bus:
 
     def dispatch(self, packet: InstructionPacket, *, line_bps: float | None = None) -> list[Reply]:
         """Run one decoded packet on the servos it addresses; return their replies."""
-        self.plant.advance(self.clock.now_s())
+        self.plant.advance(self.clock.now_s() - self.request_lag_s)
+        faults = self.faults
+        if faults is not None:
+            faults.after_physics()
         targets = self.servos if packet.id == BROADCAST_ID else self._by_id.get(packet.id, ())
         debug = log.isEnabledFor(logging.DEBUG)
         if debug:
@@ -171,6 +186,8 @@ class Bus:
             if line_bps is not None and abs(line_bps - baud) > BAUD_TOLERANCE * baud:
                 if debug:
                     log.debug("ID %d listens at %.0f bps, the host sends at %.0f: it hears garbage", servo.id, baud, line_bps)
+                continue
+            if faults is not None and not faults.admit(servo):
                 continue
             old_id = servo.id
             outcome = handle(servo, packet)
@@ -188,6 +205,8 @@ class Bus:
             self.plant.refresh()
         if moved:
             self._reindex()
+        if faults is not None and replies:
+            replies = faults.on_replies(replies)
         return replies
 
     # -- life cycle --------------------------------------------------------------------

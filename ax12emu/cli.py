@@ -17,12 +17,14 @@ import signal
 import sys
 from collections.abc import Sequence
 
-from . import __version__
+from . import __version__, cli_hil
 from .bus import Bus, parse_ids
 from .clock import WallClock
 from .control_table import DEFAULT_PROFILE, PROFILES
+from .model_factory import MODELS, ModelChoice, build_model, parse_arm
 from .servo import ServoOptions
 from .state_store import StateFileError, StateStore
+from .trace import TraceWriter
 
 __all__ = ["parse_args", "main", "build_parser"]
 
@@ -32,6 +34,13 @@ log = logging.getLogger("ax12emu")
 def _ids(text: str) -> list[int]:
     try:
         return parse_ids(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _arm(text: str) -> tuple[float, float]:
+    try:
+        return parse_arm(text)
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
@@ -71,6 +80,18 @@ def build_parser() -> argparse.ArgumentParser:
     serve.add_argument(
         "--time-scale", type=_positive_float, default=1.0, metavar="K", help="simulated seconds per wall second"
     )
+    physics = serve.add_argument_group("model behind the servos")
+    physics.add_argument("--model", choices=MODELS, default="physical", help="physical (default) or kinematic")
+    physics.add_argument("--params", metavar="FILE", help="servo parameters as TOML (e.g. from firmware_model.diagnose)")
+    physics.add_argument("--voltage", type=_positive_float, metavar="V", help="supply voltage, 7-12 V (default 9.6)")
+    physics.add_argument(
+        "--controller", choices=("compliance", "pid"), default="compliance",
+        help="position controller: the e-manual's compliance control (default) or the 2008 report's PID",
+    )
+    physics.add_argument(
+        "--external-torque", type=float, default=0.0, metavar="NM", help="constant torque on every shaft, N m (+ = CCW)"
+    )
+    physics.add_argument("--arm", type=_arm, metavar="MASS_KG,LENGTH_M", help="an arm under gravity on every shaft")
     serve.add_argument(
         "--checksum-error",
         choices=("reply", "silent"),
@@ -90,6 +111,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="RESET's status packet comes from the old ID (e-manual example, default) or the new ID 1",
     )
     serve.add_argument("-v", "--verbose", action="store_true", help="log every packet, one line each")
+    # -- issue 5: --trace and fault flags on serve; decode and conformance commands (cli_hil.py)
+    cli_hil.add_serve_flags(serve)
+    cli_hil.add_commands(sub)
     return parser
 
 
@@ -134,14 +158,30 @@ def _serve(args: argparse.Namespace) -> int:
         reset_reply_from_new_id=args.reset_reply_id == "new",
     )
     store = StateStore(args.state_dir) if args.state_dir else None
+    model = build_model(
+        ModelChoice(
+            name=args.model,
+            params_path=args.params,
+            voltage_v=args.voltage,
+            controller=args.controller,
+            external_torque_nm=args.external_torque,
+            arm=args.arm,
+        ),
+        len(args.ids),
+    )
     bus = Bus(
         args.ids,
         options=options,
+        model=model,
         clock=WallClock(args.time_scale),
         state_store=None if args.factory_reset else store,
     )
     if args.factory_reset:
         bus.state_store = store
+    faults = cli_hil.fault_config(args)  # issue 5: fault injection
+    if faults.active:
+        faults.install(bus)
+    trace = TraceWriter(args.trace, profile=args.profile) if args.trace else None
     if args.tcp:
         host, port = args.tcp_address
         if not _is_loopback(host):
@@ -151,7 +191,7 @@ def _serve(args: argparse.Namespace) -> int:
     else:
         transport = PtyTransport(args.link)
         where = transport.slave_path
-    server = BusServer(bus, transport, pace=args.pace, echo=args.echo)
+    server = BusServer(bus, transport, pace=args.pace, echo=args.echo, trace=trace)
 
     def _stop(signum: int, frame: object) -> None:
         server.stop()
@@ -172,6 +212,8 @@ def _serve(args: argparse.Namespace) -> int:
     finally:
         transport.close()
         bus.close()
+        if trace is not None:
+            trace.close()
         log.info("stopped; %d packets served", server.packets_in)
     return 0
 
@@ -188,7 +230,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         if args.command == "serve":
             return _serve(args)
-    except (StateFileError, FileExistsError) as exc:
+        if args.command in cli_hil.COMMANDS:
+            return cli_hil.COMMANDS[args.command](args)
+    except (StateFileError, FileExistsError, ValueError) as exc:
         print(f"ax12emu: {exc}", file=sys.stderr)
         return 2
     except OSError as exc:

@@ -10,7 +10,7 @@ from __future__ import annotations
 from .control_table import DEFAULT_PROFILE, layout
 from .packets import Instruction, InstructionPacket, StatusError
 
-__all__ = ["describe_instruction", "describe_error"]
+__all__ = ["describe_instruction", "describe_error", "describe_status"]
 
 
 def describe_error(error: int) -> str:
@@ -68,3 +68,22 @@ def describe_instruction(packet: InstructionPacket, profile: str = DEFAULT_PROFI
         ]
         return f"{head} " + " ".join(blocks)
     return f"{head} params={params.hex(' ')}" if params else head
+
+
+def describe_status(
+    packet_id: int,
+    error: int,
+    params: bytes,
+    request: InstructionPacket | None = None,
+    profile: str = DEFAULT_PROFILE,
+    checksum_ok: bool = True,
+) -> str:
+    """One line for a status packet; a READ's data is named from its ``request``."""
+    head = f"STATUS id={packet_id} {describe_error(error)}"
+    if not checksum_ok:
+        head += " BAD-CHECKSUM"
+    if not params:
+        return head
+    if request is not None and request.instruction == Instruction.READ and len(request.params) == 2:
+        return f"{head} {_registers(request.params[0], bytes(params), profile)}"
+    return f"{head} params={bytes(params).hex(' ')}"

@@ -24,11 +24,16 @@ The wire, as it is modelled here:
 from __future__ import annotations
 
 import bisect
+import collections
 import logging
 import select
 import time
+from collections.abc import Callable
+from concurrent.futures import Future
+from typing import Any
 
 from .bus import Bus, Reply
+from .trace import IN, OUT, TraceWriter
 from .transports.base import Transport
 
 __all__ = ["BusServer", "merge_replies"]
@@ -42,8 +47,9 @@ SPIN_S = 0.0003
 #: After input, keep polling without sleeping this long: the host's next packet usually
 #: follows within a few tens of microseconds, and waking from a sleep costs about as much.
 HOT_S = 0.0002
-#: A physics step is put off while a reply is due sooner than this, so it cannot delay the reply.
-PHYSICS_DEFER_S = 0.001
+#: A physics step is put off while a reply is due sooner than this (a step of many servos takes
+#: ~0.1 ms), so it cannot delay the reply; a longer Return Delay Time hides the step inside it.
+PHYSICS_DEFER_S = 0.0003
 
 
 def merge_replies(replies: list[Reply], start_s: float, *, per_byte: bool) -> list[tuple[float, bytes]]:
@@ -81,12 +87,20 @@ class BusServer:
         pace: bool = False,
         echo: bool = False,
         physics_period_s: float = 1e-3,
+        trace: TraceWriter | None = None,
     ) -> None:
         self.bus = bus
+        #: Records every byte in and out; None (the default) costs one test per chunk.
+        self.trace = trace
+        #: Functions to run on the serving thread (see :meth:`call`).
+        self._calls: collections.deque[tuple[Callable[[Bus], Any], Future]] = collections.deque()
         self.transport = transport
         self.pace = pace
         self.echo = echo
         self.physics_period_s = physics_period_s
+        # The loop steps physics between packets, so a request may find it up to one
+        # period behind, as the AX-12's own registers are (its control loop runs every 1 ms).
+        bus.request_lag_s = physics_period_s
         self._queue: list[_Scheduled] = []
         self._seq = 0
         self._stop = False
@@ -119,6 +133,8 @@ class BusServer:
         data = queue[0][2] if count == 1 else b"".join(item[2] for item in queue[:count])
         del queue[:count]
         sent = self.transport.write(bytes(data))
+        if self.trace is not None:
+            self.trace.record(OUT, bytes(data[:sent]), now)
         if sent < len(data):
             self.bytes_dropped += len(data) - sent  # nobody is reading: the bytes are lost, as on a bus
 
@@ -127,6 +143,8 @@ class BusServer:
 
     # -- input -------------------------------------------------------------------------
     def _on_bytes(self, data: bytes, now: float) -> None:
+        if self.trace is not None:
+            self.trace.record(IN, data, now)
         line_bps = self.transport.line_bps()
         end = now
         if self.pace:
@@ -142,8 +160,6 @@ class BusServer:
         for packet in self.bus.framer.feed(data, now):
             self.packets_in += 1
             replies = self.bus.dispatch(packet, line_bps=line_bps)
-            # dispatch brought physics up to now: the idle tick can wait a period.
-            self._next_physics = now + self.physics_period_s
             if replies:
                 self._schedule(merge_replies(replies, end, per_byte=self.pace))
                 if not self.pace and replies[0].delay_s == 0.0:
@@ -189,7 +205,32 @@ class BusServer:
                 self._hot_until = now + HOT_S
         if queue:
             self._flush(time.monotonic())
-        if now >= self._next_physics and not (queue and queue[0][0] - now < PHYSICS_DEFER_S):
-            self.bus.expire(now)
+        if not (queue and queue[0][0] - now < PHYSICS_DEFER_S):
+            # Step physics here, just after a reply went out, while the host digests it:
+            # the request path then rarely pays for a step (see Bus.request_lag_s).
             self.bus.advance()
-            self._next_physics = max(self._next_physics + self.physics_period_s, now)
+            if now >= self._next_physics:
+                self.bus.expire(now)
+                self._next_physics = max(self._next_physics + self.physics_period_s, now)
+        if self._calls:
+            self._run_calls()
+
+    # -- calls from other threads -----------------------------------------------------
+    def call(self, fn: Callable[[Bus], Any], timeout_s: float = 5.0) -> Any:
+        """Run ``fn(bus)`` on the serving thread between packets and return its result.
+
+        Why: the bus is not thread-safe, and a test thread changing a servo
+        (or its faults) mid-packet would race the serving loop.  The loop
+        wakes at least once per physics period, so this waits about 1 ms.
+        """
+        future: Future = Future()
+        self._calls.append((fn, future))
+        return future.result(timeout_s)
+
+    def _run_calls(self) -> None:
+        while self._calls:
+            fn, future = self._calls.popleft()
+            try:
+                future.set_result(fn(self.bus))
+            except BaseException as exc:  # handed to the caller, never kills the loop
+                future.set_exception(exc)

@@ -1,0 +1,119 @@
+"""Command-line parts for testing with the emulator: trace and fault flags, ``decode``, ``conformance``.
+
+Why it exists: keeps :mod:`ax12emu.cli` about serving while these grow;
+``cli.py`` calls :func:`add_serve_flags`, :func:`add_commands`,
+:func:`fault_config` and dispatches through :data:`COMMANDS`.  ``print`` is
+allowed here as in ``cli.py``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Callable
+
+from .bus import parse_ids
+from .control_table import DEFAULT_PROFILE, PROFILES
+from .faults import FAULT_OPTIONS, FaultConfig
+
+__all__ = ["add_serve_flags", "add_commands", "fault_config", "COMMANDS"]
+
+
+def _typed(parse: Callable[[str], object]) -> Callable[[str], object]:
+    def convert(text: str) -> object:
+        try:
+            return parse(text)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+
+    convert.__name__ = getattr(parse, "__name__", "value").lstrip("_")
+    return convert
+
+
+def _ids(text: str) -> list[int]:
+    return parse_ids(text)
+
+
+def add_serve_flags(serve: argparse.ArgumentParser) -> None:
+    """``serve --trace FILE`` and the fault-injection flags (see :mod:`ax12emu.faults`)."""
+    serve.add_argument("--trace", metavar="FILE", help="record every byte in and out as JSON lines (ax12emu decode FILE)")
+    group = serve.add_argument_group(
+        "fault injection",
+        "what a client sees is listed in the docs of ax12emu.faults; servos are named by their --ids slot",
+    )
+    parse = {name: _typed(parser) for name, (parser, _) in FAULT_OPTIONS.items()}
+    group.add_argument("--drop", type=parse["drop"], default=0.0, metavar="F", help="drop this fraction of status packets (client: timeout)")
+    group.add_argument("--corrupt", type=parse["corrupt"], default=0.0, metavar="F", help="send this fraction with a wrong checksum (client: corrupt packet)")
+    group.add_argument("--delay", type=parse["delay"], default=0.0, metavar="F", help="send this fraction late (client: timeout)")
+    group.add_argument("--delay-s", type=parse["delay_s"], default=0.1, metavar="S", help="how late --delay replies are (default 0.1 s)")
+    group.add_argument("--fault-ids", type=parse["fault_ids"], default=(), metavar="LIST", help="apply --drop/--corrupt/--delay to these IDs only")
+    group.add_argument("--fault-seed", type=parse["seed"], default=0, metavar="N", help="seed of the random choices (default 0)")
+    group.add_argument("--vanish", type=parse["vanish"], action="append", default=[], metavar="ID[:EVERY_S:FOR_S]", help="servo unplugged (always, or FOR_S of every EVERY_S)")
+    group.add_argument("--duplicate", type=parse["duplicate"], action="append", default=[], metavar="SLOT:ID", help="servo SLOT also answers as ID (colliding replies)")
+    group.add_argument("--alarm", type=parse["alarm"], action="append", default=[], metavar="ID:NAMES", help="force alarms: overload, overheating, input_voltage")
+    group.add_argument("--stall", type=parse["stall"], action="append", default=[], metavar="ID", help="block the servo's shaft")
+
+
+def fault_config(args: argparse.Namespace) -> FaultConfig:
+    """The faults the serve flags ask for."""
+    return FaultConfig(
+        drop=args.drop,
+        corrupt=args.corrupt,
+        delay=args.delay,
+        delay_s=args.delay_s,
+        fault_ids=tuple(args.fault_ids),
+        seed=args.fault_seed,
+        vanish=tuple(args.vanish),
+        duplicate=tuple(args.duplicate),
+        alarm=tuple(args.alarm),
+        stall=tuple(args.stall),
+    )
+
+
+def add_commands(sub: argparse._SubParsersAction) -> None:
+    """The ``decode`` and ``conformance`` subcommands."""
+    decode = sub.add_parser("decode", help="print a bus trace (or a raw byte capture) as decoded packets")
+    decode.add_argument("file", metavar="FILE", help="a JSON-lines trace from serve --trace, or a binary capture")
+    decode.add_argument("--raw", action="store_true", help="treat FILE as a raw capture even if it looks like JSON")
+    decode.add_argument("--profile", choices=sorted(PROFILES), default=DEFAULT_PROFILE, help="register names of this profile")
+
+    check = sub.add_parser("conformance", help="run the Protocol 1.0 checks against any port (emulator or servo)")
+    check.add_argument("port", metavar="PORT", help="device path or pyserial URL (socket://HOST:PORT, ax12emu://...)")
+    check.add_argument("--ids", type=_typed(_ids), default=[1], metavar="LIST", help="IDs on the bus to check (default 1)")
+    check.add_argument("--baud", type=int, default=1_000_000, help="host bit rate (default 1000000)")
+    check.add_argument("--timeout-ms", type=float, default=50.0, metavar="MS", help="reply timeout (default 50)")
+    check.add_argument("--destructive", action="store_true", help="also change ID, baud and RESET (all restored afterwards)")
+    check.add_argument("--profile", choices=sorted(PROFILES), default=DEFAULT_PROFILE, help="expected control-table defaults")
+    check.add_argument("--only", action="append", metavar="CHECK", help="run only this check (repeatable)")
+
+
+def _decode(args: argparse.Namespace) -> int:
+    from .decoder import decode, format_decoded
+    from .trace import read_capture, read_raw
+
+    chunks = read_raw(args.file) if args.raw else read_capture(args.file)
+    for item in decode(chunks, profile=args.profile):
+        print(format_decoded(item))
+    return 0
+
+
+def _conformance(args: argparse.Namespace) -> int:
+    from . import conformance
+
+    report = conformance.run(
+        args.port,
+        args.ids,
+        baud=args.baud,
+        timeout_s=args.timeout_ms / 1e3,
+        destructive=args.destructive,
+        profile=args.profile,
+        only=args.only,
+    )
+    print(f"{args.port}, IDs {','.join(map(str, args.ids))}")
+    print(report.table())
+    sys.stdout.flush()
+    return 0 if report.passed else 1
+
+
+#: Subcommand name -> runner.
+COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {"decode": _decode, "conformance": _conformance}

@@ -1,0 +1,529 @@
+"""The conformance checks, one small function each, in a table.
+
+Why it exists: the same checks must judge the emulator and a real AX-12,
+so each one states what Protocol 1.0 (e-manual, 2006 manual) says a servo
+does and measures what the device did.  A check returns its measured figure
+(pass), raises :class:`Failed` with the figure (fail) or :class:`Skipped`
+with the reason, or returns a :class:`Note` where the sources allow more
+than one behaviour (the figure says which one this device shows).
+
+Every check restores what it wrote (in ``finally``), so the non-destructive
+set leaves the device's table as it found it; ``destructive`` checks (ID,
+baud rate, RESET) also put things back, but a failure halfway may leave the
+servo at another ID or baud, which the report says.
+"""
+
+from __future__ import annotations
+
+import statistics
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+from ..control_table import TABLE_SIZE, Access, Area, layout
+from ..describe import describe_error
+from ..packets import BROADCAST_ID, Instruction, StatusError, StatusPacket, encode_instruction
+from .link import Link
+
+__all__ = ["Check", "CHECKS", "Context", "Failed", "Skipped", "Note", "DYNAMIC", "table_differences"]
+
+#: Registers the firmware changes by itself; never compared.
+DYNAMIC = frozenset(
+    {"present_position", "present_speed", "present_load", "present_voltage", "present_temperature", "moving"}
+)
+#: Baud Rate register value used by the baud check and the host rate that matches it.
+_SLOW_BAUD_REGISTER, _SLOW_HOST_BPS = 34, 57600
+
+
+class Failed(Exception):
+    """The device did not do what the protocol says; the message is the measured figure."""
+
+
+class Skipped(Exception):
+    """The check cannot run here; the message says why."""
+
+
+class Note(NamedTuple):
+    """A behaviour the sources leave open: not a failure, the figure says what was seen."""
+
+    figure: str
+
+
+def expect(condition: bool, figure: str) -> None:
+    """Fail with ``figure`` unless ``condition``."""
+    if not condition:
+        raise Failed(figure)
+
+
+def table_differences(before: bytes, after: bytes, profile: str, ignore: frozenset[str] = DYNAMIC) -> list[str]:
+    """Registers that differ between two table images, as "name a->b"."""
+    out = []
+    for entry in layout(profile).entries:
+        if entry.name in ignore:
+            continue
+        a = int.from_bytes(before[entry.address : entry.end], "little")
+        b = int.from_bytes(after[entry.address : entry.end], "little")
+        if a != b:
+            out.append(f"{entry.name} {a}->{b}")
+    return out
+
+
+@dataclass
+class Context:
+    """What the checks share: the link, the IDs under test, the tables found at the start."""
+
+    link: Link
+    ids: list[int]
+    profile: str = "ax12a"
+    destructive: bool = False
+    #: Table image of each ID read before the first check.
+    before: dict[int, bytes] = field(default_factory=dict)
+
+    @property
+    def target(self) -> int:
+        """The servo most checks work on."""
+        return self.ids[0]
+
+    def free_id(self) -> int:
+        """An ID no servo under test has (counting down from 253)."""
+        return next(i for i in range(253, -1, -1) if i not in self.ids)
+
+    # -- transactions ----------------------------------------------------------------
+    def status(self, servo_id: int, instruction: int, params: bytes = b"", *, timeout_s: float | None = None) -> StatusPacket:
+        """A transaction that must be answered by ``servo_id`` with a valid checksum."""
+        response = self.link.transact(encode_instruction(servo_id, instruction, params), timeout_s=timeout_s)
+        name = Instruction(instruction).name if instruction in Instruction._value2member_map_ else f"{instruction:#04x}"
+        expect(response.status is not None, f"no reply to {name} id={servo_id}")
+        status = response.status
+        assert status is not None
+        expect(status.checksum_ok, f"reply to {name} id={servo_id} has a bad checksum")
+        expect(status.id == servo_id, f"reply to {name} id={servo_id} came from id={status.id}")
+        return status
+
+    def silent(self, packet: bytes) -> bool:
+        """Send ``packet`` and report whether nothing came back within the timeout."""
+        return self.link.transact(packet).status is None
+
+    def read(self, servo_id: int, address: int, length: int) -> bytes:
+        """READ that must succeed without error bits."""
+        status = self.status(servo_id, Instruction.READ, bytes((address, length)))
+        expect(len(status.params) == length, f"READ {address}+{length} returned {len(status.params)} bytes")
+        expect(not status.error & ~_ALARMS, f"READ {address}+{length}: {describe_error(status.error)}")
+        return status.params
+
+    def get(self, servo_id: int, name: str) -> int:
+        """A register by name."""
+        entry = layout(self.profile).by_name[name]
+        return int.from_bytes(self.read(servo_id, entry.address, entry.size), "little")
+
+    def put(self, servo_id: int, name: str, value: int) -> int:
+        """WRITE a register by name; returns the reply's instruction error bits (alarms masked)."""
+        entry = layout(self.profile).by_name[name]
+        status = self.status(servo_id, Instruction.WRITE, bytes((entry.address,)) + value.to_bytes(entry.size, "little"))
+        return status.error & ~_ALARMS
+
+    def must_put(self, servo_id: int, name: str, value: int) -> None:
+        """WRITE that must succeed."""
+        error = self.put(servo_id, name, value)
+        expect(not error, f"WRITE {name}={value}: {describe_error(error)}")
+
+    def table(self, servo_id: int) -> bytes:
+        """The whole control table."""
+        return self.read(servo_id, 0, TABLE_SIZE)
+
+    def ping_rtts(self, servo_id: int, count: int) -> list[float]:
+        """Round trips of ``count`` PINGs."""
+        packet = encode_instruction(servo_id, Instruction.PING)
+        rtts = []
+        for _ in range(count):
+            response = self.link.transact(packet)
+            expect(response.status is not None, f"PING id={servo_id} unanswered")
+            rtts.append(response.rtt_s)
+        return rtts
+
+
+#: Alarm bits may be set by a warm or loaded servo; instruction checks ignore them.
+_ALARMS = int(StatusError.INPUT_VOLTAGE | StatusError.OVERHEATING | StatusError.OVERLOAD)
+
+
+@dataclass(frozen=True)
+class Check:
+    """One named check; ``destructive`` ones run only when asked."""
+
+    name: str
+    run: Callable[[Context], "str | Note"]
+    destructive: bool = False
+
+
+def _ms(seconds: float) -> str:
+    return f"{seconds * 1e3:.2f} ms"
+
+
+# -- framing ----------------------------------------------------------------------------
+def check_ping(ctx: Context) -> str:
+    """Every ID answers PING with an empty status packet."""
+    rtts = []
+    for servo_id in ctx.ids:
+        status = ctx.status(servo_id, Instruction.PING)
+        expect(not status.params, f"PING id={servo_id} carried {len(status.params)} parameter bytes")
+        rtts.extend(ctx.ping_rtts(servo_id, 5))
+    return f"IDs {','.join(map(str, ctx.ids))}; median {_ms(statistics.median(rtts))}"
+
+
+def check_absent_id(ctx: Context) -> str:
+    """An ID nobody has gets silence."""
+    free = ctx.free_id()
+    expect(ctx.silent(encode_instruction(free, Instruction.PING)), f"ID {free} answered")
+    return f"ID {free} silent for {_ms(ctx.link.timeout_s)}"
+
+
+def check_split_packet(ctx: Context) -> str:
+    """A packet arriving one byte at a time (1 ms apart) is still one packet."""
+    packet = encode_instruction(ctx.target, Instruction.PING)
+    start = time.perf_counter()
+    ctx.link.flush_input()
+    for byte in packet[:-1]:
+        ctx.link.write_raw(bytes((byte,)))
+        time.sleep(0.001)
+    ctx.link.sent.append(packet)
+    ctx.link.write_raw(packet[-1:])
+    response = ctx.link.receive(start=time.perf_counter())
+    expect(response.status is not None and response.status.id == ctx.target, "no reply to a PING sent byte by byte")
+    return f"{len(packet)} bytes over {_ms(time.perf_counter() - start)}"
+
+
+def check_back_to_back(ctx: Context) -> str:
+    """Two packets in one write get two replies, in order."""
+    second = ctx.ids[-1]
+    first = encode_instruction(ctx.target, Instruction.PING)
+    then = encode_instruction(second, Instruction.READ, bytes((0, 2)))
+    ctx.link.flush_input()
+    ctx.link.sent.extend((first, then))
+    ctx.link.write_raw(first + then)
+    a = ctx.link.receive()
+    b = ctx.link.receive()
+    expect(a.status is not None and a.status.id == ctx.target, "first packet unanswered")
+    expect(b.status is not None and b.status.id == second and len(b.status.params) == 2, "second packet unanswered")
+    return f"replies from {ctx.target} then {second}"
+
+
+def check_resync(ctx: Context) -> str:
+    """After garbage, repeated 0xFF, a truncated packet and an impossible LENGTH, the next PING is answered."""
+    ctx.link.write_raw(bytes(range(0, 0xFE, 7)) + b"\xff\xff\xff\xff" + bytes((ctx.target,)) + b"\x04\x02")
+    time.sleep(0.1)
+    ctx.status(ctx.target, Instruction.PING)
+    ctx.link.write_raw(b"\xff\xff" + bytes((ctx.target,)) + b"\x00\x00")
+    ctx.status(ctx.target, Instruction.PING)
+    return "PING answered after garbage + truncated packet (100 ms pause) and after LENGTH 0"
+
+
+def check_checksum(ctx: Context) -> "str | Note":
+    """A packet with a wrong checksum is not executed."""
+    led = ctx.get(ctx.target, "led")
+    bad = bytearray(encode_instruction(ctx.target, Instruction.WRITE, bytes((25, 1 - led))))
+    bad[-1] ^= 0xFF
+    response = ctx.link.transact(bytes(bad))
+    try:
+        expect(ctx.get(ctx.target, "led") == led, "a WRITE with a bad checksum was executed")
+    finally:
+        ctx.put(ctx.target, "led", led)
+    if response.status is None:
+        return Note("not executed; no reply")
+    expect(bool(response.status.error & StatusError.CHECKSUM), f"reply without the Checksum bit: {describe_error(response.status.error)}")
+    return "not executed; reply with CHECKSUM"
+
+
+# -- instructions ------------------------------------------------------------------------
+def check_model_number(ctx: Context) -> str:
+    """READ of Model Number gives 12 (AX-12) on every ID."""
+    figures = []
+    for servo_id in ctx.ids:
+        data = ctx.read(servo_id, 0, 3)
+        model = int.from_bytes(data[:2], "little")
+        expect(model == 12, f"ID {servo_id}: model number {model}")
+        figures.append(f"{servo_id}: model {model} fw {data[2]}")
+    return "; ".join(figures)
+
+
+def check_read_table(ctx: Context) -> str:
+    """READ of the whole table (50 bytes) in one packet."""
+    data = ctx.table(ctx.target)
+    return f"{len(data)} bytes"
+
+
+def check_read_past_table(ctx: Context) -> str:
+    """READ past address 49 sets the Range bit."""
+    status = ctx.status(ctx.target, Instruction.READ, bytes((49, 2)))
+    expect(bool(status.error & StatusError.RANGE), f"READ 49+2: {describe_error(status.error)}")
+    return f"{describe_error(status.error & ~_ALARMS)}, {len(status.params)} data bytes"
+
+
+def check_write(ctx: Context) -> str:
+    """WRITE of a 1-byte (LED) and a 2-byte register (Punch) reads back; both restored."""
+    led = ctx.get(ctx.target, "led")
+    punch = ctx.get(ctx.target, "punch")
+    new_punch = punch + 1 if punch < 1023 else punch - 1
+    try:
+        ctx.must_put(ctx.target, "led", 1 - led)
+        expect(ctx.get(ctx.target, "led") == 1 - led, "LED did not change")
+        ctx.must_put(ctx.target, "punch", new_punch)
+        expect(ctx.get(ctx.target, "punch") == new_punch, "Punch did not change")
+    finally:
+        ctx.put(ctx.target, "led", led)
+        ctx.put(ctx.target, "punch", punch)
+    return f"led {led}->{1 - led}, punch {punch}->{new_punch}"
+
+
+def check_range_errors(ctx: Context) -> str:
+    """Out-of-range and read-only writes set Range and change nothing."""
+    torque = ctx.get(ctx.target, "torque_enable")
+    error = ctx.put(ctx.target, "torque_enable", 2)
+    expect(bool(error & StatusError.RANGE), f"Torque Enable = 2: {describe_error(error)}")
+    expect(ctx.get(ctx.target, "torque_enable") == torque, "the rejected write changed Torque Enable")
+    error = ctx.put(ctx.target, "model_number", 13)
+    expect(bool(error & StatusError.RANGE), f"write to Model Number: {describe_error(error)}")
+    return "torque_enable=2: RANGE; model_number=13: RANGE"
+
+
+def check_angle_limit(ctx: Context) -> str:
+    """Goal Position outside the angle limits sets Angle Limit and is not taken."""
+    if ctx.get(ctx.target, "torque_enable"):
+        raise Skipped("torque is on: changing limits could move the servo")
+    cw, ccw = ctx.get(ctx.target, "cw_angle_limit"), ctx.get(ctx.target, "ccw_angle_limit")
+    goal = ctx.get(ctx.target, "goal_position")
+    if cw == ccw == 0:
+        raise Skipped("wheel mode")
+    limit = max(cw, min(ccw, 1000) - 1, goal)
+    if limit >= 1023:
+        raise Skipped("no room above Goal Position")
+    try:
+        if limit != ccw:
+            ctx.must_put(ctx.target, "ccw_angle_limit", limit)
+        error = ctx.put(ctx.target, "goal_position", limit + 1)
+        expect(bool(error & StatusError.ANGLE_LIMIT), f"goal {limit + 1} past limit {limit}: {describe_error(error)}")
+        expect(ctx.get(ctx.target, "goal_position") == goal, "the rejected goal was taken")
+    finally:
+        ctx.put(ctx.target, "ccw_angle_limit", ccw)
+    return f"goal {limit + 1} > CCW limit {limit}: ANGLE_LIMIT"
+
+
+def check_instruction_error(ctx: Context) -> str:
+    """An undefined instruction (BULK_READ on an AX-12) and ACTION with nothing registered set Instruction."""
+    status = ctx.status(ctx.target, Instruction.BULK_READ, b"\x00")
+    expect(bool(status.error & StatusError.INSTRUCTION), f"BULK_READ: {describe_error(status.error)}")
+    if ctx.get(ctx.target, "registered"):
+        raise Skipped("a REG_WRITE is pending on the device")
+    status = ctx.status(ctx.target, Instruction.ACTION)
+    expect(bool(status.error & StatusError.INSTRUCTION), f"ACTION: {describe_error(status.error)}")
+    return "BULK_READ: INSTRUCTION; bare ACTION: INSTRUCTION"
+
+
+def check_reg_write_action(ctx: Context) -> str:
+    """REG_WRITE sets Registered and waits; ACTION applies it and clears Registered."""
+    led = ctx.get(ctx.target, "led")
+    try:
+        status = ctx.status(ctx.target, Instruction.REG_WRITE, bytes((25, 1 - led)))
+        expect(not status.error & ~_ALARMS, f"REG_WRITE: {describe_error(status.error)}")
+        expect(ctx.get(ctx.target, "registered") == 1, "Registered is not 1 after REG_WRITE")
+        expect(ctx.get(ctx.target, "led") == led, "REG_WRITE took effect before ACTION")
+        ctx.status(ctx.target, Instruction.ACTION)
+        expect(ctx.get(ctx.target, "led") == 1 - led, "ACTION did not apply the registered write")
+        expect(ctx.get(ctx.target, "registered") == 0, "Registered still 1 after ACTION")
+    finally:
+        ctx.put(ctx.target, "led", led)
+    return "registered 0->1->0, LED applied on ACTION"
+
+
+def check_sync_write(ctx: Context) -> str:
+    """SYNC_WRITE (to 0xFE) sets every listed servo and nobody answers."""
+    leds = {i: ctx.get(i, "led") for i in ctx.ids}
+    body = bytes((25, 1)) + b"".join(bytes((i, 1 - leds[i])) for i in ctx.ids)
+    try:
+        expect(ctx.silent(encode_instruction(BROADCAST_ID, Instruction.SYNC_WRITE, body)), "SYNC_WRITE was answered")
+        for servo_id in ctx.ids:
+            expect(ctx.get(servo_id, "led") == 1 - leds[servo_id], f"ID {servo_id} not written")
+    finally:
+        restore = bytes((25, 1)) + b"".join(bytes((i, leds[i])) for i in ctx.ids)
+        ctx.link.send(encode_instruction(BROADCAST_ID, Instruction.SYNC_WRITE, restore))
+        time.sleep(0.005)
+    return f"{len(ctx.ids)} servo(s) written, silent"
+
+
+def check_broadcast_write(ctx: Context) -> str:
+    """WRITE to 0xFE acts on every servo and nobody answers."""
+    leds = {i: ctx.get(i, "led") for i in ctx.ids}
+    try:
+        expect(ctx.silent(encode_instruction(BROADCAST_ID, Instruction.WRITE, bytes((25, 1)))), "broadcast WRITE answered")
+        for servo_id in ctx.ids:
+            expect(ctx.get(servo_id, "led") == 1, f"ID {servo_id} not written")
+    finally:
+        for servo_id, led in leds.items():
+            ctx.put(servo_id, "led", led)
+    return "all written, silent"
+
+
+def check_broadcast_ping(ctx: Context) -> Note:
+    """PING to 0xFE: the 2006 manual says it is answered (colliding with several servos)."""
+    response = ctx.link.transact(encode_instruction(BROADCAST_ID, Instruction.PING))
+    ctx.link.drain(0.01)
+    if response.status is None:
+        return Note("silent")
+    return Note(f"answered (id={response.status.id}{', checksum bad' if not response.status.checksum_ok else ''})")
+
+
+def check_status_return_level(ctx: Context) -> str:
+    """Level 1 answers PING and READ only; level 0 answers PING only; restored to what it was."""
+    servo = ctx.target
+    level = ctx.get(servo, "status_return_level")
+    led = ctx.get(servo, "led")
+    write_led = encode_instruction(servo, Instruction.WRITE, bytes((25, led)))
+    read_led = encode_instruction(servo, Instruction.READ, bytes((25, 1)))
+    ping = encode_instruction(servo, Instruction.PING)
+    try:
+        ctx.link.transact(encode_instruction(servo, Instruction.WRITE, bytes((16, 1))))
+        expect(ctx.silent(write_led), "level 1 answered a WRITE")
+        expect(not ctx.silent(read_led), "level 1 did not answer a READ")
+        expect(not ctx.silent(ping), "level 1 did not answer PING")
+        ctx.link.transact(encode_instruction(servo, Instruction.WRITE, bytes((16, 0))))
+        expect(ctx.silent(read_led), "level 0 answered a READ")
+        expect(not ctx.silent(ping), "level 0 did not answer PING")
+    finally:
+        ctx.link.send(encode_instruction(servo, Instruction.WRITE, bytes((16, 2))))
+        time.sleep(0.005)
+        if level != 2:
+            ctx.put(servo, "status_return_level", level)
+    return "0: PING only; 1: PING+READ; 2: all"
+
+
+def check_return_delay(ctx: Context) -> str:
+    """Return Delay Time (2 us per unit) shows in the round trip: measured against a delay of 0."""
+    servo = ctx.target
+    original = ctx.get(servo, "return_delay_time")
+    slow = original if original >= 100 else 250
+    count = 30
+    try:
+        ctx.must_put(servo, "return_delay_time", slow)
+        slow_rtt = statistics.median(ctx.ping_rtts(servo, count))
+        ctx.must_put(servo, "return_delay_time", 0)
+        fast_rtt = statistics.median(ctx.ping_rtts(servo, count))
+    finally:
+        ctx.put(servo, "return_delay_time", original)
+    expected = slow * 2e-6
+    measured = slow_rtt - fast_rtt
+    figure = f"{slow} ({expected * 1e6:.0f} us): {_ms(slow_rtt)}; 0: {_ms(fast_rtt)}; difference {measured * 1e6:.0f} us"
+    # Lower bound only: a busy host adds time to both, never removes the servo's wait.
+    expect(measured >= 0.6 * expected, figure)
+    return figure
+
+
+def check_defaults(ctx: Context) -> "str | Note":
+    """Registers at the profile's factory defaults (ID, and values the firmware sets, excepted)."""
+    ignore = DYNAMIC | {"id", "goal_position", "torque_limit"}
+    lay = layout(ctx.profile)
+    differ = table_differences(lay.defaults, ctx.before[ctx.target], ctx.profile, ignore)
+    if differ:
+        return Note("differs: " + ", ".join(differ))
+    return "all at defaults"
+
+
+# -- destructive ---------------------------------------------------------------------------
+def check_id_change(ctx: Context) -> str:
+    """Writing the ID is answered from the old ID; then only the new ID answers; restored."""
+    old, new = ctx.target, ctx.free_id()
+    moved = False
+    try:
+        ctx.must_put(old, "id", new)
+        moved = True
+        ctx.status(new, Instruction.PING)
+        expect(ctx.silent(encode_instruction(old, Instruction.PING)), f"old ID {old} still answers")
+    finally:
+        if moved:
+            ctx.put(new, "id", old)
+    ctx.status(old, Instruction.PING)
+    return f"{old}->{new}->{old}"
+
+
+def check_baud_change(ctx: Context) -> "str | Note":
+    """After Baud Rate 34 the servo answers at 57,600 bps; restored."""
+    servo = ctx.target
+    original = ctx.get(servo, "baud_rate")
+    host = ctx.link.baud
+    changed = False
+    try:
+        ctx.must_put(servo, "baud_rate", _SLOW_BAUD_REGISTER)
+        changed = True
+        old_rate_silent = ctx.silent(encode_instruction(servo, Instruction.PING))
+        ctx.link.baud = _SLOW_HOST_BPS
+        rtt = statistics.median(ctx.ping_rtts(servo, 3))
+    finally:
+        if changed:
+            ctx.link.baud = _SLOW_HOST_BPS
+            ctx.put(servo, "baud_rate", original)
+        ctx.link.baud = host
+    ctx.status(servo, Instruction.PING)
+    figure = f"answers at {_SLOW_HOST_BPS} bps ({_ms(rtt)}); at {host} bps: {'silent' if old_rate_silent else 'still answered'}"
+    return figure if old_rate_silent else Note(figure + " (the port carries no line rate?)")
+
+
+def check_reset(ctx: Context) -> str:
+    """RESET restores factory defaults (ID 1, 1 Mbps); the table is then written back."""
+    servo = 1 if 1 in ctx.ids else ctx.target
+    before = ctx.table(servo)
+    host = ctx.link.baud
+    lay = layout(ctx.profile)
+    status = ctx.status(servo, Instruction.RESET)
+    figure = f"answered by id={status.id}"
+    ctx.link.baud = 1_000_000
+    try:
+        after = ctx.table(1)
+        differ = table_differences(lay.defaults, after, ctx.profile, DYNAMIC | {"goal_position", "torque_limit"})
+        expect(not differ, "after RESET: " + ", ".join(differ))
+    finally:
+        _write_back(ctx, before)
+        ctx.link.baud = host
+    ctx.status(servo, Instruction.PING)
+    return figure + "; table at defaults; restored"
+
+
+def _write_back(ctx: Context, image: bytes) -> None:
+    """Write a saved table back to the reset servo (now ID 1 at 1 Mbps): ID and baud last."""
+    lay = layout(ctx.profile)
+    last = ("id", "baud_rate")
+    for entry in lay.entries:
+        if entry.access is not Access.RW or entry.name in last or entry.name == "lock":
+            continue
+        value = int.from_bytes(image[entry.address : entry.end], "little")
+        if entry.area is Area.RAM and entry.name == "torque_enable":
+            continue
+        ctx.put(1, entry.name, value)
+    ctx.put(1, "torque_enable", image[24])
+    ctx.put(1, "id", image[3])
+    ctx.put(image[3], "baud_rate", image[4])
+
+
+CHECKS: tuple[Check, ...] = (
+    Check("ping", check_ping),
+    Check("absent ID is silent", check_absent_id),
+    Check("model number", check_model_number),
+    Check("read whole table", check_read_table),
+    Check("defaults", check_defaults),
+    Check("packet split into bytes", check_split_packet),
+    Check("two packets in one write", check_back_to_back),
+    Check("resync after garbage", check_resync),
+    Check("bad checksum not executed", check_checksum),
+    Check("write 1 and 2 bytes", check_write),
+    Check("range error", check_range_errors),
+    Check("read past the table", check_read_past_table),
+    Check("angle limit error", check_angle_limit),
+    Check("instruction error", check_instruction_error),
+    Check("REG_WRITE + ACTION", check_reg_write_action),
+    Check("SYNC_WRITE", check_sync_write),
+    Check("broadcast WRITE", check_broadcast_write),
+    Check("broadcast PING", check_broadcast_ping),
+    Check("status return levels", check_status_return_level),
+    Check("return delay", check_return_delay),
+    Check("ID change", check_id_change, destructive=True),
+    Check("baud change", check_baud_change, destructive=True),
+    Check("RESET", check_reset, destructive=True),
+)

@@ -1,0 +1,124 @@
+"""The host side of the conformance suite: send a packet, time its status packet.
+
+Why it exists: the suite must run against any Protocol 1.0 port (a pty
+path, ``socket://``, ``ax12emu://``, a real USB2Dynamixel) with nothing but
+pyserial, and measure round trips itself.  Reads block on the port with a
+short timeout rather than spinning, so a bus served by a thread of the same
+process is never starved of the GIL.  Every well-formed packet sent is kept
+in :attr:`Link.sent`, so a trace can be checked against it.
+"""
+
+from __future__ import annotations
+
+import socket
+import time
+from typing import NamedTuple
+
+import serial
+
+from ..framing import Framer
+from ..packets import StatusPacket
+
+__all__ = ["Link", "Response", "open_port"]
+
+#: How long one blocking read may wait before the deadline is checked again.
+_POLL_S = 0.002
+
+
+class Response(NamedTuple):
+    """A status packet (None: silence until the timeout) and the round trip it took."""
+
+    status: StatusPacket | None
+    rtt_s: float
+
+
+def open_port(port: str, baud: int) -> serial.SerialBase:
+    """Open a device path or any pyserial URL at ``baud``.
+
+    pyserial's ``socket://`` leaves Nagle's algorithm on, which holds back a
+    packet's later bytes for a delayed ACK (~40 ms), past the servo's
+    partial-packet timeout; a serial line never does that, so it is turned off.
+    """
+    link = serial.serial_for_url(port, baudrate=baud, timeout=_POLL_S, write_timeout=1.0)
+    sock = getattr(link, "_socket", None)
+    if sock is not None:
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+    return link
+
+
+class Link:
+    """One host on one port: transactions, raw writes, the host's baud rate."""
+
+    def __init__(self, port: serial.SerialBase, *, timeout_s: float = 0.05) -> None:
+        self.port = port
+        self.timeout_s = timeout_s
+        #: Every packet sent with :meth:`transact` or :meth:`send`, in order.
+        self.sent: list[bytes] = []
+        # Bytes after a status packet stay here for the next receive (two replies in one read).
+        self._framer = Framer()
+        self._ready: list = []
+
+    @property
+    def baud(self) -> int:
+        """The host's bit rate."""
+        return int(self.port.baudrate)
+
+    @baud.setter
+    def baud(self, bps: int) -> None:
+        self.port.baudrate = bps
+
+    def flush_input(self) -> None:
+        """Forget bytes received so far (a late reply must not answer the next packet)."""
+        self.port.reset_input_buffer()
+        self._framer.reset()
+        self._ready.clear()
+
+    def send(self, packet: bytes) -> None:
+        """Write a packet that gets no answer (broadcast, or a low status return level)."""
+        self.flush_input()
+        self.port.write(packet)
+        self.sent.append(bytes(packet))
+
+    def write_raw(self, data: bytes) -> None:
+        """Write bytes that are not a packet (garbage, halves); not recorded in :attr:`sent`."""
+        self.port.write(data)
+
+    def transact(self, packet: bytes, *, timeout_s: float | None = None) -> Response:
+        """Send ``packet`` and wait for one status packet (an echo of the packet is skipped)."""
+        start = time.perf_counter()
+        self.send(packet)
+        return self.receive(timeout_s, start=start, echo=packet)
+
+    def receive(self, timeout_s: float | None = None, *, start: float | None = None, echo: bytes = b"") -> Response:
+        """Wait for the next status packet."""
+        start = time.perf_counter() if start is None else start
+        deadline = start + (self.timeout_s if timeout_s is None else timeout_s)
+        skip_echo = bool(echo)
+        while True:
+            while self._ready:
+                packet = self._ready.pop(0)
+                if skip_echo and packet.encode() == echo:
+                    skip_echo = False
+                    continue
+                return Response(
+                    StatusPacket(packet.id, packet.instruction, bytes(packet.params), packet.checksum_ok),
+                    time.perf_counter() - start,
+                )
+            now = time.perf_counter()
+            if now >= deadline:
+                return Response(None, now - start)
+            data = self.port.read(max(1, self.port.in_waiting))
+            if data:
+                self._ready.extend(self._framer.feed(data))
+
+    def drain(self, seconds: float) -> bytes:
+        """Read and return whatever arrives within ``seconds``."""
+        deadline = time.perf_counter() + seconds
+        out = bytearray()
+        while time.perf_counter() < deadline:
+            out += self.port.read(max(1, self.port.in_waiting))
+        return bytes(out)
+
+    def close(self) -> None:
+        """Close the port."""
+        self.port.close()

@@ -1,0 +1,447 @@
+"""Fault injection: the unhappy paths of a real bus, on demand and reproducible.
+
+Why it exists: hardware shows a lost reply, a noisy line or an overheating
+servo rarely and never on cue, yet robot code must survive them.  A
+:class:`Faults` object attached to a :class:`~ax12emu.bus.Bus` (``bus.faults``)
+bends what the servos do; with none attached the bus pays one ``is None``
+test per packet.  Every random choice comes from one ``random.Random(seed)``
+drawn once per status packet, so a run is repeatable with the same seed and
+the same traffic.
+
+What a client sees, fault by fault (dynamixel-sdk's names):
+
+* ``drop``: a fraction of status packets is never sent -> ``COMM_RX_TIMEOUT``;
+  the instruction was still executed.
+* ``corrupt``: a fraction of status packets carries a wrong checksum ->
+  ``COMM_RX_CORRUPT``.
+* ``delay``: a fraction of status packets leaves ``delay_s`` late (default
+  100 ms, past dynamixel-sdk's ~34 ms timeout) -> ``COMM_RX_TIMEOUT``, and the
+  late bytes arrive during a later transaction unless the client waits or
+  flushes (the SDK flushes its input before each packet it sends).
+* ``vanish``: the servo is unplugged: it neither hears nor answers (->
+  ``COMM_RX_TIMEOUT``) until it comes back, with its table as it was;
+  optionally periodic (absent ``for_s`` out of every ``every_s`` simulated s).
+* ``duplicate``: the servo launched as ``slot`` answers to ``as_id`` too, so
+  two servos share an ID: both act on every packet and both answer at once;
+  their replies are AND-ed on the wire (``server.merge_replies``), so equal
+  replies look clean and different ones (e.g. Present Position) arrive
+  garbled -> ``COMM_RX_CORRUPT`` or wrong values.
+* ``alarm``: alarm bits (overload, overheating, input voltage) are raised as
+  if the model had: every status packet of the servo carries them (the SDK's
+  ``error`` value, e.g. ``0x20``) and Alarm Shutdown (address 18) acts on them
+  (torque limit 0, or torque off in the 2006 profile), as the firmware does.
+* ``stall``: the shaft is blocked: Present Position freezes, Present Speed
+  reads 0, Moving stays 1 while the goal is not reached, Present Load reads
+  full scale, and after ``overload_after_s`` simulated seconds of driving the
+  Overload bit (0x20) is raised.  The motion model itself is held only where
+  it exposes a writable ``angle_rad`` (the kinematic model); otherwise the
+  position catches up with the model when the stall is lifted.
+
+Servos are named by *slot*, the ID they were launched with (``--ids``), so a
+fault stays on the same servo when a client changes its ID.
+"""
+
+from __future__ import annotations
+
+import logging
+import random
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from firmware_model.units import RAD_PER_POSITION_UNIT
+
+from .packets import StatusError
+
+if TYPE_CHECKING:
+    from .bus import Bus, Reply
+    from .servo import VirtualServo
+
+__all__ = ["Faults", "FaultConfig", "ALARM_NAMES", "FAULT_OPTIONS", "parse_alarm_bits"]
+
+log = logging.getLogger(__name__)
+
+#: Alarm names accepted by ``alarm`` and ``--alarm``, to status-byte bits.
+ALARM_NAMES: Mapping[str, int] = {
+    "overload": int(StatusError.OVERLOAD),
+    "overheating": int(StatusError.OVERHEATING),
+    "input_voltage": int(StatusError.INPUT_VOLTAGE),
+    "voltage": int(StatusError.INPUT_VOLTAGE),
+}
+#: Present Load full scale with the direction bit clear (e-manual, Present Load).
+_FULL_LOAD = 1023
+
+
+def parse_alarm_bits(text: str) -> int:
+    """"overload,overheating" (or a number) to status-byte bits."""
+    bits = 0
+    for name in text.replace("+", ",").split(","):
+        name = name.strip().lower()
+        if name.isdigit() or name.startswith("0x"):
+            value = int(name, 0)
+        elif name in ALARM_NAMES:
+            value = ALARM_NAMES[name]
+        else:
+            raise ValueError(f"unknown alarm {name!r}; use {', '.join(ALARM_NAMES)} or a number")
+        if not 0 < value < 0x80:
+            raise ValueError(f"alarm bits must be 1..127, got {value}")
+        bits |= value
+    return bits
+
+
+@dataclass
+class _Stall:
+    position: int
+    driving_since_s: float | None = None
+
+
+class Faults:
+    """Live faults on one bus; change them at any time (from the thread serving the bus)."""
+
+    def __init__(self, bus: "Bus", *, seed: int = 0) -> None:
+        self.bus = bus
+        self.seed = seed
+        self._rng = random.Random(seed)
+        self.drop = 0.0
+        self.corrupt = 0.0
+        self.delay = 0.0
+        self.delay_s = 0.1
+        #: Wire IDs the reply faults apply to; None: every ID.
+        self.reply_ids: frozenset[int] | None = None
+        self._vanished: dict[int, tuple[float | None, float | None]] = {}
+        self._alarms: dict[int, int] = {}
+        self._duplicates: dict[int, int] = {}
+        self._stalls: dict[int, _Stall] = {}
+        self._stall_overload_s = 1.0
+        self._held: dict[int, dict[str, int]] = {}
+        #: What was done, for tests and logs.
+        self.dropped = 0
+        self.corrupted = 0
+        self.delayed = 0
+
+    # -- configuration -------------------------------------------------------------
+    def _index(self, slot: int) -> int:
+        try:
+            return self.bus.slots.index(slot)
+        except ValueError:
+            raise ValueError(f"no servo launched as ID {slot} (slots: {self.bus.slots})") from None
+
+    def set_reply_faults(
+        self,
+        *,
+        drop: float = 0.0,
+        corrupt: float = 0.0,
+        delay: float = 0.0,
+        delay_s: float = 0.1,
+        ids: Iterable[int] | None = None,
+    ) -> None:
+        """Set the fractions of status packets dropped, corrupted or delayed (all 0: off)."""
+        for name, value in (("drop", drop), ("corrupt", corrupt), ("delay", delay)):
+            if not 0.0 <= value <= 1.0:
+                raise ValueError(f"{name} must be a fraction 0..1, got {value}")
+        if drop + corrupt + delay > 1.0 + 1e-12:
+            raise ValueError(f"drop + corrupt + delay must not exceed 1, got {drop + corrupt + delay}")
+        if not delay_s >= 0:
+            raise ValueError(f"delay_s must be >= 0, got {delay_s}")
+        self.drop, self.corrupt, self.delay, self.delay_s = drop, corrupt, delay, delay_s
+        self.reply_ids = None if ids is None else frozenset(ids)
+
+    def vanish(self, slot: int, *, every_s: float | None = None, for_s: float | None = None) -> None:
+        """Unplug the servo; with ``every_s``/``for_s`` it is absent ``for_s`` of every ``every_s`` (simulated)."""
+        if (every_s is None) != (for_s is None) or (every_s is not None and not 0 < for_s < every_s):  # type: ignore[operator]
+            raise ValueError("vanish needs both every_s and for_s, with 0 < for_s < every_s, or neither")
+        self._vanished[self._index(slot)] = (every_s, for_s)
+
+    def reappear(self, slot: int) -> None:
+        """Plug the servo back in (its table is as it was)."""
+        self._vanished.pop(self._index(slot), None)
+
+    def force_alarm(self, slot: int, bits: int | str) -> None:
+        """Raise alarm bits (int or names such as "overload,overheating") until :meth:`clear_alarm`."""
+        value = parse_alarm_bits(bits) if isinstance(bits, str) else int(bits)
+        if not 0 < value < 0x80:
+            raise ValueError(f"alarm bits must be 1..127, got {value}")
+        self._alarms[self._index(slot)] = value
+
+    def clear_alarm(self, slot: int) -> None:
+        """Lift forced alarms; the model's own alarms, if any, return at its next step."""
+        index = self._index(slot)
+        bits = self._alarms.pop(index, 0)
+        self.bus.servos[index].alarms &= ~bits
+        self.bus.plant.refresh()
+
+    def duplicate(self, slot: int, as_id: int) -> None:
+        """Give the servo launched as ``slot`` the ID ``as_id`` (normally another servo's)."""
+        index = self._index(slot)
+        if not 0 <= as_id <= 253:
+            raise ValueError(f"ID {as_id} is outside 0..253")
+        servo = self.bus.servos[index]
+        self._duplicates.setdefault(index, servo.id)
+        servo.table.set("id", as_id)
+        self.bus._reindex()
+
+    def unduplicate(self, slot: int) -> None:
+        """Give the servo back the ID it had before :meth:`duplicate`."""
+        index = self._index(slot)
+        if index in self._duplicates:
+            self.bus.servos[index].table.set("id", self._duplicates.pop(index))
+            self.bus._reindex()
+
+    def stall(self, slot: int, *, overload_after_s: float = 1.0) -> None:
+        """Block the shaft where it is now."""
+        index = self._index(slot)
+        self._stall_overload_s = overload_after_s
+        self._stalls[index] = _Stall(self.bus.servos[index].table.get("present_position"))
+        self.after_physics()
+
+    def release(self, slot: int) -> None:
+        """Unblock the shaft; the model takes over again from the held position."""
+        index = self._index(slot)
+        if self._stalls.pop(index, None) is not None:
+            servo = self.bus.servos[index]
+            servo.alarms &= ~int(StatusError.OVERLOAD) | self._alarms.get(index, 0)
+            self.bus.plant.tables_changed()
+            self.bus.plant.refresh()
+
+    def hold(self, slot: int, name: str, value: int | None) -> None:
+        """Pin a sensed register (e.g. present_temperature) at ``value``; None lets the model drive it again.
+
+        A held temperature above Temperature Limit raises Overheating, a
+        held voltage outside the voltage limits raises Input Voltage, as the
+        firmware does with real readings.
+        """
+        index = self._index(slot)
+        servo = self.bus.servos[index]
+        servo.table.layout.by_name[name]  # KeyError for an unknown register
+        held = self._held.setdefault(index, {})
+        if value is None:
+            held.pop(name, None)
+            if not held:
+                del self._held[index]
+            servo.alarms &= ~_HELD_ALARMS | self._alarms.get(index, 0)
+            self.bus.plant.refresh()
+        else:
+            held[name] = int(value)
+            self.after_physics()
+
+    def clear(self) -> None:
+        """Lift every fault."""
+        self.set_reply_faults()
+        for index in list(self._held):
+            for name in list(self._held[index]):
+                self.hold(self.bus.slots[index], name, None)
+        self._vanished.clear()
+        for index in list(self._alarms):
+            self.clear_alarm(self.bus.slots[index])
+        for index in list(self._duplicates):
+            self.unduplicate(self.bus.slots[index])
+        for index in list(self._stalls):
+            self.release(self.bus.slots[index])
+
+    # -- hooks called by the bus -----------------------------------------------------
+    def admit(self, servo: "VirtualServo") -> bool:
+        """Before ``servo`` handles a packet: False if it is absent; apply forced alarms."""
+        index = servo.index
+        if index in self._vanished:
+            every_s, for_s = self._vanished[index]
+            if every_s is None or self.bus.clock.now_s() % every_s < for_s:  # type: ignore[operator]
+                return False
+        bits = self._alarms.get(index, 0)
+        if index in self._held:
+            bits |= _held_alarms(servo)
+        if bits:
+            servo.alarms |= bits
+            self._shutdown(servo, bits)
+        return True
+
+    def _shutdown(self, servo: "VirtualServo", bits: int) -> None:
+        table = servo.table
+        if not bits & table.get("shutdown"):
+            return
+        if table.profile.shutdown_clears == "torque_enable":
+            table.set("torque_enable", 0)
+        else:
+            table.set("torque_limit", 0)
+
+    def on_replies(self, replies: "list[Reply]") -> "list[Reply]":
+        """Drop, corrupt or delay status packets by the configured fractions."""
+        if not (self.drop or self.corrupt or self.delay):
+            return replies
+        out = []
+        for reply in replies:
+            if self.reply_ids is not None and reply.servo_id not in self.reply_ids:
+                out.append(reply)
+                continue
+            draw = self._rng.random()
+            if draw < self.drop:
+                self.dropped += 1
+                continue
+            if draw < self.drop + self.corrupt:
+                self.corrupted += 1
+                reply = reply._replace(data=reply.data[:-1] + bytes((reply.data[-1] ^ 0xFF,)))
+            elif draw < self.drop + self.corrupt + self.delay:
+                self.delayed += 1
+                reply = reply._replace(delay_s=reply.delay_s + self.delay_s)
+            out.append(reply)
+        return out
+
+    def after_physics(self) -> None:
+        """Hold stalled shafts after the model has stepped."""
+        if not (self._stalls or self._held):
+            return
+        bus = self.bus
+        for index, held in self._held.items():
+            table = bus.servos[index].table
+            for name, value in held.items():
+                table.set(name, value)
+        now_s = bus.clock.now_s()
+        # Only a plain array attribute can be held; a property (the physical model's) is read-only.
+        holdable = "angle_rad" in vars(bus.model)
+        for index, stall in self._stalls.items():
+            servo = bus.servos[index]
+            table = servo.table
+            goal = table.get("goal_position")
+            margin = max(table.get("cw_compliance_margin"), table.get("ccw_compliance_margin"), 1)
+            driving = bool(table.get("torque_enable")) and abs(goal - stall.position) > margin
+            table.set("present_position", stall.position)
+            table.set("present_speed", 0)
+            table.set("moving", int(driving))
+            table.set("present_load", (_FULL_LOAD | (0x400 if goal < stall.position else 0)) if driving else 0)
+            if driving:
+                if stall.driving_since_s is None:
+                    stall.driving_since_s = now_s
+                if now_s - stall.driving_since_s >= self._stall_overload_s:
+                    servo.alarms |= int(StatusError.OVERLOAD)
+                    self._shutdown(servo, int(StatusError.OVERLOAD))
+            else:
+                stall.driving_since_s = None
+            if holdable:
+                bus.model.angle_rad[index] = stall.position * RAD_PER_POSITION_UNIT
+
+
+#: Alarm bits a held sensor reading can raise.
+_HELD_ALARMS = int(StatusError.OVERHEATING | StatusError.INPUT_VOLTAGE)
+
+
+def _held_alarms(servo: "VirtualServo") -> int:
+    """What the firmware concludes from the (held) readings in the table."""
+    table = servo.table
+    bits = 0
+    if table.get("present_temperature") > table.get("temperature_limit"):
+        bits |= int(StatusError.OVERHEATING)
+    if not table.get("min_voltage_limit") <= table.get("present_voltage") <= table.get("max_voltage_limit"):
+        bits |= int(StatusError.INPUT_VOLTAGE)
+    return bits
+
+
+# -- declarative configuration (CLI flags and URL options) ---------------------------
+
+
+def _fraction(text: str) -> float:
+    value = float(text)
+    if not 0.0 <= value <= 1.0:
+        raise ValueError(f"expected a fraction 0..1, got {text}")
+    return value
+
+
+def _pair(text: str) -> tuple[int, int]:
+    left, sep, right = text.partition(":")
+    if not sep:
+        raise ValueError(f"expected SLOT:ID, got {text!r}")
+    return int(left), int(right)
+
+
+def _vanish(text: str) -> tuple[int, float | None, float | None]:
+    """"ID" (absent) or "ID:EVERY_S:FOR_S" (absent FOR_S of every EVERY_S)."""
+    parts = text.split(":")
+    if len(parts) == 1:
+        return int(parts[0]), None, None
+    if len(parts) == 3:
+        return int(parts[0]), float(parts[1]), float(parts[2])
+    raise ValueError(f"expected ID or ID:EVERY_S:FOR_S, got {text!r}")
+
+
+def _alarm(text: str) -> tuple[int, int]:
+    slot, sep, names = text.partition(":")
+    if not sep:
+        raise ValueError(f"expected ID:ALARMS (e.g. 1:overload), got {text!r}")
+    return int(slot), parse_alarm_bits(names)
+
+
+def _ids(text: str) -> tuple[int, ...]:
+    return tuple(int(part) for part in text.split(",") if part.strip())
+
+
+@dataclass(frozen=True)
+class FaultConfig:
+    """Faults as data, for ``ax12emu serve`` flags and ``ax12emu://`` URL options."""
+
+    #: Fraction of status packets dropped (client: timeout).
+    drop: float = 0.0
+    #: Fraction of status packets sent with a wrong checksum (client: corrupt packet).
+    corrupt: float = 0.0
+    #: Fraction of status packets sent ``delay_s`` late (client: timeout, then stray bytes).
+    delay: float = 0.0
+    delay_s: float = 0.1
+    #: Wire IDs the three above apply to; empty: all.
+    fault_ids: tuple[int, ...] = ()
+    #: Seed of the random choices.
+    seed: int = 0
+    #: (slot, every_s, for_s): unplugged servos, always or periodically.
+    vanish: tuple[tuple[int, float | None, float | None], ...] = ()
+    #: (slot, as_id): a servo answering to another's ID.
+    duplicate: tuple[tuple[int, int], ...] = ()
+    #: (slot, bits): forced alarm bits.
+    alarm: tuple[tuple[int, int], ...] = ()
+    #: Slots whose shaft is blocked.
+    stall: tuple[int, ...] = ()
+
+    @property
+    def active(self) -> bool:
+        """Whether any fault is configured."""
+        return any((self.drop, self.corrupt, self.delay, self.vanish, self.duplicate, self.alarm, self.stall))
+
+    def install(self, bus: "Bus") -> Faults:
+        """Attach a :class:`Faults` with this configuration to ``bus`` and return it."""
+        faults = Faults(bus, seed=self.seed)
+        faults.set_reply_faults(
+            drop=self.drop, corrupt=self.corrupt, delay=self.delay, delay_s=self.delay_s, ids=self.fault_ids or None
+        )
+        for slot, every_s, for_s in self.vanish:
+            faults.vanish(slot, every_s=every_s, for_s=for_s)
+        for slot, as_id in self.duplicate:
+            faults.duplicate(slot, as_id)
+        for slot, bits in self.alarm:
+            faults.force_alarm(slot, bits)
+        for slot in self.stall:
+            faults.stall(slot)
+        bus.faults = faults
+        return faults
+
+    @classmethod
+    def from_options(cls, options: Mapping[str, list[str]]) -> "FaultConfig":
+        """Build from name -> values (URL query or flags); unknown names are the caller's business."""
+        values: dict[str, object] = {}
+        for name, texts in options.items():
+            parse, repeated = FAULT_OPTIONS[name]
+            try:
+                parsed = [parse(text) for text in texts]
+            except ValueError as exc:
+                raise ValueError(f"{name}: {exc}") from None
+            values[name] = tuple(parsed) if repeated else parsed[-1]
+        return cls(**values)  # type: ignore[arg-type]
+
+
+#: Option name -> (parser of one value, may repeat).
+FAULT_OPTIONS: Mapping[str, tuple[Callable[[str], object], bool]] = {
+    "drop": (_fraction, False),
+    "corrupt": (_fraction, False),
+    "delay": (_fraction, False),
+    "delay_s": (float, False),
+    "fault_ids": (_ids, False),
+    "seed": (int, False),
+    "vanish": (_vanish, True),
+    "duplicate": (_pair, True),
+    "alarm": (_alarm, True),
+    "stall": (int, True),
+}

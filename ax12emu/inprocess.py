@@ -1,0 +1,162 @@
+"""An in-process link to a bus: no pty, no socket, no thread.
+
+Why it exists: Windows has no pty, and a test wants servos without a second
+process.  A host's ``write`` runs the bus at once under a lock; the replies
+wait in a timed queue and a ``read`` returns them only once their Return
+Delay Time (plus any injected delay) has passed, blocking up to its timeout
+like a real port.  Replies of several servos are laid on the line as the
+server does (:func:`ax12emu.server.merge_replies`), so duplicate IDs
+collide the same way.  The host's baud rate is passed to the bus, so a
+servo at another baud is deaf, as on a pty.
+
+Not modelled: wire time of the bytes (replies arrive whole), the
+adapter's echo.  Physics advances when a packet arrives (the bus brings the
+model up to date before it answers) and on :meth:`InProcessLink.advance`.
+
+Links are found by name from a URL (``ax12emu://NAME``): pyserial builds
+a port from a string, so a small registry of weak references is the only
+way to reach a bus created elsewhere in the process.
+"""
+
+from __future__ import annotations
+
+import heapq
+import threading
+import time
+import weakref
+from typing import Any, Callable
+
+from .bus import Bus
+from .server import merge_replies
+from .trace import IN, OUT, TraceWriter
+
+__all__ = ["InProcessLink", "register", "lookup", "LinkBusy"]
+
+_REGISTRY: "weakref.WeakValueDictionary[str, InProcessLink]" = weakref.WeakValueDictionary()
+_REGISTRY_LOCK = threading.Lock()
+
+
+class LinkBusy(RuntimeError):
+    """A second host tried to attach: one host at a time, as on a bus with one master."""
+
+
+class InProcessLink:
+    """A host endpoint on ``bus``, safe to use from several threads."""
+
+    def __init__(self, bus: Bus, *, trace: TraceWriter | None = None) -> None:
+        self.bus = bus
+        self.trace = trace
+        self.lock = threading.RLock()
+        self._cond = threading.Condition(self.lock)
+        self._pending: list[tuple[float, int, bytes]] = []
+        self._seq = 0
+        self._rx = bytearray()
+        self._attached = False
+        #: Packets handled, for diagnostics.
+        self.packets_in = 0
+
+    # -- host side ---------------------------------------------------------------------
+    def attach(self) -> None:
+        """Claim the link for one host (a port being opened)."""
+        with self.lock:
+            if self._attached:
+                raise LinkBusy("another port is open on this in-process bus: one host at a time")
+            self._attached = True
+            self._rx.clear()
+
+    def detach(self) -> None:
+        """Release the link (the port closed); bytes in flight are lost."""
+        with self._cond:
+            self._attached = False
+            self._rx.clear()
+            self._pending.clear()
+            self._cond.notify_all()
+
+    def write(self, data: bytes, line_bps: float | None = None) -> int:
+        """The host sends ``data``; servos act at once and their replies are queued."""
+        with self._cond:
+            now = time.monotonic()
+            if self.trace is not None:
+                self.trace.record(IN, data, now)
+            bus = self.bus
+            for packet in bus.framer.feed(data, now):
+                self.packets_in += 1
+                replies = bus.dispatch(packet, line_bps=line_bps)
+                if replies:
+                    for release_s, chunk in merge_replies(replies, now, per_byte=False):
+                        self._seq += 1
+                        heapq.heappush(self._pending, (release_s, self._seq, chunk))
+            self._cond.notify_all()
+        return len(data)
+
+    def _release(self, now: float) -> None:
+        pending = self._pending
+        while pending and pending[0][0] <= now:
+            release_s, _, chunk = heapq.heappop(pending)
+            if self.trace is not None:
+                self.trace.record(OUT, chunk, release_s)
+            self._rx += chunk
+
+    def in_waiting(self) -> int:
+        """Bytes the host can read now."""
+        with self.lock:
+            self._release(time.monotonic())
+            return len(self._rx)
+
+    def read(self, size: int, timeout_s: float | None) -> bytes:
+        """Up to ``size`` bytes; waits for them up to ``timeout_s`` (None: forever, 0: not at all)."""
+        deadline = None if timeout_s is None else time.monotonic() + timeout_s
+        with self._cond:
+            while True:
+                now = time.monotonic()
+                self._release(now)
+                if len(self._rx) >= size or not self._attached or (deadline is not None and now >= deadline):
+                    break
+                wait = None if deadline is None else deadline - now
+                if self._pending:
+                    due = self._pending[0][0] - now
+                    wait = due if wait is None else min(wait, due)
+                self._cond.wait(None if wait is None else max(wait, 0.0))
+            out = bytes(self._rx[:size])
+            del self._rx[:size]
+            return out
+
+    def clear_input(self) -> None:
+        """Drop bytes already received (not replies still to come, as on a real port)."""
+        with self.lock:
+            self._release(time.monotonic())
+            self._rx.clear()
+
+    # -- bus side ----------------------------------------------------------------------
+    def call(self, fn: Callable[[Bus], Any]) -> Any:
+        """Run ``fn(bus)`` with the link locked, so no packet is handled meanwhile."""
+        with self.lock:
+            return fn(self.bus)
+
+    def advance(self) -> None:
+        """Bring the physics up to the bus clock's present time."""
+        with self.lock:
+            self.bus.advance()
+
+
+def register(name: str, link: InProcessLink) -> None:
+    """Make ``link`` reachable as ``ax12emu://NAME``."""
+    with _REGISTRY_LOCK:
+        if name in _REGISTRY:
+            raise ValueError(f"an in-process bus named {name!r} already exists")
+        _REGISTRY[name] = link
+
+
+def unregister(name: str) -> None:
+    """Forget a name (the bus closed)."""
+    with _REGISTRY_LOCK:
+        _REGISTRY.pop(name, None)
+
+
+def lookup(name: str) -> InProcessLink:
+    """The link registered as ``name``; KeyError lists the names there are."""
+    with _REGISTRY_LOCK:
+        try:
+            return _REGISTRY[name]
+        except KeyError:
+            raise KeyError(f"no in-process bus named {name!r} (open: {sorted(_REGISTRY) or 'none'})") from None

@@ -1,0 +1,213 @@
+# SPDX-License-Identifier: MIT
+#
+# pyserial URL handler: a virtual AX-12 bus in this process, no pty, no socket.
+#
+# URL format: ax12emu://[NAME][?OPTION=VALUE[&...]]
+#
+#   ax12emu://?ids=1,2            a private bus of its own, closed with the port
+#   ax12emu://NAME                the bus a VirtualBus(transport="inprocess", name=NAME) serves
+#
+# Options of a private bus:
+#   ids=LIST          servo IDs, e.g. 1,2,5 or 1-18 (default 1)
+#   profile=NAME      control-table profile (ax12a, ax12-2006)
+#   virtual_time=0|1  physics in virtual time (it then stands still)
+#   trace=FILE        record every byte as JSON lines (ax12emu decode FILE)
+#   drop, corrupt, delay, delay_s, fault_ids, seed, vanish, duplicate, alarm, stall:
+#                     fault injection, as the serve flags (see ax12emu.faults)
+# Options of any URL:
+#   logging=debug|info|warning|error   per-handler logger "ax12emu.urlhandler"
+#
+# Reads block up to the port's timeout like a real port and return the
+# bytes that have arrived; a status packet arrives Return Delay Time after
+# its instruction was written.  The port's baud rate is the host's line rate:
+# a servo set to another baud does not hear it.
+"""pyserial ``Serial`` class for ``ax12emu://`` URLs (registered on ``import ax12emu``)."""
+
+from __future__ import annotations
+
+import logging
+import numbers
+import urllib.parse
+
+from serial.serialutil import PortNotOpenError, SerialBase, SerialException
+
+from ..bus import Bus, parse_ids
+from ..clock import VirtualClock, WallClock
+from ..faults import FAULT_OPTIONS, FaultConfig
+from ..inprocess import InProcessLink, LinkBusy, lookup
+from ..servo import ServoOptions
+from ..trace import TraceWriter
+
+__all__ = ["Serial", "UrlError", "EXPECTED"]
+
+EXPECTED = (
+    'expected "ax12emu://[NAME][?ids=LIST&profile=NAME&virtual_time=0|1&trace=FILE&seed=N&drop=F&...'
+    '&logging={debug|info|warning|error}]"'
+)
+LOGGER_LEVELS = {"debug": logging.DEBUG, "info": logging.INFO, "warning": logging.WARNING, "error": logging.ERROR}
+#: Options of a private bus besides the fault ones.
+BUS_OPTIONS = ("ids", "profile", "virtual_time", "trace")
+
+
+class UrlError(SerialException, ValueError):
+    """A malformed ax12emu:// URL: both a SerialException (pyserial's habit) and a ValueError."""
+
+
+class Serial(SerialBase):
+    """A serial port whose other end is a virtual bus in this process."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        self._link: InProcessLink | None = None
+        self._private: tuple[Bus, TraceWriter | None] | None = None
+        self.logger: logging.Logger | None = None
+        super().__init__(*args, **kwargs)
+
+    # -- opening and closing -------------------------------------------------------------
+    def open(self) -> None:
+        """Attach to the bus the URL names (or build a private one)."""
+        if self.is_open:
+            raise SerialException("Port is already open.")
+        if self._port is None:
+            raise SerialException("Port must be configured before it can be used.")
+        link = self.from_url(self.portstr)
+        try:
+            link.attach()
+        except LinkBusy as exc:
+            self._close_private()
+            raise SerialException(f"{self.portstr}: {exc}") from None
+        self._link = link
+        self._reconfigure_port()
+        self.is_open = True
+
+    def close(self) -> None:
+        """Detach; a private bus is closed with its port."""
+        if self.is_open and self._link is not None:
+            self._link.detach()
+        self._link = None
+        self._close_private()
+        self.is_open = False
+
+    def _close_private(self) -> None:
+        if self._private is not None:
+            bus, trace = self._private
+            self._private = None
+            bus.close()
+            if trace is not None:
+                trace.close()
+
+    def from_url(self, url: str) -> InProcessLink:
+        """Parse the URL; unknown or bad options raise :class:`UrlError` quoting the expected form."""
+        parts = urllib.parse.urlsplit(url)
+        if parts.scheme.lower() != "ax12emu":
+            raise UrlError(f"{EXPECTED}: not starting with ax12emu:// ({url!r})")
+        try:
+            options = urllib.parse.parse_qs(parts.query, keep_blank_values=True, strict_parsing=bool(parts.query))
+        except ValueError as exc:
+            raise UrlError(f"{EXPECTED}: {exc}") from None
+        level = options.pop("logging", None)
+        if level is not None:
+            if level[-1] not in LOGGER_LEVELS:
+                raise UrlError(f"{EXPECTED}: unknown logging level {level[-1]!r}")
+            self.logger = logging.getLogger("ax12emu.urlhandler")
+            self.logger.setLevel(LOGGER_LEVELS[level[-1]])
+        name = (parts.netloc + parts.path).strip("/")
+        if name:
+            if options:
+                raise UrlError(f"{EXPECTED}: a named bus takes no options, got {sorted(options)}")
+            try:
+                return lookup(name)
+            except KeyError as exc:
+                raise SerialException(f"{url}: {exc.args[0]}") from None
+        unknown = sorted(set(options) - set(BUS_OPTIONS) - set(FAULT_OPTIONS))
+        if unknown:
+            raise UrlError(f"{EXPECTED}: unknown option(s) {', '.join(unknown)}")
+        try:
+            ids = parse_ids(options.pop("ids", ["1"])[-1])
+            profile = options.pop("profile", ["ax12a"])[-1]
+            virtual = options.pop("virtual_time", ["0"])[-1]
+            if virtual not in ("0", "1"):
+                raise ValueError(f"virtual_time must be 0 or 1, got {virtual!r}")
+            trace_path = options.pop("trace", [None])[-1]
+            faults = FaultConfig.from_options(options)
+            bus = Bus(ids, options=ServoOptions(profile=profile), clock=VirtualClock() if virtual == "1" else WallClock())
+        except ValueError as exc:
+            raise UrlError(f"{EXPECTED}: {exc}") from None
+        if faults.active:
+            faults.install(bus)
+        trace = TraceWriter(trace_path, profile=profile) if trace_path else None
+        self._private = (bus, trace)
+        if self.logger:
+            self.logger.info("private bus with IDs %s", ids)
+        return InProcessLink(bus, trace=trace)
+
+    def _reconfigure_port(self) -> None:
+        if not isinstance(self._baudrate, numbers.Integral) or not 0 < self._baudrate < 2**32:
+            raise ValueError(f"invalid baudrate: {self._baudrate!r}")
+
+    # -- data ----------------------------------------------------------------------------
+    @property
+    def in_waiting(self) -> int:
+        """Bytes that can be read without waiting."""
+        if not self.is_open or self._link is None:
+            raise PortNotOpenError()
+        return self._link.in_waiting()
+
+    def read(self, size: int = 1) -> bytes:
+        """Up to ``size`` bytes, waiting up to the timeout (None: until all arrive)."""
+        if not self.is_open or self._link is None:
+            raise PortNotOpenError()
+        data = self._link.read(size, self._timeout)
+        if self.logger:
+            self.logger.debug("read %s", data.hex(" "))
+        return data
+
+    def write(self, data) -> int:
+        """Send bytes to the servos; they act on whole packets at once."""
+        if not self.is_open or self._link is None:
+            raise PortNotOpenError()
+        payload = bytes(memoryview(data))
+        if self.logger:
+            self.logger.debug("write %s", payload.hex(" "))
+        return self._link.write(payload, float(self._baudrate))
+
+    def reset_input_buffer(self) -> None:
+        """Drop received bytes."""
+        if not self.is_open or self._link is None:
+            raise PortNotOpenError()
+        self._link.clear_input()
+
+    def reset_output_buffer(self) -> None:
+        """Nothing is ever waiting to be sent."""
+        if not self.is_open:
+            raise PortNotOpenError()
+
+    @property
+    def out_waiting(self) -> int:
+        """Writes complete at once."""
+        return 0
+
+    # -- modem lines: there are none; answer like a plain 3-wire adapter ----------------
+    def _update_break_state(self) -> None:
+        pass
+
+    def _update_rts_state(self) -> None:
+        pass
+
+    def _update_dtr_state(self) -> None:
+        pass
+
+    @property
+    def cts(self) -> bool:
+        return True
+
+    @property
+    def dsr(self) -> bool:
+        return True
+
+    @property
+    def ri(self) -> bool:
+        return False
+
+    @property
+    def cd(self) -> bool:
+        return True

@@ -1,0 +1,302 @@
+"""Start and stop a served bus from Python, and reach into its servos.
+
+Why it exists: a user's test wants servos in a few lines and must be able
+to do to them what the bench cannot: set a temperature, block a shaft, push
+on it, drop replies, or step time exactly.  :class:`VirtualBus` owns a
+:class:`~ax12emu.bus.Bus`, a transport and (for a pty or TCP) the serving
+thread, and tears all of it down on ``close``, also when the ``with`` body
+raises.  Everything that touches the bus runs on the serving thread (or
+under the in-process link's lock), so a test never races a packet::
+
+    with ax12emu.VirtualBus(ids=[1, 2]) as bus:
+        port = PortHandler(bus.port)          # any client: dynamixel-sdk, pyserial, ...
+        bus.set_temperature(1, 80)            # -> Overheating bit in every status packet
+        bus.faults.set_reply_faults(drop=0.5) # -> half the replies time out
+
+Servos are addressed by their present ID in the state methods, and by their
+*slot* (the ID they were launched with) in ``bus.faults`` (see
+:mod:`ax12emu.faults`).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+from collections.abc import Callable, Iterable
+from typing import Any
+
+import numpy as np
+
+from firmware_model.interface import ServoModel
+
+from .bus import Bus
+from .clock import VirtualClock, WallClock
+from .faults import FaultConfig, Faults
+from .inprocess import InProcessLink, register, unregister
+from .model_factory import ModelChoice, build_model
+from .servo import ServoOptions
+from .trace import TraceWriter
+
+__all__ = ["VirtualBus", "TRANSPORTS"]
+
+log = logging.getLogger(__name__)
+
+#: Where a VirtualBus can put its servos.
+TRANSPORTS = ("pty", "tcp", "inprocess")
+#: Degrees of travel per radian, and the AX-12's 300-degree range over positions 0..1023.
+_DEG_PER_RAD = 180.0 / math.pi
+
+_instances = 0
+_instances_lock = threading.Lock()
+
+
+def _next_name() -> str:
+    global _instances
+    with _instances_lock:
+        _instances += 1
+        return f"bus{_instances}"
+
+
+class _FaultsOnBus:
+    """``bus.faults``: every Faults method, run where the bus is served."""
+
+    def __init__(self, owner: "VirtualBus") -> None:
+        self._owner = owner
+
+    def __getattr__(self, name: str) -> Any:
+        if not callable(getattr(Faults, name, None)):
+            return self._owner.call(lambda bus: getattr(self._owner._faults(bus), name))
+
+        def method(*args: Any, **kwargs: Any) -> Any:
+            return self._owner.call(lambda bus: getattr(self._owner._faults(bus), name)(*args, **kwargs))
+
+        return method
+
+
+class VirtualBus:
+    """A running bus of virtual AX-12s with a port any client can open (``port``)."""
+
+    def __init__(
+        self,
+        ids: Iterable[int] = (1,),
+        *,
+        transport: str = "pty",
+        virtual_time: bool = False,
+        time_scale: float = 1.0,
+        options: ServoOptions = ServoOptions(),
+        model: ServoModel | str | None = None,
+        faults: FaultConfig | None = None,
+        seed: int = 0,
+        trace: str | None = None,
+        pace: bool = False,
+        echo: bool = False,
+        name: str | None = None,
+        tcp_address: tuple[str, int] = ("127.0.0.1", 0),
+    ) -> None:
+        if transport not in TRANSPORTS:
+            raise ValueError(f"unknown transport {transport!r}; choose one of: {', '.join(TRANSPORTS)}")
+        self.transport_name = transport
+        self.virtual_time = virtual_time
+        clock = VirtualClock() if virtual_time else WallClock(time_scale)
+        slots = list(ids)
+        if isinstance(model, str):
+            model = build_model(ModelChoice(name=model), len(slots))
+        self.bus = Bus(slots, options=options, model=model, clock=clock)
+        self.seed = seed
+        if faults is not None and faults.active:
+            faults.install(self.bus)
+        self._trace_path = trace
+        self._pace, self._echo = pace, echo
+        self._tcp_address = tcp_address
+        self.name = name or _next_name()
+        self.port = ""
+        self._trace: TraceWriter | None = None
+        self._transport: Any = None
+        self._server: Any = None
+        self._link: InProcessLink | None = None
+        self._thread: threading.Thread | None = None
+        self._torque_nm = np.zeros(len(self.bus.slots))
+        self._closed = False
+        self._started = False
+
+    # -- life cycle -----------------------------------------------------------------------
+    def start(self) -> "VirtualBus":
+        """Open the transport and start serving; on failure everything opened is closed."""
+        if self._started:
+            return self
+        self._started = True
+        try:
+            if self._trace_path:
+                self._trace = TraceWriter(self._trace_path, profile=self.bus.options.profile)
+            if self.transport_name == "inprocess":
+                self._link = InProcessLink(self.bus, trace=self._trace)
+                register(self.name, self._link)
+                self.port = f"ax12emu://{self.name}"
+                return self
+            from .server import BusServer
+
+            if self.transport_name == "pty":
+                from .transports.pty import PtyTransport
+
+                self._transport = PtyTransport()
+                self.port = self._transport.slave_path
+            else:
+                from .transports.tcp import TcpTransport
+
+                self._transport = TcpTransport(*self._tcp_address)
+                self.port = f"socket://{self._transport.host}:{self._transport.port}"
+            self._server = BusServer(self.bus, self._transport, pace=self._pace, echo=self._echo, trace=self._trace)
+            self._thread = threading.Thread(target=self._serve, name=f"ax12emu-{self.name}", daemon=True)
+            self._thread.start()
+        except BaseException:
+            self.close()
+            raise
+        return self
+
+    def _serve(self) -> None:
+        try:
+            self._server.serve_forever()
+        except Exception:  # pragma: no cover - reported, and close() still cleans up
+            log.exception("the serving thread of %s stopped", self.name)
+
+    def close(self) -> None:
+        """Stop serving, join the thread, close the port and the trace; safe to call more than once."""
+        if self._closed:
+            return
+        self._closed = True
+        if self._server is not None:
+            self._server.stop()
+        if self._thread is not None:
+            self._thread.join(5.0)
+            if self._thread.is_alive():  # pragma: no cover
+                log.error("serving thread of %s did not stop", self.name)
+        if self._link is not None:
+            unregister(self.name)
+            self._link.detach()
+        if self._transport is not None:
+            self._transport.close()
+        self.bus.close()
+        if self._trace is not None:
+            self._trace.close()
+
+    @property
+    def running(self) -> bool:
+        """Whether clients can talk to the bus now."""
+        if self._closed or not self._started:
+            return False
+        return self._link is not None or (self._thread is not None and self._thread.is_alive())
+
+    def __enter__(self) -> "VirtualBus":
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def __del__(self) -> None:
+        if getattr(self, "_started", False) and not getattr(self, "_closed", True):
+            log.warning("VirtualBus %s was never closed", self.name)
+
+    # -- running code where the bus lives ---------------------------------------------------
+    def call(self, fn: Callable[[Bus], Any]) -> Any:
+        """Run ``fn(bus)`` between packets (on the serving thread, or under the link's lock)."""
+        if self._link is not None:
+            return self._link.call(fn)
+        if self._thread is not None and self._thread.is_alive():
+            return self._server.call(fn)
+        return fn(self.bus)
+
+    def _faults(self, bus: Bus) -> Faults:
+        if bus.faults is None:
+            bus.faults = Faults(bus, seed=self.seed)
+        return bus.faults
+
+    @property
+    def faults(self) -> Any:
+        """The bus's :class:`~ax12emu.faults.Faults` (created on first use); methods take slots."""
+        return _FaultsOnBus(self)
+
+    # -- time ----------------------------------------------------------------------------------
+    def step(self, seconds: float) -> float:
+        """Advance virtual time by ``seconds`` and run the physics; returns the new time."""
+        if not self.virtual_time:
+            raise RuntimeError("step() needs VirtualBus(virtual_time=True); this bus follows the wall clock")
+
+        def _step(bus: Bus) -> float:
+            now = bus.clock.advance(seconds)  # type: ignore[union-attr]
+            bus.advance()
+            return now
+
+        return self.call(_step)
+
+    @property
+    def now_s(self) -> float:
+        """Simulated time."""
+        return self.bus.clock.now_s()
+
+    # -- servo state ---------------------------------------------------------------------------
+    def read(self, servo_id: int, name: str) -> int:
+        """A register by name, as a client would read it now."""
+        return self.call(lambda bus: bus.servo(servo_id).table.get(name))
+
+    def write(self, servo_id: int, name: str, value: int) -> None:
+        """Set a register as the firmware would (no access or range check); an ``id`` write moves the servo."""
+
+        def _write(bus: Bus) -> None:
+            servo = bus.servo(servo_id)
+            servo.table.layout.by_name[name]
+            servo.table.set(name, value)
+            bus.plant.tables_changed()
+            if name == "id":
+                bus._reindex()
+
+        self.call(_write)
+
+    def table(self, servo_id: int) -> dict[str, int]:
+        """Every register by name."""
+        return self.call(lambda bus: {e.name: bus.servo(servo_id).table.get(e.name) for e in bus.servo(servo_id).table.layout.entries})
+
+    def angle_deg(self, servo_id: int) -> float:
+        """The simulated shaft angle in degrees from the CW end (0..300 over positions 0..1023)."""
+        return self.call(lambda bus: float(bus.model.angle_rad[bus.servo(servo_id).index]) * _DEG_PER_RAD)
+
+    def set_angle_deg(self, servo_id: int, degrees: float) -> None:
+        """Move the shaft by hand (torque off, or the controller pulls it back)."""
+
+        def _set(bus: Bus) -> None:
+            model = bus.model
+            index = bus.servo(servo_id).index
+            if hasattr(model, "set_angle"):
+                model.set_angle(index, degrees / _DEG_PER_RAD)
+            elif "angle_rad" in vars(model):
+                model.angle_rad[index] = degrees / _DEG_PER_RAD
+            else:
+                raise NotImplementedError(f"{type(model).__name__} does not let its angle be set (use model='kinematic')")
+            if hasattr(model, "_sensed"):
+                model._sensed = None  # the kinematic model caches its readings until it steps
+            bus.plant.tables_changed()
+            bus.plant.refresh()
+
+        self.call(_set)
+
+    def temperature_c(self, servo_id: int) -> int:
+        """Present Temperature, degrees C."""
+        return self.read(servo_id, "present_temperature")
+
+    def set_temperature(self, servo_id: int, celsius: float | None) -> None:
+        """Pin Present Temperature (above Temperature Limit: Overheating); None releases it."""
+        self.call(lambda bus: self._faults(bus).hold(bus.slots[bus.servo(servo_id).index], "present_temperature", None if celsius is None else round(celsius)))
+
+    def set_voltage(self, servo_id: int, volts: float | None) -> None:
+        """Pin Present Voltage (outside the voltage limits: Input Voltage error); None releases it."""
+        self.call(lambda bus: self._faults(bus).hold(bus.slots[bus.servo(servo_id).index], "present_voltage", None if volts is None else round(volts * 10)))
+
+    def set_external_torque(self, servo_id: int, torque_nm: float) -> None:
+        """A torque on the output shaft (N m, positive CCW), through the model's ``set_external_torque``."""
+
+        def _set(bus: Bus) -> None:
+            self._torque_nm[bus.servo(servo_id).index] = torque_nm
+            bus.model.set_external_torque(self._torque_nm.copy())
+            bus.plant.tables_changed()
+
+        self.call(_set)

@@ -1,0 +1,65 @@
+"""The conformance suite against the emulator: one scenario over pty, TCP and in process."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+from ax12emu import VirtualBus, conformance
+from ax12emu.conformance import FAIL, PASS
+
+IDS = [1, 2]
+TRANSPORTS = ["pty", "tcp", "inprocess"]
+
+
+@pytest.mark.parametrize("transport", TRANSPORTS)
+def test_full_suite_passes(transport):
+    """Every check, destructive ones included, passes and the tables end as they began."""
+    with VirtualBus(IDS, transport=transport, model="kinematic") as bus:
+        report = conformance.run(bus.port, IDS, destructive=True)
+    assert report.passed, report.table()
+    for name in ("ID change", "RESET", "return delay", "status return levels", "resync after garbage", "table unchanged"):
+        assert report.outcome(name) == PASS, report.table()
+
+
+@pytest.mark.parametrize("transport", TRANSPORTS)
+def test_non_destructive_mode_changes_nothing(transport):
+    """Without --destructive the device's table, read through the API before and after, is unchanged."""
+    with VirtualBus(IDS, transport=transport, model="kinematic") as bus:
+        before = {i: bus.table(i) for i in IDS}
+        report = conformance.run(bus.port, IDS)
+        after = {i: bus.table(i) for i in IDS}
+    assert report.passed, report.table()
+    assert report.outcome("RESET") == "skip"
+    assert before == after
+
+
+def test_private_url_passes_like_the_pty():
+    """serial_for_url("ax12emu://?ids=1,2"), with no VirtualBus at all, passes the same suite."""
+    report = conformance.run("ax12emu://?ids=1,2", IDS, destructive=True)
+    assert report.passed, report.table()
+
+
+def test_a_misbehaving_device_fails_with_a_figure():
+    """A servo that loses every reply fails the checks and the table says what was seen."""
+    report = conformance.run("ax12emu://?ids=1&drop=1", [1], timeout_s=0.02)
+    assert not report.passed
+    assert report.results[0].outcome == FAIL and "no reply" in report.results[0].figure
+
+
+def test_cli_conformance_against_served_tcp(emulator):
+    """ax12emu conformance socket://... prints the table and exits 0; a broken device exits 1."""
+    served = emulator("--tcp", "127.0.0.1:0", "--ids", "1,2", "--model", "kinematic")
+    result = subprocess.run(
+        [sys.executable, "-m", "ax12emu", "conformance", served.port, "--ids", "1,2"],
+        capture_output=True, text=True, timeout=60,
+    )
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "return delay" in result.stdout and "0 failed" in result.stdout
+    bad = subprocess.run(
+        [sys.executable, "-m", "ax12emu", "conformance", "ax12emu://?ids=1&corrupt=1", "--only", "ping"],
+        capture_output=True, text=True, timeout=60,
+    )
+    assert bad.returncode == 1 and "FAIL" in bad.stdout

@@ -1,0 +1,172 @@
+"""Fault injection: each fault's client-side symptom through dynamixel-sdk, and recovery when lifted."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+from dynamixel_sdk import COMM_RX_CORRUPT, COMM_RX_TIMEOUT, COMM_SUCCESS
+from emu_testkit import ok, sdk_port
+
+from firmware_model import KinematicModel
+
+from ax12emu import FaultConfig, VirtualBus
+from ax12emu.bus import Bus
+from ax12emu.clock import VirtualClock
+from ax12emu.faults import Faults, parse_alarm_bits
+from ax12emu.packets import StatusError, encode_instruction
+
+PRESENT_POSITION = 36
+
+
+@pytest.fixture
+def vbus():
+    """Two servos on a pty, kinematic model, wall clock."""
+    with VirtualBus([1, 2], model="kinematic") as bus:
+        yield bus
+
+
+def comm_of(result: tuple) -> int:
+    """The comm result of an SDK (value, comm, error) triple."""
+    return result[1]
+
+
+@pytest.mark.parametrize(
+    "setting, symptom",
+    [({"drop": 1.0}, COMM_RX_TIMEOUT), ({"corrupt": 1.0}, COMM_RX_CORRUPT), ({"delay": 1.0, "delay_s": 0.1}, COMM_RX_TIMEOUT)],
+    ids=["drop", "corrupt", "delay"],
+)
+def test_reply_faults_show_their_symptom_and_lift(vbus, setting, symptom):
+    """Dropped and late replies time out, corrupted ones fail the checksum; lifting the fault restores replies."""
+    with sdk_port(vbus.port) as (port, ph):
+        vbus.faults.set_reply_faults(**setting, ids=[1])
+        assert comm_of(ph.read2ByteTxRx(port, 1, PRESENT_POSITION)) == symptom
+        assert ok(ph.read2ByteTxRx(port, 2, PRESENT_POSITION)) == 512, "other IDs are untouched"
+        vbus.faults.set_reply_faults()
+        time.sleep(0.15)  # a delayed reply still arrives: let it pass before the next transaction
+        assert ok(ph.read2ByteTxRx(port, 1, PRESENT_POSITION)) == 512
+
+
+def test_dropped_reply_still_executes(vbus):
+    """A WRITE whose reply is lost was still carried out (the client cannot tell)."""
+    with sdk_port(vbus.port) as (port, ph):
+        vbus.faults.set_reply_faults(drop=1.0)
+        assert ph.write1ByteTxRx(port, 1, 25, 1)[0] == COMM_RX_TIMEOUT
+        vbus.faults.clear()
+        assert ok(ph.read1ByteTxRx(port, 1, 25)) == 1
+
+
+def test_vanished_servo_times_out_then_comes_back(vbus):
+    """An unplugged servo is silent (and deaf); plugged back it answers with its table as it was."""
+    with sdk_port(vbus.port) as (port, ph):
+        ph.write1ByteTxRx(port, 1, 25, 1)
+        vbus.faults.vanish(1)
+        assert comm_of(ph.ping(port, 1)) == COMM_RX_TIMEOUT
+        ph.write1ByteTxOnly(port, 0xFE, 25, 0)  # broadcast: the vanished servo does not hear it
+        vbus.faults.reappear(1)
+        assert ok(ph.ping(port, 1)) == 12
+        assert ok(ph.read1ByteTxRx(port, 1, 25)) == 1
+        assert ok(ph.read1ByteTxRx(port, 2, 25)) == 0
+
+
+def test_periodic_vanish_follows_virtual_time():
+    """vanish(every_s, for_s): absent for_s out of every every_s of simulated time."""
+    clock = VirtualClock()
+    bus = Bus([1], clock=clock)
+    bus.faults = Faults(bus)
+    bus.faults.vanish(1, every_s=1.0, for_s=0.25)
+    heard = []
+    for _ in range(8):
+        heard.append(bool(bus.receive(encode_instruction(1, 1))))
+        clock.advance(0.125)
+    assert heard == [False, False, True, True, True, True, True, True]
+
+
+def test_duplicate_ids_collide(vbus):
+    """Two servos with ID 1: equal replies merge cleanly, different Present Positions arrive corrupt."""
+    vbus.set_angle_deg(2, 100 * 300 / 1023)
+    with sdk_port(vbus.port) as (port, ph):
+        assert ok(ph.read2ByteTxRx(port, 2, PRESENT_POSITION)) == 100
+        vbus.faults.duplicate(2, 1)
+        assert ok(ph.ping(port, 1)) == 12, "identical replies AND into the same bytes"
+        assert comm_of(ph.read2ByteTxRx(port, 1, PRESENT_POSITION)) == COMM_RX_CORRUPT
+        assert comm_of(ph.ping(port, 2)) == COMM_RX_TIMEOUT
+        vbus.faults.unduplicate(2)
+        assert ok(ph.read2ByteTxRx(port, 1, PRESENT_POSITION)) == 512
+        assert ok(ph.read2ByteTxRx(port, 2, PRESENT_POSITION)) == 100
+
+
+@pytest.mark.parametrize(
+    "force, lift, bit",
+    [
+        (lambda b: b.faults.force_alarm(1, "overload"), lambda b: b.faults.clear_alarm(1), StatusError.OVERLOAD),
+        (lambda b: b.set_temperature(1, 85), lambda b: b.set_temperature(1, None), StatusError.OVERHEATING),
+        (lambda b: b.set_voltage(1, 5.0), lambda b: b.set_voltage(1, None), StatusError.INPUT_VOLTAGE),
+    ],
+    ids=["overload", "overheating", "input_voltage"],
+)
+def test_alarms_set_error_bits_and_clear(vbus, force, lift, bit):
+    """Forced alarms (or readings past the limits) appear in every status byte; they clear when lifted."""
+    with sdk_port(vbus.port) as (port, ph):
+        force(vbus)
+        value, comm, error = ph.read2ByteTxRx(port, 1, PRESENT_POSITION)
+        assert comm == COMM_SUCCESS and error == bit
+        assert ph.read1ByteTxRx(port, 2, 25)[2] == 0
+        lift(vbus)
+        assert ph.read2ByteTxRx(port, 1, PRESENT_POSITION)[2] == 0
+
+
+def test_overload_alarm_triggers_shutdown(vbus):
+    """Alarm Shutdown acts on a forced overload as the firmware does: Torque Limit drops to 0."""
+    with sdk_port(vbus.port) as (port, ph):
+        vbus.faults.force_alarm(1, parse_alarm_bits("overload"))
+        ph.ping(port, 1)
+        assert vbus.read(1, "torque_limit") == 0
+
+
+def test_stalled_shaft_holds_position_and_overloads():
+    """A blocked shaft: position frozen, Moving 1, full load, then Overload; released it reaches the goal."""
+    with VirtualBus([1], virtual_time=True, model="kinematic") as vbus, sdk_port(vbus.port) as (port, ph):
+        vbus.faults.stall(1, overload_after_s=1.0)
+        assert ph.write1ByteTxRx(port, 1, 24, 1) == (COMM_SUCCESS, 0)
+        assert ph.write2ByteTxRx(port, 1, 30, 800) == (COMM_SUCCESS, 0)
+        vbus.step(0.5)
+        assert ok(ph.read2ByteTxRx(port, 1, PRESENT_POSITION)) == 512
+        assert ok(ph.read1ByteTxRx(port, 1, 46)) == 1
+        assert ok(ph.read2ByteTxRx(port, 1, 40)) == 1023
+        vbus.step(0.6)
+        _, comm, error = ph.read2ByteTxRx(port, 1, PRESENT_POSITION)
+        assert comm == COMM_SUCCESS and error == StatusError.OVERLOAD
+        vbus.faults.release(1)
+        ph.write2ByteTxRx(port, 1, 34, 1023)  # Alarm Shutdown zeroed Torque Limit: the client restores it
+        vbus.step(2.0)
+        assert ph.read2ByteTxRx(port, 1, PRESENT_POSITION) == (800, COMM_SUCCESS, 0)
+
+
+def test_same_seed_same_faults():
+    """Random faults repeat exactly with the same seed and traffic, and differ with another seed."""
+
+    def pattern(seed):
+        bus = Bus([1], clock=VirtualClock(), model=KinematicModel(1))
+        FaultConfig(drop=0.3, corrupt=0.3, seed=seed).install(bus)
+        return [r[0].data if r else None for r in (bus.receive(encode_instruction(1, 1)) for _ in range(40))]
+
+    assert pattern(5) == pattern(5)
+    assert pattern(5) != pattern(6)
+    assert None in pattern(5)
+
+
+def test_fault_config_rejects_bad_values():
+    """Fractions outside 0..1, unknown alarms and malformed pairs are ValueErrors naming the option."""
+    for options, message in (({"drop": ["2"]}, "drop"), ({"alarm": ["1:hot"]}, "unknown alarm"), ({"duplicate": ["1"]}, "SLOT:ID")):
+        with pytest.raises(ValueError, match=message):
+            FaultConfig.from_options(options)
+
+
+def test_serve_fault_flags(emulator):
+    """ax12emu serve --drop 1 --fault-ids 2: ID 2 times out, ID 1 answers."""
+    served = emulator("--ids", "1,2", "--model", "kinematic", "--drop", "1", "--fault-ids", "2", "--alarm", "1:overheating")
+    with sdk_port(served.port) as (port, ph):
+        assert comm_of(ph.ping(port, 2)) == COMM_RX_TIMEOUT
+        value, comm, error = ph.ping(port, 1)
+        assert (value, comm, error) == (12, COMM_SUCCESS, StatusError.OVERHEATING)

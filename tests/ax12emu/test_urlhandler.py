@@ -1,0 +1,81 @@
+"""serial_for_url("ax12emu://..."): an in-process port that behaves like a real one."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+import serial
+
+import ax12emu  # noqa: F401  (registers the handler)
+from ax12emu import VirtualBus
+from ax12emu.packets import encode_instruction, encode_status
+from ax12emu.urlhandler.protocol_ax12emu import UrlError
+
+PING = encode_instruction(1, 0x01)
+
+
+def test_private_bus_answers_after_return_delay():
+    """A private bus answers PING no sooner than its Return Delay Time (500 us)."""
+    with serial.serial_for_url("ax12emu://?ids=1,2", baudrate=1_000_000, timeout=0.5) as link:
+        start = time.perf_counter()
+        link.write(PING)
+        assert link.read(6) == encode_status(1, 0)
+        assert time.perf_counter() - start >= 0.0005
+        link.write(encode_instruction(2, 0x02, bytes([0, 2])))
+        assert link.read(8) == encode_status(2, 0, b"\x0c\x00")
+
+
+def test_read_blocks_until_timeout_and_returns_short():
+    """With nothing to read, read() waits for the timeout and returns what it has, like a real port."""
+    with serial.serial_for_url("ax12emu://?ids=1", baudrate=1_000_000, timeout=0.05) as link:
+        start = time.perf_counter()
+        assert link.read(6) == b""
+        assert 0.045 <= time.perf_counter() - start < 0.5
+        link.write(PING)
+        assert link.read(10) == encode_status(1, 0)  # short read after the timeout
+
+
+def test_host_baud_must_match():
+    """At 57,600 bps the host is not heard by a servo at 1 Mbps (as on a pty or the wire)."""
+    with serial.serial_for_url("ax12emu://?ids=1", baudrate=57600, timeout=0.05) as link:
+        link.write(PING)
+        assert link.read(6) == b""
+
+
+@pytest.mark.parametrize(
+    "url, message",
+    [
+        ("ax12emu://?idz=1", "unknown option"),
+        ("ax12emu://?ids=1-x", "not an ID"),
+        ("ax12emu://?drop=3", "drop"),
+        ("ax12emu://?virtual_time=yes", "virtual_time"),
+        ("ax12emu://?logging=loud", "logging"),
+    ],
+)
+def test_bad_urls_quote_the_expected_form(url, message):
+    """Bad options raise an error that is both ValueError and SerialException and shows the URL form."""
+    with pytest.raises(UrlError, match=message) as caught:
+        serial.serial_for_url(url)
+    assert isinstance(caught.value, ValueError) and isinstance(caught.value, serial.SerialException)
+    assert "ax12emu://[NAME]" in str(caught.value)
+
+
+def test_named_bus_and_one_host_at_a_time():
+    """ax12emu://NAME reaches a VirtualBus in process; a second open is refused; unknown names are errors."""
+    with VirtualBus([3], transport="inprocess", name="arm") as bus:
+        assert bus.port == "ax12emu://arm"
+        with serial.serial_for_url(bus.port, baudrate=1_000_000, timeout=0.5) as link:
+            link.write(encode_instruction(3, 0x01))
+            assert link.read(6) == encode_status(3, 0)
+            with pytest.raises(serial.SerialException, match="one host at a time"):
+                serial.serial_for_url(bus.port)
+    with pytest.raises(serial.SerialException, match="no in-process bus named 'arm'"):
+        serial.serial_for_url("ax12emu://arm")
+
+
+def test_faults_in_the_url():
+    """Fault options work in the URL: drop=1 silences every reply."""
+    with serial.serial_for_url("ax12emu://?ids=1&drop=1&seed=3", baudrate=1_000_000, timeout=0.05) as link:
+        link.write(PING)
+        assert link.read(6) == b""

@@ -1,0 +1,94 @@
+"""VirtualBus: start/stop from code, state access, deterministic virtual time, clean shutdown."""
+
+from __future__ import annotations
+
+import os
+import threading
+
+import pytest
+import serial
+
+import ax12emu
+from ax12emu import VirtualBus
+from ax12emu.packets import encode_instruction, encode_status
+
+
+def _threads() -> set[str]:
+    return {t.name for t in threading.enumerate() if t.name.startswith("ax12emu-")}
+
+
+def test_with_block_serves_a_pty_and_cleans_up():
+    """Inside the block a client talks over bus.port; after it the thread is joined and the pty closed."""
+    with ax12emu.VirtualBus(ids=[1, 2]) as bus:
+        with serial.Serial(bus.port, 1_000_000, timeout=0.5) as link:
+            link.write(encode_instruction(2, 0x01))
+            assert link.read(6) == encode_status(2, 0)
+        assert bus.running and _threads()
+        master = bus._transport._master
+    assert not bus.running and not _threads()
+    with pytest.raises(OSError):
+        os.fstat(master)
+
+
+def test_exception_in_block_still_shuts_down():
+    """An exception in the with body propagates and the bus is torn down anyway."""
+    with pytest.raises(ZeroDivisionError):
+        with VirtualBus([1]) as bus:
+            1 / 0
+    assert not bus.running and not _threads()
+    bus.close()  # a second close is harmless
+
+
+def test_state_access_by_name():
+    """Registers read and written by name; an ID write moves the servo; the table lists every register."""
+    with VirtualBus([1, 2], transport="inprocess", model="kinematic") as bus:
+        bus.write(1, "led", 1)
+        assert bus.read(1, "led") == 1
+        assert bus.table(2)["model_number"] == 12
+        bus.write(2, "id", 7)
+        assert bus.read(7, "id") == 7
+        with pytest.raises(KeyError, match="no servo with ID 2"):
+            bus.read(2, "led")
+
+
+def test_virtual_time_steps_are_deterministic():
+    """Two buses stepped the same way reach the same positions; without steps nothing moves."""
+
+    def run() -> list[int]:
+        with VirtualBus([1], virtual_time=True, model="kinematic", transport="inprocess") as bus:
+            bus.write(1, "torque_enable", 1)
+            bus.write(1, "moving_speed", 100)
+            bus.write(1, "goal_position", 900)
+            trail = [bus.read(1, "present_position")]
+            for _ in range(5):
+                bus.step(0.1)
+                trail.append(bus.read(1, "present_position"))
+            return trail
+
+    first = run()
+    assert first == run()
+    assert first[0] == 512 and first[1] > 512 and first == sorted(first)
+
+
+def test_step_needs_virtual_time():
+    """step() on a wall-clock bus is a clear error."""
+    with VirtualBus([1], transport="inprocess") as bus, pytest.raises(RuntimeError, match="virtual_time"):
+        bus.step(0.1)
+
+
+def test_angle_temperature_and_external_torque():
+    """Angle set by hand shows in Present Position; temperature pins; external torque reaches the model."""
+    with VirtualBus([1], transport="inprocess", model="kinematic") as bus:
+        bus.set_angle_deg(1, 150.0)
+        assert abs(bus.angle_deg(1) - 150.0) < 1e-9
+        assert abs(bus.read(1, "present_position") - 512) <= 2
+        bus.set_temperature(1, 60)
+        assert bus.temperature_c(1) == 60
+        bus.set_external_torque(1, 0.5)
+        assert bus.bus.model.external_torque_nm[0] == 0.5
+
+
+def test_unknown_transport_is_a_value_error():
+    """A misspelt transport names the choices."""
+    with pytest.raises(ValueError, match="pty, tcp, inprocess"):
+        VirtualBus([1], transport="usb")
