@@ -33,9 +33,10 @@ What a client sees, fault by fault (dynamixel-sdk's names):
 * ``stall``: the shaft is blocked: Present Position freezes, Present Speed
   reads 0, Moving stays 1 while the goal is not reached, Present Load reads
   full scale, and after ``overload_after_s`` simulated seconds of driving the
-  Overload bit (0x20) is raised.  The motion model itself is held only where
-  it exposes a writable ``angle_rad`` (the kinematic model); otherwise the
-  position catches up with the model when the stall is lifted.
+  Overload bit (0x20) is raised.  The physical model holds the shaft in its
+  own mechanics (the motor pushes against the block: full drive, heating,
+  the model's overload alarm); for the kinematic model the registers are held
+  here and its ``angle_rad`` pinned.
 
 Servos are named by *slot*, the ID they were launched with (``--ids``), so a
 fault stays on the same servo when a client changes its ID.
@@ -112,6 +113,8 @@ class Faults:
         self._alarms: dict[int, int] = {}
         self._duplicates: dict[int, int] = {}
         self._stalls: dict[int, _Stall] = {}
+        #: Servos whose shaft the model itself holds (see stall()).
+        self._blocked: set[int] = set()
         self._stall_overload_s = 1.0
         self._held: dict[int, dict[str, int]] = {}
         #: What was done, for tests and logs.
@@ -187,9 +190,28 @@ class Faults:
             self.bus.servos[index].table.set("id", self._duplicates.pop(index))
             self.bus._reindex()
 
+    def _model_blocks(self) -> bool:
+        """Whether the model itself can hold a shaft (the physical model can)."""
+        return hasattr(self.bus.model, "set_blocked")
+
+    def _set_model_blocked(self) -> None:
+        blocked = [index in self._blocked for index in range(len(self.bus.servos))]
+        self.bus.model.set_blocked(blocked)
+        self.bus.plant.tables_changed()
+
     def stall(self, slot: int, *, overload_after_s: float = 1.0) -> None:
-        """Block the shaft where it is now."""
+        """Block the shaft where it is now.
+
+        A model that can hold a shaft (the physical one) does it in its
+        mechanics, so speed, load, heating and the overload alarm follow from
+        the motor pushing against the block (after the model's own overload
+        delay); otherwise the registers are held here.
+        """
         index = self._index(slot)
+        if self._model_blocks():
+            self._blocked.add(index)
+            self._set_model_blocked()
+            return
         self._stall_overload_s = overload_after_s
         self._stalls[index] = _Stall(self.bus.servos[index].table.get("present_position"))
         self.after_physics()
@@ -197,6 +219,10 @@ class Faults:
     def release(self, slot: int) -> None:
         """Unblock the shaft; the model takes over again from the held position."""
         index = self._index(slot)
+        if index in self._blocked:
+            self._blocked.discard(index)
+            self._set_model_blocked()
+            return
         if self._stalls.pop(index, None) is not None:
             servo = self.bus.servos[index]
             servo.alarms &= ~int(StatusError.OVERLOAD) | self._alarms.get(index, 0)

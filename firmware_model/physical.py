@@ -71,7 +71,8 @@ _TWO_PI = 2.0 * math.pi
 _COMMAND_FIELDS = Commands.field_names()
 _RANGE_RAD, _UNIT_RAD = float(POSITION_RANGE_RAD), float(RAD_PER_POSITION_UNIT)
 _STATE = ("angle", "speed", "ref", "ref_vel", "drive", "demand", "integral", "prev_error", "current_sq_sum",
-          "temperature", "overload_timer", "sample_angle", "held_speed", "held_drive", "ext_nm", "weight_nm")
+          "temperature", "overload_timer", "sample_angle", "held_speed", "held_drive", "ext_nm", "weight_nm",
+          "blocked")
 
 
 def _position_raw(angle_rad: float) -> int:
@@ -146,6 +147,29 @@ class PhysicalModel:
         if np.any(moment < 0):
             raise ValueError("arm mass and length must be >= 0")
         self._s.weight_nm = self._to_backend(np.broadcast_to(moment, (self.n,)))
+        self._plan_cache = None
+
+    def set_blocked(self, blocked) -> None:
+        """Block (True) or free each output shaft, as a hand or an obstacle holding the horn.
+
+        A blocked shaft does not turn whatever the motor does, so the controller
+        keeps driving, the drive saturates and the overload timer runs, as on a
+        real servo pushing against a stop.
+        """
+        mask = np.broadcast_to(np.asarray(blocked, dtype=bool), (self.n,))
+        self._s.blocked = self._to_backend(mask.astype(float))
+        if mask.any():
+            self._s.speed = self._to_backend(np.where(mask, 0.0, self._array("speed")))
+        self._plan_cache = None
+
+    def set_angle(self, index: int, angle_rad: float) -> None:
+        """Put shaft ``index`` at ``angle_rad`` (by hand), at rest; the reference follows it, so nothing jumps."""
+        values = {name: self._array(name) for name in ("angle", "speed", "ref", "ref_vel", "sample_angle")}
+        values["angle"][index] = values["ref"][index] = values["sample_angle"][index] = float(angle_rad)
+        values["speed"][index] = values["ref_vel"][index] = 0.0
+        for name, array in values.items():
+            setattr(self._s, name, self._to_backend(array))
+        self._slow = None
         self._plan_cache = None
 
     # ------------------------------------------------------------------ state views
@@ -270,6 +294,7 @@ class PhysicalModel:
         plan.any_disabled = bool((~enabled).any())
         plan.any_arm = bool(np.any(self._array("weight_nm") != 0))
         plan.any_ext = bool(np.any(self._array("ext_nm") != 0))
+        plan.any_blocked = bool(np.any(self._array("blocked") != 0))
         plan.symmetric = bool(np.all(comp.cw_margin == comp.ccw_margin) and np.all(comp.cw_gain == comp.ccw_gain))
         # In wheel mode the reference is unused; entering or leaving it restarts the reference at the shaft.
         was_wheel = self._sensing.wheel if self._sensing is not None else np.zeros(n, dtype=bool)
@@ -300,6 +325,7 @@ class PhysicalModel:
         angle, speed, ref, ref_vel = s.angle, s.speed, s.ref, s.ref_vel
         drive, demand, integral, prev_error, i2_sum = s.drive, s.demand, s.integral, s.prev_error, s.current_sq_sum
         ext, weight, any_ext, any_arm = s.ext_nm, s.weight_nm, plan.any_ext, plan.any_arm
+        free, any_blocked = 1.0 - s.blocked, plan.any_blocked
         thermal_steps, hold_steps = self._thermal_steps, self._hold_steps
         for step in range(first + 1, last + 1):
             if any_joint:
@@ -331,7 +357,12 @@ class PhysicalModel:
                 applied = applied + ext
             if any_arm:
                 applied = applied + arm_gravity_torque_nm(xp, angle, weight)
-            angle, speed = mechanics_step(xp, angle, speed, applied, ts, tc, b, vs, dt_j, dt)
+            if any_blocked:  # a held shaft keeps its angle; the motor still draws current
+                held_angle = angle
+                angle, speed = mechanics_step(xp, angle, speed, applied, ts, tc, b, vs, dt_j, dt)
+                angle, speed = held_angle + (angle - held_angle) * free, speed * free
+            else:
+                angle, speed = mechanics_step(xp, angle, speed, applied, ts, tc, b, vs, dt_j, dt)
             i2_sum = i2_sum + current * current
             if step % thermal_steps == 0:
                 s.angle, s.speed, s.ref, s.ref_vel = angle, speed, ref, ref_vel

@@ -143,6 +143,26 @@ def test_stalled_shaft_holds_position_and_overloads():
         assert ph.read2ByteTxRx(port, 1, PRESENT_POSITION) == (800, COMM_SUCCESS, 0)
 
 
+def test_stalled_shaft_in_the_physical_model():
+    """Physical model: the blocked shaft stays put while the motor drives at full load; the model's own
+    overload timer (0.5 s) raises Overload; released, the servo moves on from where it was held."""
+    with VirtualBus([1], virtual_time=True) as vbus, sdk_port(vbus.port) as (port, ph):
+        vbus.faults.stall(1)
+        assert ph.write1ByteTxRx(port, 1, 24, 1) == (COMM_SUCCESS, 0)
+        assert ph.write2ByteTxRx(port, 1, 30, 800) == (COMM_SUCCESS, 0)
+        vbus.step(0.3)
+        assert abs(ok(ph.read2ByteTxRx(port, 1, PRESENT_POSITION)) - 512) <= 1
+        assert ok(ph.read2ByteTxRx(port, 1, 40)) & 0x3FF >= 1000  # full drive, CCW
+        vbus.step(0.5)
+        _, comm, error = ph.read2ByteTxRx(port, 1, PRESENT_POSITION)
+        assert comm == COMM_SUCCESS and error & StatusError.OVERLOAD
+        vbus.faults.release(1)
+        ph.write2ByteTxRx(port, 1, 34, 1023)  # Alarm Shutdown zeroed Torque Limit: the client restores it
+        vbus.step(1.5)
+        value, comm, error = ph.read2ByteTxRx(port, 1, PRESENT_POSITION)
+        assert comm == COMM_SUCCESS and abs(value - 800) <= 4 and not error & StatusError.OVERLOAD
+
+
 def test_same_seed_same_faults():
     """Random faults repeat exactly with the same seed and traffic, and differ with another seed."""
 

@@ -177,3 +177,26 @@ def test_joint_mode_overshoot_below_zero_does_not_wrap():
         commands = Commands(**{k: np.array([v]) for k, v in fields.items()})
         positions = [int(model.advance(t / 100, commands).present_position[0]) for t in range(1, 101)]
         assert max(positions[70:]) <= 5, (backend, positions)
+
+
+@pytest.mark.parametrize("backend", ["scalar", "numpy"])
+def test_blocked_shaft_and_set_angle(backend):
+    """A blocked shaft does not turn under full drive and overloads; set_angle moves it by hand without a jump."""
+    from firmware_model.interface import ALARM_OVERLOAD, Commands
+
+    model = PhysicalModel(1, backend=backend)
+    fields = dict(
+        torque_enable=1, goal_position=800, moving_speed=0, torque_limit=1023, cw_angle_limit=0,
+        ccw_angle_limit=1023, cw_compliance_margin=1, ccw_compliance_margin=1, cw_compliance_slope=32,
+        ccw_compliance_slope=32, punch=32, temperature_limit=70, min_voltage_limit=60, max_voltage_limit=140,
+    )
+    commands = Commands(**{k: np.array([v]) for k, v in fields.items()})
+    model.set_blocked(True)
+    sensed = model.advance(1.0, commands)
+    assert int(sensed.present_position[0]) == 512
+    assert int(sensed.present_load[0]) & 0x3FF > 1000 and int(sensed.alarms[0]) & ALARM_OVERLOAD
+    model.set_blocked(False)
+    sensed = model.advance(2.0, commands)
+    assert abs(int(sensed.present_position[0]) - 800) <= 4
+    model.set_angle(0, 300 * 0.2929 * np.pi / 180)
+    assert abs(int(model.sense().present_position[0]) - 300) <= 1
