@@ -1,0 +1,23 @@
+"""The model-discrepancy workflow (issue 4): measured trace in, named missing effects and better parameters out.
+
+Why it is a subpackage apart: it does I/O (CSV traces, report files, plots,
+TOML) and uses scipy; the model modules of :mod:`firmware_model` stay pure
+numpy with no I/O, and nothing there imports this.
+
+Modules, one job each: :mod:`.trace` (CSV format, reader and writer),
+:mod:`.schedule` (commands to whole-step segments), :mod:`.replay` (the
+trace through ``PhysicalModel``), :mod:`.batch` (many parameter sets at
+once), :mod:`.phases` (motion phases), :mod:`.metrics` (scales, costs,
+gaps), :mod:`.effects` (the effect library), :mod:`.evaluate` (batched
+scoring, lockstep fits), :mod:`.search` (forward selection),
+:mod:`.output` (verdict, report, parameter files), :mod:`.excitation` and
+:mod:`.synthetic` (test data), :mod:`.cli`.
+"""
+
+from .effects import LIBRARY, Effect, Param
+from .replay import replay
+from .search import Candidate, Diagnosis, diagnose
+from .trace import Trace, TraceFormatError, read_trace, write_trace
+
+__all__ = ["LIBRARY", "Effect", "Param", "replay", "Candidate", "Diagnosis", "diagnose", "Trace",
+           "TraceFormatError", "read_trace", "write_trace"]

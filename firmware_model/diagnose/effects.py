@@ -1,0 +1,162 @@
+"""The effect library: named, physical extensions of the base model, as data.
+
+Why it exists: the search (:mod:`.search`) must choose among *explanations*,
+not among free curve-fitting terms, so each candidate is a physical effect
+with a one-line mechanism, the residual signature it leaves (so a report can
+say why it was named), parameters with units, bounds and a null value, and a
+mapping onto the batched simulator's knobs (:mod:`.batch`).  At its null
+value every effect maps to the base knobs exactly, so "no effect" is the
+base model bit for bit (a test checks each one).
+
+``grid`` values seed the coarse screen and the multi-start for parameters the
+residual is not smooth in (delay, hold period, play, dead band);
+``fd_step`` is the finite-difference step of the fit (a position unit's worth
+for the quantised ones).  ``tested`` names the parameters whose joint 95 %
+confidence region must exclude the null for the effect to be accepted.
+``sensing`` effects change only what is read, so they need no re-simulation.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+__all__ = ["Param", "Effect", "LIBRARY", "BASE_PARAMS", "apply_effects"]
+
+
+@dataclass(frozen=True)
+class Param:
+    """One parameter of an effect; the unit is in the name."""
+
+    name: str
+    null: float
+    low: float
+    high: float
+    grid: tuple[float, ...]
+    fd_step: float
+    #: Range the dataset maker draws hidden values from (a clearly present effect).
+    hidden: tuple[float, float]
+
+
+@dataclass(frozen=True)
+class Effect:
+    """A named model extension."""
+
+    name: str
+    physics: str
+    signature: str
+    params: tuple[Param, ...]
+    #: values -> {knob: new value}, given the knobs so far.
+    knobs: Callable[[dict[str, float], dict[str, float]], dict[str, float]]
+    tested: tuple[str, ...]
+    sensing: bool = False
+    #: Whether least squares refines the grid's best point (False: grid only, e.g. a hold period in 10 ms steps).
+    smooth: bool = True
+
+    def null_values(self) -> dict[str, float]:
+        """The parameter values that reproduce the base model."""
+        return {p.name: p.null for p in self.params}
+
+    def param(self, name: str) -> Param:
+        """The parameter called ``name``."""
+        return next(p for p in self.params if p.name == name)
+
+
+def _add(knob: str, value: float, base: dict[str, float]) -> float:
+    return base[knob] + value if value else base[knob]
+
+
+def _coulomb(v, k):
+    return {"coulomb_friction_nm": _add("coulomb_friction_nm", v["extra_coulomb_nm"], k),
+            "static_friction_nm": _add("static_friction_nm", v["extra_coulomb_nm"], k)}
+
+
+def _stribeck(v, k):
+    return {"static_friction_nm": _add("static_friction_nm", v["extra_static_nm"], k),
+            "stribeck_velocity_rad_s": v["stribeck_velocity_rad_s"]}
+
+
+_HOLD_GRID = tuple(round(0.02 + 0.01 * i, 2) for i in range(29))
+
+#: The shared base parameters re-fitted with every candidate: unit-to-unit spread of the motor's strength.
+BASE_PARAMS = (Param("gearbox_efficiency", 0.7594, 0.55, 0.95, (0.7594,), 0.01, (0.74, 0.78)),)
+
+#: Effects by identifier.
+LIBRARY: dict[str, Effect] = {e.name: e for e in (
+    Effect(
+        "coulomb_friction",
+        "Extra sliding friction in the gear train (dry gears, a stiff horn bearing) adds a constant torque against motion.",
+        "Slower cruising at full drive, late arrival, a larger steady offset after small steps; load higher while moving.",
+        (Param("extra_coulomb_nm", 0.0, -0.08, 0.6, (-0.05, 0.05, 0.1, 0.2, 0.3, 0.45), 0.01, (0.08, 0.3)),),
+        _coulomb, ("extra_coulomb_nm",)),
+    Effect(
+        "stribeck_friction",
+        "Breakaway (static) friction above the sliding level, fading with speed over the Stribeck velocity.",
+        "Stick-slip on small steps and slow moves, offsets at rest, a kick at start; little change at full speed.",
+        (Param("extra_static_nm", 0.0, -0.03, 0.6, (0.1, 0.2, 0.35), 0.01, (0.12, 0.35)),
+         Param("stribeck_velocity_rad_s", 1.025, 0.05, 3.0, (0.15, 0.4, 1.0), 0.05, (0.1, 0.5))),
+        _stribeck, ("extra_static_nm",)),
+    Effect(
+        "backlash",
+        "Gear play: the output (where the pot sits) follows the motor only once the slack is taken up.",
+        "Position lags at every reversal by the play; hunting around the goal; load swings with no position change.",
+        (Param("backlash_rad", 0.0, 0.0, 0.12, (0.005, 0.01, 0.02, 0.03, 0.045, 0.06, 0.08), 0.003, (0.015, 0.05)),),
+        lambda v, k: {"backlash_rad": v["backlash_rad"]}, ("backlash_rad",)),
+    Effect(
+        "delay",
+        "Latency between the shaft and the reading (or equivalently the command): ADC, firmware loop, bus.",
+        "Residual proportional to speed, antisymmetric across each move, zero at rest; all channels shifted in time.",
+        (Param("delay_s", 0.0, -0.01, 0.15, (0.005, 0.01, 0.02, 0.03, 0.05, 0.08), 0.002, (0.01, 0.05)),),
+        lambda v, k: {"delay_s": v["delay_s"]}, ("delay_s",), sensing=True),
+    Effect(
+        "sample_hold",
+        "Present Speed / Load are latched at an unknown period and phase, not the model's 0.1 s from the start.",
+        "Position fits; speed and load residuals are staircases that change at the wrong instants.",
+        (Param("hold_s", 0.1, 0.02, 0.3, _HOLD_GRID, 0.01, (0.05, 0.2)),
+         Param("hold_phase_s", 0.0, 0.0, 0.29, tuple(round(0.01 * i, 2) for i in range(30)), 0.01, (0.0, 0.09))),
+        lambda v, k: {"hold_s": v["hold_s"], "hold_phase_s": v["hold_phase_s"]}, ("hold_s", "hold_phase_s"),
+        sensing=True, smooth=False),
+    Effect(
+        "torque_saturation",
+        "The drive tops out below full (a lower torque limit, a weak supply or a current-limited driver).",
+        "Acceleration and holding torque capped: slower starts, sag under external load, load pinned at a ceiling.",
+        (Param("drive_ceiling", 1.0, 0.1, 1.0, (0.3, 0.4, 0.5, 0.6, 0.7, 0.85), 0.01, (0.3, 0.7)),),
+        lambda v, k: {"drive_ceiling": min(v["drive_ceiling"], k["drive_ceiling"])}, ("drive_ceiling",)),
+    Effect(
+        "gravity_load",
+        "An arm's weight on the horn: torque m g L cos(angle - horizontal at raw 512), pulling CW near the centre.",
+        "Position-dependent sag at rest and asymmetric up/down moves; load offset that varies with position.",
+        (Param("arm_weight_nm", 0.0, -0.3, 1.2, (0.1, 0.2, 0.35, 0.5, 0.7), 0.01, (0.15, 0.6)),),
+        lambda v, k: {"arm_weight_nm": _add("arm_weight_nm", v["arm_weight_nm"], k)}, ("arm_weight_nm",)),
+    Effect(
+        "extra_inertia",
+        "More mass on the shaft than the model has (a horn, a wheel, a link): slower to accelerate and brake.",
+        "Lag while accelerating, overshoot when braking and settling; cruise speed unchanged.",
+        (Param("extra_inertia_kg_m2", 0.0, -0.002, 0.06, (0.002, 0.005, 0.01, 0.02, 0.035), 0.0005, (0.004, 0.02)),),
+        lambda v, k: {"extra_inertia_kg_m2": _add("extra_inertia_kg_m2", v["extra_inertia_kg_m2"], k)},
+        ("extra_inertia_kg_m2",)),
+    Effect(
+        "compliance_deadband",
+        "The firmware's dead band is wider than the Compliance Margin register says.",
+        "Settles several units short of the goal (on the side it came from); zero load at those offsets.",
+        (Param("extra_margin_units", 0.0, 0.0, 14.0, (1.0, 2.0, 3.0, 4.0, 6.0, 8.0, 11.0), 0.5, (2.0, 8.0)),),
+        lambda v, k: {"extra_margin_units": _add("extra_margin_units", v["extra_margin_units"], k)},
+        ("extra_margin_units",)),
+    Effect(
+        "sensor_offset_gain",
+        "The reported position is offset/scaled against the one the controller settles on (a re-mounted or re-calibrated pot, an external encoder).",
+        "Constant or position-proportional offset at every rest, in every phase; speed scaled by the gain.",
+        (Param("position_offset_units", 0.0, -30.0, 30.0, (-8.0, -4.0, 0.0, 4.0, 8.0), 0.5, (3.0, 10.0)),
+         Param("position_gain", 1.0, 0.85, 1.15, (0.97, 1.0, 1.03), 0.002, (0.01, 0.04))),
+        lambda v, k: {"position_offset_units": _add("position_offset_units", v["position_offset_units"], k),
+                      "position_gain": k["position_gain"] * v["position_gain"]},
+        ("position_offset_units", "position_gain"), sensing=True),
+)}
+
+
+def apply_effects(knobs: dict[str, float], chosen: dict[str, dict[str, float]]) -> dict[str, float]:
+    """``knobs`` with each chosen effect (identifier -> parameter values) applied in turn."""
+    out = dict(knobs)
+    for name, values in chosen.items():
+        out.update(LIBRARY[name].knobs(values, out))
+    return out

@@ -1,0 +1,135 @@
+"""Simulate many candidate models of one trace at once and score them.
+
+Why it exists: the search asks "what would these 50 parameter sets read?"
+again and again.  :class:`Evaluator` answers a whole list in one batched
+simulation (identical motion knobs are simulated once; sensing knobs are
+applied afterwards), and :class:`Lockstep` lets several least-squares fits,
+each in its own thread, pool their requests into that one simulation, so
+fitting three candidates costs about what fitting one does.
+"""
+
+from __future__ import annotations
+
+import threading
+from typing import Callable
+
+import numpy as np
+
+from ..params import ServoParams
+from .batch import DYNAMIC_KNOBS, SENSING_KNOBS, null_knobs, sample, simulate
+from .metrics import CHANNELS, channel_scales, robust_cost
+from .phases import classify
+from .schedule import compile_schedule
+from .trace import Trace
+
+__all__ = ["Evaluator", "Lockstep", "HELD_OUT_BLOCKS"]
+
+#: The trace is cut into 8 equal blocks; these are held out of every fit and used only to check it.
+HELD_OUT_BLOCKS = (1, 5)
+
+
+class Evaluator:
+    """One measured trace, ready to score candidate knob sets against."""
+
+    def __init__(self, trace: Trace, params: ServoParams = ServoParams(), step_s: float = 1e-3) -> None:
+        self.trace, self.params = trace, params
+        self.schedule = compile_schedule(trace, step_s, params.supply_voltage_v)
+        self.phases = classify(self.schedule, params)
+        self.channels = [ch for ch in CHANNELS if trace.has(ch)]
+        self.scales = channel_scales(trace, self.phases == 0)
+        self.measured = np.stack([trace[ch].astype(float) for ch in self.channels], axis=1)
+        self.sd = np.array([self.scales[ch] for ch in self.channels])
+        n = len(trace)
+        block = np.arange(n) * 8 // n
+        self.held = np.isin(block, HELD_OUT_BLOCKS)
+        self.train = ~self.held
+        self.null = null_knobs(params)
+        self.simulations = 0
+        self.columns = 0
+
+    def run(self, requests: list[dict[str, float]]) -> np.ndarray:
+        """Simulated channels for each knob set, shape (M, n, C); missing knobs take their null value."""
+        full = [{**self.null, **r} for r in requests]
+        keys = [tuple(r[name] for name in DYNAMIC_KNOBS) for r in full]
+        unique = list(dict.fromkeys(keys))
+        index = {key: i for i, key in enumerate(unique)}
+        dyn = {name: np.array([key[j] for key in unique]) for j, name in enumerate(DYNAMIC_KNOBS)}
+        record = simulate(self.schedule, self.params, dyn, len(unique))
+        self.simulations += 1
+        self.columns += len(unique)
+        sensing = {name: np.array([r[name] for r in full]) for name in SENSING_KNOBS}
+        out = sample(self.schedule, record, self.params, sensing, columns=np.array([index[k] for k in keys]))
+        return np.stack([out[ch] for ch in self.channels], axis=2).astype(float).transpose(1, 0, 2)
+
+    def whiten(self, simulated: np.ndarray) -> np.ndarray:
+        """(sim - measured) / channel sd, same shape as ``simulated``."""
+        return (simulated - self.measured) / self.sd
+
+    def costs(self, z: np.ndarray) -> tuple[float, float]:
+        """Robust cost of whitened residuals ``z`` (n, C) on the training rows and on the held-out rows."""
+        c = robust_cost(z).sum(axis=1)
+        return float(c[self.train].sum()), float(c[self.held].sum())
+
+
+class Lockstep:
+    """Run callables in threads; their ``submit`` calls are merged into one :meth:`Evaluator.run`."""
+
+    def __init__(self, run: Callable[[list[dict]], np.ndarray]) -> None:
+        self._run = run
+        self._cv = threading.Condition()
+        self._pending: list[dict] = []
+        self._active = 0
+
+    def submit(self, requests: list[dict]) -> np.ndarray:
+        """Simulate ``requests`` together with whatever the other threads are waiting for."""
+        slot = {"requests": requests, "result": None, "error": None}
+        with self._cv:
+            self._pending.append(slot)
+            self._maybe_run()
+            while slot["result"] is None and slot["error"] is None:
+                self._cv.wait()
+        if slot["error"] is not None:
+            raise RuntimeError("batched simulation failed") from slot["error"]
+        return slot["result"]
+
+    def _maybe_run(self) -> None:
+        """With the lock held: once every live thread waits, run all their requests as one batch."""
+        if not self._pending or len(self._pending) < self._active:
+            return
+        batch, self._pending = self._pending, []
+        flat = [r for s in batch for r in s["requests"]]
+        try:
+            result = self._run(flat)
+            i = 0
+            for s in batch:
+                s["result"] = result[i: i + len(s["requests"])]
+                i += len(s["requests"])
+        except Exception as exc:  # every waiter must wake, or the pool deadlocks
+            for s in batch:
+                s["error"] = exc
+        self._cv.notify_all()
+
+    def map(self, jobs: list[Callable[[], object]]) -> list[object]:
+        """Run ``jobs`` concurrently (each may call :meth:`submit`); return their results in order."""
+        results: list[object] = [None] * len(jobs)
+        errors: list[BaseException] = []
+        self._active = len(jobs)
+
+        def wrap(i: int, job: Callable[[], object]) -> None:
+            try:
+                results[i] = job()
+            except BaseException as exc:  # reported after join
+                errors.append(exc)
+            finally:
+                with self._cv:
+                    self._active -= 1
+                    self._maybe_run()
+
+        threads = [threading.Thread(target=wrap, args=(i, job), daemon=True) for i, job in enumerate(jobs)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+        if errors:
+            raise errors[0]
+        return results

@@ -1,0 +1,180 @@
+"""What the workflow hands back: the verdict as text and JSON, report.md with plots, and parameter files.
+
+Why it exists: the search returns numbers; a user needs a verdict, the
+evidence, and files that close the loop.
+
+Parameter files (a decision, documented here and in the report):
+
+* ``params.toml`` holds **only** :class:`~firmware_model.params.ServoParams`
+  fields, so ``ax12emu serve --params params.toml`` loads it as it is.  The
+  effects that are ServoParams fields go in: ``coulomb_friction``
+  (``coulomb_friction_nm`` and ``static_friction_nm``), ``stribeck_friction``
+  (``static_friction_nm``, ``stribeck_velocity_rad_s``), ``extra_inertia``
+  (``load_inertia_kg_m2``), ``sample_hold`` (``sample_hold_s``; the phase is
+  a property of the recording, not of the servo) and the base
+  ``gearbox_efficiency``.
+* ``effects.toml`` holds one table per named effect that is *not* a
+  ServoParams field (``[backlash]``, ``[delay]``, ``[torque_saturation]``,
+  ``[gravity_load]``, ``[compliance_deadband]``, ``[sensor_offset_gain]``),
+  with the fitted values in SI units and, where one exists, the ``serve``
+  option that reproduces it (``gravity_load``: ``--arm``;
+  ``torque_saturation``: write Torque Limit).  ``serve`` does not read it.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from ..params import ServoParams
+from .effects import LIBRARY
+from .phases import PHASES
+from .search import Diagnosis
+from .trace import Trace
+
+__all__ = ["verdict_text", "verdict_json", "fitted_params", "write_outputs"]
+
+_SERVO_FIELD_EFFECTS = ("coulomb_friction", "stribeck_friction", "extra_inertia", "sample_hold")
+
+
+def fitted_params(d: Diagnosis, params: ServoParams = ServoParams()) -> ServoParams:
+    """ServoParams with the base re-fit and every named effect that is a ServoParams field."""
+    k = d.knobs
+    changes = {"gearbox_efficiency": k["gearbox_efficiency"], "coulomb_friction_nm": max(k["coulomb_friction_nm"], 0.0),
+               "static_friction_nm": max(k["static_friction_nm"], k["coulomb_friction_nm"], 0.0),
+               "stribeck_velocity_rad_s": k["stribeck_velocity_rad_s"],
+               "load_inertia_kg_m2": max(params.load_inertia_kg_m2 + k["extra_inertia_kg_m2"], 0.0)}
+    if "sample_hold" in d.named:
+        changes["sample_hold_s"] = round(k["hold_s"], 2)
+    return replace(params, **changes)
+
+
+def verdict_json(d: Diagnosis) -> dict:
+    """One JSON-able object: named effects with identifiers and values, RMS gap per channel before and after."""
+    return {
+        "named": [{"effect": c.effect, "confidence": c.confidence, "values": c.values,
+                   "uncertainty_95": {k: v for k, v in c.uncertainty.items() if k in c.values},
+                   "delta_bic": c.delta_bic} for c in d.accepted],
+        "base": d.base,
+        "gap_rms_before": {ch: d.gaps_before[ch]["rms"] for ch in d.channels},
+        "gap_rms_after": {ch: d.gaps_after[ch]["rms"] for ch in d.channels},
+        "unexplained": d.unexplained,
+        "unexplained_detail": d.unexplained_detail,
+        "seconds": d.seconds,
+    }
+
+
+def verdict_text(d: Diagnosis) -> str:
+    """The verdict in a few lines."""
+    lines = []
+    if not d.accepted:
+        lines.append("No library effect is needed: the base model explains the trace." if not d.unexplained
+                     else "No library effect passes the tests.")
+    for c in d.accepted:
+        vals = ", ".join(f"{k} = {v:.4g} ± {c.uncertainty.get(k, float('nan')):.2g}" for k, v in c.values.items())
+        lines.append(f"{c.effect} ({c.confidence}): {vals}  [dBIC {c.delta_bic:.0f}]")
+    if d.unexplained:
+        lines.append("Unexplained residual: " + d.unexplained_detail)
+    for ch in d.channels:
+        lines.append(f"  {ch}: RMS gap {d.gaps_before[ch]['rms']:.2f} -> {d.gaps_after[ch]['rms']:.2f}")
+    return "\n".join(lines)
+
+
+def _effects_toml(d: Diagnosis) -> str:
+    lines = ["# Effects named by firmware_model.diagnose that are not ServoParams fields (serve does not read this file)."]
+    for c in d.accepted:
+        if c.effect in _SERVO_FIELD_EFFECTS:
+            continue
+        lines.append(f"\n[{c.effect}]\n# {LIBRARY[c.effect].physics}")
+        lines += [f"{k} = {float(v)!r}" for k, v in c.values.items()]
+        if c.effect == "gravity_load":
+            lines.append(f"# serve: --arm {c.values['arm_weight_nm'] / 9.80665:.4f},1.0  (mass kg at 1 m)")
+        if c.effect == "torque_saturation":
+            lines.append(f"# serve: write Torque Limit = {int(round(c.values['drive_ceiling'] * 1023))}")
+    return "\n".join(lines) + "\n"
+
+
+def _plots(trace: Trace, d: Diagnosis, out: Path) -> list[str]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    t = trace.t
+    files = []
+    fig, axes = plt.subplots(len(d.channels), 1, figsize=(11, 2.6 * len(d.channels)), sharex=True)
+    for ax, ch in zip(np.atleast_1d(axes), d.channels):
+        ax.plot(t, trace[ch], "k.", ms=1.5, label="measured")
+        ax.plot(t, d.sim_before[ch], "-", lw=0.8, color="tab:red", label="model before")
+        ax.plot(t, d.sim_after[ch], "-", lw=0.8, color="tab:blue", label="model after")
+        ax.set_ylabel(ch.replace("present_", ""))
+    np.atleast_1d(axes)[0].legend(loc="upper right", fontsize=8)
+    np.atleast_1d(axes)[-1].set_xlabel("t (s)")
+    fig.tight_layout()
+    fig.savefig(out / "measured_vs_model.png", dpi=90)
+    plt.close(fig)
+    files.append("measured_vs_model.png")
+    fig, axes = plt.subplots(2, 1, figsize=(11, 5), sharex=True)
+    colours = plt.get_cmap("tab10")
+    for ax, sim, title in zip(axes, (d.sim_before, d.sim_after), ("before", "after")):
+        e = sim["present_position"] - trace["present_position"]
+        for i, name in enumerate(PHASES):
+            sel = d.phases == i
+            if sel.any():
+                ax.plot(t[sel], e[sel], ".", ms=2, color=colours(i), label=name)
+        ax.set_ylabel(f"position error {title}")
+    axes[0].legend(loc="upper right", fontsize=7, ncol=4)
+    axes[1].set_xlabel("t (s)")
+    fig.tight_layout()
+    fig.savefig(out / "residual_by_phase.png", dpi=90)
+    plt.close(fig)
+    files.append("residual_by_phase.png")
+    return files
+
+
+def _report(trace: Trace, d: Diagnosis, files: list[str], source: str) -> str:
+    md = [f"# Model discrepancy report: {source}", "", "## Verdict", "", "```", verdict_text(d), "```", ""]
+    md += ["## Named effects", ""]
+    if not d.accepted:
+        md.append("None.")
+    for c in d.accepted:
+        e = LIBRARY[c.effect]
+        md += [f"### `{c.effect}` ({c.confidence})", "", f"*Physics:* {e.physics}", "", f"*Signature:* {e.signature}", "",
+               "| parameter | fitted | ± 95 % | null |", "|---|---|---|---|"]
+        md += [f"| {k} | {v:.5g} | {c.uncertainty.get(k, math.nan):.2g} | {e.param(k).null:g} |" for k, v in c.values.items()]
+        md += ["", f"dBIC {c.delta_bic:.1f} (n_eff {c.n_eff:.0f}), share of cost removed {100 * c.share:.0f} %", ""]
+    md += ["## Candidates per round", "", "| round | effect | dBIC | held-out cost | null excluded | result |", "|---|---|---|---|---|---|"]
+    for r, cands in enumerate(d.rounds, 1):
+        for c in cands:
+            md.append(f"| {r} | {c.effect} | {c.delta_bic:.1f} | {c.cost_held:.0f} | {c.null_excluded} | "
+                      f"{'accepted' if c.accepted else ('passes' if c.passed() else '; '.join(c.reasons))} |")
+    md += ["", "## Gap per channel and phase (RMS, raw units)", "", "| channel | phase | before | after |", "|---|---|---|---|"]
+    for ch in d.channels:
+        md.append(f"| {ch} | all (peak {d.gaps_before[ch]['peak']:.0f} -> {d.gaps_after[ch]['peak']:.0f}) | "
+                  f"{d.gaps_before[ch]['rms']:.2f} | {d.gaps_after[ch]['rms']:.2f} |")
+        for ph, v in d.gaps_before[ch]["per_phase"].items():
+            md.append(f"| | {ph} | {v:.2f} | {d.gaps_after[ch]['per_phase'][ph]:.2f} |")
+    md += ["", "## What remains", "",
+           ("Unexplained residual: " + d.unexplained_detail) if d.unexplained else
+           "Residual at noise level: " + ", ".join(f"{ch} {v:.2f} sd" for ch, v in d.residual_rms_sd.items()), ""]
+    md += ["## Plots", ""] + [f"![{f}]({f})" for f in files]
+    md += ["", "## Files", "", "* `params.toml`: ServoParams (load with `ax12emu serve --params params.toml`).",
+           "* `effects.toml`: named effects that are not ServoParams fields.", "",
+           f"{d.simulations} batched simulations, {d.seconds:.1f} s."]
+    return "\n".join(md) + "\n"
+
+
+def write_outputs(trace: Trace, d: Diagnosis, out: str | Path, source: str = "trace",
+                  params: ServoParams = ServoParams()) -> None:
+    """Write report.md, the PNG plots, params.toml, effects.toml and verdict.json into ``out``."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    files = _plots(trace, d, out)
+    (out / "report.md").write_text(_report(trace, d, files, source), encoding="utf-8")
+    fitted_params(d, params).to_toml(out / "params.toml")
+    (out / "effects.toml").write_text(_effects_toml(d), encoding="utf-8")
+    (out / "verdict.json").write_text(json.dumps(verdict_json(d), indent=2), encoding="utf-8")

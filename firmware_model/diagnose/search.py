@@ -1,0 +1,376 @@
+"""Forward selection over the effect library: screen, fit, test, accept, repeat.
+
+Why it exists: it turns "the model is off" into "this effect, with these
+values, explains it", with tests that keep it from naming noise.
+
+Each round:
+
+1. **Screen** every remaining effect on its coarse grid (all of them in one
+   batched simulation) with the current model's other parameters fixed.
+2. **Fit** the three most promising (lowest screened cost, and below the
+   current model's) by :func:`scipy.optimize.least_squares` (soft-L1 loss on
+   residuals whitened by channel noise, the shared base parameters re-fitted
+   with the effect, started at the best grid point: a multi-start for the
+   non-smooth parameters); the fits run in lockstep threads sharing each
+   simulation.  Grid-only effects (``smooth=False``) keep their grid optimum.
+3. **Test** each fit; accept the best (by BIC) only if all hold: BIC improves
+   by more than :data:`BIC_MARGIN` with the autocorrelation-corrected sample
+   count; the cost on the held-out blocks falls; the 95 % confidence region
+   of its ``tested`` parameters excludes the null (Wald test from the fit's
+   Jacobian, inflated for autocorrelation; a profile over the grid for
+   grid-only effects).
+
+It stops when no candidate passes, then compares the final model with the
+measurement: if the whitened residual stays well above the noise the
+verdict says so (an unexplained residual) and effects that explained only a
+small share are marked tentative.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+import time
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.stats import chi2
+
+from ..params import ServoParams
+from .effects import BASE_PARAMS, LIBRARY, Effect, Param, apply_effects
+from .evaluate import Evaluator, Lockstep
+from .metrics import F_SCALE, effective_count, gaps, trimmed_rms
+from .phases import PHASES
+from .trace import Trace
+
+__all__ = ["Candidate", "Diagnosis", "diagnose", "BIC_MARGIN", "UNEXPLAINED_RMS", "TENTATIVE_SHARE"]
+
+log = logging.getLogger(__name__)
+
+#: BIC must improve by more than this (issue 4).
+BIC_MARGIN = 10.0
+#: Whitened residual RMS (in channel sd) above which a channel counts as unexplained.
+UNEXPLAINED_RMS = 2.5
+#: With an unexplained residual, an effect that removed less than this share of the cost is "tentative".
+TENTATIVE_SHARE = 0.8
+#: A candidate must also remove this share of the current cost (practical, not only statistical, significance).
+MIN_SHARE = 0.05
+#: Candidates fitted per round.
+FIT_TOP = 3
+#: Function evaluations per fit (each one batched simulation).
+MAX_NFEV = 10
+#: At most this many effects are named.
+MAX_ROUNDS = 4
+
+
+@dataclass
+class Candidate:
+    """One effect fitted in one round, with its test results."""
+
+    effect: str
+    values: dict[str, float]
+    base: dict[str, float]
+    #: 95 % half-width of each fitted parameter (NaN where not estimable).
+    uncertainty: dict[str, float]
+    cost_train: float
+    cost_held: float
+    delta_bic: float
+    n_eff: float
+    null_excluded: bool
+    accepted: bool = False
+    #: Every effect's values after this fit (earlier ones re-fitted with it).
+    refitted: dict[str, dict[str, float]] = field(default_factory=dict)
+    reasons: list[str] = field(default_factory=list)
+    confidence: str = ""
+    #: Share of the then-current cost this effect removed.
+    share: float = 0.0
+
+    def passed(self) -> bool:
+        """All three acceptance tests hold."""
+        return not self.reasons
+
+
+@dataclass
+class Diagnosis:
+    """What the workflow found."""
+
+    accepted: list[Candidate]
+    rounds: list[list[Candidate]]
+    base: dict[str, float]
+    knobs: dict[str, float]
+    channels: list[str]
+    scales: dict[str, float]
+    phases: np.ndarray
+    sim_before: dict[str, np.ndarray]
+    sim_after: dict[str, np.ndarray]
+    gaps_before: dict
+    gaps_after: dict
+    unexplained: bool
+    unexplained_detail: str
+    residual_rms_sd: dict[str, float]
+    seconds: float
+    simulations: int
+
+    @property
+    def named(self) -> list[str]:
+        """Identifiers of the accepted effects, in order."""
+        return [c.effect for c in self.accepted]
+
+    @property
+    def confident(self) -> list[str]:
+        """Identifiers of the accepted effects not marked tentative."""
+        return [c.effect for c in self.accepted if c.confidence == "confident"]
+
+
+#: A pseudo-effect with no parameters: fitting it re-fits only the shared base parameters.
+_BASE_ONLY = Effect("base", "", "", (), lambda v, k: {}, ())
+
+
+class _Search:
+    """State of one diagnosis (the current model and how to score changes to it)."""
+
+    def __init__(self, trace: Trace, params: ServoParams, progress: Callable[[str], None]) -> None:
+        self.ev = Evaluator(trace, params)
+        self.params = params
+        self.progress = progress
+        self.base_params = tuple(Param(p.name, getattr(params, p.name), p.low, p.high, (getattr(params, p.name),),
+                                       p.fd_step, p.hidden) for p in BASE_PARAMS)
+        self.base = {p.name: p.null for p in self.base_params}
+        self.chosen: dict[str, dict[str, float]] = {}
+
+    def knobs(self, base: dict[str, float], chosen: dict[str, dict[str, float]]) -> dict[str, float]:
+        """Simulator knobs for base values plus chosen effects."""
+        k = dict(self.ev.null)
+        k.update(base)
+        return apply_effects(k, chosen)
+
+    # ------------------------------------------------------------------ scoring
+    def score(self, z: np.ndarray) -> tuple[float, float, float]:
+        """(train cost, held-out cost, effective training count) of whitened residuals (n, C)."""
+        s, h = self.ev.costs(z)
+        return s, h, effective_count(z[self.ev.train])
+
+    # ------------------------------------------------------------------ one least-squares fit
+    def fit(self, effect: Effect, start: dict[str, float], lock: Lockstep):
+        """Fit ``effect`` plus the base and the smooth accepted effects, from ``start``.
+
+        The accepted effects are re-fitted too (their columns cost little in a
+        batched simulation), so a new effect is not accepted merely to patch an
+        earlier fit.  Returns (values, base, z, r0, jac, names, refitted chosen).
+        """
+        owners = [(effect.name, p) for p in effect.params]
+        owners += [(name, p) for name in self.chosen if LIBRARY[name].smooth for p in LIBRARY[name].params]
+        owners += [("base", p) for p in self.base_params]
+        names = [p.name for _, p in owners]
+        lo = np.array([p.low for _, p in owners])
+        hi = np.array([p.high for _, p in owners])
+        step = np.array([p.fd_step for _, p in owners])
+        x0 = np.array([start.get(p.name, p.null) if o == effect.name else
+                       (self.base[p.name] if o == "base" else self.chosen[o][p.name]) for o, p in owners], dtype=float)
+        x0 = np.clip(x0, lo + 1e-9 * (hi - lo), hi - 1e-9 * (hi - lo))
+        cache: dict[bytes, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        train = self.ev.train
+
+        def split(x):
+            chosen = {k: dict(v) for k, v in self.chosen.items()}
+            base: dict[str, float] = {}
+            values: dict[str, float] = {}
+            for (o, p), v in zip(owners, x):
+                if o == "base":
+                    base[p.name] = float(v)
+                elif o == effect.name:
+                    values[p.name] = float(v)
+                else:
+                    chosen[o][p.name] = float(v)
+            if effect.params:
+                chosen[effect.name] = values
+            return values, base, chosen
+
+        def evaluate(x):
+            key = x.tobytes()
+            if key not in cache:
+                pts, hs = [x.copy()], []
+                for j in range(len(x)):
+                    h = step[j] if x[j] + step[j] <= hi[j] else -step[j]
+                    xp = x.copy()
+                    xp[j] += h
+                    pts.append(xp)
+                    hs.append(h)
+                reqs = []
+                for pt in pts:
+                    _, b, chosen = split(pt)
+                    reqs.append(self.knobs(b, chosen))
+                z = self.ev.whiten(lock.submit(reqs))
+                r0 = z[0][train].ravel()
+                jac = np.stack([(z[j + 1][train].ravel() - r0) / hs[j] for j in range(len(x))], axis=1)
+                cache[key] = (r0, jac, z[0])
+            return cache[key]
+
+        res = least_squares(lambda x: evaluate(x)[0], x0, jac=lambda x: evaluate(x)[1], bounds=(lo, hi),
+                            loss="soft_l1", f_scale=F_SCALE, x_scale=step, max_nfev=MAX_NFEV, method="trf",
+                            ftol=1e-4, xtol=1e-3)
+        r0, jac, z = evaluate(res.x)
+        values, base, chosen = split(res.x)
+        return values, base, z, r0, jac, names, chosen
+
+    # ------------------------------------------------------------------ tests
+    def wald(self, effect: Effect, values, names, r0, jac, n_eff) -> tuple[dict[str, float], bool]:
+        """95 % half-widths, and whether the tested parameters' confidence region excludes the null."""
+        n, p = jac.shape
+        w = 1.0 / np.sqrt(1.0 + (r0 / F_SCALE) ** 2)  # soft-L1 IRLS weights: the robust fit's curvature
+        jw = jac * w[:, None] ** 0.5
+        s2 = float(np.sum((r0 * w**0.5) ** 2)) / max(n - p, 1)
+        cov = np.linalg.pinv(jw.T @ jw) * s2 * (n / max(n_eff, 1.0))
+        sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+        unc = {name: float(1.96 * sd[i]) for i, name in enumerate(names)}
+        idx = [names.index(t) for t in effect.tested]
+        d = np.array([values[t] - effect.param(t).null for t in effect.tested])
+        sub = cov[np.ix_(idx, idx)]
+        stat = float(d @ np.linalg.pinv(sub) @ d) if np.all(np.isfinite(sub)) else 0.0
+        return unc, stat > chi2.ppf(0.95, len(idx))
+
+    # ------------------------------------------------------------------ a round
+    def round(self, current_z: np.ndarray, remaining: list[str], round_no: int) -> tuple[list[Candidate], np.ndarray]:
+        """Screen, fit and test every remaining effect against the current model (base re-fitted first in round 1).
+
+        Returns the candidates and the current model's residual (changed if the base re-fit helped).
+        """
+        ev = self.ev
+        s0, h0, _ = self.score(current_z)
+        grid_reqs, owners = [], []
+        for name in remaining:
+            e = LIBRARY[name]
+            for combo in itertools.product(*(p.grid for p in e.params)):
+                vals = dict(zip([p.name for p in e.params], combo))
+                if name == "sample_hold" and vals["hold_phase_s"] >= vals["hold_s"]:
+                    continue
+                grid_reqs.append(self.knobs(self.base, {**self.chosen, name: vals}))
+                owners.append((name, vals))
+        self.progress(f"round {round_no}: screening {len(remaining)} effects on {len(grid_reqs)} grid points")
+        zs = ev.whiten(ev.run(grid_reqs))
+        best: dict[str, tuple[float, dict, np.ndarray, list]] = {}
+        for (name, vals), z in zip(owners, zs):
+            s, _ = ev.costs(z)
+            entry = best.setdefault(name, (np.inf, {}, None, []))
+            entry[3].append((vals, s))
+            if s < entry[0]:
+                best[name] = (s, vals, z, entry[3])
+        ranked = sorted((b[0], n) for n, b in best.items() if b[0] < s0)
+        smooth = [n for _, n in ranked if LIBRARY[n].smooth][:FIT_TOP]
+        rough = [n for _, n in ranked if not LIBRARY[n].smooth][:1]
+        if smooth:
+            self.progress(f"round {round_no}: fitting {', '.join(smooth)} by least squares")
+        lock = Lockstep(ev.run)
+        jobs = [lambda n=n: self.fit(LIBRARY[n], best[n][1], lock) for n in smooth]
+        if round_no == 1:  # the shared base parameters alone, in the same batches
+            jobs.append(lambda: self.fit(_BASE_ONLY, {}, lock))
+        fits = lock.map(jobs)
+        if round_no == 1:
+            _, base, zb, _, _, _, _ = fits.pop()
+            sb, hb, _ = self.score(zb)
+            if sb < s0:
+                self.base, current_z, s0, h0 = base, zb, sb, hb
+                self.progress("round 1: base re-fit " + ", ".join(f"{k}={v:.4g}" for k, v in base.items()))
+        out: list[Candidate] = []
+        for name, (values, base, z, r0, jac, names, chosen) in zip(smooth, fits):
+            e = LIBRARY[name]
+            s1, h1, n_eff = self.score(z)
+            dbic = n_eff * np.log(s0 / s1) - len(e.params) * np.log(n_eff) if s1 > 0 else np.inf
+            unc, excluded = self.wald(e, {**values, **base}, names, r0, jac, n_eff)
+            c = self._judge(name, values, base, unc, s1, h1, dbic, n_eff, excluded, h0, s0)
+            c.refitted = chosen
+            out.append(c)
+        for name in rough:
+            e = LIBRARY[name]
+            s1, vals, z, table = best[name]
+            _, h1, n_eff = self.score(z)
+            dbic = n_eff * np.log(s0 / s1) - len(e.params) * np.log(n_eff)
+            # profile over the grid: chi2-like scale from the best point, corrected for autocorrelation
+            scale = n_eff / max(s1, 1e-12)
+            null_cost = next((s for v, s in table if all(abs(v[k] - e.param(k).null) < 1e-9 for k in e.tested)), s0)
+            excluded = (null_cost - s1) * scale > chi2.ppf(0.95, len(e.tested))
+            unc = {}
+            for pname in vals:
+                inside = [v[pname] for v, s in table if (s - s1) * scale <= chi2.ppf(0.95, 1)]
+                unc[pname] = float((max(inside) - min(inside)) / 2.0) if inside else float("nan")
+            out.append(self._judge(name, vals, dict(self.base), unc, s1, h1, dbic, n_eff, excluded, h0, s0))
+        return out, current_z
+
+    def _judge(self, name, values, base, unc, s1, h1, dbic, n_eff, excluded, h0, s0) -> Candidate:
+        c = Candidate(name, {k: float(v) for k, v in values.items()}, {k: float(v) for k, v in base.items()}, unc,
+                      s1, h1, float(dbic), float(n_eff), bool(excluded), share=float(1.0 - s1 / s0) if s0 > 0 else 0.0)
+        c.refitted = {**{k: dict(v) for k, v in self.chosen.items()}, name: c.values}
+        if not c.share >= MIN_SHARE:
+            c.reasons.append(f"removes only {100 * c.share:.1f} % of the cost (< {100 * MIN_SHARE:g} %)")
+        if not dbic > BIC_MARGIN:
+            c.reasons.append(f"BIC improves by {dbic:.1f} <= {BIC_MARGIN:g}")
+        if not h1 < h0:
+            c.reasons.append(f"held-out cost does not fall ({h1:.1f} vs {h0:.1f})")
+        if not excluded:
+            c.reasons.append("confidence region includes the null")
+        return c
+
+
+def diagnose(trace: Trace, params: ServoParams = ServoParams(), progress: Callable[[str], None] | None = None,
+             effects: list[str] | None = None) -> Diagnosis:
+    """Run the whole workflow on a measured trace (``effects``: restrict the library, default all)."""
+    t0 = time.perf_counter()
+    say = progress or (lambda msg: log.info(msg))
+    srch = _Search(trace, params, say)
+    ev = srch.ev
+    say(f"{len(trace)} rows, {ev.schedule.n_steps} model steps; channel sd "
+        + ", ".join(f"{ch.replace('present_', '')} {ev.scales[ch]:.2f}" for ch in ev.channels))
+    z_before = ev.whiten(ev.run([srch.knobs(srch.base, {})]))[0]
+    sim_before = ev.measured + z_before * ev.sd
+    z = z_before
+    remaining = list(effects or LIBRARY)
+    rounds: list[list[Candidate]] = []
+    accepted: list[Candidate] = []
+    for round_no in range(1, MAX_ROUNDS + 1):
+        if not remaining:
+            break
+        cands, z = srch.round(z, remaining, round_no)
+        rounds.append(cands)
+        passing = [c for c in cands if c.passed()]
+        for c in sorted(cands, key=lambda c: -c.delta_bic):
+            say(f"  {c.effect}: dBIC {c.delta_bic:.1f}, "
+                + ("passes" if c.passed() else "; ".join(c.reasons)))
+        if not passing:
+            break
+        win = max(passing, key=lambda c: c.delta_bic)
+        win.accepted = True
+        accepted.append(win)
+        srch.chosen = {k: dict(v) for k, v in win.refitted.items()}
+        srch.base = win.base
+        for c in accepted[:-1]:
+            c.values = dict(srch.chosen[c.effect])
+        remaining.remove(win.effect)
+        z = ev.whiten(ev.run([srch.knobs(srch.base, srch.chosen)]))[0]
+        say(f"round {round_no}: accepted {win.effect} " + ", ".join(f"{k}={v:.4g}" for k, v in win.values.items()))
+    sim_after = ev.measured + z * ev.sd
+    as_dict = lambda arr: {ch: np.rint(arr[:, i]).astype(np.int64) for i, ch in enumerate(ev.channels)}  # noqa: E731
+    rms = {ch: trimmed_rms(z[:, i]) for i, ch in enumerate(ev.channels)}
+    worst = max(rms, key=rms.get)
+    unexplained = rms[worst] > UNEXPLAINED_RMS
+    detail = ""
+    if unexplained:
+        per_phase = {PHASES[p]: trimmed_rms(z[ev.phases == p, ev.channels.index(worst)])
+                     for p in np.unique(ev.phases)}
+        where = max(per_phase, key=per_phase.get)
+        detail = (f"{worst} residual is {rms[worst]:.1f} sd after the named effects (noise-level is about 1), "
+                  f"largest while {where.replace('_', ' ')} ({per_phase[where]:.1f} sd): no library effect explains it")
+    for c in accepted:
+        c.confidence = "tentative" if unexplained and c.share < TENTATIVE_SHARE else "confident"
+    measured_trace = trace
+    return Diagnosis(
+        accepted=accepted, rounds=rounds, base=srch.base, knobs=srch.knobs(srch.base, srch.chosen),
+        channels=ev.channels, scales=ev.scales, phases=ev.phases,
+        sim_before=as_dict(sim_before), sim_after=as_dict(sim_after),
+        gaps_before=gaps(measured_trace, as_dict(sim_before), ev.phases),
+        gaps_after=gaps(measured_trace, as_dict(sim_after), ev.phases),
+        unexplained=unexplained, unexplained_detail=detail, residual_rms_sd=rms,
+        seconds=time.perf_counter() - t0, simulations=ev.simulations,
+    )
+

@@ -1,0 +1,192 @@
+"""The measured-trace CSV format: one reader and one writer, side by side.
+
+Why it exists: a trace is the one thing a user with hardware (or anyone's
+log) hands the diagnosis workflow, so its format is small, plain and checked
+with errors that say where a file is wrong.
+
+Format
+------
+A header line naming the columns, then one row per sample, comma-separated.
+Values are raw control-table units as a client reads them::
+
+    t,goal_position,moving_speed,present_position,present_speed,present_load
+    0.000000,512,0,512,0,0
+    0.010000,600,200,513,12,-80
+
+* ``t`` (s, required): when the row's sensed columns were read; strictly
+  increasing.  The replay's time origin is the first row's ``t``.
+* ``goal_position`` (0..1023), ``moving_speed`` (0..1023; 0 = full speed)
+  (required): the registers *in effect from* ``t`` on (written at ``t``, after
+  the reading, or earlier).
+* ``present_position`` (0..1023, required).
+* ``present_speed``, ``present_load`` (optional): **signed** integers,
+  positive when the position increases (not the register's bit-10 form:
+  ``-80`` rather than ``1104``), -1023..1023.
+* ``torque_limit`` (0..1023), ``voltage`` (0.1 V units), ``external_torque_nm``
+  (N m, positive CCW) (optional): what was applied from ``t`` on.
+
+Blank lines and lines starting with ``#`` are ignored (comments).  Any other
+problem raises :class:`TraceFormatError` naming the line and the column.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["Trace", "TraceFormatError", "read_trace", "write_trace", "REQUIRED", "OPTIONAL", "COLUMNS"]
+
+#: Columns every trace has, in the order the writer uses.
+REQUIRED = ("t", "goal_position", "moving_speed", "present_position")
+#: Columns a trace may have.
+OPTIONAL = ("present_speed", "present_load", "torque_limit", "voltage", "external_torque_nm")
+COLUMNS = REQUIRED + OPTIONAL
+#: Inclusive ranges of the integer columns.
+_INT_RANGES = {
+    "goal_position": (0, 1023), "moving_speed": (0, 1023), "present_position": (0, 1023),
+    "present_speed": (-1023, 1023), "present_load": (-1023, 1023), "torque_limit": (0, 1023), "voltage": (0, 255),
+}
+_FLOAT_COLUMNS = ("t", "external_torque_nm")
+
+
+class TraceFormatError(ValueError):
+    """A malformed trace; ``line`` (1-based) and ``column`` (name) say where, when known."""
+
+    def __init__(self, message: str, line: int | None = None, column: str | None = None, source: str = "trace") -> None:
+        where = source + (f":{line}" if line is not None else "") + (f": column {column!r}" if column else "")
+        super().__init__(f"{where}: {message}")
+        self.line, self.column = line, column
+
+
+@dataclass
+class Trace:
+    """A trace in memory: ``columns`` maps each present column name to an array of shape (n,)."""
+
+    columns: dict[str, np.ndarray]
+    #: Comment lines (without ``#``) kept from the file, e.g. the tool that made it.
+    comments: list[str] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        missing = [c for c in REQUIRED if c not in self.columns]
+        if missing:
+            raise TraceFormatError(f"missing required column(s) {', '.join(missing)}")
+        lengths = {len(v) for v in self.columns.values()}
+        if len(lengths) != 1:
+            raise TraceFormatError(f"columns differ in length: {sorted(lengths)}")
+        self.columns = {k: np.asarray(v, dtype=float if k in _FLOAT_COLUMNS else np.int64) for k, v in self.columns.items()}
+
+    def __len__(self) -> int:
+        return len(self.columns["t"])
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        return self.columns[name]
+
+    def has(self, name: str) -> bool:
+        """Whether the trace carries column ``name``."""
+        return name in self.columns
+
+    @property
+    def t(self) -> np.ndarray:
+        """Sample times relative to the first row, seconds."""
+        return self.columns["t"] - self.columns["t"][0]
+
+    def with_columns(self, **columns: np.ndarray) -> "Trace":
+        """A copy with some columns replaced or added (e.g. simulated sensed values)."""
+        return Trace({**self.columns, **columns}, list(self.comments))
+
+
+def _parse(text: str, name: str, line: int, source: str) -> float | int:
+    """One cell, checked against its column's type and range."""
+    text = text.strip()
+    if name in _FLOAT_COLUMNS:
+        try:
+            value = float(text)
+        except ValueError:
+            raise TraceFormatError(f"{text!r} is not a number", line, name, source) from None
+        if not math.isfinite(value):
+            raise TraceFormatError(f"{text!r} is not finite", line, name, source)
+        return value
+    try:
+        value = int(text)
+    except ValueError:
+        raise TraceFormatError(f"{text!r} is not an integer", line, name, source) from None
+    low, high = _INT_RANGES[name]
+    if not low <= value <= high:
+        raise TraceFormatError(f"{value} is outside {low}..{high}", line, name, source)
+    return value
+
+
+def read_trace(path: str | Path) -> Trace:
+    """Read and validate a trace file; raise :class:`TraceFormatError` with line and column on any problem."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise TraceFormatError(f"not UTF-8 text ({exc.reason})", source=str(path)) from None
+    return parse_trace(text, source=str(path))
+
+
+def parse_trace(text: str, source: str = "trace") -> Trace:
+    """:func:`read_trace` on a string (``source`` names it in errors)."""
+    comments: list[str] = []
+    header: list[str] | None = None
+    rows: list[list[float | int]] = []
+    for line_no, raw in enumerate(io.StringIO(text), start=1):
+        stripped = raw.strip()
+        if not stripped:
+            continue
+        if stripped.startswith("#"):
+            comments.append(stripped[1:].strip())
+            continue
+        cells = next(csv.reader([stripped]))
+        if header is None:
+            header = [c.strip() for c in cells]
+            for col in header:
+                if col not in COLUMNS:
+                    raise TraceFormatError(f"unknown column (known: {', '.join(COLUMNS)})", line_no, col, source)
+            dup = {c for c in header if header.count(c) > 1}
+            if dup:
+                raise TraceFormatError("column appears twice", line_no, sorted(dup)[0], source)
+            for col in REQUIRED:
+                if col not in header:
+                    raise TraceFormatError("required column missing from the header", line_no, col, source)
+            continue
+        if len(cells) != len(header):
+            raise TraceFormatError(f"expected {len(header)} values, got {len(cells)}", line_no, None, source)
+        row = [_parse(cell, name, line_no, source) for cell, name in zip(cells, header)]
+        t = row[header.index("t")]
+        if rows and not t > rows[-1][header.index("t")]:
+            raise TraceFormatError(f"time {t} does not increase", line_no, "t", source)
+        rows.append(row)
+    if header is None:
+        raise TraceFormatError("empty file: no header", source=source)
+    if len(rows) < 2:
+        raise TraceFormatError("need at least two rows", source=source)
+    data = np.array(rows, dtype=float)
+    return Trace({name: data[:, i] for i, name in enumerate(header)}, comments)
+
+
+def write_trace(trace: Trace, path: str | Path) -> None:
+    """Write ``trace`` in the format above (known columns in canonical order, comments first)."""
+    names = [c for c in COLUMNS if trace.has(c)]
+    out = io.StringIO()
+    for comment in trace.comments:
+        out.write(f"# {comment}\n")
+    out.write(",".join(names) + "\n")
+    cols = [trace[c] for c in names]
+    for i in range(len(trace)):
+        cells = []
+        for name, col in zip(names, cols):
+            if name == "t":
+                cells.append(f"{col[i]:.6f}")
+            elif name in _FLOAT_COLUMNS:
+                cells.append(repr(float(col[i])))
+            else:
+                cells.append(str(int(col[i])))
+        out.write(",".join(cells) + "\n")
+    Path(path).write_text(out.getvalue(), encoding="utf-8")

@@ -1,0 +1,40 @@
+"""Trace CSV reader and writer: round trip and errors that name line and column."""
+
+import numpy as np
+import pytest
+
+from firmware_model.diagnose.trace import Trace, TraceFormatError, parse_trace, read_trace, write_trace
+
+GOOD = "# a comment\nt,goal_position,moving_speed,present_position,present_speed,present_load\n0.0,512,0,512,0,0\n0.01,600,100,513,-12,80\n"
+
+
+def test_round_trip(tmp_path):
+    """What the writer writes the reader reads back unchanged."""
+    tr = Trace({"t": [0.0, 0.01, 0.02], "goal_position": [1, 2, 3], "moving_speed": [0, 0, 5],
+                "present_position": [4, 5, 6], "external_torque_nm": [0.0, 0.25, -0.5]}, ["made here"])
+    write_trace(tr, tmp_path / "a.csv")
+    back = read_trace(tmp_path / "a.csv")
+    assert back.comments == ["made here"]
+    for k, v in tr.columns.items():
+        np.testing.assert_array_equal(back[k], v)
+
+
+@pytest.mark.parametrize("text, line, column", [
+    (GOOD.replace("513,-12", "513x,-12"), 4, "present_position"),
+    (GOOD.replace("0.01,600", "0.0,600"), 4, "t"),
+    (GOOD.replace(",80", ",2000"), 4, "present_load"),
+    (GOOD.replace("present_load", "present_lode"), 2, "present_lode"),
+    (GOOD.replace("moving_speed,", ""), 2, "moving_speed"),
+])
+def test_errors_name_line_and_column(text, line, column):
+    """A malformed cell, order, range or header is reported at its line and column."""
+    with pytest.raises(TraceFormatError) as info:
+        parse_trace(text, "x.csv")
+    assert info.value.line == line and info.value.column == column
+    assert f"x.csv:{line}" in str(info.value)
+
+
+def test_row_length_error():
+    """A short row names its line."""
+    with pytest.raises(TraceFormatError, match=":4"):
+        parse_trace(GOOD.replace(",80\n", "\n"))

@@ -1,0 +1,48 @@
+#!/usr/bin/env python3
+"""Make a "measured" trace with hidden effects, and its answer key in a separate file.
+
+Why it exists: the diagnosis workflow is checked on data whose answer is
+known (firmware_model.diagnose.synthetic); the key goes to KEY.json, which
+the workflow never reads.
+
+Usage: ``python tools/make_dataset.py OUT.csv --key KEY.json [--effects coulomb_friction,delay] [--seed N]
+[--duration 20] [--rate 100]`` (``--effects none`` for a clean servo; ``cogging`` is out of the library).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from firmware_model.diagnose.synthetic import draw_effect, make_trace  # noqa: E402
+from firmware_model.diagnose.trace import write_trace  # noqa: E402
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Write the trace and the key."""
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("out", help="trace CSV to write")
+    p.add_argument("--key", required=True, help="answer key JSON to write (keep it away from the workflow)")
+    p.add_argument("--effects", default="none", help="comma-separated hidden effects, or 'none'")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--duration", type=float, default=20.0, help="seconds (default 20)")
+    p.add_argument("--rate", type=float, default=100.0, help="samples per second (default 100)")
+    args = p.parse_args(argv)
+    rng = np.random.default_rng(args.seed + 100_000)
+    names = [] if args.effects == "none" else args.effects.split(",")
+    hidden = {n: draw_effect(n, rng) for n in names}
+    trace, key = make_trace(hidden, args.seed, args.duration, args.rate)
+    write_trace(trace, args.out)
+    Path(args.key).write_text(json.dumps(key, indent=2), encoding="utf-8")
+    print(f"{args.out}: {len(trace)} rows; key in {args.key}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
