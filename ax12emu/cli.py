@@ -114,6 +114,12 @@ def build_parser() -> argparse.ArgumentParser:
     # -- issue 5: --trace and fault flags on serve; decode and conformance commands (cli_hil.py)
     cli_hil.add_serve_flags(serve)
     cli_hil.add_commands(sub)
+    diagnose = sub.add_parser(
+        "diagnose",
+        add_help=False,
+        help="find where a measured trace and the model disagree (same as python -m firmware_model.diagnose)",
+    )
+    diagnose.add_argument("arguments", nargs=argparse.REMAINDER)
     return parser
 
 
@@ -218,8 +224,20 @@ def _serve(args: argparse.Namespace) -> int:
     return 0
 
 
+def _diagnose(arguments: list[str]) -> int:
+    try:
+        from firmware_model.diagnose.cli import main as diagnose_main
+    except ImportError as exc:
+        print(f"ax12emu: diagnose needs scipy and matplotlib: pip install 'ax12emu[diagnose]' ({exc})", file=sys.stderr)
+        return 2
+    return diagnose_main(arguments)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``ax12emu`` console script."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["diagnose"]:  # its own parser takes every argument, --help included
+        return _diagnose(argv[1:])
     args = parse_args(argv)
     logging.basicConfig(
         level=logging.DEBUG if getattr(args, "verbose", False) else logging.INFO,

@@ -77,3 +77,10 @@ def test_arm_flag_is_validated():
     """--arm takes MASS_KG,LENGTH_M as two non-negative numbers."""
     result = run("serve", "--arm", "heavy")
     assert result.returncode == 2 and "MASS_KG,LENGTH_M" in result.stderr
+
+
+def test_diagnose_alias_reaches_the_workflow(tmp_path):
+    """`ax12emu diagnose` is the discrepancy workflow's CLI: its help, and its one-line error on a missing file."""
+    assert "MEASURED.csv" in run("diagnose", "--help").stdout
+    result = run("diagnose", str(tmp_path / "missing.csv"), "--out", str(tmp_path / "out"))
+    assert result.returncode == 2 and "missing.csv" in result.stderr and "Traceback" not in result.stderr
