@@ -41,6 +41,8 @@ __all__ = ["Bus", "Reply", "BAUD_TOLERANCE", "parse_ids"]
 
 log = logging.getLogger(__name__)
 
+#: Instructions that can change command registers; after any other the model's inputs stand.
+_CHANGES_TABLES = frozenset(int(i) for i in (Instruction.WRITE, Instruction.ACTION, Instruction.RESET, Instruction.SYNC_WRITE))
 #: A UART samples mid-bit; beyond about 3 % rate mismatch the stop bit is missed.
 BAUD_TOLERANCE = 0.03
 
@@ -200,9 +202,11 @@ class Bus:
                 servo.eeprom_dirty = False
                 if self.state_store is not None:
                     self.state_store.save(self.slots[servo.index], servo.table)
-        self.plant.tables_changed()
-        if packet.instruction == Instruction.RESET:
-            self.plant.refresh()
+        instruction = packet.instruction
+        if instruction in _CHANGES_TABLES and targets:
+            self.plant.tables_changed()
+            if instruction == Instruction.RESET:
+                self.plant.refresh()
         if moved:
             self._reindex()
         if faults is not None and replies:

@@ -288,6 +288,7 @@ class Faults:
             table.set("torque_enable", 0)
         else:
             table.set("torque_limit", 0)
+        self.bus.plant.tables_changed()
 
     def on_replies(self, replies: "list[Reply]") -> "list[Reply]":
         """Drop, corrupt or delay status packets by the configured fractions."""

@@ -15,6 +15,10 @@ TORQUE_ENABLE, GOAL_POSITION, MOVING_SPEED, PRESENT_POSITION, MOVING = 24, 30, 3
 ALARMS = {0x01: "input voltage", 0x04: "overheating", 0x20: "overload"}
 
 
+#: How close "arrived" is, in position units: with its default compliance (margin 1, slope 32) an
+#: AX-12 stops a few units short of or past the goal against its own static friction.
+POSITION_TOLERANCE = 4
+
 class CommError(RuntimeError):
     """A servo did not answer after every retry."""
 
@@ -60,7 +64,7 @@ class Arm:
         while time.monotonic() < deadline:
             moving, _ = self._retry(lambda: self.packets.read1ByteTxRx(self.port, joint, MOVING))
             if not moving:
-                return abs(self.read_position(joint) - position) <= 2
+                return abs(self.read_position(joint) - position) <= POSITION_TOLERANCE
             time.sleep(0.01)
         return False
 

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import pytest
-from robot_arm import Arm, CommError
+from robot_arm import POSITION_TOLERANCE, Arm, CommError
 
 from ax12emu import FaultConfig
 
@@ -22,7 +22,7 @@ def test_joints_reach_their_goals(arm):
     arm.enable()
     assert arm.move_to(1, 600)
     assert arm.move_to(2, 400)
-    assert abs(arm.read_position(1) - 600) <= 2  # a real servo also settles within its compliance margin
+    assert abs(arm.read_position(1) - 600) <= POSITION_TOLERANCE  # a real servo also stops a few units off
 
 
 @pytest.mark.ax12_ids(1)
