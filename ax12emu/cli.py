@@ -45,6 +45,16 @@ def _arm(text: str) -> tuple[float, float]:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
+def _finite_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if value != value or value in (float("inf"), float("-inf")):
+        raise argparse.ArgumentTypeError(f"must be a finite number, got {text}")
+    return value
+
+
 def _positive_float(text: str) -> float:
     try:
         value = float(text)
@@ -89,7 +99,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="position controller: the e-manual's compliance control (default) or the 2008 report's PID",
     )
     physics.add_argument(
-        "--external-torque", type=float, default=0.0, metavar="NM", help="constant torque on every shaft, N m (+ = CCW)"
+        "--external-torque", type=_finite_float, default=0.0, metavar="NM", help="constant torque on every shaft, N m (+ = CCW)"
     )
     physics.add_argument("--arm", type=_arm, metavar="MASS_KG,LENGTH_M", help="an arm under gravity on every shaft")
     serve.add_argument(
@@ -189,11 +199,11 @@ def _serve(args: argparse.Namespace) -> int:
         faults.install(bus)
     trace = TraceWriter(args.trace, profile=args.profile) if args.trace else None
     if args.tcp:
-        host, port = args.tcp_address
-        if not _is_loopback(host):
-            log.warning("serving on %s:%d, reachable from other machines", host, port)
-        transport = TcpTransport(host, port)
-        where = f"socket://{transport.host}:{transport.port}"
+        transport = TcpTransport(*args.tcp_address)
+        host = f"[{transport.host}]" if ":" in transport.host else transport.host
+        where = f"socket://{host}:{transport.port}"
+        if not _is_loopback(transport.host):
+            log.warning("serving on %s, reachable from other machines", where)
     else:
         transport = PtyTransport(args.link)
         where = transport.slave_path

@@ -106,6 +106,7 @@ class BusServer:
         self._stop = False
         self._rx_busy_until = 0.0
         self._hot_until = 0.0
+        self._connections = getattr(transport, "connections", None)
         self._next_physics = time.monotonic()
         #: Counters for diagnostics and tests.
         self.packets_in = 0
@@ -143,6 +144,11 @@ class BusServer:
 
     # -- input -------------------------------------------------------------------------
     def _on_bytes(self, data: bytes, now: float) -> None:
+        connections = getattr(self.transport, "connections", None)
+        if connections != self._connections:
+            # A new TCP client is a new host: the last one's half packet is not its business.
+            self._connections = connections
+            self.bus.framer.reset()
         if self.trace is not None:
             self.trace.record(IN, data, now)
         line_bps = self.transport.line_bps()

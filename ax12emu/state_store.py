@@ -8,7 +8,8 @@ a client changed to 5 comes back as 5 when launched as ``--ids 1`` again.
 Files hold register values by name (readable, diffable) and are replaced
 atomically (temporary file, fsync, rename), so a crash mid-write leaves the
 old or the new state, never a mix.  Names are built only from integers, so
-no input can make the store touch a file outside its directory.
+no input can make the store touch a file outside its directory, and a state
+file that is a symlink is refused rather than followed.
 """
 
 from __future__ import annotations
@@ -33,9 +34,16 @@ class StateStore:
     def __init__(self, directory: str | os.PathLike[str]) -> None:
         self.directory = Path(directory)
         self.directory.mkdir(parents=True, exist_ok=True)
+        # A crash between creating a temporary file and renaming it leaves the temporary
+        # file behind (the state file itself is intact); remove such leftovers so they
+        # do not pile up.  One server per state directory, as one servo per EEPROM.
+        for leftover in self.directory.glob("servo-[0-9][0-9][0-9].json*.tmp"):
+            leftover.unlink(missing_ok=True)
 
     def path_for(self, slot: int) -> Path:
         """The file of the servo launched with ID ``slot``."""
+        if not 0 <= int(slot) <= 0xFD:
+            raise ValueError(f"servo slot must be 0..253, got {slot}")
         return self.directory / f"servo-{int(slot):03d}.json"
 
     def load(self, slot: int, table: ControlTable) -> bool:
@@ -44,7 +52,11 @@ class StateStore:
         if not path.exists():
             return False
         try:
-            document = json.loads(path.read_text(encoding="utf-8"))
+            # O_NOFOLLOW: a symlink planted in the directory cannot make the store read
+            # a file elsewhere (ELOOP, reported below as an unusable state file).
+            fd = os.open(path, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0))
+            with os.fdopen(fd, encoding="utf-8") as handle:
+                document = json.loads(handle.read())
             registers = document["eeprom"]
             if not isinstance(registers, dict):
                 raise TypeError("'eeprom' must be an object")

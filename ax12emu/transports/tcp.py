@@ -56,6 +56,8 @@ class TcpTransport(Transport):
         self.name = f"tcp://{self.host}:{self.port}"
         #: Clients turned away because one was already connected.
         self.refused = 0
+        #: Clients accepted so far (a change tells the server a new host began).
+        self.connections = 0
 
     @property
     def connected(self) -> bool:
@@ -63,10 +65,11 @@ class TcpTransport(Transport):
         return self._client is not None
 
     def fds(self) -> list[int]:
-        fds = [self._listener.fileno()]
+        # The client first: when it hangs up and reconnects at once, select reports both,
+        # and its EOF must be seen before the new connection, or that one is refused.
         if self._client is not None:
-            fds.append(self._client.fileno())
-        return fds
+            return [self._client.fileno(), self._listener.fileno()]
+        return [self._listener.fileno()]
 
     def on_readable(self, fd: int) -> bytes:
         if fd == self._listener.fileno():
@@ -74,16 +77,22 @@ class TcpTransport(Transport):
             return b""
         if self._client is None:
             return b""
-        try:
-            data = self._client.recv(4096)
-        except (BlockingIOError, InterruptedError):
-            return b""
-        except OSError as exc:
-            log.info("client connection failed: %s", exc)
-            data = b""
-        if not data:
-            self._drop_client()
-        return data
+        # Read until the socket is empty, so an EOF right behind the last bytes (a client
+        # that sends and hangs up) is seen now, before a reconnecting client is accepted.
+        chunks: list[bytes] = []
+        while len(chunks) < 16:
+            try:
+                data = self._client.recv(4096)
+            except (BlockingIOError, InterruptedError):
+                break
+            except OSError as exc:
+                log.info("client connection failed: %s", exc)
+                data = b""
+            if not data:
+                self._drop_client()
+                break
+            chunks.append(data)
+        return b"".join(chunks)
 
     def _accept(self) -> None:
         try:
@@ -98,6 +107,7 @@ class TcpTransport(Transport):
         conn.setblocking(False)
         conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         self._client = conn
+        self.connections += 1
         log.info("client connected from %s", peer)
 
     def _drop_client(self) -> None:

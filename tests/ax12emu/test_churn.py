@@ -1,0 +1,103 @@
+"""Connection churn on the pty and TCP never stops the bus (tools/churn.py; the tool runs 1,000 of each)."""
+
+from __future__ import annotations
+
+import importlib.util
+import socket
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from ax12emu.packets import encode_instruction, encode_status
+
+TOOL = Path(__file__).resolve().parents[2] / "tools" / "churn.py"
+PING, PONG = encode_instruction(1, 0x01), encode_status(1, 0)
+
+
+def _load_tool():
+    spec = importlib.util.spec_from_file_location("ax12emu_churn_tool", TOOL)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+churn = _load_tool()
+
+
+def _address(url: str) -> tuple[str, int]:
+    host, port = url.removeprefix("socket://").rsplit(":", 1)
+    return host, int(port)
+
+
+def test_pty_opened_and_closed_300_times(emulator):
+    """300 opens/closes (PINGs, half packets, unread replies) and the bus still answers, dynamixel-sdk too."""
+    served = emulator()
+    report = churn.pty_churn(served.port, 300, seed=1)
+    assert report.failures == [] and report.cycles == 300
+    assert report.pings_answered > 50 and report.partial_packets > 20
+    churn.check_alive(served.port, served.process)
+    churn._sdk_read(served.port)
+
+
+def test_tcp_clients_connect_drop_mid_packet_and_reconnect(emulator):
+    """150 TCP clients, half of them leaving mid-packet: the bus keeps serving."""
+    served = emulator("--tcp", "127.0.0.1:0")
+    report = churn.tcp_churn(served.port, 150, seed=2)
+    assert report.failures == [] and report.cycles == 150 and report.partial_packets > 30
+    churn.check_alive(served.port, served.process)
+
+
+def test_second_tcp_client_is_closed_at_once_and_never_interleaves(emulator):
+    """While a host polls, 50 intruders are accepted and closed; their WRITEs never land, the host sees only its replies."""
+    served = emulator("--tcp", "127.0.0.1:0")
+    report = churn.second_clients(served.port, 50)
+    assert report.failures == [] and report.refused_clients == 50 and report.host_replies == 50
+
+
+def test_client_reconnecting_at_once_is_not_refused(emulator):
+    """Regression: a client that hangs up and reconnects immediately was sometimes refused as a 'second client'.
+
+    select reported the new connection and the old one's EOF together and the
+    listener was handled first; the TCP transport now lists the client first
+    and reads it to EOF.
+    """
+    served = emulator("--tcp", "127.0.0.1:0")
+    address = _address(served.port)
+    for attempt in range(200):
+        with socket.create_connection(address, timeout=2.0) as sock:
+            sock.sendall(PING)
+            assert churn._recv_exactly(sock, 6) == PONG, f"attempt {attempt}: refused or no reply"
+
+
+def test_tcp_send_then_hang_up_is_seen_in_one_read():
+    """The transport returns a client's last bytes and notices its EOF in the same call."""
+    from ax12emu.transports.tcp import TcpTransport
+
+    with TcpTransport() as transport:
+        client = socket.create_connection((transport.host, transport.port))
+        transport.on_readable(transport.fds()[0])  # accept
+        assert transport.connected and transport.connections == 1
+        client.sendall(PING)
+        client.close()
+        time.sleep(0.05)
+        assert transport.on_readable(transport.fds()[0]) == PING
+        assert not transport.connected
+
+
+def test_new_tcp_client_is_not_glued_to_the_previous_ones_half_packet(emulator):
+    """A client that left mid-packet must not swallow the next client's first packet (a new connection is a new host)."""
+    served = emulator("--tcp", "127.0.0.1:0")
+    address = _address(served.port)
+    with socket.create_connection(address, timeout=2.0) as sock:
+        sock.sendall(PING[:4])  # FF FF 01 02: the framer now waits for 2 more bytes
+    with socket.create_connection(address, timeout=1.0) as sock:
+        sock.sendall(PING)
+        sock.settimeout(0.3)
+        try:
+            reply = churn._recv_exactly(sock, 6)
+        except socket.timeout:
+            reply = b""
+    assert reply == PONG

@@ -1,0 +1,31 @@
+"""A short soak through dynamixel-sdk (tools/soak.py): no lost or wrong reply, servos moving, memory flat."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+
+TOOL = Path(__file__).resolve().parents[2] / "tools" / "soak.py"
+
+
+def _load_tool():
+    spec = importlib.util.spec_from_file_location("ax12emu_soak_tool", TOOL)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+soak = _load_tool()
+
+
+def test_three_second_soak_loses_nothing(emulator):
+    """3 s of back-to-back requests to 3 moving servos: every reply arrives and is right; RSS is read from /proc."""
+    served = emulator("--ids", "1-3")
+    result = soak.soak(served.port, served.process.pid, 3.0, 3, goal_period_s=0.3, warmup_s=0.5)
+    text = soak.report(result, 3)
+    assert result.requests > 300, text
+    assert result.lost == 0 and result.wrong == 0, text
+    assert result.moving_seen > 0, text
+    assert result.rss_start_kb > 0 and abs(result.rss_growth_kb) <= soak.RSS_LIMIT_KB, text

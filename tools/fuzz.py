@@ -1,0 +1,712 @@
+"""Fuzz the framer and the servos' request handling, with an oracle checked after every input.
+
+A case is a stream of mostly near-valid instruction packets (right header,
+LENGTH and checksum; random IDs, instructions, addresses, lengths and
+values), mutated ones (a flipped byte or checksum, a cut, a wrong LENGTH,
+stray 0xFF) and raw garbage, cut into chunks fed to a two-servo
+:class:`ax12emu.bus.Bus` in virtual time, sometimes after a pause longer
+than the framer's silence timeout and sometimes after a physics step.
+
+After every input (one chunk) the harness checks:
+
+* no exception escapes, and the chunk is handled within ``HANG_S``;
+* the framer holds less than one maximal frame;
+* every control-table byte equals what an independent model of the
+  instruction rules predicts (:class:`Oracle`): bytes change only through a
+  valid WRITE, REG_WRITE + ACTION, SYNC_WRITE or RESET addressed to that
+  servo, read-only and unused bytes never change, the firmware-owned
+  Present*/Moving bytes change only through physics or RESET, and Alarm
+  Shutdown may only zero Torque Limit (Torque Enable in the 2006 profile)
+  while an alarm it selects is raised;
+* the replies are those predicted (who answers, from which ID, with which
+  error bits, READ data), and each parses: header, LENGTH, checksum, bit 7
+  of the error byte clear;
+
+and at the end of each case a PING after a pause is answered cleanly.
+
+Usage::
+
+    python tools/fuzz.py --inputs 1000000          # the full run
+    python tools/fuzz.py --seconds 5 --no-coverage # a quick one
+    python tools/fuzz.py --replay failure.json     # rerun a reported failure
+
+Generation: one packet grammar, driven two ways.  In the test suite
+hypothesis draws every choice (``DataChooser``), so a failure shrinks.  Here,
+for volume, hypothesis draws each case's seed and length and a seeded PRNG
+expands the grammar (``RandomChooser``, ~20x faster); a failing case is then
+minimised by delta debugging and written as JSON for ``--replay``.  It is
+not coverage-guided; coverage is measured with coverage.py over the ax12emu
+modules the target reaches and printed with the missed lines.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import io
+import json
+import random
+import signal
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+#: Modules the target exercises, for the coverage figure.
+TARGET_MODULES = ("framing", "packets", "request_handler", "control_table", "servo", "bus", "plant", "clock")
+
+
+def _start_coverage() -> Any:
+    """Start coverage.py before ax12emu is imported, so module-level lines count too."""
+    try:
+        import coverage
+    except ImportError:
+        print("coverage is not installed (pip install coverage): no coverage figure")
+        return None
+    cov = coverage.Coverage(include=[f"*/ax12emu/{m}.py" for m in TARGET_MODULES], branch=True, data_file=None)
+    cov.start()
+    return cov
+
+
+_COVERAGE = (
+    _start_coverage()
+    if __name__ == "__main__" and not {"--no-coverage", "--replay", "-h", "--help"} & set(sys.argv)
+    else None
+)
+
+import numpy as np  # noqa: E402
+import hypothesis  # noqa: E402
+from hypothesis import HealthCheck, Phase, given, settings
+from hypothesis import strategies as st
+
+from ax12emu.bus import Bus
+from ax12emu.clock import VirtualClock
+from ax12emu.control_table import TABLE_SIZE, Access, layout
+from ax12emu.framing import DEFAULT_SILENCE_TIMEOUT_S, MAX_FRAME_BYTES, Framer
+from ax12emu.model_factory import ModelChoice, build_model
+from ax12emu.packets import BROADCAST_ID, Instruction, StatusError, checksum, encode_instruction, encode_status
+from ax12emu.servo import ServoOptions, baud_bps
+
+#: One chunk taking longer than this counts as a hang.
+HANG_S = 2.0
+#: Bytes the physics writes (Present Position .. Present Temperature, Moving).
+FIRMWARE_OWNED = frozenset(range(36, 44)) | {46}
+SLOTS = (1, 2)
+PAUSE_S = DEFAULT_SILENCE_TIMEOUT_S * 1.5
+
+R = StatusError.RANGE
+
+
+class FuzzFailure(AssertionError):
+    """An invariant broke; the message says which and where."""
+
+
+# -- the oracle -------------------------------------------------------------------------
+@dataclass
+class ShadowServo:
+    """What the oracle believes one servo holds."""
+
+    row: np.ndarray
+    registered: tuple[int, bytes] | None = None
+
+
+@dataclass
+class Predicted:
+    """A reply the oracle expects: from ``servo_id`` with these error bits and data."""
+
+    slot: int
+    servo_id: int
+    error: int
+    data: bytes
+    #: READ: (address, length) whose non-firmware bytes must match the table.
+    read: tuple[int, int] | None = None
+
+
+class Oracle:
+    """An independent statement of the Protocol 1.0 write rules, from the control table's data only."""
+
+    def __init__(self, rows: np.ndarray, options: ServoOptions, line_bps: float | None) -> None:
+        self.layout = layout(options.profile)
+        self.options = options
+        self.line_bps = line_bps
+        self.servos = [ShadowServo(row.copy()) for row in rows]
+        self.entry_at: list[Any] = [None] * TABLE_SIZE
+        for entry in self.layout.entries:
+            for address in range(entry.address, entry.end):
+                self.entry_at[address] = entry
+        self.defaults = np.frombuffer(self.layout.defaults, dtype=np.uint8)
+
+    # -- write rules ---------------------------------------------------------------------
+    def _check(self, row: np.ndarray, address: int, data: bytes) -> tuple[np.ndarray | None, int]:
+        """Validate a write as REG_WRITE does (range, access, Lock window)."""
+        end = address + len(data)
+        if not data or end > TABLE_SIZE:
+            return None, R
+        window = self.layout.profile.lock_writable
+        if row[47] and not (address in window and end - 1 in window):
+            return None, R
+        entries = []
+        for a in range(address, end):
+            entry = self.entry_at[a]
+            if entry is None or entry.access is not Access.RW:
+                return None, R
+            if not entries or entries[-1] is not entry:
+                entries.append(entry)
+        candidate = row.copy()
+        candidate[address:end] = list(data)
+        for entry in entries:
+            value = int.from_bytes(bytes(candidate[entry.address : entry.end]), "little")
+            if not entry.minimum <= value <= entry.maximum:
+                return None, R
+        return candidate, 0
+
+    def _write(self, shadow: ShadowServo, address: int, data: bytes) -> int:
+        """Validate a WRITE fully (also Lock release and the Angle Limit rule); apply if valid."""
+        candidate, error = self._check(shadow.row, address, data)
+        if candidate is None:
+            return error
+        if shadow.row[47] and not candidate[47]:
+            return R
+        if address <= 31 and address + len(data) > 30:
+            cw = int(candidate[6]) | int(candidate[7]) << 8
+            ccw = int(candidate[8]) | int(candidate[9]) << 8
+            goal = int(candidate[30]) | int(candidate[31]) << 8
+            if (cw or ccw) and not cw <= goal <= ccw:
+                return StatusError.ANGLE_LIMIT
+        shadow.row[:] = candidate
+        return 0
+
+    def _execute(self, shadow: ShadowServo, instruction: int, params: bytes) -> tuple[int, bytes, tuple | None]:
+        row = shadow.row
+        if instruction == Instruction.PING:
+            return 0, b"", None
+        if instruction == Instruction.READ:
+            if len(params) != 2:
+                return R, b"", None
+            address, length = params
+            n = min(length, 253)
+            error = R if length > 253 or (n and address + n > TABLE_SIZE) else 0  # only missing bytes are an error
+            data = bytes(row[address : min(address + n, TABLE_SIZE)]) if address < TABLE_SIZE else b""
+            return error, data.ljust(n, b"\0"), (address, n)
+        if instruction in (Instruction.WRITE, Instruction.REG_WRITE):
+            if len(params) < 2:
+                return R, b"", None
+            if instruction == Instruction.WRITE:
+                return self._write(shadow, params[0], params[1:]), b"", None
+            candidate, error = self._check(row, params[0], params[1:])
+            if candidate is None:
+                return error, b"", None
+            shadow.registered = (params[0], params[1:])
+            row[44] = 1
+            return 0, b"", None
+        if instruction == Instruction.ACTION:
+            if shadow.registered is None:
+                return StatusError.INSTRUCTION, b"", None
+            address, data = shadow.registered
+            shadow.registered = None
+            row[44] = 0
+            return self._write(shadow, address, data), b"", None
+        if instruction == Instruction.RESET:
+            present = row[36:38].copy()
+            row[:] = self.defaults
+            row[36:38] = present
+            row[34:36] = row[14:16]  # Torque Limit loads Max Torque
+            row[30:32] = present  # Goal Position follows Present Position
+            row[44] = 0
+            shadow.registered = None
+            return 0, b"", None
+        if instruction == Instruction.SYNC_WRITE:
+            if len(params) < 2 or params[1] == 0 or (len(params) - 2) % (params[1] + 1):
+                return R, b"", None
+            size = params[1]
+            for start in range(2, len(params), size + 1):
+                if params[start] == row[3]:
+                    return self._write(shadow, params[0], params[start + 1 : start + 1 + size]), b"", None
+            return 0, b"", None
+        return StatusError.INSTRUCTION, b"", None
+
+    def packet(self, packet_id: int, instruction: int, params: bytes, checksum_ok: bool) -> list[Predicted]:
+        """Apply one decoded packet to every servo it reaches; return the replies expected."""
+        targets = [
+            (slot, s) for slot, s in enumerate(self.servos) if packet_id == BROADCAST_ID or s.row[3] == packet_id
+        ]
+        out: list[Predicted] = []
+        for slot, shadow in targets:
+            baud = baud_bps(int(shadow.row[4]))
+            if self.line_bps is not None and abs(self.line_bps - baud) > 0.03 * baud:
+                continue  # deaf: listens at another rate
+            reply_id = int(shadow.row[3])
+            level = int(shadow.row[16])
+            if packet_id == BROADCAST_ID:
+                answers = instruction == Instruction.PING and self.options.reply_to_broadcast_ping
+            else:
+                answers = instruction == Instruction.PING or level >= 2 or (level == 1 and instruction == Instruction.READ)
+            read = None
+            if not checksum_ok:
+                error = StatusError.CHECKSUM
+                n = min(params[1], 253) if instruction == Instruction.READ and len(params) == 2 else 0
+                data = bytes(n)
+                answers = answers and self.options.reply_on_checksum_error
+            else:
+                error, data, read = self._execute(shadow, instruction, params)
+                if instruction == Instruction.RESET and self.options.reset_reply_from_new_id:
+                    reply_id = int(shadow.row[3])
+            if answers:
+                out.append(Predicted(slot, reply_id, int(error), data, read))
+        return out
+
+
+# -- one case ---------------------------------------------------------------------------
+@dataclass
+class Case:
+    """Options of the bus and the inputs fed to it: (bytes, pause before, physics step before)."""
+
+    profile: str = "ax12a"
+    model: str = "kinematic"
+    reply_on_checksum_error: bool = True
+    reply_to_broadcast_ping: bool = True
+    reset_reply_from_new_id: bool = False
+    line_bps: float | None = None
+    inputs: list[tuple[bytes, float, float]] = field(default_factory=list)
+
+    def to_json(self) -> str:
+        """A reproducer: ``python tools/fuzz.py --replay FILE``."""
+        document = {k: v for k, v in self.__dict__.items() if k != "inputs"}
+        document["inputs"] = [[data.hex(), pause, dt] for data, pause, dt in self.inputs]
+        return json.dumps(document)
+
+    @classmethod
+    def from_json(cls, text: str) -> "Case":
+        """Read a reproducer written by :meth:`to_json`."""
+        document = json.loads(text)
+        inputs = [(bytes.fromhex(h), float(p), float(d)) for h, p, d in document.pop("inputs")]
+        return cls(**document, inputs=inputs)
+
+
+def _parse_status(reply: bytes) -> tuple[int, int, bytes]:
+    if len(reply) < 6 or reply[:2] != b"\xff\xff" or reply[3] != len(reply) - 4:
+        raise FuzzFailure(f"malformed status packet {reply.hex()}")
+    if checksum(reply[2:-1]) != reply[-1]:
+        raise FuzzFailure(f"bad checksum in status packet {reply.hex()}")
+    if reply[4] & 0x80:
+        raise FuzzFailure(f"bit 7 set in status packet {reply.hex()}")
+    return reply[2], reply[4], reply[5:-1]
+
+
+def run_case(case: Case) -> int:
+    """Feed every input of ``case`` to a fresh bus, checking the invariants; return inputs fed."""
+    options = ServoOptions(
+        profile=case.profile,
+        reply_on_checksum_error=case.reply_on_checksum_error,
+        reply_to_broadcast_ping=case.reply_to_broadcast_ping,
+        reset_reply_from_new_id=case.reset_reply_from_new_id,
+    )
+    clock = VirtualClock()
+    bus = Bus(list(SLOTS), options=options, clock=clock, model=build_model(ModelChoice(name=case.model), len(SLOTS)))
+    oracle = Oracle(bus.rows, options, case.line_bps)
+    shadow_framer = Framer()
+    shutdown_register = layout(case.profile).profile.shutdown_clears
+    wire_s = 0.0
+    fed = 0
+    for index, (data, pause_s, physics_dt_s) in enumerate(case.inputs):
+        where = f"input {index} ({data.hex() or 'empty'})"
+        wire_s += pause_s
+        if physics_dt_s:
+            clock.advance(physics_dt_s)
+            bus.advance()
+            _sync_physics(bus, oracle, shutdown_register, f"{where}, physics step")
+        before = bus.rows.copy()
+        started = time.perf_counter()
+        replies = bus.receive(data, wire_s, line_bps=case.line_bps)
+        if time.perf_counter() - started > HANG_S:
+            raise FuzzFailure(f"{where}: took {time.perf_counter() - started:.1f} s")
+        fed += 1
+        if bus.framer.buffered >= MAX_FRAME_BYTES:
+            raise FuzzFailure(f"{where}: framer holds {bus.framer.buffered} bytes")
+        packets = shadow_framer.feed(data, wire_s)
+        predicted: list[Predicted] = []
+        reset_slots: set[int] = set()
+        for packet in packets:
+            if packet.checksum_ok and packet.instruction == Instruction.RESET:
+                reset_slots |= {
+                    i for i, s in enumerate(oracle.servos) if packet.id in (BROADCAST_ID, int(s.row[3]))
+                }
+            predicted += oracle.packet(packet.id, packet.instruction, packet.params, packet.checksum_ok)
+        _check_replies(bus, oracle, replies, predicted, where)
+        _check_tables(bus, oracle, before, reset_slots, shutdown_register, where)
+    # A PING after a pause is answered cleanly by every servo holding the ID.
+    wire_s += PAUSE_S
+    target = int(oracle.servos[0].row[3])
+    replies = bus.receive(encode_instruction(target, Instruction.PING), wire_s)
+    holders = [i for i, s in enumerate(oracle.servos) if int(s.row[3]) == target]
+    expected = [encode_status(target, bus.servos[i].alarms) for i in holders]
+    if [r.data for r in replies] != expected:
+        raise FuzzFailure(f"PING to {target} after the inputs: got {[r.data.hex() for r in replies]}")
+    return fed + 1
+
+
+def _check_replies(bus: Bus, oracle: Oracle, replies: list, predicted: list[Predicted], where: str) -> None:
+    if len(replies) != len(predicted):
+        raise FuzzFailure(
+            f"{where}: {len(replies)} replies {[r.data.hex() for r in replies]}, expected {len(predicted)} "
+            f"from IDs {[p.servo_id for p in predicted]}"
+        )
+    for reply, expect in zip(replies, predicted):
+        servo_id, status, data = _parse_status(reply.data)
+        alarms = bus.servos[expect.slot].alarms
+        if servo_id != expect.servo_id or reply.servo_id != servo_id:
+            raise FuzzFailure(f"{where}: reply {reply.data.hex()} from ID {servo_id}, expected {expect.servo_id}")
+        if (status & ~alarms) != (expect.error & ~alarms) or (status & expect.error) != expect.error:
+            raise FuzzFailure(f"{where}: reply {reply.data.hex()} has error {status:#x}, expected {expect.error:#x}")
+        if len(data) != len(expect.data):
+            raise FuzzFailure(f"{where}: reply {reply.data.hex()} carries {len(data)} bytes, expected {len(expect.data)}")
+        if expect.read is not None:
+            address, _ = expect.read
+            for k, (got, want) in enumerate(zip(data, expect.data)):
+                if address + k < TABLE_SIZE and address + k not in FIRMWARE_OWNED and got != want:
+                    raise FuzzFailure(f"{where}: READ of {address + k} gave {got}, table holds {want}")
+
+
+def _check_tables(bus: Bus, oracle: Oracle, before: np.ndarray, reset_slots: set[int], shutdown_register: str, where: str) -> None:
+    for slot, shadow in enumerate(oracle.servos):
+        actual = bus.rows[slot]
+        for address in range(TABLE_SIZE):
+            if address in FIRMWARE_OWNED:
+                if slot not in reset_slots and actual[address] != before[slot, address]:
+                    raise FuzzFailure(f"{where}: firmware byte {address} of slot {slot} changed without physics or RESET")
+                continue
+            if actual[address] != shadow.row[address]:
+                if _shutdown_explains(bus, slot, address, shutdown_register):
+                    continue
+                raise FuzzFailure(
+                    f"{where}: slot {slot} byte {address} is {actual[address]}, the rules give {shadow.row[address]} "
+                    f"(was {before[slot, address]})"
+                )
+        shadow.row[:] = actual
+        if (bus.servos[slot].registered_write is None) != (shadow.registered is None):
+            raise FuzzFailure(f"{where}: slot {slot} registered write {bus.servos[slot].registered_write}, expected {shadow.registered}")
+
+
+def _shutdown_explains(bus: Bus, slot: int, address: int, shutdown_register: str) -> bool:
+    """Alarm Shutdown may zero Torque Limit (or Torque Enable) while a selected alarm is raised."""
+    servo = bus.servos[slot]
+    addresses = (34, 35) if shutdown_register == "torque_limit" else (24,)
+    return address in addresses and bus.rows[slot, address] == 0 and bool(servo.alarms & int(bus.rows[slot, 18]))
+
+
+def _sync_physics(bus: Bus, oracle: Oracle, shutdown_register: str, where: str) -> None:
+    for slot, shadow in enumerate(oracle.servos):
+        actual = bus.rows[slot]
+        for address in range(TABLE_SIZE):
+            if address not in FIRMWARE_OWNED and actual[address] != shadow.row[address]:
+                if not _shutdown_explains(bus, slot, address, shutdown_register):
+                    raise FuzzFailure(f"{where}: physics changed byte {address} of slot {slot}")
+        shadow.row[:] = actual
+
+
+# -- generation -------------------------------------------------------------------------
+# The grammar is written once against a chooser, so hypothesis can drive it in the test
+# suite (shrinkable draws) and a seeded PRNG can drive it at volume in this tool.
+class RandomChooser:
+    """Choices from a seeded PRNG: fast, for the million-input run."""
+
+    def __init__(self, seed: int) -> None:
+        self._rng = random.Random(seed)
+
+    def integer(self, low: int, high: int) -> int:
+        """An integer in low..high."""
+        return self._rng.randint(low, high)
+
+    def pick(self, options: tuple) -> Any:
+        """One of ``options``."""
+        return options[self._rng.randrange(len(options))]
+
+    def binary(self, low: int, high: int) -> bytes:
+        """Random bytes, low..high of them."""
+        return self._rng.randbytes(self._rng.randint(low, high))
+
+
+class DataChooser:
+    """Choices drawn through hypothesis (``st.data()``): slower, but they shrink."""
+
+    def __init__(self, data: st.DataObject) -> None:
+        self._data = data
+
+    def integer(self, low: int, high: int) -> int:
+        """An integer in low..high."""
+        return self._data.draw(st.integers(low, high))
+
+    def pick(self, options: tuple) -> Any:
+        """One of ``options``."""
+        return self._data.draw(st.sampled_from(options))
+
+    def binary(self, low: int, high: int) -> bytes:
+        """Random bytes, low..high of them."""
+        return self._data.draw(st.binary(min_size=low, max_size=high))
+
+
+HOT_ADDRESSES = (0, 2, 3, 4, 5, 6, 7, 8, 10, 11, 12, 13, 14, 16, 18, 19, 20, 24, 29, 30, 31, 32, 34, 36, 44, 45, 46, 47, 48, 49)
+HOT_VALUES = (0, 1, 2, 3, 4, 0x20, 0x64, 0x7F, 0x80, 0xFD, 0xFE, 0xFF)
+HOT_IDS = (1, 2, 1, 2, BROADCAST_ID, 0, 3)
+KINDS = ("write", "write", "read", "read", "reg", "action", "sync", "ping", "reset", "other")
+
+
+def _value(c: Any) -> int:
+    return c.pick(HOT_VALUES) if c.integer(0, 1) else c.integer(0, 255)
+
+
+def _address(c: Any) -> int:
+    return c.pick(HOT_ADDRESSES) if c.integer(0, 3) else c.integer(0, 255)
+
+
+def _id(c: Any) -> int:
+    return c.pick(HOT_IDS) if c.integer(0, 3) else c.integer(0, 0xFE)
+
+
+def _data(c: Any, low: int = 0, high: int = 4) -> bytes:
+    return bytes(_value(c) for _ in range(c.integer(low, high)))
+
+
+def instruction_packet(c: Any) -> bytes:
+    """A well-framed instruction packet with plausible, often invalid, parameters."""
+    kind = c.pick(KINDS)
+    if kind in ("write", "reg"):
+        code = Instruction.WRITE if kind == "write" else Instruction.REG_WRITE
+        params = bytes([_address(c)]) + _data(c)
+    elif kind == "read":
+        code = Instruction.READ
+        length = c.pick((0, 1, 2, 4, 50, 253, 254, 255)) if c.integer(0, 1) else c.integer(0, 255)
+        params = bytes([_address(c), length])
+        if c.integer(0, 9) == 0:
+            params = params[: c.integer(0, 1)] + _data(c)
+    elif kind == "sync":
+        code = Instruction.SYNC_WRITE
+        size = c.integer(0, 4)
+        blocks = b"".join(bytes([_id(c)]) + _data(c, size, size) for _ in range(c.integer(0, 4)))
+        params = bytes([_address(c), size]) + blocks
+        if c.integer(0, 9) == 0:
+            params += _data(c)
+    elif kind == "other":
+        code, params = c.integer(0, 255), _data(c)
+    else:
+        code = {"action": Instruction.ACTION, "ping": Instruction.PING, "reset": Instruction.RESET}[kind]
+        params = _data(c) if c.integer(0, 7) == 0 else b""
+    return encode_instruction(_id(c), code, params)
+
+
+def mutated_packet(c: Any) -> bytes:
+    """A packet with one of: a flipped bit, a bad checksum, a cut, a wrong LENGTH, extra 0xFF, junk inside."""
+    packet = bytearray(instruction_packet(c))
+    how = c.pick(("flip", "checksum", "cut", "length", "ff", "insert"))
+    at = c.integer(0, len(packet) - 1)
+    if how == "flip":
+        packet[at] ^= 1 << c.integer(0, 7)
+    elif how == "checksum":
+        packet[-1] ^= c.integer(1, 255)
+    elif how == "cut":
+        del packet[at:]
+    elif how == "length":
+        packet[3] = c.integer(0, 3) if c.integer(0, 1) else c.integer(0, 255)
+    elif how == "ff":
+        packet[at:at] = b"\xff" * c.integer(1, 3)
+    else:
+        packet[at:at] = c.binary(1, 4)
+    return bytes(packet)
+
+
+def piece(c: Any) -> bytes:
+    """Mostly valid packets, then mutated ones, then raw garbage."""
+    roll = c.integer(0, 9)
+    if roll < 6:
+        return instruction_packet(c)
+    if roll < 9:
+        return mutated_packet(c)
+    return c.binary(0, 12)
+
+
+PAUSES = (0.0, 0.0, 0.0, 0.0, 1e-4, PAUSE_S)
+PHYSICS_STEPS = (0.0,) * 14 + (0.001, 0.003)
+
+
+def generate_case(c: Any, pieces: int) -> Case:
+    """Options plus a stream of ``pieces`` pieces, each fed whole, cut in two, or glued to the next."""
+    case = Case(
+        profile=c.pick(("ax12a", "ax12a", "ax12-2006")),
+        model=c.pick(("kinematic", "kinematic", "physical")),
+        reply_on_checksum_error=bool(c.integer(0, 1)),
+        reply_to_broadcast_ping=bool(c.integer(0, 1)),
+        reset_reply_from_new_id=bool(c.integer(0, 1)),
+        line_bps=c.pick((None, None, 1e6)),
+    )
+    pending = b""
+    for _ in range(pieces):
+        data = pending + piece(c)
+        pending = b""
+        shape = c.pick(("whole", "whole", "cut", "glue"))
+        if shape == "glue":
+            pending = data
+            continue
+        parts = [data]
+        if shape == "cut" and len(data) > 1:
+            at = c.integer(1, len(data) - 1)
+            parts = [data[:at], data[at:]]
+        for part in parts:
+            case.inputs.append((part, c.pick(PAUSES), c.pick(PHYSICS_STEPS)))
+    if pending:
+        case.inputs.append((pending, 0.0, 0.0))
+    return case
+
+
+def minimise(case: Case, budget: int = 2000) -> Case:
+    """Delta-debug a failing case: drop inputs, then pauses and physics steps, while it still fails."""
+
+    def fails(candidate: Case) -> bool:
+        try:
+            run_case(candidate)
+        except Exception:
+            return True
+        return False
+
+    inputs = list(case.inputs)
+    chunk = max(1, len(inputs) // 2)
+    while chunk >= 1 and budget > 0:
+        i, removed = 0, False
+        while i < len(inputs) and budget > 0:
+            trial = inputs[:i] + inputs[i + chunk :]
+            budget -= 1
+            if fails(dataclasses.replace(case, inputs=trial)):
+                inputs, removed = trial, True
+            else:
+                i += chunk
+        if not removed:
+            chunk //= 2
+    for i, (data, pause, dt) in enumerate(inputs):
+        for simpler in ((data, 0.0, dt), (data, pause, 0.0)):
+            trial = inputs[:i] + [simpler] + inputs[i + 1 :]
+            if simpler != inputs[i] and fails(dataclasses.replace(case, inputs=trial)):
+                inputs = trial
+                data, pause, dt = simpler
+    return dataclasses.replace(case, inputs=inputs)
+
+
+# -- driver -----------------------------------------------------------------------------
+@dataclass
+class Stats:
+    """Counts of one fuzzing run."""
+
+    inputs: int = 0
+    cases: int = 0
+    failure: str | None = None
+    reproducer: str | None = None
+
+
+def _watchdog(signum: int, frame: object) -> None:
+    raise TimeoutError(f"one case ran over {HANG_S * 10:.0f} s: a hang")
+
+
+def fuzz(
+    max_inputs: int, *, seconds: float | None = None, seed: int | None = None, pieces: int = 200, batch: int = 100
+) -> Stats:
+    """Run cases until ``max_inputs`` inputs were fed (or ``seconds`` passed) or one fails.
+
+    Hypothesis draws each case's seed and length; a PRNG with that seed
+    expands the grammar into ``pieces`` pieces.  A failing case is minimised
+    by delta debugging and returned as a JSON reproducer.
+    """
+    stats = Stats()
+    deadline = None if seconds is None else time.monotonic() + seconds
+    failing: list[Case] = []
+    use_alarm = threading.current_thread() is threading.main_thread()
+
+    @settings(max_examples=batch, deadline=None, database=None, phases=(Phase.generate,),
+              suppress_health_check=list(HealthCheck))
+    @given(st.integers(0, 2**64 - 1), st.integers(1, pieces))
+    def target(case_seed: int, count: int) -> None:
+        if stats.inputs >= max_inputs or (deadline is not None and time.monotonic() > deadline):
+            return  # budget spent: let hypothesis finish the batch cheaply
+        case = generate_case(RandomChooser(case_seed), count)
+        if use_alarm:
+            signal.setitimer(signal.ITIMER_REAL, HANG_S * 10)
+        try:
+            stats.inputs += run_case(case)
+        except BaseException:
+            failing[:] = [case]
+            raise
+        finally:
+            if use_alarm:
+                signal.setitimer(signal.ITIMER_REAL, 0)
+        stats.cases += 1
+
+    previous = signal.signal(signal.SIGALRM, _watchdog) if use_alarm else None
+    rounds = 0
+    try:
+        while stats.inputs < max_inputs and not (deadline is not None and time.monotonic() > deadline):
+            if seed is not None:
+                hypothesis.seed(seed + rounds)(target)
+            rounds += 1
+            target()
+    except Exception as exc:
+        stats.failure = f"{type(exc).__name__}: {exc}"
+        if failing:
+            small = minimise(failing[0])
+            try:
+                run_case(small)
+            except Exception as again:
+                stats.failure += f"\nminimised ({len(small.inputs)} inputs): {type(again).__name__}: {again}"
+            stats.reproducer = small.to_json()
+    finally:
+        if use_alarm:
+            signal.signal(signal.SIGALRM, previous)
+    return stats
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Parse arguments, fuzz, print figures; exit 1 on a failure."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--inputs", type=int, default=1_000_000, help="inputs (chunks) to feed (default 1,000,000)")
+    parser.add_argument("--seconds", type=float, help="stop after this long even if fewer inputs were fed")
+    parser.add_argument("--seed", type=int, help="seed hypothesis (default: random)")
+    parser.add_argument("--no-coverage", action="store_true", help="skip coverage measurement (faster)")
+    parser.add_argument("--replay", metavar="FILE", help="rerun one case written on a failure")
+    parser.add_argument("--failure-file", default="fuzz-failure.json", help="where a failing case is written")
+    args = parser.parse_args(argv)
+
+    if args.replay:
+        case = Case.from_json(Path(args.replay).read_text())
+        try:
+            fed = run_case(case)
+        except Exception as exc:
+            print(f"FAIL: {type(exc).__name__}: {exc}")
+            return 1
+        print(f"ok: {fed} inputs pass")
+        return 0
+
+    cov = _COVERAGE
+    started = time.perf_counter()
+    try:
+        stats = fuzz(args.inputs, seconds=args.seconds, seed=args.seed)
+    finally:
+        if cov is not None:
+            cov.stop()
+    elapsed = time.perf_counter() - started
+    print(f"inputs: {stats.inputs:,} in {stats.cases:,} cases, {elapsed:.1f} s, {stats.inputs / elapsed:,.0f} inputs/s")
+    if cov is not None:
+        report = io.StringIO()
+        total = cov.report(file=report, show_missing=True, skip_empty=True)
+        print(f"coverage, lines and branches of ax12emu/{{{','.join(TARGET_MODULES)}}}.py: {total:.1f} %")
+        print(report.getvalue().rstrip())
+    if stats.failure:
+        print(f"FAILURE: {stats.failure}")
+        if stats.reproducer:
+            Path(args.failure_file).write_text(stats.reproducer + "\n")
+            print(f"reproducer written to {args.failure_file}: python tools/fuzz.py --replay {args.failure_file}")
+            print(stats.reproducer)
+        return 1
+    print("failures: 0")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
