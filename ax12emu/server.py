@@ -133,9 +133,12 @@ class BusServer:
             return
         data = queue[0][2] if count == 1 else b"".join(item[2] for item in queue[:count])
         del queue[:count]
-        sent = self.transport.write(bytes(data))
+        self._emit(bytes(data), now)
+
+    def _emit(self, data: bytes, now: float) -> None:
+        sent = self.transport.write(data)
         if self.trace is not None:
-            self.trace.record(OUT, bytes(data[:sent]), now)
+            self.trace.record(OUT, data[:sent], now)
         if sent < len(data):
             self.bytes_dropped += len(data) - sent  # nobody is reading: the bytes are lost, as on a bus
 
@@ -166,10 +169,14 @@ class BusServer:
         for packet in self.bus.framer.feed(data, now):
             self.packets_in += 1
             replies = self.bus.dispatch(packet, line_bps=line_bps)
-            if replies:
-                self._schedule(merge_replies(replies, end, per_byte=self.pace))
-                if not self.pace and replies[0].delay_s == 0.0:
-                    self._flush(now)
+            if not replies:
+                continue
+            if len(replies) == 1 and replies[0].delay_s == 0.0 and not (self.pace or self._queue):
+                self._emit(replies[0].data, now)  # the common case at Return Delay Time 0
+                continue
+            self._schedule(merge_replies(replies, end, per_byte=self.pace))
+            if not self.pace and replies[0].delay_s == 0.0:
+                self._flush(now)
 
     def _collide(self, data: bytes, begin: float, byte_s: float) -> bytes:
         """Host bytes overlapping reply bytes still on the wire: both become their AND."""
