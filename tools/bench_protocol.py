@@ -10,7 +10,10 @@ ratios against two references taken on this machine in this run:
 
 Goals (issue 2): at Return Delay Time 0, >= 80 % of the bare responder's
 rate with p99 < 1 ms; Return Delay Time 250 adds 500 +/- 50 us per read;
-with ``--pace`` the rate matches the wire limit within 5 %.
+with ``--pace`` the rate matches the wire limit within 5 %.  For ``--pace`` the
+emulator's own part of each read (from the instruction's arrival to the
+reply's last byte, read from its ``--trace``) is printed beside the rate the
+client sees, which also carries the client's own time per transaction.
 
 Usage: ``python tools/bench_protocol.py [--seconds 3]``
 """
@@ -116,6 +119,22 @@ def configure(rdt: int, ids: list[int], moving: bool, baud_value: int | None = N
     return setup
 
 
+def transaction_times(trace: Path) -> list[float]:
+    """From an emulator trace: time from a READ's arrival to the last byte of its 8-byte reply."""
+    from ax12emu.trace import IN, read_trace
+
+    times, start_s, pending = [], None, 0
+    for chunk in read_trace(trace):
+        if chunk.direction == IN and len(chunk.data) == 8 and chunk.data[4] == 0x02:
+            start_s, pending = chunk.t, 8
+        elif start_s is not None and chunk.direction != IN:
+            pending -= len(chunk.data)
+            if pending <= 0:
+                times.append(chunk.t - start_s)
+                start_s = None
+    return times[200:] or times  # skip the warm-up reads
+
+
 def row(label: str, result: dict, reference: float | None = None) -> str:
     ratio = f"{result['rate'] / reference:7.1%}" if reference else "       "
     return (
@@ -165,20 +184,28 @@ def main(argv: list[str] | None = None) -> int:
         )
 
     print()
+    print("--pace: rate seen by dynamixel-sdk, and the emulator's own time per read (from its --trace)")
     for baud_value, host_baud in ((1, 1_000_000), (16, 115_200), (34, 57_600)):
         servo_bps = 2_000_000 / (baud_value + 1)
-        wire = 1.0 / (80 / host_baud + 80 / servo_bps)
-        process, path = start(emulator + ["--pace"])
-        try:
-            setup = configure(0, [1], moving=False, baud_value=None if baud_value == 1 else baud_value)
-            prepare = PortHandler(path)
-            prepare.openPort()
-            setup(prepare, PacketHandler(1.0))
-            prepare.closePort()
-            result = measure(path, args.seconds, baud=host_baud)
-        finally:
-            stop(process)
-        print(row(f"--pace at {servo_bps:9.0f} bps (wire limit {wire:5.0f}/s)", result, wire))
+        wire_s = 80 / host_baud + 80 / servo_bps
+        with tempfile.TemporaryDirectory() as tmp:
+            trace = Path(tmp, "pace.jsonl")
+            process, path = start(emulator + ["--pace", "--trace", str(trace)])
+            try:
+                setup = configure(0, [1], moving=False, baud_value=None if baud_value == 1 else baud_value)
+                prepare = PortHandler(path)
+                prepare.openPort()
+                setup(prepare, PacketHandler(1.0))
+                prepare.closePort()
+                result = measure(path, args.seconds, baud=host_baud)
+            finally:
+                stop(process)
+            own_s = statistics.median(transaction_times(trace))
+        print(row(f"--pace at {servo_bps:9.0f} bps (wire limit {1 / wire_s:5.0f}/s)", result, 1 / wire_s))
+        print(
+            f"{'':<44} emulator's own time per read: median {own_s * 1e6:7.0f} us = "
+            f"{own_s / wire_s:.1%} of the wire time {wire_s * 1e6:.0f} us"
+        )
     return 0
 
 
