@@ -16,7 +16,7 @@ and collisions on the wire (``server.py``), electrical faults.
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable
 from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np

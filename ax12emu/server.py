@@ -101,7 +101,7 @@ class BusServer:
         # The loop steps physics between packets, so a request may find it up to one
         # period behind, as the AX-12's own registers are (its control loop runs every 1 ms).
         bus.request_lag_s = physics_period_s
-        self._queue: list[_Scheduled] = []
+        self._queue: list[list] = []  # [release_s, seq, data, is_reply], sorted
         self._seq = 0
         self._stop = False
         self._rx_busy_until = 0.0

@@ -26,3 +26,17 @@ def ok(result: tuple) -> object:
     assert comm == COMM_SUCCESS, f"communication failed: {comm}"
     assert error == 0, f"status error {error:#x}"
     return value
+
+
+def load_tool(name: str):
+    """Import ``tools/NAME.py`` as a module (the tools are scripts, not a package)."""
+    import importlib.util
+    import sys
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parent.parent / "tools" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(f"ax12emu_tool_{name}", path)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses look their module up while the tool loads
+    spec.loader.exec_module(module)
+    return module

@@ -2,29 +2,18 @@
 
 from __future__ import annotations
 
-import importlib.util
 import socket
-import sys
 import time
-from pathlib import Path
 
-import pytest
 
 from ax12emu.packets import encode_instruction, encode_status
+from emu_testkit import load_tool
 
-TOOL = Path(__file__).resolve().parents[2] / "tools" / "churn.py"
 PING, PONG = encode_instruction(1, 0x01), encode_status(1, 0)
 
 
-def _load_tool():
-    spec = importlib.util.spec_from_file_location("ax12emu_churn_tool", TOOL)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
 
-
-churn = _load_tool()
+churn = load_tool("churn")
 
 
 def _address(url: str) -> tuple[str, int]:

@@ -2,27 +2,17 @@
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
 
 import numpy as np
 
 from ax12emu.control_table import ControlTable
 from ax12emu.state_store import StateStore
-
-TOOL = Path(__file__).resolve().parents[2] / "tools" / "crash_state.py"
-
-
-def _load_tool():
-    spec = importlib.util.spec_from_file_location("ax12emu_crash_state_tool", TOOL)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
+from emu_testkit import load_tool
 
 
-crash_state = _load_tool()
+
+
+crash_state = load_tool("crash_state")
 
 
 def test_sigkill_during_write_bursts_leaves_old_or_new_state(tmp_path):

@@ -2,9 +2,6 @@
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,19 +10,12 @@ from hypothesis import strategies as st
 
 from ax12emu import request_handler
 from ax12emu.packets import Instruction, StatusError
-
-TOOL = Path(__file__).resolve().parents[2] / "tools" / "fuzz.py"
-
-
-def _load_tool():
-    spec = importlib.util.spec_from_file_location("ax12emu_fuzz_tool", TOOL)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module  # dataclasses look their module up by name
-    spec.loader.exec_module(module)
-    return module
+from emu_testkit import load_tool
 
 
-fuzz = _load_tool()
+
+
+fuzz = load_tool("fuzz")
 
 
 def test_short_fuzz_run_finds_nothing():

@@ -2,22 +2,12 @@
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
-TOOL = Path(__file__).resolve().parents[2] / "tools" / "soak.py"
+from emu_testkit import load_tool
 
 
-def _load_tool():
-    spec = importlib.util.spec_from_file_location("ax12emu_soak_tool", TOOL)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
 
 
-soak = _load_tool()
+soak = load_tool("soak")
 
 
 def test_three_second_soak_loses_nothing(emulator):
