@@ -6,7 +6,9 @@ known (firmware_model.diagnose.synthetic); the key goes to KEY.json, which
 the workflow never reads.
 
 Usage: ``python tools/make_dataset.py OUT.csv --key KEY.json [--effects coulomb_friction,delay] [--seed N]
-[--duration 20] [--rate 100]`` (``--effects none`` for a clean servo; ``cogging`` is out of the library).
+[--duration 20] [--rate 100] [--breakaway SECONDS]`` (``--effects none`` for a clean servo; ``cogging`` is out
+of the library; ``--breakaway``: the last that many seconds are small steps and moderate-speed moves, which
+show breakaway/Stribeck friction, see firmware_model.diagnose.excitation).
 """
 
 from __future__ import annotations
@@ -33,11 +35,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--duration", type=float, default=20.0, help="seconds (default 20)")
     p.add_argument("--rate", type=float, default=100.0, help="samples per second (default 100)")
+    p.add_argument("--breakaway", type=float, default=0.0, help="seconds of breakaway block at the end (default 0)")
     args = p.parse_args(argv)
     rng = np.random.default_rng(args.seed + 100_000)
     names = [] if args.effects == "none" else args.effects.split(",")
     hidden = {n: draw_effect(n, rng) for n in names}
-    trace, key = make_trace(hidden, args.seed, args.duration, args.rate)
+    trace, key = make_trace(hidden, args.seed, args.duration, args.rate, breakaway_s=args.breakaway)
     write_trace(trace, args.out)
     Path(args.key).write_text(json.dumps(key, indent=2), encoding="utf-8")
     print(f"{args.out}: {len(trace)} rows; key in {args.key}")

@@ -10,7 +10,9 @@ program's external-load segments are plain holds here (a bus cannot apply a
 load; hang one by hand if wanted).  ``t`` is the host's monotonic clock at
 the read, relative to the first read.
 
-Usage: ``python tools/record.py PORT OUT.csv [--id 1] [--baud 1000000] [--duration 20] [--rate 100]``
+Usage: ``python tools/record.py PORT OUT.csv [--id 1] [--baud 1000000] [--duration 20] [--rate 100]
+[--breakaway SECONDS]`` (``--breakaway``: end with that many seconds of small steps and moderate-speed
+moves, which show breakaway/Stribeck friction; see firmware_model.diagnose.excitation).
 """
 
 from __future__ import annotations
@@ -34,7 +36,8 @@ def _signed(raw: int) -> int:
     return -(raw & 0x3FF) if raw & 0x400 else raw & 0x3FF
 
 
-def record(port_name: str, servo_id: int, baud: int, duration_s: float, rate_hz: float) -> Trace:
+def record(port_name: str, servo_id: int, baud: int, duration_s: float, rate_hz: float,
+           breakaway_s: float = 0.0) -> Trace:
     """Run the excitation and return the trace."""
     from dynamixel_sdk import COMM_SUCCESS, PacketHandler, PortHandler
 
@@ -42,7 +45,7 @@ def record(port_name: str, servo_id: int, baud: int, duration_s: float, rate_hz:
     if not port.openPort() or not port.setBaudRate(baud):
         raise SystemExit(f"cannot open {port_name} at {baud} baud")
     try:
-        steps = program(duration_s)
+        steps = program(duration_s, breakaway_s)
         ends = np.cumsum([s.duration_s for s in steps])
         ph.write1ByteTxRx(port, servo_id, ADDR_TORQUE_ENABLE, 1)
         rows: list[list] = []
@@ -86,8 +89,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--baud", type=int, default=1_000_000)
     p.add_argument("--duration", type=float, default=20.0)
     p.add_argument("--rate", type=float, default=100.0)
+    p.add_argument("--breakaway", type=float, default=0.0, help="seconds of breakaway block at the end (default 0)")
     args = p.parse_args(argv)
-    trace = record(args.port, args.id, args.baud, args.duration, args.rate)
+    trace = record(args.port, args.id, args.baud, args.duration, args.rate, args.breakaway)
     write_trace(trace, args.out)
     print(f"{args.out}: {len(trace)} rows over {trace.t[-1]:.2f} s")
     return 0

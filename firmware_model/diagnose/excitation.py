@@ -11,7 +11,15 @@ through the bus; there those segments are plain holds (or a load applied by
 hand).
 
 The 20 s program is the reference; :func:`program` scales its durations to
-other lengths (the tests use shorter ones).
+other lengths (the tests use shorter ones).  It can be followed by
+:data:`BREAKAWAY`, small steps from rest and short moves at a moderate
+speed around the centre: breakaway (static, Stribeck) friction shows where
+the shaft starts from rest and in how far short of the goal it stops, and
+the reference program has few such starts.  (Crawling at 1-3 % of full
+speed, tried first, shows it even more but makes the motion stick-slip,
+whose timing is so sensitive to the friction values that no fit can match
+it sample by sample.)  ``program(duration_s, breakaway_s=...)``;
+``--breakaway SECONDS`` in ``tools/make_dataset.py`` and ``tools/record.py``.
 """
 
 from __future__ import annotations
@@ -20,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Step", "PROGRAM_20S", "program", "commands_at"]
+__all__ = ["Step", "PROGRAM_20S", "BREAKAWAY", "program", "commands_at"]
 
 
 @dataclass(frozen=True)
@@ -58,10 +66,26 @@ PROGRAM_20S = (
 )
 
 
-def program(duration_s: float = 20.0) -> tuple[Step, ...]:
-    """:data:`PROGRAM_20S` with every duration scaled to a total of ``duration_s``."""
-    scale = duration_s / sum(s.duration_s for s in PROGRAM_20S)
-    return tuple(Step(s.duration_s * scale, s.goal_position, s.moving_speed, s.external_torque_nm) for s in PROGRAM_20S)
+#: Small steps (6-8 units) out and back from rest, then moves at Moving Speed 80 (0.93 rad/s) that pass through
+#: the Stribeck range (0.1-0.5 rad/s) at every start and stop: about 6.7 s at this scale.
+BREAKAWAY = (
+    Step(0.5, 512, 0),
+    *(Step(0.4, g, 0) for g in (506, 512, 518, 512, 504, 512, 520, 512)),
+    *(Step(0.8, g, 80) for g in (560, 470, 560, 512)),
+)
+
+
+def _scaled(steps: tuple[Step, ...], duration_s: float) -> tuple[Step, ...]:
+    scale = duration_s / sum(s.duration_s for s in steps)
+    return tuple(Step(s.duration_s * scale, s.goal_position, s.moving_speed, s.external_torque_nm) for s in steps)
+
+
+def program(duration_s: float = 20.0, breakaway_s: float = 0.0) -> tuple[Step, ...]:
+    """:data:`PROGRAM_20S` scaled to ``duration_s - breakaway_s``, then :data:`BREAKAWAY` scaled to ``breakaway_s``."""
+    if not 0.0 <= breakaway_s < duration_s:
+        raise ValueError(f"breakaway_s must be in [0, {duration_s}), got {breakaway_s}")
+    head = _scaled(PROGRAM_20S, duration_s - breakaway_s)
+    return head + (_scaled(BREAKAWAY, breakaway_s) if breakaway_s > 0 else ())
 
 
 def commands_at(times_s: np.ndarray, steps: tuple[Step, ...]) -> dict[str, np.ndarray]:

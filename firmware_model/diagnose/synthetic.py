@@ -24,16 +24,22 @@ from .excitation import commands_at, program
 from .schedule import compile_schedule
 from .trace import Trace
 
-__all__ = ["draw_effect", "make_trace", "OUT_OF_LIBRARY"]
+__all__ = ["draw_effect", "make_trace", "OUT_OF_LIBRARY", "COGGING_AMPLITUDE_NM"]
 
 #: Effects the library does not contain, for negative tests.
 OUT_OF_LIBRARY = ("cogging",)
+#: Cogging / gear-mesh ripple amplitude drawn for ``cogging``, N m at the output: 10-17 % of the ~1.5 N m stall
+#: torque (a damaged gear tooth or a strongly cogging iron-core motor; the AX-12's motor is iron-cored).  It
+#: moves the shaft 1.5-3 position units RMS: clearly visible, yet nothing in the library reproduces it.  At
+#: 0.08-0.15 N m (tried first) it left about 1 unit, the size of the pot's own noise, on 10 s traces.
+COGGING_AMPLITUDE_NM = (0.15, 0.25)
 
 
 def draw_effect(name: str, rng: np.random.Generator) -> dict[str, float]:
     """Random values of a clearly present ``name`` effect (from each parameter's ``hidden`` range)."""
     if name == "cogging":
-        return {"amplitude_nm": float(rng.uniform(0.08, 0.15)), "periods_per_rad": float(rng.choice([20.0, 30.0]))}
+        return {"amplitude_nm": float(rng.uniform(*COGGING_AMPLITUDE_NM)),
+                "periods_per_rad": float(rng.choice([20.0, 30.0]))}
     e = LIBRARY[name]
     if name == "sample_hold":
         hold = float(rng.choice([h for h in np.round(np.arange(0.05, 0.21, 0.01), 2) if abs(h - 0.1) > 1e-9]))
@@ -47,14 +53,19 @@ def draw_effect(name: str, rng: np.random.Generator) -> dict[str, float]:
 
 
 def make_trace(hidden: dict[str, dict[str, float]], seed: int, duration_s: float = 20.0, rate_hz: float = 100.0,
-               params: ServoParams = ServoParams(), base_spread: bool = True) -> tuple[Trace, dict]:
-    """A measured trace with ``hidden`` effects, and its answer key (effects, base values, noise)."""
+               params: ServoParams = ServoParams(), base_spread: bool = True,
+               breakaway_s: float = 0.0) -> tuple[Trace, dict]:
+    """A measured trace with ``hidden`` effects, and its answer key (effects, base values, noise).
+
+    ``breakaway_s``: the last this many seconds run :data:`.excitation.BREAKAWAY` (see
+    :func:`.excitation.program`).
+    """
     rng = np.random.default_rng(seed)
     period = 1.0 / rate_hz
     n = int(round(duration_s * rate_hz))
     t_true = np.arange(n) * period + np.concatenate([[0.0], rng.uniform(-0.3, 0.3, n - 1) * period])
     t_true = np.maximum.accumulate(t_true + np.arange(n) * 1e-9)
-    cmd = commands_at(t_true, program(duration_s))
+    cmd = commands_at(t_true, program(duration_s, breakaway_s))
     trace = Trace({"t": t_true, "present_position": np.full(n, 512), **cmd})
     schedule = compile_schedule(trace, 1e-3, params.supply_voltage_v)
     knobs = null_knobs(params)
@@ -81,7 +92,7 @@ def make_trace(hidden: dict[str, dict[str, float]], seed: int, duration_s: float
         "present_load": read["present_load"][:, 0],
     }, comments=[f"synthetic trace, seed {seed}, firmware_model.diagnose.synthetic"])
     key = {"effects": hidden, "base": base, "seed": seed, "duration_s": duration_s, "rate_hz": rate_hz,
-           "pot_noise_units": noise_units, "timestamp_noise_s": 5e-5}
+           "pot_noise_units": noise_units, "timestamp_noise_s": 5e-5, "breakaway_s": breakaway_s}
     return measured, key
 
 
