@@ -191,9 +191,12 @@ class Bus:
                 continue
             if faults is not None and not faults.admit(servo):
                 continue
-            old_id = servo.id
-            outcome = handle(servo, packet)
-            moved = moved or servo.id != old_id
+            if packet.instruction in _CHANGES_TABLES:
+                old_id = servo.id
+                outcome = handle(servo, packet)
+                moved = moved or servo.id != old_id
+            else:
+                outcome = handle(servo, packet)
             if outcome.reply is not None:
                 replies.append(Reply(outcome.reply_id, outcome.reply, outcome.delay_s, baud))
                 if debug:
