@@ -127,6 +127,8 @@ class PhysicalModel:
         self._plan_commands: Commands | None = None
         #: Registers for sense() that change only at events (held speed/load, temperature, alarms).
         self._slow: dict[str, np.ndarray] | None = None
+        #: Rounded temperatures and overload flags at the last thermal event (see _thermal_event).
+        self._thermal_key: tuple[bytes, bytes] | None = None
         self._sensing: SimpleNamespace | None = None
 
     # ------------------------------------------------------------------ run-time inputs
@@ -367,16 +369,22 @@ class PhysicalModel:
             if step % thermal_steps == 0:
                 s.angle, s.speed, s.ref, s.ref_vel = angle, speed, ref, ref_vel
                 s.drive, s.demand, s.current_sq_sum = drive, demand, i2_sum
-                self._thermal_event(plan)
+                slow_changed = self._thermal_event(plan)
                 if step % hold_steps == 0:
                     self._sample_event()
-                self._slow = None
+                    slow_changed = True
+                if slow_changed:
+                    self._slow = None
                 angle, ref, i2_sum = s.angle, s.ref, s.current_sq_sum
         s.angle, s.speed, s.ref, s.ref_vel = angle, speed, ref, ref_vel
         s.drive, s.demand, s.integral, s.prev_error, s.current_sq_sum = drive, demand, integral, prev_error, i2_sum
 
-    def _thermal_event(self, plan: SimpleNamespace) -> None:
-        """Heating, the overload timer and angle wrapping, once per thermal period."""
+    def _thermal_event(self, plan: SimpleNamespace) -> bool:
+        """Heating, the overload timer and angle wrapping, once per thermal period.
+
+        Returns whether a register it feeds (Present Temperature in whole degrees, the
+        overload alarm) may have changed, so ``sense`` recomputes them only then.
+        """
         xp, p, s = self._xp, self.params, self._s
         period = self._thermal_steps * self.step_s
         decay = math.exp(-period / (p.thermal_resistance_k_w * p.heat_capacity_j_k))
@@ -389,6 +397,11 @@ class PhysicalModel:
         # overshoot below 0 reads as a small negative error, not as a jump to the far end.
         shift = xp.where(plan.wheel, xp.floor(s.angle / _TWO_PI) * _TWO_PI, 0.0 * s.angle)
         s.angle, s.sample_angle, s.ref = s.angle - shift, s.sample_angle - shift, s.ref - shift
+        key = (np.rint(self._array("temperature")).tobytes(),
+               (self._array("overload_timer") >= p.overload_delay_s - 1e-9).tobytes())
+        changed = key != self._thermal_key
+        self._thermal_key = key
+        return changed
 
     def _sample_event(self) -> None:
         """Latch Present Speed and Present Load, once per sample period."""
