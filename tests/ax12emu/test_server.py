@@ -67,14 +67,14 @@ def test_pace_collision_garbles_both(emulator):
     """--pace: a host packet sent while a slow reply is on the wire garbles it, as on a half-duplex bus."""
     served = emulator("--pace")
     with _open(served.port) as link:
-        link.write(encode_instruction(1, 0x03, bytes([4, 207])))  # 9,615 bps: about 1 ms per byte
+        link.write(encode_instruction(1, 0x03, bytes([4, 254])))  # 7,843 bps: 1.3 ms per byte
         time.sleep(0.05)
-        link.baudrate = 9600
+        link.baudrate = 7843
         link.reset_input_buffer()
         link.write(PING)
         assert link.read(6) == encode_status(1, 0), "alone on the wire the reply is clean"
         link.write(PING)
-        time.sleep(0.0075)  # the reply starts after 6 ms of PING and 0.5 ms of delay
+        time.sleep(0.010)  # the reply is on the wire from 8.2 ms (PING 7.7 ms + 0.5 ms delay) to 15.8 ms
         link.write(b"\x00\x00\x00")
         garbled = link.read(6)
     assert garbled != encode_status(1, 0)
