@@ -257,6 +257,8 @@ class ServoParams:
             data = tomllib.loads(path.read_text(encoding="utf-8"))
         except tomllib.TOMLDecodeError as exc:
             raise ValueError(f"{path}: not valid TOML: {exc}") from exc
+        except UnicodeDecodeError as exc:
+            raise ValueError(f"{path}: not UTF-8 text: {exc}") from exc
         known = {f.name for f in fields(cls)}
         for key, value in data.items():
             if key not in known:

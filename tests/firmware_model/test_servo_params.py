@@ -79,3 +79,13 @@ def test_toml_errors_name_file_and_key(tmp_path, text, message):
     with pytest.raises(ValueError, match=message) as info:
         ServoParams.from_toml(path)
     assert "bad.toml" in str(info.value)
+
+
+def test_non_utf8_params_file_names_the_file(tmp_path):
+    """A params file that is not UTF-8 text is refused with its path in the message."""
+    from firmware_model.params import ServoParams
+
+    bad = tmp_path / "latin1.toml"
+    bad.write_bytes(b"gear_ratio = 254 # \xe9\n")
+    with pytest.raises(ValueError, match="latin1.toml"):
+        ServoParams.from_toml(bad)
