@@ -158,39 +158,26 @@ def test_leaving_wheel_mode_starts_from_the_shaft(commands):
     assert abs(model.advance(2.5, commands(goal_position=goal)).present_position[0] - goal) <= 3
 
 
-def test_joint_mode_overshoot_below_zero_does_not_wrap():
+def test_joint_mode_overshoot_below_zero_does_not_wrap(commands):
     """A move to Goal Position 0 that overshoots below 0 comes back to 0 instead of wrapping to the far end.
 
     Regression: the angle used to wrap modulo 2 pi in joint mode too, so an overshoot at 0 read as
     position ~1228 and the servo drove the long way round.
     """
-    from firmware_model import PhysicalModel
-    from firmware_model.interface import Commands
-
+    cmds = commands(goal_position=0)
     for backend in ("scalar", "numpy"):
         model = PhysicalModel(1, backend=backend)
-        fields = dict(
-            torque_enable=1, goal_position=0, moving_speed=0, torque_limit=1023, cw_angle_limit=0,
-            ccw_angle_limit=1023, cw_compliance_margin=1, ccw_compliance_margin=1, cw_compliance_slope=32,
-            ccw_compliance_slope=32, punch=32, temperature_limit=70, min_voltage_limit=60, max_voltage_limit=140,
-        )
-        commands = Commands(**{k: np.array([v]) for k, v in fields.items()})
-        positions = [int(model.advance(t / 100, commands).present_position[0]) for t in range(1, 101)]
+        positions = [int(model.advance(t / 100, cmds).present_position[0]) for t in range(1, 101)]
         assert max(positions[70:]) <= 5, (backend, positions)
 
 
 @pytest.mark.parametrize("backend", ["scalar", "numpy"])
-def test_blocked_shaft_and_set_angle(backend):
+def test_blocked_shaft_and_set_angle(backend, commands):
     """A blocked shaft does not turn under full drive and overloads; set_angle moves it by hand without a jump."""
-    from firmware_model.interface import ALARM_OVERLOAD, Commands
+    from firmware_model.interface import ALARM_OVERLOAD
 
     model = PhysicalModel(1, backend=backend)
-    fields = dict(
-        torque_enable=1, goal_position=800, moving_speed=0, torque_limit=1023, cw_angle_limit=0,
-        ccw_angle_limit=1023, cw_compliance_margin=1, ccw_compliance_margin=1, cw_compliance_slope=32,
-        ccw_compliance_slope=32, punch=32, temperature_limit=70, min_voltage_limit=60, max_voltage_limit=140,
-    )
-    commands = Commands(**{k: np.array([v]) for k, v in fields.items()})
+    commands = commands(goal_position=800)
     model.set_blocked(True)
     sensed = model.advance(1.0, commands)
     assert int(sensed.present_position[0]) == 512
