@@ -90,9 +90,10 @@ class Plant:
             else:
                 rows[:, address] = getattr(sensed, name)
         alarms = np.asarray(sensed.alarms, dtype=np.int64) & 0x7F
-        if not (self._any_alarm or alarms.any()):
-            return
-        self._any_alarm = bool(alarms.any())
+        any_alarm = bool(alarms.any())
+        if not (any_alarm or self._any_alarm):
+            return  # no alarm now nor at the last step: nothing to clear or trip
+        self._any_alarm = any_alarm
         for servo, bits in zip(self.servos, alarms.tolist()):
             servo.alarms = bits
         tripped = (alarms & rows[:, self._shutdown]) != 0
