@@ -15,22 +15,60 @@ TRANSPORTS = ["pty", "tcp", "inprocess"]
 
 
 @pytest.mark.parametrize("transport", TRANSPORTS)
-def test_full_suite_passes(transport):
-    """Every check, destructive ones included, passes and the tables end as they began."""
-    with VirtualBus(IDS, transport=transport, model="kinematic") as bus:
-        report = conformance.run(bus.port, IDS, destructive=True)
+def test_full_suite_passes(transport, emulator):
+    """Every check, destructive ones included, passes and the tables end as they began.
+
+    Over pty and TCP the emulator runs as its own process, as a user runs it: in a thread of
+    this process it would share the interpreter lock with the client, and the round trips the
+    return-delay check times would carry the lock's hand-overs.
+    """
+    if transport == "inprocess":
+        with VirtualBus(IDS, transport=transport, model="kinematic") as bus:
+            report = conformance.run(bus.port, IDS, destructive=True)
+    else:
+        where = ["--tcp", "127.0.0.1:0"] if transport == "tcp" else []
+        served = emulator("--ids", ",".join(map(str, IDS)), "--model", "kinematic", *where)
+        report = conformance.run(served.port, IDS, destructive=True)
     assert report.passed, report.table()
     for name in ("ID change", "RESET", "return delay", "status return levels", "resync after garbage", "table unchanged"):
         assert report.outcome(name) == PASS, report.table()
 
 
+def _tables_over_the_port(port: str) -> dict[int, bytes]:
+    """Every servo's whole table, read by a client of its own (raw READ packets, pty path or socket:// URL)."""
+    import serial
+
+    from ax12emu.packets import encode_instruction
+
+    tables = {}
+    with serial.serial_for_url(port, baudrate=1_000_000, timeout=1.0) as link:
+        for servo_id in IDS:
+            link.reset_input_buffer()
+            link.write(encode_instruction(servo_id, 0x02, bytes([0, 50])))
+            reply = link.read(6 + 50)
+            assert len(reply) == 56 and reply[2] == servo_id and reply[4] == 0, reply.hex()
+            tables[servo_id] = reply[5:55]
+    return tables
+
+
 @pytest.mark.parametrize("transport", TRANSPORTS)
-def test_non_destructive_mode_changes_nothing(transport):
-    """Without --destructive the device's table, read through the API before and after, is unchanged."""
-    with VirtualBus(IDS, transport=transport, model="kinematic") as bus:
-        before = {i: bus.table(i) for i in IDS}
-        report = conformance.run(bus.port, IDS)
-        after = {i: bus.table(i) for i in IDS}
+def test_non_destructive_mode_changes_nothing(transport, emulator):
+    """Without --destructive the device's table, read independently before and after, is unchanged.
+
+    In process the tables are read through the API; over pty and TCP the emulator is a process
+    of its own (see test_full_suite_passes) and a separate client reads all 50 bytes.
+    """
+    if transport == "inprocess":
+        with VirtualBus(IDS, transport=transport, model="kinematic") as bus:
+            before = {i: bus.table(i) for i in IDS}
+            report = conformance.run(bus.port, IDS)
+            after = {i: bus.table(i) for i in IDS}
+    else:
+        where = ["--tcp", "127.0.0.1:0"] if transport == "tcp" else []
+        served = emulator("--ids", ",".join(map(str, IDS)), "--model", "kinematic", *where)
+        before = _tables_over_the_port(served.port)
+        report = conformance.run(served.port, IDS)
+        after = _tables_over_the_port(served.port)
     assert report.passed, report.table()
     assert report.outcome("RESET") == "skip"
     assert before == after
