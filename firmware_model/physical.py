@@ -38,18 +38,20 @@ shaft, so enabling torque never jumps.
 from __future__ import annotations
 
 import math
+from functools import partial
 from types import SimpleNamespace
 
 import numpy as np
 
 from .backend import NUMPY, SCALAR
-from .controller import PidGains, compliance_drive, compliance_plan, pid_drive, symmetric_compliance_drive
+from .controller import PidGains, compliance_plan
 from .interface import Commands, Sensed
-from .motor import GRAVITY_M_S2, arm_gravity_torque_nm, mechanics_step
+from .motor import GRAVITY_M_S2
 from .params import ServoParams
 from .protection import alarm_bits, overload_timer_step, thermal_step
 from .sensors import held_speed_rad_s, registers
-from .setpoint import apply_dead_zone, setpoint_step
+from .setpoint import apply_dead_zone
+from .stepping import FusedNumpySteps, StepConstants, fused_scalar_steps, fusable, generic_steps
 from .units import (
     DIRECTION_BIT,
     POSITION_MAX_RAW,
@@ -96,6 +98,7 @@ class PhysicalModel:
         controller: str = "compliance",
         pid_gains: PidGains = PidGains(),
         backend: str = "auto",
+        fused: bool = True,
     ) -> None:
         if n < 1:
             raise ValueError(f"need at least one servo, got n={n}")
@@ -110,6 +113,9 @@ class PhysicalModel:
         self.step_s = step_s
         self.controller = controller
         self.pid_gains = pid_gains
+        #: Whether the usual configuration runs the fused kernels (False: always the generic loop, for comparison).
+        self.fused = fused
+        self._k = StepConstants.from_params(params, step_s, controller, pid_gains)
         self.time_s = 0.0
         self._steps = 0
         self._xp = SCALAR if (backend == "scalar" or (backend == "auto" and n == 1)) else NUMPY
@@ -223,12 +229,18 @@ class PhysicalModel:
             moving = int(c is not None and c.enabled[0] and (busy or abs(st.speed) > RAD_S_PER_SPEED_UNIT))
             return Sensed(present_position=np.array([_position_raw(st.angle)], dtype=np.int64),
                           moving=np.array([moving], dtype=np.int64), **slow)
+        st = self._s
         if c is None:
             moving = np.zeros(self.n, dtype=np.int64)
         else:
-            busy = np.where(c.wheel, c.wheel_turning, np.abs(self._array("ref_vel")) > 1e-9)
-            moving = (c.enabled & (busy | (np.abs(self._array("speed")) > RAD_S_PER_SPEED_UNIT))).astype(np.int64)
-        return Sensed(present_position=position_rad_to_raw(self._array("angle")), moving=moving, **slow)
+            busy = np.abs(st.ref_vel) > 1e-9
+            if c.any_wheel:
+                busy = np.where(c.wheel, c.wheel_turning, busy)
+            moving = (c.enabled & (busy | (np.abs(st.speed) > RAD_S_PER_SPEED_UNIT))).astype(np.int64)
+        units = st.angle / _UNIT_RAD
+        if units.min() >= 0.0 and units.max() < 1023.0:  # all on the track: the general conversion gives the same
+            return Sensed(present_position=np.rint(units).astype(np.int64), moving=moving, **slow)
+        return Sensed(present_position=position_rad_to_raw(st.angle), moving=moving, **slow)
 
     def _slow_registers(self) -> dict[str, np.ndarray]:
         """Present Speed / Load / Voltage / Temperature and the alarms, recomputed after an event."""
@@ -290,7 +302,7 @@ class PhysicalModel:
         plan.sensing = SimpleNamespace(
             enabled=enabled, wheel=wheel, wheel_turning=(speed_raw & 0x3FF) != 0,
             temperature_limit=raw["temperature_limit"].copy(), min_voltage_limit=raw["min_voltage_limit"].copy(),
-            max_voltage_limit=raw["max_voltage_limit"].copy(),
+            max_voltage_limit=raw["max_voltage_limit"].copy(), any_wheel=bool(wheel.any()),
         )
         plan.any_wheel, plan.any_joint = bool(wheel.any()), bool((~wheel).any())
         plan.any_disabled = bool((~enabled).any())
@@ -298,6 +310,12 @@ class PhysicalModel:
         plan.any_ext = bool(np.any(self._array("ext_nm") != 0))
         plan.any_blocked = bool(np.any(self._array("blocked") != 0))
         plan.symmetric = bool(np.all(comp.cw_margin == comp.ccw_margin) and np.all(comp.cw_gain == comp.ccw_gain))
+        if not (self.fused and fusable(self._k, plan)):
+            plan.kernel = partial(generic_steps, self._xp, plan, self._k)
+        elif self._xp is SCALAR:
+            plan.kernel = partial(fused_scalar_steps, plan, self._k)
+        else:
+            plan.kernel = FusedNumpySteps(plan, self._k, self._s, n)
         # In wheel mode the reference is unused; entering or leaving it restarts the reference at the shaft.
         was_wheel = self._sensing.wheel if self._sensing is not None else np.zeros(n, dtype=bool)
         restart = wheel | was_wheel
@@ -308,76 +326,20 @@ class PhysicalModel:
         return plan
 
     def _run(self, plan: SimpleNamespace, first: int, last: int) -> None:
-        """Steps ``first + 1 .. last``: setpoint, controller, motor, mechanics, and the periodic events.
-
-        The hot loop keeps the state in locals; it writes it back only around
-        an event (every thermal period) and at the end.
-        """
-        xp, p, s, dt = self._xp, self.params, self._s, self.step_s
-        a, unit = p.max_acceleration_rad_s2, float(RAD_PER_POSITION_UNIT)
-        inv_unit, k_r, eta_k = 1.0 / unit, p.torque_constant_nm_a / p.winding_resistance_ohm, p.gearbox_efficiency * p.torque_constant_nm_a
-        ts, tc, b, vs, dt_j = (p.static_friction_nm, p.coulomb_friction_nm, p.viscous_friction_nm_s_rad,
-                               p.stribeck_velocity_rad_s, dt / p.total_inertia_kg_m2)
-        pid, gains, symmetric = self.controller == "pid", self.pid_gains, plan.symmetric
-        any_joint, any_wheel, mixed, any_disabled = plan.any_joint, plan.any_wheel, plan.any_joint and plan.any_wheel, plan.any_disabled
-        goal, max_speed, enabled, wheel, en, volts_r = plan.goal_rad, plan.max_speed, plan.enabled, plan.wheel, plan.en, plan.volts_r
-        cw_margin, ccw_margin, cw_gain, ccw_gain, punch, limit = (plan.cw_margin, plan.ccw_margin, plan.cw_gain,
-                                                                  plan.ccw_gain, plan.punch, plan.limit)
-        wheel_ff, wheel_ref, kv = plan.wheel_ff, plan.wheel_ref, p.wheel_speed_gain_s_rad
-        angle, speed, ref, ref_vel = s.angle, s.speed, s.ref, s.ref_vel
-        drive, demand, integral, prev_error, i2_sum = s.drive, s.demand, s.integral, s.prev_error, s.current_sq_sum
-        ext, weight, any_ext, any_arm = s.ext_nm, s.weight_nm, plan.any_ext, plan.any_arm
-        free, any_blocked = 1.0 - s.blocked, plan.any_blocked
+        """Steps ``first + 1 .. last``: the plan's kernel between events, the periodic events at their steps."""
         thermal_steps, hold_steps = self._thermal_steps, self._hold_steps
-        for step in range(first + 1, last + 1):
-            if any_joint:
-                ref, ref_vel = setpoint_step(xp, ref, ref_vel, goal, max_speed, a, dt)
-                if any_disabled:
-                    ref = xp.where(enabled, ref, angle)
-                    ref_vel = ref_vel * en
-                error = ref * inv_unit - xp.rint(angle * inv_unit)
-                if pid:
-                    error = error * unit
-                    drive, demand, integral = pid_drive(xp, error, integral, prev_error, dt, gains, limit)
-                    prev_error = error
-                elif symmetric:
-                    drive, demand = symmetric_compliance_drive(xp, error, ccw_margin, ccw_gain, punch, limit)
-                else:
-                    drive, demand = compliance_drive(xp, error, cw_margin, ccw_margin, cw_gain, ccw_gain, punch, limit)
-            if any_wheel:
-                wanted = wheel_ff + kv * (wheel_ref - speed)
-                wheel_drive = xp.minimum(xp.maximum(wanted, -limit), limit)
-                drive = xp.where(wheel, wheel_drive, drive) if mixed else wheel_drive
-                demand = xp.where(wheel, xp.abs(wanted), demand) if mixed else xp.abs(wanted)
-            if any_disabled:  # open bridge: no drive, no current (Present Load reads 0)
-                drive = drive * en
-                current = (drive * volts_r - k_r * speed) * en
-            else:
-                current = drive * volts_r - k_r * speed
-            applied = eta_k * current
-            if any_ext:
-                applied = applied + ext
-            if any_arm:
-                applied = applied + arm_gravity_torque_nm(xp, angle, weight)
-            if any_blocked:  # a held shaft keeps its angle; the motor still draws current
-                held_angle = angle
-                angle, speed = mechanics_step(xp, angle, speed, applied, ts, tc, b, vs, dt_j, dt)
-                angle, speed = held_angle + (angle - held_angle) * free, speed * free
-            else:
-                angle, speed = mechanics_step(xp, angle, speed, applied, ts, tc, b, vs, dt_j, dt)
-            i2_sum = i2_sum + current * current
+        step = first
+        while step < last:
+            stop = min(last, (step // thermal_steps + 1) * thermal_steps)
+            plan.kernel(self._s, stop - step)
+            step = stop
             if step % thermal_steps == 0:
-                s.angle, s.speed, s.ref, s.ref_vel = angle, speed, ref, ref_vel
-                s.drive, s.demand, s.current_sq_sum = drive, demand, i2_sum
                 slow_changed = self._thermal_event(plan)
                 if step % hold_steps == 0:
                     self._sample_event()
                     slow_changed = True
                 if slow_changed:
                     self._slow = None
-                angle, ref, i2_sum = s.angle, s.ref, s.current_sq_sum
-        s.angle, s.speed, s.ref, s.ref_vel = angle, speed, ref, ref_vel
-        s.drive, s.demand, s.integral, s.prev_error, s.current_sq_sum = drive, demand, integral, prev_error, i2_sum
 
     def _thermal_event(self, plan: SimpleNamespace) -> bool:
         """Heating, the overload timer and angle wrapping, once per thermal period.
@@ -395,8 +357,9 @@ class PhysicalModel:
                                                p.stall_speed_rad_s, period)
         # Only wheel mode turns endlessly; a joint-mode shaft keeps a continuous angle, so an
         # overshoot below 0 reads as a small negative error, not as a jump to the far end.
-        shift = xp.where(plan.wheel, xp.floor(s.angle / _TWO_PI) * _TWO_PI, 0.0 * s.angle)
-        s.angle, s.sample_angle, s.ref = s.angle - shift, s.sample_angle - shift, s.ref - shift
+        if plan.any_wheel:
+            shift = xp.where(plan.wheel, xp.floor(s.angle / _TWO_PI) * _TWO_PI, 0.0 * s.angle)
+            s.angle, s.sample_angle, s.ref = s.angle - shift, s.sample_angle - shift, s.ref - shift
         key = (np.rint(self._array("temperature")).tobytes(),
                (self._array("overload_timer") >= p.overload_delay_s - 1e-9).tobytes())
         changed = key != self._thermal_key

@@ -1,0 +1,65 @@
+"""The fused step kernels against the generic loop: the same numbers, bit for bit.
+
+Each scenario runs twice, fused and generic (``PhysicalModel(fused=False)``),
+through goal changes, torque off, other compliance settings and the run-time
+loads, and every state and register must be equal at every advance.
+"""
+
+import numpy as np
+import pytest
+from firmware_model.physical import PhysicalModel
+from firmware_model.stepping import FusedNumpySteps, fused_scalar_steps, generic_steps
+
+LOADS = {
+    "none": lambda m: None,
+    "external torque": lambda m: m.set_external_torque([0.1, -0.3, 0.0][: m.n]),
+    "arm": lambda m: m.set_arm([0.1, 0.2, 0.05][: m.n], [0.1, 0.1, 0.2][: m.n]),
+    "blocked": lambda m: m.set_blocked([True, False, True][: m.n]),
+}
+
+
+def _scenario(n: int, make_commands) -> list[tuple[float, object]]:
+    pick = lambda values: values[:n]  # noqa: E731
+    return [
+        (0.3, make_commands(n, goal_position=pick([300, 700, 100]), moving_speed=pick([0, 200, 50]))),
+        (0.2, make_commands(n, goal_position=pick([800, 200, 900]), torque_enable=pick([0, 1, 0]))),
+        (0.3, make_commands(n, goal_position=512, punch=pick([0, 100, 32]), cw_compliance_margin=5,
+                            ccw_compliance_margin=5, torque_limit=pick([300, 1023, 600]))),
+    ]
+
+
+def _trajectory(n: int, backend: str, fused: bool, load, make_commands) -> list[tuple]:
+    model = PhysicalModel(n, backend=backend, fused=fused)
+    load(model)
+    states, t = [], 0.0
+    for duration_s, cmds in _scenario(n, make_commands):
+        end = t + duration_s
+        while t < end - 1e-12:
+            t += 0.007  # not a multiple of the thermal or sample period
+            sensed = model.advance(t, cmds)
+            states.append((model.angle_rad, model.speed_rad_s, model.reference_rad, model.drive, model.temperature_c,
+                           *(getattr(sensed, name) for name in type(sensed).field_names())))
+    return states
+
+
+@pytest.mark.parametrize("load", sorted(LOADS))
+@pytest.mark.parametrize("n, backend", [(1, "scalar"), (1, "numpy"), (3, "numpy")])
+def test_fused_kernels_equal_the_generic_loop(n, backend, load, commands):
+    fused, generic = (_trajectory(n, backend, flag, LOADS[load], commands) for flag in (True, False))
+    assert len(fused) == len(generic) > 100
+    for step, (a, b) in enumerate(zip(fused, generic)):
+        assert all(np.array_equal(x, y) for x, y in zip(a, b)), f"differs at advance {step}"
+
+
+def test_usual_configuration_runs_fused_and_others_the_generic_loop(commands):
+    """Guards the comparison above: it must really compare two different kernels."""
+
+    def _kernel(model: PhysicalModel, **overrides):
+        return model._cached_plan(commands(model.n, **overrides)).kernel
+
+    assert _kernel(PhysicalModel(1)).func is fused_scalar_steps
+    assert isinstance(_kernel(PhysicalModel(3)), FusedNumpySteps)
+    assert _kernel(PhysicalModel(3, fused=False)).func is generic_steps
+    assert _kernel(PhysicalModel(3, controller="pid")).func is generic_steps
+    assert _kernel(PhysicalModel(3), ccw_compliance_margin=4).func is generic_steps  # asymmetric
+    assert _kernel(PhysicalModel(3), ccw_angle_limit=0).func is generic_steps  # wheel mode
