@@ -25,6 +25,7 @@ def _scenario(n: int, make_commands) -> list[tuple[float, object]]:
         (0.2, make_commands(n, goal_position=pick([800, 200, 900]), torque_enable=pick([0, 1, 0]))),
         (0.3, make_commands(n, goal_position=512, punch=pick([0, 100, 32]), cw_compliance_margin=5,
                             ccw_compliance_margin=5, torque_limit=pick([300, 1023, 600]))),
+        (0.6, make_commands(n, goal_position=pick([520, 500, 530]))),  # long enough to come to rest and hold
     ]
 
 
@@ -39,6 +40,8 @@ def _trajectory(n: int, backend: str, fused: bool, load, make_commands) -> list[
             sensed = model.advance(t, cmds)
             states.append((model.angle_rad, model.speed_rad_s, model.reference_rad, model.drive, model.temperature_c,
                            *(getattr(sensed, name) for name in type(sensed).field_names())))
+    held = (model.speed_rad_s == 0) & (model.reference_rad == model._cached_plan(cmds).goal_rad)
+    assert held.any(), "the scenario should end with a servo holding still (the kernels' fixed-point shortcut)"
     return states
 
 
