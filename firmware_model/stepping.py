@@ -8,11 +8,12 @@ reference.  It costs about 55 numpy calls per step, each about a
 microsecond whatever N, most of them allocating a fresh array or converting a
 Python float.  The fused kernels do the *same arithmetic in the same order*
 (so their results are bitwise equal to the generic loop's; the tests compare
-them) for what nearly every bus runs: joint mode with symmetric compliance
-(torque off, an external torque, an arm and a blocked shaft included).  The
-numpy one works in place in preallocated buffers with its constants already
-broadcast, the scalar one (one servo) on plain floats with no function calls.
-PID, asymmetric compliance and wheel mode run the generic loop.
+them) for what nearly every bus runs: joint mode with symmetric compliance,
+or every servo in wheel mode (torque off, an external torque, an arm and a
+blocked shaft included).  The numpy one works in place in preallocated
+buffers with its constants already broadcast, the scalar one (one servo) on
+plain floats with no function calls.  PID, asymmetric compliance and a mix
+of wheel and joint mode run the generic loop.
 
 The numpy kernel also skips what provably repeats: after the first step of
 a call it compares the state with the one before; a reference resting on its
@@ -81,7 +82,9 @@ class StepConstants:
 
 def fusable(k: StepConstants, plan: SimpleNamespace) -> bool:
     """Whether the fused kernels cover this configuration (else the generic loop runs)."""
-    return not k.pid and plan.symmetric and not plan.any_wheel
+    if plan.any_wheel:
+        return not plan.any_joint  # all in wheel mode: no position controller at all
+    return not k.pid and plan.symmetric
 
 
 def generic_steps(xp, plan: SimpleNamespace, k: StepConstants, s: SimpleNamespace, count: int) -> None:
@@ -145,7 +148,7 @@ def generic_steps(xp, plan: SimpleNamespace, k: StepConstants, s: SimpleNamespac
 
 
 def fused_scalar_steps(plan: SimpleNamespace, k: StepConstants, s: SimpleNamespace, count: int) -> None:
-    """:func:`generic_steps` for one servo in joint mode with symmetric compliance, inlined on floats."""
+    """:func:`generic_steps` for one servo (wheel mode, or joint mode with symmetric compliance), inlined on floats."""
     sqrt, exp, cos, copysign = math.sqrt, math.exp, math.cos, math.copysign
     a, dt, inv_unit = k.accel_rad_s2, k.step_s, k.inv_unit
     adt = a * dt
@@ -153,6 +156,7 @@ def fused_scalar_steps(plan: SimpleNamespace, k: StepConstants, s: SimpleNamespa
     k_r, eta_k, dt_j = k.k_over_r, k.eta_k, k.step_over_inertia
     tc, dts, b, strib = k.coulomb_nm, k.static_nm - k.coulomb_nm, k.viscous_nm_s_rad, -1.0 / (k.stribeck_rad_s * k.stribeck_rad_s)
     goal, max_speed, enabled, en, volts_r = plan.goal_rad, plan.max_speed, plan.enabled, plan.en, plan.volts_r
+    wheel, wheel_ff, wheel_ref, kv = plan.wheel, plan.wheel_ff, plan.wheel_ref, k.wheel_gain_s_rad
     margin, gain, punch, limit = plan.ccw_margin, plan.ccw_gain, plan.punch, plan.limit
     ext = s.ext_nm if plan.any_ext else 0.0
     weight = s.weight_nm if plan.any_arm else 0.0
@@ -160,17 +164,21 @@ def fused_scalar_steps(plan: SimpleNamespace, k: StepConstants, s: SimpleNamespa
     angle, speed, ref, ref_vel, i2_sum = s.angle, s.speed, s.ref, s.ref_vel, s.current_sq_sum
     drive = demand = 0.0
     for _ in range(count):
-        error = goal - ref  # setpoint.setpoint_step
-        d = abs(error)
-        braking = min(sqrt(q + two_a * d) - half_adt, d * inv_dt)
-        vel = ref_vel + min(max(copysign(min(max_speed, braking), error) - ref_vel, -adt), adt)
-        ref, ref_vel = ref + vel * dt, vel
-        if not enabled:
-            ref, ref_vel = angle, ref_vel * en
-        error = ref * inv_unit - round(angle * inv_unit)  # controller.symmetric_compliance_drive
-        beyond = abs(error) - margin
-        demand = (punch + beyond * gain) * (beyond > 0)
-        drive = copysign(min(demand, limit), error) * en
+        if wheel:  # speed loop with feed-forward
+            wanted = wheel_ff + kv * (wheel_ref - speed)
+            drive, demand = min(max(wanted, -limit), limit) * en, abs(wanted)
+        else:
+            error = goal - ref  # setpoint.setpoint_step
+            d = abs(error)
+            braking = min(sqrt(q + two_a * d) - half_adt, d * inv_dt)
+            vel = ref_vel + min(max(copysign(min(max_speed, braking), error) - ref_vel, -adt), adt)
+            ref, ref_vel = ref + vel * dt, vel
+            if not enabled:
+                ref, ref_vel = angle, ref_vel * en
+            error = ref * inv_unit - round(angle * inv_unit)  # controller.symmetric_compliance_drive
+            beyond = abs(error) - margin
+            demand = (punch + beyond * gain) * (beyond > 0)
+            drive = copysign(min(demand, limit), error) * en
         current = drive * volts_r - k_r * speed
         if not enabled:
             current = current * en
@@ -197,7 +205,7 @@ def fused_scalar_steps(plan: SimpleNamespace, k: StepConstants, s: SimpleNamespa
 
 
 class FusedNumpySteps:
-    """:func:`generic_steps` for N servos in joint mode with symmetric compliance, in place.
+    """:func:`generic_steps` for N servos, all in wheel mode or all in joint mode with symmetric compliance, in place.
 
     Built once per plan (the commands' decoding): it broadcasts every constant
     to shape (N,) and owns the scratch buffers, so a step is about 50 numpy
@@ -212,13 +220,16 @@ class FusedNumpySteps:
             neg_adt=full(-adt), adt=full(adt), dt=full(k.step_s), zero=full(0.0), eta_k=full(k.eta_k),
             strib=full(-1.0 / (k.stribeck_rad_s * k.stribeck_rad_s)),
             dts=full(k.static_nm - k.coulomb_nm), tc=full(k.coulomb_nm), viscous=bool(k.viscous_nm_s_rad),
-            dt_j=full(k.step_over_inertia), arm_at=full(ARM_HORIZONTAL_RAD),
+            dt_j=full(k.step_over_inertia), arm_at=full(ARM_HORIZONTAL_RAD), kv=full(k.wheel_gain_s_rad),
             # Products that share an operand are stacked into one call: speed times (1e12, k/R, b),
             # and (reference, angle) times 1/unit.
             by_speed=np.repeat([[1e12], [k.k_over_r], [k.viscous_nm_s_rad]], n, axis=1),
             inv_unit2=np.full((2, n), k.inv_unit),
         )
         self.plan = plan
+        #: Every servo in wheel mode (fusable() allows no mix): a speed loop instead of setpoint and compliance.
+        self.wheel = plan.any_wheel
+        self.neg_limit = -plan.limit
         self.disabled = ~np.asarray(plan.enabled, dtype=bool) if plan.any_disabled else None
         self.ext = s.ext_nm.copy() if plan.any_ext else None
         self.neg_weight = -s.weight_nm if plan.any_arm else None
@@ -235,7 +246,7 @@ class FusedNumpySteps:
         speed_big, speed_k_r, speed_b = speed_products
         goal, max_speed, margin, gain, punch, limit, volts_r, en = (p.goal_rad, p.max_speed, p.ccw_margin, p.ccw_gain, p.punch,
                                                                     p.limit, p.volts_r, p.en)
-        disabled, ext, neg_weight, free, viscous = self.disabled, self.ext, self.neg_weight, self.free, c.viscous
+        disabled, ext, neg_weight, free, viscous, wheel = self.disabled, self.ext, self.neg_weight, self.free, c.viscous, self.wheel
         # Fresh copies of the state (others may hold the old arrays), updated in place, stored back below;
         # reference and angle are the two rows of one array, so one call scales both.
         ref_angle = np.stack((s.ref, s.angle))
@@ -249,38 +260,46 @@ class FusedNumpySteps:
         before = (ref.copy(), vel.copy(), angle.copy(), speed.copy()) if count > 1 else None
         ref_resting = False
         for step in range(count):
-            if not ref_resting:  # setpoint.setpoint_step
-                sub(goal, ref, e)
-                absolute(e, d)
-                mul(d, c.two_a, t)
-                add(t, c.q, t)
-                sqrt(t, t)
-                sub(t, c.half_adt, t)
-                mul(d, c.inv_dt, u)
-                minimum(t, u, out=t)
-                minimum(max_speed, t, out=t)
-                copysign(t, e, t)
-                sub(t, vel, t)
-                maximum(t, c.neg_adt, out=t)
-                minimum(t, c.adt, out=t)
-                add(vel, t, vel)
-                mul(vel, c.dt, t)
-                add(ref, t, ref)
-            if disabled is not None:
-                np.copyto(ref, angle, where=disabled)
-                mul(vel, en, vel)
-            # controller.symmetric_compliance_drive, on the error in units
-            mul(ref_angle, c.inv_unit2, in_units)
-            rint(in_units[1], t)
-            sub(in_units[0], t, err)
-            absolute(err, d)
-            sub(d, margin, d)
-            mul(d, gain, demand)
-            add(punch, demand, demand)
-            heaviside(d, c.zero, t)  # (d > 0) as 0.0 / 1.0
-            mul(demand, t, demand)
-            minimum(demand, limit, out=drive)
-            copysign(drive, err, drive)
+            if wheel:  # the generic loop's speed loop with feed-forward
+                sub(p.wheel_ref, speed, t)
+                mul(c.kv, t, t)
+                add(p.wheel_ff, t, t)
+                maximum(t, self.neg_limit, out=drive)
+                minimum(drive, limit, out=drive)
+                absolute(t, demand)
+            else:
+                if not ref_resting:  # setpoint.setpoint_step
+                    sub(goal, ref, e)
+                    absolute(e, d)
+                    mul(d, c.two_a, t)
+                    add(t, c.q, t)
+                    sqrt(t, t)
+                    sub(t, c.half_adt, t)
+                    mul(d, c.inv_dt, u)
+                    minimum(t, u, out=t)
+                    minimum(max_speed, t, out=t)
+                    copysign(t, e, t)
+                    sub(t, vel, t)
+                    maximum(t, c.neg_adt, out=t)
+                    minimum(t, c.adt, out=t)
+                    add(vel, t, vel)
+                    mul(vel, c.dt, t)
+                    add(ref, t, ref)
+                if disabled is not None:
+                    np.copyto(ref, angle, where=disabled)
+                    mul(vel, en, vel)
+                # controller.symmetric_compliance_drive, on the error in units
+                mul(ref_angle, c.inv_unit2, in_units)
+                rint(in_units[1], t)
+                sub(in_units[0], t, err)
+                absolute(err, d)
+                sub(d, margin, d)
+                mul(d, gain, demand)
+                add(punch, demand, demand)
+                heaviside(d, c.zero, t)  # (d > 0) as 0.0 / 1.0
+                mul(demand, t, demand)
+                minimum(demand, limit, out=drive)
+                copysign(drive, err, drive)
             # motor current; an open bridge (torque off) carries none
             if disabled is not None:
                 mul(drive, en, drive)

@@ -18,8 +18,16 @@ LOADS = {
 }
 
 
-def _scenario(n: int, make_commands) -> list[tuple[float, object]]:
+def _scenario(n: int, make_commands, wheel: bool) -> list[tuple[float, object]]:
     pick = lambda values: values[:n]  # noqa: E731
+    if wheel:  # both angle limits 0; Moving Speed's bit 10 turns CW
+        spin = dict(cw_angle_limit=0, ccw_angle_limit=0)
+        return [
+            (0.3, make_commands(n, moving_speed=pick([300, 1024 + 200, 0]), **spin)),
+            (0.2, make_commands(n, moving_speed=pick([1024 + 500, 100, 700]), torque_enable=pick([0, 1, 0]), **spin)),
+            (0.3, make_commands(n, moving_speed=pick([1023, 0, 50]), torque_limit=pick([300, 1023, 600]), **spin)),
+            (0.6, make_commands(n, moving_speed=0, **spin)),  # long enough to stop
+        ]
     return [
         (0.3, make_commands(n, goal_position=pick([300, 700, 100]), moving_speed=pick([0, 200, 50]))),
         (0.2, make_commands(n, goal_position=pick([800, 200, 900]), torque_enable=pick([0, 1, 0]))),
@@ -29,26 +37,27 @@ def _scenario(n: int, make_commands) -> list[tuple[float, object]]:
     ]
 
 
-def _trajectory(n: int, backend: str, fused: bool, load, make_commands) -> list[tuple]:
+def _trajectory(n: int, backend: str, fused: bool, load, make_commands, wheel: bool = False) -> list[tuple]:
     model = PhysicalModel(n, backend=backend, fused=fused)
     load(model)
     states, t = [], 0.0
-    for duration_s, cmds in _scenario(n, make_commands):
+    for duration_s, cmds in _scenario(n, make_commands, wheel):
         end = t + duration_s
         while t < end - 1e-12:
             t += 0.007  # not a multiple of the thermal or sample period
             sensed = model.advance(t, cmds)
             states.append((model.angle_rad, model.speed_rad_s, model.reference_rad, model.drive, model.temperature_c,
                            *(getattr(sensed, name) for name in type(sensed).field_names())))
-    held = (model.speed_rad_s == 0) & (model.reference_rad == model._cached_plan(cmds).goal_rad)
+    held = (model.speed_rad_s == 0) & (wheel or model.reference_rad == model._cached_plan(cmds).goal_rad)
     assert held.any(), "the scenario should end with a servo holding still (the kernels' fixed-point shortcut)"
     return states
 
 
+@pytest.mark.parametrize("mode", ["joint", "wheel"])
 @pytest.mark.parametrize("load", sorted(LOADS))
 @pytest.mark.parametrize("n, backend", [(1, "scalar"), (1, "numpy"), (3, "numpy")])
-def test_fused_kernels_equal_the_generic_loop(n, backend, load, commands):
-    fused, generic = (_trajectory(n, backend, flag, LOADS[load], commands) for flag in (True, False))
+def test_fused_kernels_equal_the_generic_loop(n, backend, load, mode, commands):
+    fused, generic = (_trajectory(n, backend, flag, LOADS[load], commands, mode == "wheel") for flag in (True, False))
     assert len(fused) == len(generic) > 100
     for step, (a, b) in enumerate(zip(fused, generic)):
         assert all(np.array_equal(x, y) for x, y in zip(a, b)), f"differs at advance {step}"
@@ -65,4 +74,6 @@ def test_usual_configuration_runs_fused_and_others_the_generic_loop(commands):
     assert _kernel(PhysicalModel(3, fused=False)).func is generic_steps
     assert _kernel(PhysicalModel(3, controller="pid")).func is generic_steps
     assert _kernel(PhysicalModel(3), ccw_compliance_margin=4).func is generic_steps  # asymmetric
-    assert _kernel(PhysicalModel(3), ccw_angle_limit=0).func is generic_steps  # wheel mode
+    assert isinstance(_kernel(PhysicalModel(3), ccw_angle_limit=0), FusedNumpySteps)  # wheel mode
+    assert _kernel(PhysicalModel(1), ccw_angle_limit=0).func is fused_scalar_steps
+    assert _kernel(PhysicalModel(2), ccw_angle_limit=[0, 1023]).func is generic_steps  # wheel and joint mixed
