@@ -30,6 +30,7 @@ from .framing import Framer
 from .model_factory import ModelChoice, build_model
 from .packets import BROADCAST_ID, MAX_ID, Instruction, InstructionPacket
 from .plant import Plant
+from .reply_cache import ReplyCache
 from .request_handler import handle
 from .servo import ServoOptions, VirtualServo
 from .state_store import StateStore
@@ -125,6 +126,8 @@ class Bus:
         self.request_lag_s = 0.0
         #: Injected faults (``faults.Faults``); None costs one test per packet.
         self.faults: Faults | None = None
+        #: Replies to repeated READ / PING packets (see :mod:`ax12emu.reply_cache`).
+        self.reply_cache = ReplyCache()
         self._closed = False
 
     # -- lookup ------------------------------------------------------------------------
@@ -161,10 +164,34 @@ class Bus:
         ``line_bps`` is the rate the host transmits at, when the transport
         knows it (a pty's termios speed); None means every servo hears.
         """
+        cached = self.recall(data, line_bps=line_bps)
+        if cached is not None:
+            return cached
         replies: list[Reply] = []
-        for packet in self.framer.feed(data, now_s):
+        packets = self.framer.feed(data, now_s)
+        for packet in packets:
             replies.extend(self.dispatch(packet, line_bps=line_bps))
+        if len(packets) == 1:
+            self.remember(data, packets[0], replies, line_bps=line_bps)
         return replies
+
+    def recall(self, data: bytes, *, line_bps: float | None = None) -> list[Reply] | None:
+        """The replies to ``data`` if it repeats a cached READ or PING and nothing it reads changed; else None.
+
+        Brings physics up first, as :meth:`dispatch` does; the caller feeds
+        the framer and dispatches only when this returns None.
+        """
+        if len(data) < 6 or len(data) != data[3] + 4 or self.framer.buffered or self.faults is not None:
+            return None
+        if log.isEnabledFor(logging.DEBUG):
+            return None  # -v logs every packet, so every packet goes the long way
+        self.plant.advance(self.clock.now_s() - self.request_lag_s)
+        return self.reply_cache.lookup(bytes(data), line_bps, self._by_id)
+
+    def remember(self, data: bytes, packet: InstructionPacket, replies: list[Reply], *, line_bps: float | None = None) -> None:
+        """Offer the replies to ``data``, just dispatched as ``packet``, to the reply cache."""
+        if self.faults is None and not self.framer.buffered and not log.isEnabledFor(logging.DEBUG):
+            self.reply_cache.store(bytes(data), line_bps, packet, self._by_id.get(packet.id), replies)
 
     def expire(self, now_s: float) -> None:
         """Let the framer drop a partial packet after silence."""

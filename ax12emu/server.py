@@ -166,17 +166,30 @@ class BusServer:
                 self._schedule([(begin + (i + 1) * byte_s, bytes((b,))) for i, b in enumerate(data)], is_reply=False)
         elif self.echo:
             self._schedule([(now, data)], is_reply=False)
-        for packet in self.bus.framer.feed(data, now):
+        bus = self.bus
+        cached = None if self.pace else bus.recall(data, line_bps=line_bps)  # pace: bytes may have collided
+        if cached is not None:
             self.packets_in += 1
-            replies = self.bus.dispatch(packet, line_bps=line_bps)
-            if not replies:
-                continue
-            if len(replies) == 1 and replies[0].delay_s == 0.0 and not (self.pace or self._queue):
-                self._emit(replies[0].data, now)  # the common case at Return Delay Time 0
-                continue
-            self._schedule(merge_replies(replies, end, per_byte=self.pace))
-            if not self.pace and replies[0].delay_s == 0.0:
-                self._flush(now)
+            self._answer(cached, now, end)
+            return
+        packets = bus.framer.feed(data, now)
+        for packet in packets:
+            self.packets_in += 1
+            replies = bus.dispatch(packet, line_bps=line_bps)
+            if len(packets) == 1 and not self.pace:
+                bus.remember(data, packet, replies, line_bps=line_bps)
+            self._answer(replies, now, end)
+
+    def _answer(self, replies: list[Reply], now: float, end: float) -> None:
+        """Put one packet's replies on the line: now, or queued for their delay (and pace)."""
+        if not replies:
+            return
+        if len(replies) == 1 and replies[0].delay_s == 0.0 and not (self.pace or self._queue):
+            self._emit(replies[0].data, now)  # the common case at Return Delay Time 0
+            return
+        self._schedule(merge_replies(replies, end, per_byte=self.pace))
+        if not self.pace and replies[0].delay_s == 0.0:
+            self._flush(now)
 
     def _collide(self, data: bytes, begin: float, byte_s: float) -> bytes:
         """Host bytes overlapping reply bytes still on the wire: both become their AND."""
@@ -218,13 +231,12 @@ class BusServer:
                 self._hot_until = now + HOT_S
         if queue:
             self._flush(time.monotonic())
-        if not (queue and queue[0][0] - now < PHYSICS_DEFER_S):
-            # Step physics here, just after a reply went out, while the host digests it:
-            # the request path then rarely pays for a step (see Bus.request_lag_s).
+        if now >= self._next_physics and not (queue and queue[0][0] - now < PHYSICS_DEFER_S):
+            # Step physics on the loop's tick, not in the request path: a request then rarely
+            # pays for a step (see Bus.request_lag_s), and a spinning loop stays cheap.
             self.bus.advance()
-            if now >= self._next_physics:
-                self.bus.expire(now)
-                self._next_physics = max(self._next_physics + self.physics_period_s, now)
+            self.bus.expire(now)
+            self._next_physics = max(self._next_physics + self.physics_period_s, now)
         if self._calls:
             self._run_calls()
 

@@ -34,6 +34,8 @@ __all__ = ["PtyTransport"]
 
 # struct termios2 on Linux: 4 tcflag_t, c_line, 19 cc, then c_ispeed, c_ospeed.
 _TERMIOS2 = struct.Struct("4IB19B2I")
+_OSPEED = struct.Struct("I")
+_OSPEED_OFFSET = _TERMIOS2.size - _OSPEED.size
 _TCGETS2 = getattr(termios, "TCGETS2", 0x802C542A)
 _SPEEDS = {
     getattr(termios, f"B{rate}"): float(rate)
@@ -58,7 +60,8 @@ class PtyTransport(Transport):
         self.link: Path | None = None
         self._closed = False
         self._termios2 = True
-        self._termios2_buffer = bytes(_TERMIOS2.size)
+        # Filled in place by the ioctl (no new bytes object per call: it runs once per packet).
+        self._termios2_buffer = bytearray(_TERMIOS2.size)
         if link is not None:
             path = Path(link)
             if path.is_symlink():
@@ -100,7 +103,8 @@ class PtyTransport(Transport):
     def line_bps(self) -> float | None:
         if self._termios2:
             try:
-                ospeed = _TERMIOS2.unpack(fcntl.ioctl(self._slave, _TCGETS2, self._termios2_buffer))[-1]
+                fcntl.ioctl(self._slave, _TCGETS2, self._termios2_buffer, True)
+                ospeed = _OSPEED.unpack_from(self._termios2_buffer, _OSPEED_OFFSET)[0]
                 if ospeed:
                     return float(ospeed)
             except OSError:
