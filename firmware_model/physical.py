@@ -221,7 +221,7 @@ class PhysicalModel:
         """The registers at ``time_s`` without advancing."""
         if self._slow is None:
             self._slow = self._slow_registers()
-        slow = {k: v.copy() for k, v in self._slow.items()}
+        slow = self._slow  # read-only arrays, shared until the next event: no copy per call
         c = self._sensing
         if self._xp is SCALAR:  # one servo: plain Python is several times cheaper than numpy here
             st = self._s
@@ -233,9 +233,12 @@ class PhysicalModel:
         if c is None:
             moving = np.zeros(self.n, dtype=np.int64)
         else:
-            busy = np.abs(st.ref_vel) > 1e-9
-            if c.any_wheel:
-                busy = np.where(c.wheel, c.wheel_turning, busy)
+            if not c.any_wheel:
+                busy = np.abs(st.ref_vel) > 1e-9
+            elif c.all_wheel:
+                busy = c.wheel_turning
+            else:
+                busy = np.where(c.wheel, c.wheel_turning, np.abs(st.ref_vel) > 1e-9)
             moving = (c.enabled & (busy | (np.abs(st.speed) > RAD_S_PER_SPEED_UNIT))).astype(np.int64)
         units = st.angle / _UNIT_RAD
         if units.min() >= 0.0 and units.max() < 1023.0:  # all on the track: the general conversion gives the same
@@ -253,6 +256,8 @@ class PhysicalModel:
             regs["alarms"] = alarm_bits(regs["present_temperature"], c.temperature_limit, self._array("overload_timer"),
                                         self.params.overload_delay_s, self.supply_voltage_v,
                                         c.min_voltage_limit, c.max_voltage_limit)
+        for array in regs.values():
+            array.flags.writeable = False  # handed to every sense() caller until the next event
         return regs
 
     # ------------------------------------------------------------------ internals
@@ -302,7 +307,7 @@ class PhysicalModel:
         plan.sensing = SimpleNamespace(
             enabled=enabled, wheel=wheel, wheel_turning=(speed_raw & 0x3FF) != 0,
             temperature_limit=raw["temperature_limit"].copy(), min_voltage_limit=raw["min_voltage_limit"].copy(),
-            max_voltage_limit=raw["max_voltage_limit"].copy(), any_wheel=bool(wheel.any()),
+            max_voltage_limit=raw["max_voltage_limit"].copy(), any_wheel=bool(wheel.any()), all_wheel=bool(wheel.all()),
         )
         plan.any_wheel, plan.any_joint = bool(wheel.any()), bool((~wheel).any())
         plan.any_disabled = bool((~enabled).any())
