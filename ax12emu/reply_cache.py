@@ -63,8 +63,8 @@ class ReplyCache:
         """Keep ``replies`` to ``data`` if it was exactly one cacheable packet to one ID."""
         if (targets is None or packet.id == BROADCAST_ID or not packet.checksum_ok or packet.instruction not in CACHEABLE
                 or len(data) < 6 or len(data) != data[3] + 4 or data[:2] != b"\xff\xff"
-                or data[2] != packet.id or data[4] != packet.instruction):
-            return  # not exactly this one packet (a chunk may finish an earlier partial one)
+                or data[2] != packet.id or data[4] != packet.instruction or data[5:-1] != packet.params):
+            return  # not exactly this one packet: a chunk may have finished a partial one held before it
         if len(self._entries) >= MAX_ENTRIES:
             self._entries.clear()
         snapshot = tuple((servo.table.row.tobytes(), servo.alarms) for servo in targets)

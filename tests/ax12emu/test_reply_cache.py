@@ -111,6 +111,23 @@ def test_chunks_that_are_not_exactly_one_packet_are_served_and_not_stored(chunks
     assert bus.reply_cache.hits == 0
 
 
+def test_a_packet_shaped_chunk_that_finished_a_held_partial_is_not_stored():
+    """The chunk completes a stray partial (whose checksum happens to fit) instead of being the READ it looks like.
+
+    The servo answers that combined packet (a READ with 6 parameters: Range error); the same bytes
+    sent again cleanly are a plain READ and must get its own reply, not the one stored for the mix-up.
+    """
+    params = next(bytes([p]) + READ_POSITION[:5] for p in range(256)
+                  if ~(1 + 8 + 2 + p + sum(READ_POSITION[:5])) & 0xFF == READ_POSITION[5])
+    stray = bytes([0xFF, 0xFF, 1, len(params) + 2, 0x02, params[0]])
+    bus = _bus()
+    assert bus.receive(stray, now_s=0.0) == [] and bus.framer.buffered
+    (mixed,) = bus.receive(READ_POSITION, now_s=0.001)
+    assert mixed.data[4] & 0x08 and not bus.framer.buffered  # Range error: the combined packet was answered
+    for later_s in (1.0, 2.0):
+        assert _data(bus.receive(READ_POSITION, now_s=later_s)) == [encode_status(1, 0, bytes([0x00, 0x02]))]
+
+
 def test_the_cache_stays_bounded():
     bus = _bus()
     for address in range(50):
