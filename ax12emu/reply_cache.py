@@ -41,9 +41,6 @@ class ReplyCache:
         self._entries: dict[tuple[bytes, float | None], tuple[list, tuple, list]] = {}
         self.hits = 0
 
-    def clear(self) -> None:
-        self._entries.clear()
-
     def lookup(self, data: bytes, line_bps: float | None, by_id: dict[int, list[VirtualServo]]) -> list[Reply] | None:
         """The replies stored for ``data`` if the servos it reached are unchanged; else None."""
         entry = self._entries.get((data, line_bps))

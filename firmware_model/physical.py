@@ -18,7 +18,8 @@ Commands are decoded only when they change (the bus hands over the same
 object until a register changes; otherwise their bytes are compared), and
 the registers that change only at events are cached, so a call per step
 stays cheap.  One servo runs on plain floats, more on numpy arrays
-(:mod:`firmware_model.backend`); the numbers agree.
+(:mod:`firmware_model.backend`); the numbers agree.  The step loop itself,
+generic and fused for the usual configurations, is :mod:`firmware_model.stepping`.
 
 Controllers: ``controller="compliance"`` (default, the e-manual's) or
 ``"pid"`` (the report's), see :mod:`firmware_model.controller`.
@@ -309,7 +310,7 @@ class PhysicalModel:
             temperature_limit=raw["temperature_limit"].copy(), min_voltage_limit=raw["min_voltage_limit"].copy(),
             max_voltage_limit=raw["max_voltage_limit"].copy(), any_wheel=bool(wheel.any()), all_wheel=bool(wheel.all()),
         )
-        plan.any_wheel, plan.any_joint = bool(wheel.any()), bool((~wheel).any())
+        plan.any_wheel, plan.any_joint = plan.sensing.any_wheel, not plan.sensing.all_wheel
         plan.any_disabled = bool((~enabled).any())
         plan.any_arm = bool(np.any(self._array("weight_nm") != 0))
         plan.any_ext = bool(np.any(self._array("ext_nm") != 0))
