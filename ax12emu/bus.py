@@ -164,22 +164,30 @@ class Bus:
         ``line_bps`` is the rate the host transmits at, when the transport
         knows it (a pty's termios speed); None means every servo hears.
         """
-        cached = self.recall(data, line_bps=line_bps)
-        if cached is not None:
-            return cached
-        replies: list[Reply] = []
+        return [reply for replies in self.answer(data, now_s, line_bps=line_bps) for reply in replies]
+
+    def answer(self, data: bytes, now_s: float | None = None, *, line_bps: float | None = None,
+               cache: bool = True) -> list[list[Reply]]:
+        """Feed bytes; return the replies to each packet they completed, one list per packet.
+
+        A chunk that repeats a cached READ or PING is answered from the reply
+        cache (``cache=False`` bypasses it, e.g. when bytes may have collided).
+        """
+        if cache:
+            cached = self.recall(data, line_bps=line_bps)
+            if cached is not None:
+                return [cached]
         packets = self.framer.feed(data, now_s)
-        for packet in packets:
-            replies.extend(self.dispatch(packet, line_bps=line_bps))
-        if len(packets) == 1:
-            self.remember(data, packets[0], replies, line_bps=line_bps)
-        return replies
+        answers = [self.dispatch(packet, line_bps=line_bps) for packet in packets]
+        if cache and len(packets) == 1:
+            self.remember(data, packets[0], answers[0], line_bps=line_bps)
+        return answers
 
     def recall(self, data: bytes, *, line_bps: float | None = None) -> list[Reply] | None:
         """The replies to ``data`` if it repeats a cached READ or PING and nothing it reads changed; else None.
 
-        Brings physics up first, as :meth:`dispatch` does; the caller feeds
-        the framer and dispatches only when this returns None.
+        Brings physics up first, as :meth:`dispatch` does; :meth:`answer`
+        feeds the framer and dispatches only when this returns None.
         """
         if len(data) < 6 or len(data) != data[3] + 4 or self.framer.buffered or self.faults is not None:
             return None

@@ -166,18 +166,9 @@ class BusServer:
                 self._schedule([(begin + (i + 1) * byte_s, bytes((b,))) for i, b in enumerate(data)], is_reply=False)
         elif self.echo:
             self._schedule([(now, data)], is_reply=False)
-        bus = self.bus
-        cached = None if self.pace else bus.recall(data, line_bps=line_bps)  # pace: bytes may have collided
-        if cached is not None:
+        # With pace the bytes may have collided: no reply cache.
+        for replies in self.bus.answer(data, now, line_bps=line_bps, cache=not self.pace):
             self.packets_in += 1
-            self._answer(cached, now, end)
-            return
-        packets = bus.framer.feed(data, now)
-        for packet in packets:
-            self.packets_in += 1
-            replies = bus.dispatch(packet, line_bps=line_bps)
-            if len(packets) == 1 and not self.pace:
-                bus.remember(data, packet, replies, line_bps=line_bps)
             self._answer(replies, now, end)
 
     def _answer(self, replies: list[Reply], now: float, end: float) -> None:
