@@ -46,6 +46,10 @@ class Plant:
         self._shutdown = lay.by_name["shutdown"].address
         self._cached_commands: Commands | None = None
         self._any_alarm = True
+        #: The arrays last written, by register: a model may hand over the same (read-only)
+        #: array until the value changes (the slow registers, see ServoModel.sense), which
+        #: then need no copying.  Whoever else writes a row says so (tables_changed, refresh).
+        self._written: dict[str, object] = {}
         for name, (address, size) in {**self._commands, **self._sensed}.items():
             if size == 2 and address % 2:
                 raise AssertionError(f"{name} at odd address {address}: the word view cannot read it")
@@ -66,8 +70,9 @@ class Plant:
         return self._cached_commands
 
     def tables_changed(self) -> None:
-        """Tell the plant a client may have written commands."""
+        """Tell the plant a client may have written commands (or any register: all are rewritten next)."""
         self._cached_commands = None
+        self._written.clear()
 
     def advance(self, sim_time_s: float) -> bool:
         """Advance the model to ``sim_time_s`` if a whole step is due; True if it moved."""
@@ -79,16 +84,25 @@ class Plant:
 
     def refresh(self) -> None:
         """Copy the model's present sensed values into the tables without advancing."""
+        self._written.clear()
+        self._any_alarm = True
         self._write_back(self.model.sense())
 
     def _write_back(self, sensed: Sensed) -> None:
-        rows = self.rows
+        rows, written = self.rows, self._written
         words = rows.view("<u2")
         for name, (address, size) in self._sensed.items():
+            value = getattr(sensed, name)
+            if written.get(name) is value and not value.flags.writeable:
+                continue  # the very array written last time, and nobody can have changed it
+            written[name] = value
             if size == 2:
-                words[:, address // 2] = getattr(sensed, name)
+                words[:, address // 2] = value
             else:
-                rows[:, address] = getattr(sensed, name)
+                rows[:, address] = value
+        if written.get("alarms") is sensed.alarms and not (self._any_alarm or sensed.alarms.flags.writeable):
+            return  # no alarm then, the same read-only bits now
+        written["alarms"] = sensed.alarms
         alarms = np.asarray(sensed.alarms, dtype=np.int64) & 0x7F
         any_alarm = bool(alarms.any())
         if not (any_alarm or self._any_alarm):

@@ -233,6 +233,8 @@ class PhysicalModel:
         st = self._s
         if c is None:
             moving = np.zeros(self.n, dtype=np.int64)
+        elif c.always_moving is not None:
+            moving = c.always_moving
         else:
             if not c.any_wheel:
                 busy = np.abs(st.ref_vel) > 1e-9
@@ -241,6 +243,8 @@ class PhysicalModel:
             else:
                 busy = np.where(c.wheel, c.wheel_turning, np.abs(st.ref_vel) > 1e-9)
             moving = (c.enabled & (busy | (np.abs(st.speed) > RAD_S_PER_SPEED_UNIT))).astype(np.int64)
+        if c is not None and c.any_wheel:  # endless turns: some shaft is usually in the gap
+            return Sensed(present_position=position_rad_to_raw(st.angle), moving=moving, **slow)
         units = st.angle / _UNIT_RAD
         if units.min() >= 0.0 and units.max() < 1023.0:  # all on the track: the general conversion gives the same
             return Sensed(present_position=np.rint(units).astype(np.int64), moving=moving, **slow)
@@ -309,7 +313,13 @@ class PhysicalModel:
             enabled=enabled, wheel=wheel, wheel_turning=(speed_raw & 0x3FF) != 0,
             temperature_limit=raw["temperature_limit"].copy(), min_voltage_limit=raw["min_voltage_limit"].copy(),
             max_voltage_limit=raw["max_voltage_limit"].copy(), any_wheel=bool(wheel.any()), all_wheel=bool(wheel.all()),
+            always_moving=None,
         )
+        if plan.sensing.all_wheel and bool((enabled & plan.sensing.wheel_turning).all()):
+            # Every servo driven at a speed in wheel mode: Moving is 1 whatever the shaft does, so
+            # sense() hands over this one read-only array (the plant then need not rewrite it).
+            plan.sensing.always_moving = np.ones(n, dtype=np.int64)
+            plan.sensing.always_moving.flags.writeable = False
         plan.any_wheel, plan.any_joint = plan.sensing.any_wheel, not plan.sensing.all_wheel
         plan.any_disabled = bool((~enabled).any())
         plan.any_arm = bool(np.any(self._array("weight_nm") != 0))
@@ -376,5 +386,6 @@ class PhysicalModel:
         """Latch Present Speed and Present Load, once per sample period."""
         s = self._s
         s.held_speed = held_speed_rad_s(s.angle, s.sample_angle, self._hold_steps * self.step_s)
-        s.held_drive = s.drive
-        s.sample_angle = s.angle
+        # Copies: the fused kernel updates the state arrays in place.
+        s.held_drive = s.drive if self._xp is SCALAR else s.drive.copy()
+        s.sample_angle = s.angle if self._xp is SCALAR else s.angle.copy()

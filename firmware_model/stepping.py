@@ -236,6 +236,13 @@ class FusedNumpySteps:
         self.free = 1.0 - s.blocked if plan.any_blocked else None
         self.buf = SimpleNamespace(**{name: np.empty(n) for name in ("e", "d", "t", "u", "err", "cur", "applied", "dirn", "fric", "held")})
         self.buf.speed_products, self.buf.in_units = np.empty((3, n)), np.empty((2, n))
+        # The state the kernel updates in place.  Reference and angle are the two rows of one
+        # array, so one call scales both.  A caller that rebinds a state array (an event, a new
+        # plan) is copied in at the next call; one that keeps a state array must copy it.
+        self.ref_angle = np.empty((2, n))
+        self.state = {"ref": self.ref_angle[0], "angle": self.ref_angle[1],
+                      **{name: np.empty(n) for name in ("speed", "ref_vel", "drive", "demand", "current_sq_sum")}}
+        self.before = [np.empty(n) for _ in range(4)]
 
     def __call__(self, s: SimpleNamespace, count: int) -> None:
         sub, add, mul, absolute, sqrt, rint, exp, cos = np.subtract, np.add, np.multiply, np.abs, np.sqrt, np.rint, np.exp, np.cos
@@ -247,17 +254,24 @@ class FusedNumpySteps:
         goal, max_speed, margin, gain, punch, limit, volts_r, en = (p.goal_rad, p.max_speed, p.ccw_margin, p.ccw_gain, p.punch,
                                                                     p.limit, p.volts_r, p.en)
         disabled, ext, neg_weight, free, viscous, wheel = self.disabled, self.ext, self.neg_weight, self.free, c.viscous, self.wheel
-        # Fresh copies of the state (others may hold the old arrays), updated in place, stored back below;
-        # reference and angle are the two rows of one array, so one call scales both.
-        ref_angle = np.stack((s.ref, s.angle))
-        ref, angle = ref_angle
-        speed, vel = s.speed.copy(), s.ref_vel.copy()
-        drive, demand, i2_sum = np.empty_like(angle), np.empty_like(angle), s.current_sq_sum.copy()
+        state = self.state
+        for name, own in state.items():
+            current = getattr(s, name)
+            if current is not own:  # rebound since the last call: take the new values in
+                np.copyto(own, current)
+                setattr(s, name, own)
+        ref_angle = self.ref_angle
+        ref, angle, speed, vel, drive, demand, i2_sum = (state["ref"], state["angle"], state["speed"], state["ref_vel"],
+                                                         state["drive"], state["demand"], state["current_sq_sum"])
         # Fixed points, checked after the first step rather than assumed: a step that leaves the
         # reference (and its speed) bit for bit unchanged leaves it so for good, and a step that
         # leaves the whole state unchanged (reference, angle, speed: a servo holding still)
         # repeats itself exactly, so later steps skip the generator, or everything but heating.
-        before = (ref.copy(), vel.copy(), angle.copy(), speed.copy()) if count > 1 else None
+        before = None
+        if count > 1:
+            before = self.before
+            for copy, value in zip(before, (ref, vel, angle, speed)):
+                np.copyto(copy, value)
         ref_resting = False
         for step in range(count):
             if wheel:  # the generic loop's speed loop with feed-forward
@@ -351,6 +365,3 @@ class FusedNumpySteps:
                         add(i2_sum, t, i2_sum)
                     break
                 ref_resting = ref_resting and disabled is None  # else the reference follows a free shaft
-        s.angle, s.speed, s.ref, s.ref_vel = angle, speed, ref, vel
-        if count:
-            s.drive, s.demand, s.current_sq_sum = drive, demand, i2_sum

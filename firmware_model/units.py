@@ -44,11 +44,11 @@ def position_rad_to_raw(angle_rad: np.ndarray) -> np.ndarray:
     while the horn passes through the 60 degree gap.
     """
     wrapped = np.mod(np.asarray(angle_rad, dtype=float), 2.0 * np.pi)
-    raw = np.rint(wrapped / RAD_PER_POSITION_UNIT)
-    in_gap = wrapped > POSITION_RANGE_RAD
-    nearer_top = (wrapped - POSITION_RANGE_RAD) < (2.0 * np.pi - wrapped)
-    raw = np.where(in_gap, np.where(nearer_top, POSITION_MAX_RAW, 0), raw)
-    return np.clip(raw, 0, POSITION_MAX_RAW).astype(np.int64)
+    # On the track and in the gap's upper half this is the reading (past the top it saturates);
+    # a point nearer the CW end (0) than the top can only lie in the gap, where it reads 0.
+    raw = np.minimum(np.rint(wrapped / RAD_PER_POSITION_UNIT), POSITION_MAX_RAW)
+    nearer_cw_end = (wrapped - POSITION_RANGE_RAD) >= (2.0 * np.pi - wrapped)
+    return np.where(nearer_cw_end, 0, raw).astype(np.int64)
 
 
 def speed_rad_s_to_raw(speed_rad_s: np.ndarray) -> np.ndarray:

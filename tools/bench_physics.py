@@ -11,7 +11,11 @@ its goal, as most servos of a robot are most of the time) shows what the
 model's checked fixed points save (see :mod:`firmware_model.stepping`).
 
 Timing on a shared machine is noisy, so each count runs ``--repeat`` times
-and the best run is reported (as ``timeit`` does), with the worst beside it.
+and the best run is reported (as ``timeit`` does: noise only ever slows a
+run down), with the median and the worst beside it.  On the development VM
+the same process swings between about 17x and 31x for 253 servos within
+seconds (other tenants of the host), so the best shows what the code does on
+a free core and the median what a run on this machine typically sees.
 
 Usage: ``python tools/bench_physics.py [--seconds S] [--step-s DT] [--poll-s P] [--counts 1,18,253] [--repeat R]``
 """
@@ -67,7 +71,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--step-s", type=float, default=1e-3, help="integration step (default 1 ms)")
     parser.add_argument("--poll-s", type=float, default=0.01, help="simulated time between advance() calls (default 10 ms)")
     parser.add_argument("--counts", default="1,18,253", help="servo counts, comma-separated")
-    parser.add_argument("--repeat", type=int, default=3, help="runs per count; the best is reported (default 3)")
+    parser.add_argument("--repeat", type=int, default=7, help="runs per count; the best is reported (default 7)")
     return parser.parse_args(argv)
 
 
@@ -75,16 +79,22 @@ def main(argv: list[str] | None = None) -> int:
     """Print the rate for each servo count and its ratio to the goal."""
     args = parse_args(argv)
     print(f"step {args.step_s * 1e3:g} ms, {args.seconds:g} s simulated, advance() every {args.poll_s * 1e3:g} ms")
+    configs = [(int(c), scenario) for c in args.counts.split(",") for scenario in ("moving", "holding")]
+    # Round robin, so every configuration's runs are spread over the whole benchmark, slow spells and fast.
+    results: dict[tuple[int, str], list[float]] = {config: [] for config in configs}
+    for _ in range(max(1, args.repeat)):
+        for n, scenario in configs:
+            results[n, scenario].append(rate(n, args.seconds, args.step_s, args.poll_s, scenario))
     worst = float("inf")
-    for n in (int(c) for c in args.counts.split(",")):
-        for scenario in ("moving", "holding"):
-            runs = sorted(rate(n, args.seconds, args.step_s, args.poll_s, scenario) for _ in range(max(1, args.repeat)))
-            r = runs[-1]
-            goal = GOALS.get(n) if scenario == "moving" else None
-            verdict = f"goal {goal:g}x -> {r / goal:.2f} of goal" if goal else "no goal"
-            print(f"{n:4d} servos {scenario:7s}: {r:8.1f} x real time   (worst of {len(runs)}: {runs[0]:.1f}; {verdict})")
-            if goal:
-                worst = min(worst, r / goal)
+    for n, scenario in configs:
+        runs = sorted(results[n, scenario])
+        r, median = runs[-1], runs[len(runs) // 2]
+        goal = GOALS.get(n) if scenario == "moving" else None
+        verdict = f"goal {goal:g}x -> best {r / goal:.2f}, median {median / goal:.2f} of goal" if goal else "no goal"
+        print(f"{n:4d} servos {scenario:7s}: {r:8.1f} x real time   (of {len(runs)} runs: median {median:.1f}, "
+              f"worst {runs[0]:.1f}; {verdict})")
+        if goal:
+            worst = min(worst, r / goal)
     return 0 if worst >= 1.0 else 1
 
 

@@ -187,3 +187,15 @@ def test_blocked_shaft_and_set_angle(backend, commands):
     assert abs(int(sensed.present_position[0]) - 800) <= 4
     model.set_angle(0, 300 * 0.2929 * np.pi / 180)
     assert abs(int(model.sense().present_position[0]) - 300) <= 1
+
+
+def test_moving_in_wheel_mode_is_one_shared_array_while_every_servo_is_driven(commands):
+    """Every servo driven in wheel mode reads Moving 1, handed over as one read-only array (the plant
+    then skips rewriting it); a servo told to stop, or with torque off, reads 0 once at rest."""
+    model = PhysicalModel(3)
+    turning = commands(3, cw_angle_limit=0, ccw_angle_limit=0, moving_speed=300)
+    first = model.advance(0.05, turning).moving
+    assert first.tolist() == [1, 1, 1] and not first.flags.writeable
+    assert model.advance(0.06, turning).moving is first
+    mixed = commands(3, cw_angle_limit=0, ccw_angle_limit=0, moving_speed=[300, 0, 300], torque_enable=[1, 1, 0])
+    assert model.advance(1.5, mixed).moving.tolist() == [1, 0, 0]
