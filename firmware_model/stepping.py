@@ -45,6 +45,9 @@ from .units import RAD_PER_POSITION_UNIT
 
 __all__ = ["StepConstants", "generic_steps", "fused_scalar_steps", "FusedNumpySteps", "fusable"]
 
+#: While no fixed point is found, the numpy kernel looks for one after every this many steps.
+CHECK_EVERY = 8
+
 
 @dataclass(frozen=True)
 class StepConstants:
@@ -242,7 +245,16 @@ class FusedNumpySteps:
         self.ref_angle = np.empty((2, n))
         self.state = {"ref": self.ref_angle[0], "angle": self.ref_angle[1],
                       **{name: np.empty(n) for name in ("speed", "ref_vel", "drive", "demand", "current_sq_sum")}}
-        self.before = [np.empty(n) for _ in range(4)]
+        self.buf.i2_step, self.buf.step_angle = np.empty(n), np.empty(n)
+        # Fixed points found by a check after a step (see __call__); they hold while the plan (this
+        # object) lives and nobody rebinds the state arrays they depend on.
+        self.ref_resting = self.at_rest = self.cruising = False
+        #: Cruising applies when the speed update depends on the speed alone: all in wheel mode
+        #: (no position controller), no arm (gravity depends on the angle), no blocked shaft.
+        self.can_cruise = plan.any_wheel and not plan.any_arm and not plan.any_blocked
+        self.check_in = 0
+        #: Steps taken by each shortcut (for tests and benchmarks: that they run at all).
+        self.rest_steps = self.cruise_steps = 0
 
     def __call__(self, s: SimpleNamespace, count: int) -> None:
         sub, add, mul, absolute, sqrt, rint, exp, cos = np.subtract, np.add, np.multiply, np.abs, np.sqrt, np.rint, np.exp, np.cos
@@ -260,20 +272,40 @@ class FusedNumpySteps:
             if current is not own:  # rebound since the last call: take the new values in
                 np.copyto(own, current)
                 setattr(s, name, own)
+                if name in ("ref", "ref_vel", "angle"):
+                    self.ref_resting = self.at_rest = False
+                elif name == "speed":
+                    self.ref_resting = self.at_rest = self.cruising = False
         ref_angle = self.ref_angle
         ref, angle, speed, vel, drive, demand, i2_sum = (state["ref"], state["angle"], state["speed"], state["ref_vel"],
                                                          state["drive"], state["demand"], state["current_sq_sum"])
-        # Fixed points, checked after the first step rather than assumed: a step that leaves the
-        # reference (and its speed) bit for bit unchanged leaves it so for good, and a step that
-        # leaves the whole state unchanged (reference, angle, speed: a servo holding still)
-        # repeats itself exactly, so later steps skip the generator, or everything but heating.
-        before = None
-        if count > 1:
-            before = self.before
-            for copy, value in zip(before, (ref, vel, angle, speed)):
-                np.copyto(copy, value)
-        ref_resting = False
-        for step in range(count):
+        i2_step, step_angle = bf.i2_step, bf.step_angle
+        # Fixed points, checked after a step rather than assumed (every CHECK_EVERY steps while
+        # none is found): a step that leaves the reference (and its speed) bit for bit unchanged
+        # leaves it so for good; one that leaves the whole state unchanged (reference, angle,
+        # speed: a servo holding still) repeats itself exactly, so later steps only heat; and in
+        # wheel mode, where the speed update depends on the speed alone, one that leaves the
+        # speed unchanged is cruising: later steps only turn the shaft by the same angle and heat.
+        ref_resting = self.ref_resting
+        step = 0
+        while step < count:
+            if self.at_rest:
+                self.rest_steps += count - step
+                for _ in range(count - step):
+                    add(i2_sum, i2_step, i2_sum)
+                break
+            if self.cruising:
+                self.cruise_steps += count - step
+                for _ in range(count - step):
+                    add(angle, step_angle, angle)
+                    add(i2_sum, i2_step, i2_sum)
+                break
+            before = None
+            if self.check_in <= 0:
+                before = (ref.tobytes(), vel.tobytes(), angle.tobytes(), speed.tobytes())
+            else:
+                self.check_in -= 1
+            step += 1
             if wheel:  # the generic loop's speed loop with feed-forward
                 sub(p.wheel_ref, speed, t)
                 mul(c.kv, t, t)
@@ -349,19 +381,19 @@ class FusedNumpySteps:
             mul(speed, dirn, t)
             maximum(t, c.zero, out=t)
             mul(t, dirn, speed)
-            mul(speed, c.dt, t)
-            add(angle, t, angle)
+            mul(speed, c.dt, step_angle)
+            add(angle, step_angle, angle)
             if free is not None:  # a held shaft keeps its angle
                 sub(angle, held, t)
                 mul(t, free, t)
                 add(held, t, angle)
                 mul(speed, free, speed)
-            mul(cur, cur, t)
-            add(i2_sum, t, i2_sum)
-            if step == 0 and before is not None:
-                ref_resting = np.array_equal(ref, before[0]) and np.array_equal(vel, before[1])
-                if ref_resting and np.array_equal(angle, before[2]) and np.array_equal(speed, before[3]):
-                    for _ in range(count - 1):
-                        add(i2_sum, t, i2_sum)
-                    break
-                ref_resting = ref_resting and disabled is None  # else the reference follows a free shaft
+            mul(cur, cur, i2_step)
+            add(i2_sum, i2_step, i2_sum)
+            if before is not None:
+                same_ref = ref.tobytes() == before[0] and vel.tobytes() == before[1]
+                same_speed = speed.tobytes() == before[3]
+                self.at_rest = same_ref and same_speed and angle.tobytes() == before[2]
+                self.cruising = same_speed and self.can_cruise
+                ref_resting = self.ref_resting = same_ref and disabled is None  # else it follows a free shaft
+                self.check_in = 0 if self.at_rest or self.cruising else CHECK_EVERY

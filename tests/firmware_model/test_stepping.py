@@ -54,14 +54,14 @@ def _same_bits(a: np.ndarray, b: np.ndarray) -> bool:
 
 
 def _trajectory(n: int, backend: str, fused: bool, load, make_commands, wheel: bool = False,
-                params: ServoParams = ServoParams()) -> list[tuple]:
+                params: ServoParams = ServoParams(), every_s: float = 0.007) -> list[tuple]:
     model = PhysicalModel(n, params=params, backend=backend, fused=fused)
     load(model)
     states, t = [], 0.0
     for duration_s, cmds in _scenario(n, make_commands, wheel):
         end = t + duration_s
         while t < end - 1e-12:
-            t += 0.007  # not a multiple of the thermal or sample period
+            t += every_s  # 7 ms: not a multiple of the thermal or sample period
             sensed = model.advance(t, cmds)
             states.append((model.angle_rad, model.speed_rad_s, model.reference_rad, model.drive, model.temperature_c,
                            *(getattr(sensed, name) for name in type(sensed).field_names())))
@@ -80,6 +80,34 @@ def test_fused_kernels_equal_the_generic_loop(n, backend, load, mode, params, co
     assert len(fused) == len(generic) > 100
     for step, (a, b) in enumerate(zip(fused, generic)):
         assert all(_same_bits(x, y) for x, y in zip(a, b)), f"differs at advance {step}"
+
+
+@pytest.mark.parametrize("mode", ["joint", "wheel"])
+@pytest.mark.parametrize("load", ["none", "external torque"])
+def test_fused_kernel_equals_the_generic_loop_one_step_per_call(load, mode, commands):
+    """The serving loop's cadence, one step per advance: fixed points found carry over between calls."""
+    fused, generic = (_trajectory(3, "numpy", flag, LOADS[load], commands, mode == "wheel", every_s=0.001)
+                      for flag in (True, False))
+    assert len(fused) == len(generic) > 1000
+    for step, (a, b) in enumerate(zip(fused, generic)):
+        assert all(_same_bits(x, y) for x, y in zip(a, b)), f"differs at advance {step}"
+
+
+def test_fixed_point_shortcuts_run_in_the_scenarios_above(commands, monkeypatch):
+    """Guards the comparisons: servos holding still and wheels cruising take the shortcuts there."""
+    kernels = []
+    build = FusedNumpySteps.__init__
+
+    def _collect(self, *args):
+        build(self, *args)
+        kernels.append(self)
+
+    monkeypatch.setattr(FusedNumpySteps, "__init__", _collect)
+    _trajectory(3, "numpy", True, LOADS["none"], commands, wheel=False)
+    assert sum(k.rest_steps for k in kernels) > 100
+    kernels.clear()
+    _trajectory(3, "numpy", True, LOADS["external torque"], commands, wheel=True, every_s=0.001)
+    assert sum(k.cruise_steps for k in kernels) > 100
 
 
 def test_usual_configuration_runs_fused_and_others_the_generic_loop(commands):
