@@ -112,6 +112,10 @@ class ServoModel(Protocol):
         """Integrate from ``time_s`` to ``to_time_s`` holding ``commands``; return the sensors."""
         ...
 
+    def step_to(self, to_time_s: float, commands: Commands) -> None:
+        """:meth:`advance` without reading the sensors (a serving loop reads them separately, later)."""
+        ...
+
     def sense(self) -> Sensed:
         """The sensed registers at ``time_s`` without advancing."""
         ...

@@ -75,6 +75,11 @@ class KinematicModel:
 
     def advance(self, to_time_s: float, commands: Commands) -> Sensed:
         """Step from ``time_s`` to ``to_time_s`` (whole steps only) with ``commands`` held."""
+        self.step_to(to_time_s, commands)
+        return self.sense()
+
+    def step_to(self, to_time_s: float, commands: Commands) -> None:
+        """:meth:`advance` without reading the sensors."""
         target_steps = int(np.floor(to_time_s / self.step_s + 1e-9))
         count = target_steps - self._steps
         if count > 0 and not (commands is self._rest_commands):
@@ -83,7 +88,6 @@ class KinematicModel:
             self._rest_commands = commands if not self.speed_rad_s.any() else None
             self._steps = target_steps
             self.time_s = target_steps * self.step_s
-        return self.sense()
 
     def _integrate(self, dt_s: float, c: Commands) -> None:
         # Constant speed makes the closed form exact, so many steps cost one.

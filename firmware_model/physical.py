@@ -210,13 +210,17 @@ class PhysicalModel:
     # ------------------------------------------------------------------ the seam
     def advance(self, to_time_s: float, commands: Commands) -> Sensed:
         """Step from ``time_s`` to ``to_time_s`` (whole steps) holding ``commands``; return the sensors."""
+        self.step_to(to_time_s, commands)
+        return self.sense()
+
+    def step_to(self, to_time_s: float, commands: Commands) -> None:
+        """:meth:`advance` without reading the sensors."""
         target = int(math.floor(to_time_s / self.step_s + 1e-9))
         plan = self._cached_plan(commands)
         if target > self._steps:
             self._run(plan, self._steps, target)
             self._steps = target
             self.time_s = self._steps * self.step_s
-        return self.sense()
 
     def sense(self) -> Sensed:
         """The registers at ``time_s`` without advancing."""
@@ -374,10 +378,11 @@ class PhysicalModel:
         # Only wheel mode turns endlessly; a joint-mode shaft keeps a continuous angle, so an
         # overshoot below 0 reads as a small negative error, not as a jump to the far end.
         if plan.any_wheel:
-            shift = xp.where(plan.wheel, xp.floor(s.angle / _TWO_PI) * _TWO_PI, 0.0 * s.angle)
-            s.angle, s.sample_angle, s.ref = s.angle - shift, s.sample_angle - shift, s.ref - shift
-        key = (np.rint(self._array("temperature")).tobytes(),
-               (self._array("overload_timer") >= p.overload_delay_s - 1e-9).tobytes())
+            turns = np.asarray(s.angle / _TWO_PI)
+            if turns.min() < 0.0 or turns.max() >= 1.0:  # some shaft is a turn off (else all stay bound as they are)
+                shift = xp.where(plan.wheel, xp.floor(turns if xp is NUMPY else float(turns)) * _TWO_PI, 0.0 * s.angle)
+                s.angle, s.sample_angle, s.ref = s.angle - shift, s.sample_angle - shift, s.ref - shift
+        key = (np.rint(s.temperature).tobytes(), np.asarray(s.overload_timer >= p.overload_delay_s - 1e-9).tobytes())
         changed = key != self._thermal_key
         self._thermal_key = key
         return changed
