@@ -16,7 +16,7 @@ and collisions on the wire (``server.py``), electrical faults.
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
@@ -157,6 +157,12 @@ class Bus:
             self.faults.after_physics()
         return moved
 
+    def advance_in_pieces(self) -> Iterator[None]:
+        """:meth:`advance` in the plant's pieces (see ``Plant.tick``), for a serving loop to interleave with packets."""
+        yield from self.plant.tick(self.clock.now_s())
+        if self.faults is not None:
+            self.faults.after_physics()
+
     # -- bytes in, replies out ---------------------------------------------------------
     def receive(self, data: bytes, now_s: float | None = None, *, line_bps: float | None = None) -> list[Reply]:
         """Feed bytes that arrived at wall time ``now_s``; return the replies they cause.
@@ -170,36 +176,28 @@ class Bus:
                cache: bool = True) -> list[list[Reply]]:
         """Feed bytes; return the replies to each packet they completed, one list per packet.
 
-        A chunk that repeats a cached READ or PING is answered from the reply
-        cache (``cache=False`` bypasses it, e.g. when bytes may have collided).
+        A chunk that repeats a cached READ or PING (exactly one whole packet,
+        no partial packet held before it) is answered from the reply cache if
+        nothing it reads changed (see :mod:`ax12emu.reply_cache`); physics is
+        brought up first, as :meth:`dispatch` does.  Never with faults
+        installed (they act per packet) or debug logging on (``-v`` logs every
+        packet); ``cache=False`` bypasses it, e.g. when bytes may have collided.
         """
-        if cache:
-            cached = self.recall(data, line_bps=line_bps)
-            if cached is not None:
-                return [cached]
+        replies_cache = None
+        if cache and self.faults is None and not self.framer.buffered and not log.isEnabledFor(logging.DEBUG):
+            replies_cache = self.reply_cache
+            if len(data) >= 6 and len(data) == data[3] + 4:
+                self.plant.advance(self.clock.now_s() - self.request_lag_s)
+                key = data if type(data) is bytes else bytes(data)
+                cached = replies_cache.lookup(key, line_bps, self._by_id)
+                if cached is not None:
+                    return [cached]
         packets = self.framer.feed(data, now_s)
         answers = [self.dispatch(packet, line_bps=line_bps) for packet in packets]
-        if cache and len(packets) == 1:
-            self.remember(data, packets[0], answers[0], line_bps=line_bps)
+        if replies_cache is not None and len(packets) == 1 and not self.framer.buffered:
+            packet = packets[0]
+            replies_cache.store(bytes(data), line_bps, packet, self._by_id.get(packet.id), answers[0])
         return answers
-
-    def recall(self, data: bytes, *, line_bps: float | None = None) -> list[Reply] | None:
-        """The replies to ``data`` if it repeats a cached READ or PING and nothing it reads changed; else None.
-
-        Brings physics up first, as :meth:`dispatch` does; :meth:`answer`
-        feeds the framer and dispatches only when this returns None.
-        """
-        if len(data) < 6 or len(data) != data[3] + 4 or self.framer.buffered or self.faults is not None:
-            return None
-        if log.isEnabledFor(logging.DEBUG):
-            return None  # -v logs every packet, so every packet goes the long way
-        self.plant.advance(self.clock.now_s() - self.request_lag_s)
-        return self.reply_cache.lookup(bytes(data), line_bps, self._by_id)
-
-    def remember(self, data: bytes, packet: InstructionPacket, replies: list[Reply], *, line_bps: float | None = None) -> None:
-        """Offer the replies to ``data``, just dispatched as ``packet``, to the reply cache."""
-        if self.faults is None and not self.framer.buffered and not log.isEnabledFor(logging.DEBUG):
-            self.reply_cache.store(bytes(data), line_bps, packet, self._by_id.get(packet.id), replies)
 
     def expire(self, now_s: float) -> None:
         """Let the framer drop a partial packet after silence."""

@@ -38,6 +38,7 @@ class ReplyCache:
     """Packet bytes and line speed -> the replies they got, with the state those came from."""
 
     def __init__(self) -> None:
+        #: (packet, line speed) -> (the servos reached, (servo, its table bytes, its alarms) each, replies).
         self._entries: dict[tuple[bytes, float | None], tuple[list, tuple, list]] = {}
         self.hits = 0
 
@@ -49,11 +50,11 @@ class ReplyCache:
         targets, snapshot, replies = entry
         if by_id.get(data[2]) is not targets:  # an ID changed since: another set of servos answers
             return None
-        for servo, (row, alarms) in zip(targets, snapshot):
+        for servo, row, alarms in snapshot:
             if servo.alarms != alarms or servo.table.row.tobytes() != row:
                 return None
         self.hits += 1
-        return list(replies)
+        return replies.copy()
 
     def store(self, data: bytes, line_bps: float | None, packet: InstructionPacket,
               targets: list[VirtualServo] | None, replies: list[Reply]) -> None:
@@ -64,5 +65,5 @@ class ReplyCache:
             return  # not exactly this one packet: a chunk may have finished a partial one held before it
         if len(self._entries) >= MAX_ENTRIES:
             self._entries.clear()
-        snapshot = tuple((servo.table.row.tobytes(), servo.alarms) for servo in targets)
+        snapshot = tuple((servo, servo.table.row.tobytes(), servo.alarms) for servo in targets)
         self._entries[(bytes(data), line_bps)] = (targets, snapshot, list(replies))

@@ -6,7 +6,10 @@ sleeps in the serving path) and put each status packet on the line exactly
 Return Delay Time after the instruction ended.  It sleeps in ``select`` until
 the next event (input, a reply falling due, a physics tick) and spins only
 for the last fraction of a millisecond before a reply, where a timeout
-would be too coarse.
+would be too coarse.  The 1 kHz physics step runs on the loop's tick, in
+pieces (step, sensors, tables: ``Bus.advance_in_pieces``), and while a host
+polls, each piece just after a packet was answered: the host is then busy
+with the reply, so the step costs it almost nothing.
 
 The wire, as it is modelled here:
 
@@ -26,9 +29,10 @@ from __future__ import annotations
 import bisect
 import collections
 import logging
+import os
 import select
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from concurrent.futures import Future
 from typing import Any
 
@@ -50,6 +54,8 @@ HOT_S = 0.0002
 #: A physics step is put off while a reply is due sooner than this (a step of many servos takes
 #: ~0.1 ms), so it cannot delay the reply; a longer Return Delay Time hides the step inside it.
 PHYSICS_DEFER_S = 0.0003
+#: What ``next`` returns from a finished physics step.
+_DONE = object()
 
 
 def merge_replies(replies: list[Reply], start_s: float, *, per_byte: bool) -> list[tuple[float, bytes]]:
@@ -107,7 +113,10 @@ class BusServer:
         self._rx_busy_until = 0.0
         self._hot_until = 0.0
         self._connections = getattr(transport, "connections", None)
+        self._yield_after_reply = getattr(transport, "yield_after_reply", False) and hasattr(os, "sched_yield")
         self._next_physics = time.monotonic()
+        #: The physics step under way, in pieces (Bus.advance_in_pieces), or None.
+        self._physics: Iterator[None] | None = None
         #: Counters for diagnostics and tests.
         self.packets_in = 0
         self.bytes_dropped = 0
@@ -177,6 +186,8 @@ class BusServer:
             return
         if len(replies) == 1 and replies[0].delay_s == 0.0 and not (self.pace or self._queue):
             self._emit(replies[0].data, now)  # the common case at Return Delay Time 0
+            if self._yield_after_reply:
+                os.sched_yield()
             return
         self._schedule(merge_replies(replies, end, per_byte=self.pace))
         if not self.pace and replies[0].delay_s == 0.0:
@@ -207,27 +218,35 @@ class BusServer:
         """Wait for the next event and handle everything that is due."""
         now = time.monotonic()
         queue = self._queue
-        if queue and queue[0][0] - now < SPIN_S or now < self._hot_until:
-            wait_s = 0.0  # a reply is nearly due, or a host is mid-conversation: spin
+        hot = now < self._hot_until
+        if queue and queue[0][0] - now < SPIN_S or hot or self._physics is not None:
+            wait_s = 0.0  # a reply is nearly due, a host is mid-conversation or a step is half done: spin
         else:
             deadline = min(self._next_physics, queue[0][0] - SPIN_S) if queue else self._next_physics
             wait_s = max(0.0, deadline - now)
         # select() takes microseconds; poll/epoll round a timeout up to whole milliseconds.
         readable, _, _ = select.select(self.transport.fds(), (), (), wait_s)
         now = time.monotonic()
+        answered = False
         for fd in readable:
             data = self.transport.on_readable(fd)
             if data:
                 self._on_bytes(data, now)
                 self._hot_until = now + HOT_S
+                answered = True
         if queue:
             self._flush(time.monotonic())
-        if now >= self._next_physics and not (queue and queue[0][0] - now < PHYSICS_DEFER_S):
-            # Step physics on the loop's tick, not in the request path: a request then rarely
-            # pays for a step (see Bus.request_lag_s), and a spinning loop stays cheap.
-            self.bus.advance()
-            self.bus.expire(now)
-            self._next_physics = max(self._next_physics + self.physics_period_s, now)
+        # Step physics on the loop's tick, not in the request path: a request then rarely pays
+        # for a step (see Bus.request_lag_s).  The step comes in pieces, one per pass; while a
+        # host is mid-conversation, a piece runs just after a packet was answered, when the host
+        # is busy with the reply rather than waiting for one.
+        if not (queue and queue[0][0] - now < PHYSICS_DEFER_S) and (answered or not hot):
+            if self._physics is None and now >= self._next_physics:
+                self._physics = self.bus.advance_in_pieces()
+                self.bus.expire(now)
+                self._next_physics = max(self._next_physics + self.physics_period_s, now)
+            if self._physics is not None and next(self._physics, _DONE) is _DONE:
+                self._physics = None
         if self._calls:
             self._run_calls()
 

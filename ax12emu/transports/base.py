@@ -18,6 +18,11 @@ class Transport(abc.ABC):
 
     #: Human-readable location printed at start-up (a device path, an address).
     name: str = ""
+    #: Whether the serving loop should give up the CPU for a moment after a reply: the kernel
+    #: may hand written bytes to the host through a worker thread that needs this CPU first.
+    yield_after_reply: bool = False
+    #: Hosts connected so far, for a transport that accepts several in turn (TCP); a new one is a new host.
+    connections: int | None = None
 
     @abc.abstractmethod
     def fds(self) -> list[int]:

@@ -51,6 +51,12 @@ _SPEEDS = {
 class PtyTransport(Transport):
     """A pty pair; ``link`` makes a symlink to the slave that is removed on close."""
 
+    #: Bytes written to a pty master reach the slave through a kernel worker (the tty flip
+    #: buffer's), which on a two-core machine whose other core runs a busy-waiting client
+    #: often needs this CPU: yielding at once lets the reply through before the loop goes on
+    #: (measured with tools/bench_protocol.py: about 3 % more reads per second).
+    yield_after_reply = True
+
     def __init__(self, link: str | os.PathLike[str] | None = None) -> None:
         self._master, self._slave = pty.openpty()
         tty.setraw(self._slave)

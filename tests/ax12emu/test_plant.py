@@ -51,3 +51,47 @@ def test_a_sensed_register_overwritten_by_someone_else_is_rewritten_once_they_sa
     getattr(bus.plant, announce)()
     _step(bus)
     assert table.get("present_temperature") == true_c
+
+
+def _wheel_bus() -> Bus:
+    bus = Bus([1, 2], clock=VirtualClock())
+    for servo in bus.servos:
+        for name, value in (("cw_angle_limit", 0), ("ccw_angle_limit", 0), ("moving_speed", 400), ("torque_enable", 1)):
+            servo.table.set(name, value)
+    bus.plant.tables_changed()
+    return bus
+
+
+def test_a_step_in_pieces_ends_where_a_whole_step_does_and_shows_the_old_one_until_then():
+    """The serving loop's pieces (step, read the sensors, write them back): the tables keep the
+    previous step's values until the last piece, then equal what a whole step writes."""
+    whole, pieces = _wheel_bus(), _wheel_bus()
+    for step in range(300):
+        for bus in (whole, pieces):
+            bus.clock.advance(0.001)
+        whole.advance()
+        before = pieces.rows.copy()
+        run = pieces.advance_in_pieces()
+        next(run)
+        assert (pieces.rows == before).all(), step
+        for _ in run:
+            pass
+        assert (pieces.rows == whole.rows).all(), step
+    assert whole.servos[0].table.get("present_position") != 512  # they did turn
+
+
+def test_pieces_overtaken_by_a_step_in_the_request_path_do_not_write_older_values():
+    """A request that finds physics behind steps it at once and writes the tables; the pieces of the
+    step under way then leave them alone rather than put the older readings back."""
+    bus = _wheel_bus()
+    _step(bus, 50)
+    bus.clock.advance(0.001)
+    run = bus.advance_in_pieces()
+    next(run)
+    next(run)  # stepped and sensed, not yet written back
+    bus.clock.advance(0.005)
+    bus.plant.advance(bus.clock.now_s())  # as Bus.dispatch does when physics lags
+    newer = bus.rows.copy()
+    for _ in run:
+        pass
+    assert (bus.rows == newer).all()
