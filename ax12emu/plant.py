@@ -46,10 +46,12 @@ class Plant:
         self._shutdown = lay.by_name["shutdown"].address
         self._cached_commands: Commands | None = None
         self._any_alarm = True
-        #: The arrays last written, by register: a model may hand over the same (read-only)
-        #: array until the value changes (the slow registers, see ServoModel.sense), which
-        #: then need no copying.  Whoever else writes a row says so (tables_changed, refresh).
+        #: The arrays last written, by register: a model may hand over the same read-only
+        #: array until the value changes (see ServoModel.sense), which then needs no copying.
+        #: So whoever else writes a sensed register into a row must say so (tables_changed or
+        #: refresh), or the model's value returns only when it changes.
         self._written: dict[str, object] = {}
+        self._refreshes = 0
         for name, (address, size) in {**self._commands, **self._sensed}.items():
             if size == 2 and address % 2:
                 raise AssertionError(f"{name} at odd address {address}: the word view cannot read it")
@@ -95,18 +97,25 @@ class Plant:
         model = self.model
         if sim_time_s < model.time_s + model.step_s:
             return
-        model.step_to(sim_time_s, self.commands())
+        step_to = getattr(model, "step_to", None)
+        if step_to is None:  # a model without it (it is optional): the whole step at once
+            self._write_back(model.advance(sim_time_s, self.commands()))
+            return
+        step_to(sim_time_s, self.commands())
         stepped_to_s = model.time_s
         yield
         sensed = model.sense()
+        refreshes = self._refreshes
         yield
-        if model.time_s == stepped_to_s:  # else a request in between stepped again and wrote newer values
+        # Unless, in between, a request stepped again or someone refreshed the tables (after
+        # changing the model, e.g. turning a shaft by hand): their values are newer.
+        if model.time_s == stepped_to_s and self._refreshes == refreshes:
             self._write_back(sensed)
 
     def refresh(self) -> None:
         """Copy the model's present sensed values into the tables without advancing."""
         self._written.clear()
-        self._any_alarm = True
+        self._refreshes += 1
         self._write_back(self.model.sense())
 
     def _write_back(self, sensed: Sensed) -> None:

@@ -31,6 +31,7 @@ import collections
 import logging
 import os
 import select
+import sys
 import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future
@@ -115,7 +116,8 @@ class BusServer:
         self._connections = getattr(transport, "connections", None)
         self._yield_after_reply = getattr(transport, "yield_after_reply", False) and hasattr(os, "sched_yield")
         self._next_physics = time.monotonic()
-        self._poller = select.poll() if hasattr(select, "poll") else None
+        # Linux only: elsewhere poll() may not take a pty's descriptor (macOS returns POLLNVAL).
+        self._poller = select.poll() if sys.platform.startswith("linux") else None
         self._polled_fds: list[int] = []
         #: The physics step under way, in pieces (Bus.advance_in_pieces), or None.
         self._physics: Iterator[None] | None = None

@@ -112,12 +112,15 @@ class ServoModel(Protocol):
         """Integrate from ``time_s`` to ``to_time_s`` holding ``commands``; return the sensors."""
         ...
 
-    def step_to(self, to_time_s: float, commands: Commands) -> None:
-        """:meth:`advance` without reading the sensors (a serving loop reads them separately, later)."""
-        ...
-
     def sense(self) -> Sensed:
-        """The sensed registers at ``time_s`` without advancing."""
+        """The sensed registers at ``time_s`` without advancing.
+
+        An array handed out is never changed afterwards; a model may hand out
+        the same read-only array again while the value stays the same (the
+        bus then skips copying it).  A model may also offer ``step_to(to_time_s,
+        commands)``, :meth:`advance` without reading the sensors, which lets a
+        serving loop split a step in pieces (both models here do).
+        """
         ...
 
     def set_external_torque(self, torque_nm: np.ndarray) -> None:

@@ -15,10 +15,13 @@ buffers with its constants already broadcast, the scalar one (one servo) on
 plain floats with no function calls.  PID, asymmetric compliance and a mix
 of wheel and joint mode run the generic loop.
 
-The numpy kernel also skips what provably repeats: after the first step of
-a call it compares the state with the one before; a reference resting on its
-goal is not stepped again, and a state that did not change at all (servos
-holding still) only accumulates heating for the rest of the call.
+The numpy kernel also skips what provably repeats: every ``CHECK_EVERY``
+steps, until it finds one, it compares the state after a step with the one
+before; a reference resting on its goal is not stepped again, a state that
+did not change at all (servos holding still) only accumulates heating, and
+wheels whose speed did not change (cruising) only turn by the same angle and
+heat.  What it found holds across calls, until the plan changes or someone
+rebinds a state array the finding depends on.
 
 Two rewrites that keep every value: ``sign(e) * m`` with ``m >= 0`` is
 ``copysign(m, e)`` (zeros aside, whose sign no later step can see), and
@@ -396,4 +399,4 @@ class FusedNumpySteps:
                 self.at_rest = same_ref and same_speed and angle.tobytes() == before[2]
                 self.cruising = same_speed and self.can_cruise
                 ref_resting = self.ref_resting = same_ref and disabled is None  # else it follows a free shaft
-                self.check_in = 0 if self.at_rest or self.cruising else CHECK_EVERY
+                self.check_in = 0 if self.at_rest or self.cruising else CHECK_EVERY - 1

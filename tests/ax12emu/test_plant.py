@@ -5,6 +5,7 @@ import pytest
 from ax12emu.bus import Bus
 from ax12emu.clock import VirtualClock
 from firmware_model.interface import Sensed
+from firmware_model.units import RAD_PER_POSITION_UNIT
 
 SENSED = [name for name in Sensed.field_names() if name != "alarms"]
 
@@ -15,9 +16,7 @@ def _step(bus: Bus, steps: int = 1) -> None:
         bus.advance()
 
 
-def test_tables_hold_what_the_model_senses_after_every_step():
-    """Every sensed register of every servo equals the model's reading after each step (also when a
-    slow register keeps its value and the plant need not copy it again)."""
+def _mixed_bus() -> Bus:
     bus = Bus([1, 2, 3], clock=VirtualClock())
     wheel, mover, _ = (servo.table for servo in bus.servos)
     for table in (wheel, mover):
@@ -27,11 +26,29 @@ def test_tables_hold_what_the_model_senses_after_every_step():
     wheel.set("moving_speed", 500)
     mover.set("goal_position", 900)
     bus.plant.tables_changed()
+    return bus
+
+
+def _wheel_bus() -> Bus:
+    bus = Bus([1, 2], clock=VirtualClock())
+    for servo in bus.servos:
+        for name, value in (("cw_angle_limit", 0), ("ccw_angle_limit", 0), ("moving_speed", 400), ("torque_enable", 1)):
+            servo.table.set(name, value)
+    bus.plant.tables_changed()
+    return bus
+
+
+@pytest.mark.parametrize("make_bus", [_mixed_bus, _wheel_bus], ids=["wheel, joint, idle", "all wheels driven"])
+def test_tables_hold_what_the_model_senses_after_every_step(make_bus):
+    """Every sensed register of every servo equals the model's reading after each step (also when a
+    register keeps its value and the plant need not copy it again: slow registers, a driven wheel's Moving)."""
+    bus = make_bus()
+    first, second = (servo.table for servo in bus.servos[:2])
     positions = set()
     for step in range(400):
         _step(bus)
         sensed = bus.model.sense()
-        positions.add((wheel.get("present_position"), mover.get("present_position")))
+        positions.add((first.get("present_position"), second.get("present_position")))
         for index, servo in enumerate(bus.servos):
             for name in SENSED:
                 assert servo.table.get(name) == getattr(sensed, name)[index], (step, servo.id, name)
@@ -51,15 +68,6 @@ def test_a_sensed_register_overwritten_by_someone_else_is_rewritten_once_they_sa
     getattr(bus.plant, announce)()
     _step(bus)
     assert table.get("present_temperature") == true_c
-
-
-def _wheel_bus() -> Bus:
-    bus = Bus([1, 2], clock=VirtualClock())
-    for servo in bus.servos:
-        for name, value in (("cw_angle_limit", 0), ("ccw_angle_limit", 0), ("moving_speed", 400), ("torque_enable", 1)):
-            servo.table.set(name, value)
-    bus.plant.tables_changed()
-    return bus
 
 
 def test_a_step_in_pieces_ends_where_a_whole_step_does_and_shows_the_old_one_until_then():
@@ -95,3 +103,40 @@ def test_pieces_overtaken_by_a_step_in_the_request_path_do_not_write_older_value
     for _ in run:
         pass
     assert (bus.rows == newer).all()
+
+
+def test_pieces_do_not_undo_a_refresh_made_in_between():
+    """A shaft turned by hand (the model changed, the tables refreshed) between reading the sensors and
+    writing them back: the older readings are dropped, the tables keep the new position."""
+    bus = _wheel_bus()
+    bus.servos[1].table.set("torque_enable", 0)
+    bus.plant.tables_changed()
+    _step(bus, 5)
+    bus.clock.advance(0.001)
+    run = bus.advance_in_pieces()
+    next(run)
+    next(run)  # stepped and sensed, not yet written back
+    bus.model.set_angle(1, 100 * RAD_PER_POSITION_UNIT)
+    bus.plant.refresh()
+    for _ in run:
+        pass
+    assert bus.servos[1].table.get("present_position") == 100 == bus.model.sense().present_position[1]
+
+
+def test_a_model_without_step_to_is_stepped_whole():
+    """step_to is optional for a model: without it the pieces are one whole step."""
+
+    class WholeStepsOnly:
+        def __init__(self, model):
+            self._model = model
+
+        def __getattr__(self, name):
+            if name == "step_to":
+                raise AttributeError(name)
+            return getattr(self._model, name)
+
+    bus = Bus([1], clock=VirtualClock())
+    bus.plant.model = WholeStepsOnly(bus.model)
+    bus.clock.advance(0.005)
+    assert list(bus.advance_in_pieces()) == []
+    assert bus.model.time_s == pytest.approx(0.005)

@@ -110,6 +110,29 @@ def test_fixed_point_shortcuts_run_in_the_scenarios_above(commands, monkeypatch)
     assert sum(k.cruise_steps for k in kernels) > 100
 
 
+def test_fused_kernel_equals_the_generic_loop_through_wraps_while_cruising(commands, monkeypatch):
+    """Wheels cruising turn after turn: each wrap (the thermal event rebinds the angle) lands mid-cruise."""
+    kernels = []
+    build = FusedNumpySteps.__init__
+
+    def _collect(self, *args):
+        build(self, *args)
+        kernels.append(self)
+
+    monkeypatch.setattr(FusedNumpySteps, "__init__", _collect)
+    spin = commands(3, cw_angle_limit=0, ccw_angle_limit=0, moving_speed=[1023, 1024 + 800, 600])
+    models = [PhysicalModel(3, fused=flag) for flag in (True, False)]
+    turned_rad = np.zeros(3)
+    for i in range(1, 2501):
+        readings = [model.advance(i * 0.001, spin) for model in models]
+        states = [(model.angle_rad, model.speed_rad_s, model.temperature_c, r.present_position, r.present_speed)
+                  for model, r in zip(models, readings)]
+        assert all(_same_bits(x, y) for x, y in zip(*states)), f"differs at step {i}"
+        turned_rad += np.abs(models[0].speed_rad_s) * 0.001
+    assert (turned_rad > 2 * 2 * np.pi).all()  # two turns or more each, so wraps came while cruising
+    assert sum(k.cruise_steps for k in kernels) > 1500
+
+
 def test_usual_configuration_runs_fused_and_others_the_generic_loop(commands):
     """Guards the comparison above: it must really compare two different kernels."""
 
