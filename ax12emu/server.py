@@ -49,6 +49,8 @@ log = logging.getLogger(__name__)
 BITS_PER_BYTE = 10
 #: Below this much time to the next reply, busy-wait instead of sleeping in select.
 SPIN_S = 0.0003
+#: Below this much time to the next release, wait for it on the clock alone (no system call).
+EXACT_S = 0.00002
 #: After input, keep polling without sleeping this long: the host's next packet usually
 #: follows within a few tens of microseconds, and waking from a sleep costs about as much.
 HOT_S = 0.0002
@@ -147,6 +149,8 @@ class BusServer:
         data = queue[0][2] if count == 1 else b"".join(item[2] for item in queue[:count])
         del queue[:count]
         self._emit(bytes(data), now)
+        if self._yield_after_reply and not (queue or self.pace):
+            os.sched_yield()
 
     def _emit(self, data: bytes, now: float) -> None:
         sent = self.transport.write(data)
@@ -222,6 +226,11 @@ class BusServer:
         """Wait for the next event and handle everything that is due."""
         now = time.monotonic()
         queue = self._queue
+        if queue and queue[0][0] - now < EXACT_S:  # a release is a few microseconds away: meet it exactly
+            due = queue[0][0]
+            while now < due:
+                now = time.monotonic()
+            self._flush(now)
         hot = now < self._hot_until
         if queue and queue[0][0] - now < SPIN_S or hot or self._physics is not None:
             wait_s = 0.0  # a reply is nearly due, a host is mid-conversation or a step is half done: spin
