@@ -93,16 +93,22 @@ def test_fused_kernel_equals_the_generic_loop_one_step_per_call(load, mode, comm
         assert all(_same_bits(x, y) for x, y in zip(a, b)), f"differs at advance {step}"
 
 
-def test_fixed_point_shortcuts_run_in_the_scenarios_above(commands, monkeypatch):
-    """Guards the comparisons: servos holding still and wheels cruising take the shortcuts there."""
-    kernels = []
+@pytest.fixture
+def kernels(monkeypatch) -> list:
+    """Every FusedNumpySteps built during the test, to read their shortcut counters."""
+    built = []
     build = FusedNumpySteps.__init__
 
     def _collect(self, *args):
         build(self, *args)
-        kernels.append(self)
+        built.append(self)
 
     monkeypatch.setattr(FusedNumpySteps, "__init__", _collect)
+    return built
+
+
+def test_fixed_point_shortcuts_run_in_the_scenarios_above(commands, kernels):
+    """Guards the comparisons: servos holding still and wheels cruising take the shortcuts there."""
     _trajectory(3, "numpy", True, LOADS["none"], commands, wheel=False)
     assert sum(k.rest_steps for k in kernels) > 100
     kernels.clear()
@@ -110,16 +116,8 @@ def test_fixed_point_shortcuts_run_in_the_scenarios_above(commands, monkeypatch)
     assert sum(k.cruise_steps for k in kernels) > 100
 
 
-def test_fused_kernel_equals_the_generic_loop_through_wraps_while_cruising(commands, monkeypatch):
+def test_fused_kernel_equals_the_generic_loop_through_wraps_while_cruising(commands, kernels):
     """Wheels cruising turn after turn: each wrap (the thermal event rebinds the angle) lands mid-cruise."""
-    kernels = []
-    build = FusedNumpySteps.__init__
-
-    def _collect(self, *args):
-        build(self, *args)
-        kernels.append(self)
-
-    monkeypatch.setattr(FusedNumpySteps, "__init__", _collect)
     spin = commands(3, cw_angle_limit=0, ccw_angle_limit=0, moving_speed=[1023, 1024 + 800, 600])
     models = [PhysicalModel(3, fused=flag) for flag in (True, False)]
     turned_rad = np.zeros(3)
