@@ -117,6 +117,8 @@ class BusServer:
         self._hot_until = 0.0
         self._connections = getattr(transport, "connections", None)
         self._yield_after_reply = getattr(transport, "yield_after_reply", False) and hasattr(os, "sched_yield")
+        #: Whether the clock is fine enough to wait on for a few microseconds (not Windows before 3.13).
+        self._exact_clock = time.get_clock_info("monotonic").resolution <= 1e-6
         self._next_physics = time.monotonic()
         # Linux only: elsewhere poll() may not take a pty's descriptor (macOS returns POLLNVAL).
         self._poller = select.poll() if sys.platform.startswith("linux") else None
@@ -226,11 +228,13 @@ class BusServer:
         """Wait for the next event and handle everything that is due."""
         now = time.monotonic()
         queue = self._queue
-        if queue and queue[0][0] - now < EXACT_S:  # a release is a few microseconds away: meet it exactly
+        if queue and queue[0][0] - now < EXACT_S and self._exact_clock:  # a release is microseconds away
             due = queue[0][0]
             while now < due:
                 now = time.monotonic()
-            self._flush(now)
+            # With pace, host bytes that came meanwhile are read first: they may collide with this release.
+            if not (self.pace and select.select(self.transport.fds(), (), (), 0)[0]):
+                self._flush(now)
         hot = now < self._hot_until
         if queue and queue[0][0] - now < SPIN_S or hot or self._physics is not None:
             wait_s = 0.0  # a reply is nearly due, a host is mid-conversation or a step is half done: spin

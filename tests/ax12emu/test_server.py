@@ -89,6 +89,7 @@ class _PipeTransport(Transport):
         self.read_fd, self.write_fd = os.pipe()
         os.set_blocking(self.read_fd, False)
         self.replies = bytearray()
+        self.written_at: list[float] = []
 
     def fds(self) -> list[int]:
         return [self.read_fd]
@@ -101,6 +102,7 @@ class _PipeTransport(Transport):
 
     def write(self, data: bytes) -> int:
         self.replies += data
+        self.written_at.append(time.monotonic())
         return len(data)
 
     def close(self) -> None:
@@ -141,3 +143,24 @@ def test_physics_steps_in_pieces_while_a_host_polls_without_pause():
     assert len(transport.replies) == 8 * sent and sent > 100
     assert len(finished) >= 0.5 * elapsed_ms, (len(finished), elapsed_ms)
     assert bus.model.time_s >= bus.clock.now_s() - 0.01
+
+
+def test_a_delayed_reply_is_released_after_its_return_delay_not_before():
+    """Return Delay Time 100 (200 us): each reply leaves no earlier than 200 us after its READ came in,
+    and soon after (the loop meets a release due within microseconds on the clock; margins wide)."""
+    bus = Bus([1])
+    bus.servos[0].table.set("return_delay_time", 100)
+    read = encode_instruction(1, 0x02, bytes([36, 2]))
+    with _PipeTransport() as transport:
+        server = BusServer(bus, transport)
+        delays = []
+        for _ in range(50):
+            sent_at = time.monotonic()
+            os.write(transport.write_fd, read)
+            count = len(transport.written_at)
+            while len(transport.written_at) == count:
+                server.run_once()
+            delays.append(transport.written_at[-1] - sent_at)
+    assert len(transport.replies) == 50 * 8
+    assert min(delays) >= 200e-6, min(delays)
+    assert sorted(delays)[25] < 0.005, sorted(delays)
