@@ -242,6 +242,9 @@ def main(argv: list[str] | None = None) -> int:
                 stop(process)
     bare = fast.pop("bare")
     print(row("reference: bare pty responder", bare))
+    if bare["p99_us"] >= 1000:
+        print(f"warning: the bare responder's own p99 is {bare['p99_us'] / 1000:.1f} ms: this machine is too loaded "
+              "for the comparison to mean much (an emulator, doing more per read, loses more); rerun when it is quieter")
     for servos, result in fast.items():
         print(row(f"ax12emu, {servos:2d} servo(s) moving, RDT   0", result, bare["rate"]))
     slow = {}
