@@ -230,7 +230,8 @@ class BusServer:
         queue = self._queue
         # A release a few microseconds away is met on the clock, with no system call (host bytes
         # that come meanwhile are read just after it: with pace, a collision window at most
-        # EXACT_S short; checking for them first made each paced release late by about 1 %).
+        # EXACT_S short, where checking for them first would put a system call before every
+        # paced byte).
         if queue and queue[0][0] - now < EXACT_S and self._exact_clock:
             due = queue[0][0]
             while now < due:
