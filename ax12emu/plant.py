@@ -95,11 +95,9 @@ class Plant:
         show the previous step (see ``Bus.request_lag_s``).
         """
         model = self.model
-        if sim_time_s < model.time_s + model.step_s:
-            return
         step_to = getattr(model, "step_to", None)
-        if step_to is None:  # a model without it (it is optional): the whole step at once
-            self._write_back(model.advance(sim_time_s, self.commands()))
+        if step_to is None or sim_time_s < model.time_s + model.step_s:
+            self.advance(sim_time_s)  # without step_to (it is optional), the whole step at once
             return
         step_to(sim_time_s, self.commands())
         stepped_to_s = model.time_s
