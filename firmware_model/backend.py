@@ -4,7 +4,7 @@ Why it exists: a numpy call costs about a microsecond whatever the array
 size, so one servo stepped through numpy is limited by call overhead, not
 arithmetic.  The step functions in this package are written once against a
 small namespace ``xp`` (``where``, ``minimum``, ``maximum``, ``abs``, ``sign``,
-``sqrt``, ``exp``, ``cos``); :data:`NUMPY` runs them on arrays of N servos and
+``sqrt``, ``exp``, ``cos``, ``copysign``); :data:`NUMPY` runs them on arrays of N servos and
 :data:`SCALAR` on Python floats, several times faster for N = 1.  Both give
 the same numbers (tests compare them).  Rules for step code: no ``~``, ``and``,
 ``or``, ``not`` or ``if`` on values; combine masks with ``&`` and ``|``.
@@ -41,6 +41,7 @@ NUMPY = SimpleNamespace(
     cos=np.cos,
     rint=np.rint,
     floor=np.floor,
+    copysign=np.copysign,
 )
 
 #: The same operations on Python floats and bools, for a single servo.
@@ -56,4 +57,5 @@ SCALAR = SimpleNamespace(
     cos=math.cos,
     rint=lambda x: float(round(x)),
     floor=lambda x: float(math.floor(x)),
+    copysign=math.copysign,
 )

@@ -42,6 +42,7 @@ __all__ = [
     "apply_dead_zone",
     "braking_speed",
     "setpoint_step",
+    "setpoint_velocity",
     "state_code",
 ]
 
@@ -62,12 +63,17 @@ def braking_speed(xp, distance_rad, accel_rad_s2: float, step_s: float):
     return xp.minimum(curve, distance_rad * (1.0 / step_s))
 
 
-def setpoint_step(xp, ref_rad, ref_vel_rad_s, goal_rad, max_speed_rad_s, accel_rad_s2: float, step_s: float):
-    """One step of the generator; returns the new ``(ref_rad, ref_vel_rad_s)``."""
+def setpoint_velocity(xp, ref_rad, ref_vel_rad_s, goal_rad, max_speed_rad_s, accel_rad_s2: float, step_s: float):
+    """The reference's velocity for the next step (the step loop moves the reference and the shaft together)."""
     error = goal_rad - ref_rad
     adt = accel_rad_s2 * step_s
-    wanted = xp.sign(error) * xp.minimum(max_speed_rad_s, braking_speed(xp, xp.abs(error), accel_rad_s2, step_s))
-    vel = ref_vel_rad_s + xp.minimum(xp.maximum(wanted - ref_vel_rad_s, -adt), adt)
+    wanted = xp.copysign(xp.minimum(max_speed_rad_s, braking_speed(xp, xp.abs(error), accel_rad_s2, step_s)), error)
+    return ref_vel_rad_s + xp.minimum(xp.maximum(wanted - ref_vel_rad_s, -adt), adt)
+
+
+def setpoint_step(xp, ref_rad, ref_vel_rad_s, goal_rad, max_speed_rad_s, accel_rad_s2: float, step_s: float):
+    """One step of the generator; returns the new ``(ref_rad, ref_vel_rad_s)``."""
+    vel = setpoint_velocity(xp, ref_rad, ref_vel_rad_s, goal_rad, max_speed_rad_s, accel_rad_s2, step_s)
     return ref_rad + vel * step_s, vel
 
 

@@ -4,7 +4,7 @@ Why it exists: behind a live bus the model must run far ahead of the wall
 clock (issue 3: 100x real time for one servo, 20x for 253, one core).  The
 generic loop composes the one-job step functions (:mod:`.setpoint`,
 :mod:`.controller`, :mod:`.motor`) and runs every configuration; it is the
-reference.  It costs about 55 numpy calls per step, each about a
+reference.  It costs about 50 numpy calls per step, each about a
 microsecond whatever N, most of them allocating a fresh array or converting a
 Python float.  The fused kernels do the *same arithmetic in the same order*
 (so their results are bitwise equal to the generic loop's; the tests compare
@@ -23,9 +23,16 @@ wheels whose speed did not change (cruising) only turn by the same angle and
 heat.  What it found holds across calls, until the plan changes or someone
 rebinds a state array the finding depends on.
 
-Two rewrites that keep every value: ``sign(e) * m`` with ``m >= 0`` is
-``copysign(m, e)`` (zeros aside, whose sign no later step can see), and
-Karnopp's stop ``v * (v d > 0)`` with ``d = +-1`` is ``max(v d, 0) d``.
+The step is ordered for few calls.  Positions move first, with the
+velocities the step starts from (the reference's chosen now by the setpoint
+generator): ``x' = x + v dt`` for reference and shaft alike, then the
+controller sees ``x'``, and the shaft's new speed follows from the torques
+at ``x'`` (semi-implicit Euler, position first; the other symplectic order
+than velocity first, and as stable).  Torques enter as speed changes per
+step (``eta k dt / J`` folded into one constant), and dry friction is taken
+implicitly (:func:`~firmware_model.motor.shaft_speed_step`), which needs no
+direction test and no clamp.  One rewrite keeps every value: ``clip(x, lo,
+hi)`` is ``minimum(maximum(x, lo), hi)``.
 
 A kernel advances the state namespace ``s`` of
 :class:`~firmware_model.physical.PhysicalModel` by ``count`` steps; the
@@ -41,9 +48,9 @@ from types import SimpleNamespace
 import numpy as np
 
 from .controller import PidGains, compliance_drive, pid_drive, symmetric_compliance_drive
-from .motor import ARM_HORIZONTAL_RAD, arm_gravity_torque_nm, mechanics_step
+from .motor import ARM_HORIZONTAL_RAD, DryFriction, arm_gravity_torque_nm, shaft_speed_step
 from .params import ServoParams
-from .setpoint import setpoint_step
+from .setpoint import setpoint_velocity
 from .units import RAD_PER_POSITION_UNIT
 
 __all__ = ["StepConstants", "generic_steps", "fused_scalar_steps", "FusedNumpySteps", "fusable"]
@@ -62,14 +69,13 @@ class StepConstants:
     inv_unit: float
     #: Back-EMF current per rad/s, k / R.
     k_over_r: float
-    #: Output torque per ampere, eta k.
-    eta_k: float
-    static_nm: float
-    coulomb_nm: float
-    viscous_nm_s_rad: float
-    stribeck_rad_s: float
+    #: Speed change per step per ampere, eta k step / J.
+    eta_k_dv: float
     #: Step over total inertia, (rad/s) per N m.
     step_over_inertia: float
+    friction: DryFriction
+    #: ``1 - b step / J`` (None: no viscous friction).
+    viscous_keep: float | None
     wheel_gain_s_rad: float
     pid: bool
     gains: PidGains
@@ -77,11 +83,13 @@ class StepConstants:
     @classmethod
     def from_params(cls, p: ServoParams, step_s: float, controller: str, gains: PidGains) -> "StepConstants":
         unit = float(RAD_PER_POSITION_UNIT)
+        dt_j = step_s / p.total_inertia_kg_m2
         return cls(
             step_s=step_s, accel_rad_s2=p.max_acceleration_rad_s2, unit_rad=unit, inv_unit=1.0 / unit,
-            k_over_r=p.torque_constant_nm_a / p.winding_resistance_ohm, eta_k=p.gearbox_efficiency * p.torque_constant_nm_a,
-            static_nm=p.static_friction_nm, coulomb_nm=p.coulomb_friction_nm, viscous_nm_s_rad=p.viscous_friction_nm_s_rad,
-            stribeck_rad_s=p.stribeck_velocity_rad_s, step_over_inertia=step_s / p.total_inertia_kg_m2,
+            k_over_r=p.torque_constant_nm_a / p.winding_resistance_ohm,
+            eta_k_dv=(p.gearbox_efficiency * p.torque_constant_nm_a) * dt_j, step_over_inertia=dt_j,
+            friction=DryFriction.per_step(p.static_friction_nm, p.coulomb_friction_nm, p.stribeck_velocity_rad_s, dt_j),
+            viscous_keep=1.0 - p.viscous_friction_nm_s_rad * dt_j if p.viscous_friction_nm_s_rad else None,
             wheel_gain_s_rad=p.wheel_speed_gain_s_rad, pid=controller == "pid", gains=gains,
         )
 
@@ -94,13 +102,12 @@ def fusable(k: StepConstants, plan: SimpleNamespace) -> bool:
 
 
 def generic_steps(xp, plan: SimpleNamespace, k: StepConstants, s: SimpleNamespace, count: int) -> None:
-    """``count`` steps of any configuration: setpoint, controller, motor, mechanics.
+    """``count`` steps of any configuration: setpoint, positions, controller, motor, shaft speed.
 
     The state lives in locals during the loop and is written back at the end.
     """
     a, dt, unit, inv_unit = k.accel_rad_s2, k.step_s, k.unit_rad, k.inv_unit
-    k_r, eta_k, ts, tc, b, vs, dt_j = (k.k_over_r, k.eta_k, k.static_nm, k.coulomb_nm, k.viscous_nm_s_rad,
-                                       k.stribeck_rad_s, k.step_over_inertia)
+    k_r, eta_k_dv, friction, keep = k.k_over_r, k.eta_k_dv, k.friction, k.viscous_keep
     pid, gains, symmetric = k.pid, k.gains, plan.symmetric
     any_joint, any_wheel, any_disabled = plan.any_joint, plan.any_wheel, plan.any_disabled
     mixed = any_joint and any_wheel
@@ -110,14 +117,21 @@ def generic_steps(xp, plan: SimpleNamespace, k: StepConstants, s: SimpleNamespac
     wheel_ff, wheel_ref, kv = plan.wheel_ff, plan.wheel_ref, k.wheel_gain_s_rad
     angle, speed, ref, ref_vel = s.angle, s.speed, s.ref, s.ref_vel
     drive, demand, integral, prev_error, i2_sum = s.drive, s.demand, s.integral, s.prev_error, s.current_sq_sum
-    ext, weight, any_ext, any_arm = s.ext_nm, s.weight_nm, plan.any_ext, plan.any_arm
+    any_ext, any_arm = plan.any_ext, plan.any_arm
+    ext_dv = s.ext_nm * k.step_over_inertia if any_ext else None
+    weight_dv = s.weight_nm * k.step_over_inertia if any_arm else None
     free, any_blocked = 1.0 - s.blocked, plan.any_blocked
     for _ in range(count):
+        # Positions first, with the velocities the step starts from (the reference's is chosen now).
         if any_joint:
-            ref, ref_vel = setpoint_step(xp, ref, ref_vel, goal, max_speed, a, dt)
+            ref_vel = setpoint_velocity(xp, ref, ref_vel, goal, max_speed, a, dt)
             if any_disabled:
-                ref = xp.where(enabled, ref, angle)
                 ref_vel = ref_vel * en
+            ref = ref + ref_vel * dt
+        angle = angle + speed * dt
+        if any_joint:
+            if any_disabled:  # torque off: the reference follows the shaft
+                ref = xp.where(enabled, ref, angle)
             error = ref * inv_unit - xp.rint(angle * inv_unit)
             if pid:
                 error = error * unit
@@ -137,17 +151,14 @@ def generic_steps(xp, plan: SimpleNamespace, k: StepConstants, s: SimpleNamespac
             current = (drive * volts_r - k_r * speed) * en
         else:
             current = drive * volts_r - k_r * speed
-        applied = eta_k * current
+        applied_dv = current * eta_k_dv
         if any_ext:
-            applied = applied + ext
+            applied_dv = applied_dv + ext_dv
         if any_arm:
-            applied = applied + arm_gravity_torque_nm(xp, angle, weight)
-        if any_blocked:  # a held shaft keeps its angle; the motor still draws current
-            held_angle = angle
-            angle, speed = mechanics_step(xp, angle, speed, applied, ts, tc, b, vs, dt_j, dt)
-            angle, speed = held_angle + (angle - held_angle) * free, speed * free
-        else:
-            angle, speed = mechanics_step(xp, angle, speed, applied, ts, tc, b, vs, dt_j, dt)
+            applied_dv = applied_dv + arm_gravity_torque_nm(xp, angle, weight_dv)
+        speed = shaft_speed_step(xp, speed, applied_dv, friction, keep)
+        if any_blocked:  # a held shaft does not turn; the motor still draws current
+            speed = speed * free
         i2_sum = i2_sum + current * current
     s.angle, s.speed, s.ref, s.ref_vel = angle, speed, ref, ref_vel
     s.drive, s.demand, s.integral, s.prev_error, s.current_sq_sum = drive, demand, integral, prev_error, i2_sum
@@ -159,28 +170,33 @@ def fused_scalar_steps(plan: SimpleNamespace, k: StepConstants, s: SimpleNamespa
     a, dt, inv_unit = k.accel_rad_s2, k.step_s, k.inv_unit
     adt = a * dt
     q, two_a, half_adt, inv_dt = 0.25 * adt * adt, 2.0 * a, 0.5 * adt, 1.0 / dt
-    k_r, eta_k, dt_j = k.k_over_r, k.eta_k, k.step_over_inertia
-    tc, dts, b, strib = k.coulomb_nm, k.static_nm - k.coulomb_nm, k.viscous_nm_s_rad, -1.0 / (k.stribeck_rad_s * k.stribeck_rad_s)
+    k_r, eta_k_dv, keep = k.k_over_r, k.eta_k_dv, k.viscous_keep
+    f = k.friction
+    tc, dts, strib = f.coulomb_dv_rad_s, f.static_dv_rad_s - f.coulomb_dv_rad_s, f.stribeck_coef_s2_rad2
     goal, max_speed, enabled, en, volts_r = plan.goal_rad, plan.max_speed, plan.enabled, plan.en, plan.volts_r
     wheel, wheel_ff, wheel_ref, kv = plan.wheel, plan.wheel_ff, plan.wheel_ref, k.wheel_gain_s_rad
     margin, gain, punch, limit = plan.ccw_margin, plan.ccw_gain, plan.punch, plan.limit
-    ext = s.ext_nm if plan.any_ext else 0.0
-    weight = s.weight_nm if plan.any_arm else 0.0
+    ext_dv = s.ext_nm * k.step_over_inertia if plan.any_ext else 0.0
+    weight_dv = s.weight_nm * k.step_over_inertia if plan.any_arm else 0.0
     blocked = plan.any_blocked
     angle, speed, ref, ref_vel, i2_sum = s.angle, s.speed, s.ref, s.ref_vel, s.current_sq_sum
     drive = demand = 0.0
     for _ in range(count):
         if wheel:  # speed loop with feed-forward
+            angle = angle + speed * dt
             wanted = wheel_ff + kv * (wheel_ref - speed)
             drive, demand = min(max(wanted, -limit), limit) * en, abs(wanted)
         else:
-            error = goal - ref  # setpoint.setpoint_step
+            error = goal - ref  # setpoint.setpoint_velocity
             d = abs(error)
             braking = min(sqrt(q + two_a * d) - half_adt, d * inv_dt)
-            vel = ref_vel + min(max(copysign(min(max_speed, braking), error) - ref_vel, -adt), adt)
-            ref, ref_vel = ref + vel * dt, vel
+            ref_vel = ref_vel + min(max(copysign(min(max_speed, braking), error) - ref_vel, -adt), adt)
             if not enabled:
-                ref, ref_vel = angle, ref_vel * en
+                ref_vel = ref_vel * en
+            ref = ref + ref_vel * dt
+            angle = angle + speed * dt
+            if not enabled:
+                ref = angle
             error = ref * inv_unit - round(angle * inv_unit)  # controller.symmetric_compliance_drive
             beyond = abs(error) - margin
             demand = (punch + beyond * gain) * (beyond > 0)
@@ -188,22 +204,16 @@ def fused_scalar_steps(plan: SimpleNamespace, k: StepConstants, s: SimpleNamespa
         current = drive * volts_r - k_r * speed
         if not enabled:
             current = current * en
-        applied = eta_k * current
-        if ext:
-            applied = applied + ext
-        if weight:
-            applied = applied + -weight * cos(angle - ARM_HORIZONTAL_RAD)
-        x = speed * 1e12 + applied  # motor.mechanics_step
-        direction = float((x > 0) - (x < 0))
-        friction = direction * (tc + dts * exp(speed * speed * strib))
-        if b:
-            friction = friction + b * speed
-        new_speed = speed + (applied - friction) * dt_j
-        new_speed = max(new_speed * direction, 0.0) * direction
+        applied = current * eta_k_dv
+        if ext_dv:
+            applied = applied + ext_dv
+        if weight_dv:
+            applied = applied + -weight_dv * cos(angle - ARM_HORIZONTAL_RAD)
+        free = (speed if keep is None else speed * keep) + applied  # motor.shaft_speed_step
+        dry = tc + dts * exp(speed * speed * strib)
+        speed = free - copysign(min(abs(free), dry), free)
         if blocked:
             speed = 0.0
-        else:
-            angle, speed = angle + new_speed * dt, new_speed
         i2_sum = i2_sum + current * current
     if count:
         s.angle, s.speed, s.ref, s.ref_vel = angle, speed, ref, ref_vel
@@ -214,41 +224,47 @@ class FusedNumpySteps:
     """:func:`generic_steps` for N servos, all in wheel mode or all in joint mode with symmetric compliance, in place.
 
     Built once per plan (the commands' decoding): it broadcasts every constant
-    to shape (N,) and owns the scratch buffers, so a step is about 50 numpy
-    calls, none allocating (about 35 once the references rest).  It writes the state arrays of ``s`` in place.
+    to shape (N,) and owns the scratch buffers, so a step is about 41 numpy
+    calls, none allocating (about 27 once the references rest).  It writes the
+    state arrays of ``s`` in place.  Three things are done in bulk: the
+    reference and the shaft move in one pair of calls (they are the rows of
+    one array, as are their velocities), the position error of both is scaled
+    in one call, and the heating's squared currents are kept one row per step
+    and summed once per call (a reduction over rows adds them in order, so the
+    sum is the generic loop's to the bit).
     """
 
     def __init__(self, plan: SimpleNamespace, k: StepConstants, s: SimpleNamespace, n: int) -> None:
         full = lambda value: np.full(n, float(value))  # noqa: E731
         adt = k.accel_rad_s2 * k.step_s
+        f = k.friction
         self.c = SimpleNamespace(
             q=full(0.25 * adt * adt), two_a=full(2.0 * k.accel_rad_s2), half_adt=full(0.5 * adt), inv_dt=full(1.0 / k.step_s),
-            neg_adt=full(-adt), adt=full(adt), dt=full(k.step_s), zero=full(0.0), eta_k=full(k.eta_k),
-            strib=full(-1.0 / (k.stribeck_rad_s * k.stribeck_rad_s)),
-            dts=full(k.static_nm - k.coulomb_nm), tc=full(k.coulomb_nm), viscous=bool(k.viscous_nm_s_rad),
-            dt_j=full(k.step_over_inertia), arm_at=full(ARM_HORIZONTAL_RAD), kv=full(k.wheel_gain_s_rad),
-            # Products that share an operand are stacked into one call: speed times (1e12, k/R, b),
-            # and (reference, angle) times 1/unit.
-            by_speed=np.repeat([[1e12], [k.k_over_r], [k.viscous_nm_s_rad]], n, axis=1),
-            inv_unit2=np.full((2, n), k.inv_unit),
+            neg_adt=full(-adt), adt=full(adt), dt=full(k.step_s), dt2=np.full((2, n), k.step_s), zero=full(0.0),
+            k_r=full(k.k_over_r), eta_k_dv=full(k.eta_k_dv), strib=full(f.stribeck_coef_s2_rad2),
+            dts=full(f.static_dv_rad_s - f.coulomb_dv_rad_s), tc=full(f.coulomb_dv_rad_s),
+            keep=None if k.viscous_keep is None else full(k.viscous_keep),
+            arm_at=full(ARM_HORIZONTAL_RAD), kv=full(k.wheel_gain_s_rad), inv_unit2=np.full((2, n), k.inv_unit),
         )
         self.plan = plan
         #: Every servo in wheel mode (fusable() allows no mix): a speed loop instead of setpoint and compliance.
         self.wheel = plan.any_wheel
         self.neg_limit = -plan.limit
         self.disabled = ~np.asarray(plan.enabled, dtype=bool) if plan.any_disabled else None
-        self.ext = s.ext_nm.copy() if plan.any_ext else None
-        self.neg_weight = -s.weight_nm if plan.any_arm else None
+        self.ext_dv = s.ext_nm * k.step_over_inertia if plan.any_ext else None
+        self.neg_weight_dv = -(s.weight_nm * k.step_over_inertia) if plan.any_arm else None
         self.free = 1.0 - s.blocked if plan.any_blocked else None
-        self.buf = SimpleNamespace(**{name: np.empty(n) for name in ("e", "d", "t", "u", "err", "cur", "applied", "dirn", "fric", "held")})
-        self.buf.speed_products, self.buf.in_units = np.empty((3, n)), np.empty((2, n))
+        self.buf = SimpleNamespace(**{name: np.empty(n) for name in ("e", "d", "t", "u", "err", "z", "i2_step")})
+        self.buf.in_units, self.buf.moves = np.empty((2, n)), np.empty((2, n))
         # The state the kernel updates in place.  Reference and angle are the two rows of one
-        # array, so one call scales both.  A caller that rebinds a state array (an event, a new
-        # plan) is copied in at the next call; one that keeps a state array must copy it.
-        self.ref_angle = np.empty((2, n))
-        self.state = {"ref": self.ref_angle[0], "angle": self.ref_angle[1],
-                      **{name: np.empty(n) for name in ("speed", "ref_vel", "drive", "demand", "current_sq_sum")}}
-        self.buf.i2_step, self.buf.step_angle = np.empty(n), np.empty(n)
+        # array, their velocities of another, so one pair of calls moves both.  A caller that
+        # rebinds a state array (an event, a new plan) is copied in at the next call; one that
+        # keeps a state array must copy it.
+        self.ref_angle, self.vel_speed = np.empty((2, n)), np.empty((2, n))
+        self.state = {"ref": self.ref_angle[0], "angle": self.ref_angle[1], "ref_vel": self.vel_speed[0],
+                      "speed": self.vel_speed[1], **{name: np.empty(n) for name in ("drive", "demand", "current_sq_sum")}}
+        self.n = n
+        self._grow_heat(16)
         # Fixed points found by a check after a step (see __call__); they hold while the plan (this
         # object) lives and nobody rebinds the state arrays they depend on.
         self.ref_resting = self.at_rest = self.cruising = False
@@ -259,16 +275,35 @@ class FusedNumpySteps:
         #: Steps taken by each shortcut (for tests and benchmarks: that they run at all).
         self.rest_steps = self.cruise_steps = 0
 
+    def _grow_heat(self, rows: int) -> None:
+        """Room for ``rows`` steps' currents (row 0 takes the running sum when they are added up)."""
+        self.heat = np.empty((rows + 1, self.n))
+        self.heat_rows = list(self.heat)
+
+    def _add_heat(self, rows: int, i2_sum: np.ndarray) -> None:
+        """Add the squares of the currents in heat rows 1..rows to ``i2_sum``, in step order.
+
+        While a fixed point holds, the last square is what every later step adds.
+        """
+        heat = self.heat
+        np.copyto(heat[0], i2_sum)
+        block = heat[1:rows + 1]
+        np.multiply(block, block, block)
+        np.add.reduce(heat[:rows + 1], axis=0, out=i2_sum)
+        if self.at_rest or self.cruising:
+            np.copyto(self.buf.i2_step, heat[rows])
+
     def __call__(self, s: SimpleNamespace, count: int) -> None:
         sub, add, mul, absolute, sqrt, rint, exp, cos = np.subtract, np.add, np.multiply, np.abs, np.sqrt, np.rint, np.exp, np.cos
-        minimum, maximum, copysign, sign, heaviside = np.minimum, np.maximum, np.copysign, np.sign, np.heaviside
+        minimum, copysign, heaviside = np.minimum, np.copysign, np.heaviside
         c, p, bf = self.c, self.plan, self.buf
-        e, d, t, u, err, cur, applied, dirn, fric, held = bf.e, bf.d, bf.t, bf.u, bf.err, bf.cur, bf.applied, bf.dirn, bf.fric, bf.held
-        speed_products, in_units = bf.speed_products, bf.in_units
-        speed_big, speed_k_r, speed_b = speed_products
+        e, d, t, u, err, z, i2_step, in_units, moves = bf.e, bf.d, bf.t, bf.u, bf.err, bf.z, bf.i2_step, bf.in_units, bf.moves
         goal, max_speed, margin, gain, punch, limit, volts_r, en = (p.goal_rad, p.max_speed, p.ccw_margin, p.ccw_gain, p.punch,
                                                                     p.limit, p.volts_r, p.en)
-        disabled, ext, neg_weight, free, viscous, wheel = self.disabled, self.ext, self.neg_weight, self.free, c.viscous, self.wheel
+        q, two_a, half_adt, inv_dt, neg_adt, adt, dt, dt2, zero = (c.q, c.two_a, c.half_adt, c.inv_dt, c.neg_adt, c.adt, c.dt,
+                                                                   c.dt2, c.zero)
+        k_r, eta_k_dv, strib, dts, tc, keep, inv_unit2 = c.k_r, c.eta_k_dv, c.strib, c.dts, c.tc, c.keep, c.inv_unit2
+        disabled, ext_dv, neg_weight_dv, free, wheel = self.disabled, self.ext_dv, self.neg_weight_dv, self.free, self.wheel
         state = self.state
         for name, own in state.items():
             current = getattr(s, name)
@@ -279,10 +314,13 @@ class FusedNumpySteps:
                     self.ref_resting = self.at_rest = False
                 elif name == "speed":
                     self.ref_resting = self.at_rest = self.cruising = False
-        ref_angle = self.ref_angle
+        if count > len(self.heat_rows) - 1:
+            self._grow_heat(count)
+        heat_rows = self.heat_rows
+        ref_angle, vel_speed = self.ref_angle, self.vel_speed
         ref, angle, speed, vel, drive, demand, i2_sum = (state["ref"], state["angle"], state["speed"], state["ref_vel"],
                                                          state["drive"], state["demand"], state["current_sq_sum"])
-        i2_step, step_angle = bf.i2_step, bf.step_angle
+        step_angle = moves[1]
         # Fixed points, checked after a step rather than assumed (every CHECK_EVERY steps while
         # none is found): a step that leaves the reference (and its speed) bit for bit unchanged
         # leaves it so for good; one that leaves the whole state unchanged (reference, angle,
@@ -290,18 +328,22 @@ class FusedNumpySteps:
         # wheel mode, where the speed update depends on the speed alone, one that leaves the
         # speed unchanged is cruising: later steps only turn the shaft by the same angle and heat.
         ref_resting = self.ref_resting
-        step = 0
+        step = rows = 0
         while step < count:
-            if self.at_rest:
-                self.rest_steps += count - step
-                for _ in range(count - step):
-                    add(i2_sum, i2_step, i2_sum)
-                break
-            if self.cruising:
-                self.cruise_steps += count - step
-                for _ in range(count - step):
-                    add(angle, step_angle, angle)
-                    add(i2_sum, i2_step, i2_sum)
+            if self.at_rest or self.cruising:
+                if rows:
+                    self._add_heat(rows, i2_sum)
+                    rows = 0
+                left = count - step
+                if self.at_rest:
+                    self.rest_steps += left
+                    for _ in range(left):
+                        add(i2_sum, i2_step, i2_sum)
+                else:
+                    self.cruise_steps += left
+                    for _ in range(left):
+                        add(angle, step_angle, angle)
+                        add(i2_sum, i2_step, i2_sum)
                 break
             before = None
             if self.check_in <= 0:
@@ -309,90 +351,85 @@ class FusedNumpySteps:
             else:
                 self.check_in -= 1
             step += 1
+            rows += 1
+            cur = heat_rows[rows]
             if wheel:  # the generic loop's speed loop with feed-forward
+                mul(speed, dt, step_angle)
+                add(angle, step_angle, angle)
                 sub(p.wheel_ref, speed, t)
                 mul(c.kv, t, t)
                 add(p.wheel_ff, t, t)
-                maximum(t, self.neg_limit, out=drive)
-                minimum(drive, limit, out=drive)
+                _clip(t, self.neg_limit, limit, drive)
                 absolute(t, demand)
             else:
-                if not ref_resting:  # setpoint.setpoint_step
+                if ref_resting:  # only the shaft moves
+                    mul(speed, dt, step_angle)
+                    add(angle, step_angle, angle)
+                else:  # setpoint.setpoint_velocity, then reference and shaft move together
                     sub(goal, ref, e)
                     absolute(e, d)
-                    mul(d, c.two_a, t)
-                    add(t, c.q, t)
+                    mul(d, two_a, t)
+                    add(t, q, t)
                     sqrt(t, t)
-                    sub(t, c.half_adt, t)
-                    mul(d, c.inv_dt, u)
+                    sub(t, half_adt, t)
+                    mul(d, inv_dt, u)
                     minimum(t, u, out=t)
                     minimum(max_speed, t, out=t)
                     copysign(t, e, t)
                     sub(t, vel, t)
-                    maximum(t, c.neg_adt, out=t)
-                    minimum(t, c.adt, out=t)
+                    _clip(t, neg_adt, adt, t)
                     add(vel, t, vel)
-                    mul(vel, c.dt, t)
-                    add(ref, t, ref)
+                    if disabled is not None:
+                        mul(vel, en, vel)
+                    mul(vel_speed, dt2, moves)
+                    add(ref_angle, moves, ref_angle)
                 if disabled is not None:
                     np.copyto(ref, angle, where=disabled)
-                    mul(vel, en, vel)
                 # controller.symmetric_compliance_drive, on the error in units
-                mul(ref_angle, c.inv_unit2, in_units)
+                mul(ref_angle, inv_unit2, in_units)
                 rint(in_units[1], t)
                 sub(in_units[0], t, err)
                 absolute(err, d)
                 sub(d, margin, d)
                 mul(d, gain, demand)
                 add(punch, demand, demand)
-                heaviside(d, c.zero, t)  # (d > 0) as 0.0 / 1.0
+                heaviside(d, zero, t)  # (d > 0) as 0.0 / 1.0
                 mul(demand, t, demand)
                 minimum(demand, limit, out=drive)
                 copysign(drive, err, drive)
             # motor current; an open bridge (torque off) carries none
             if disabled is not None:
                 mul(drive, en, drive)
-            mul(speed, c.by_speed, speed_products)
             mul(drive, volts_r, cur)
-            sub(cur, speed_k_r, cur)
+            mul(k_r, speed, t)
+            sub(cur, t, cur)
             if disabled is not None:
                 mul(cur, en, cur)
-            mul(c.eta_k, cur, applied)
-            if ext is not None:
-                add(applied, ext, applied)
-            if neg_weight is not None:  # motor.arm_gravity_torque_nm
+            mul(cur, eta_k_dv, z)
+            if ext_dv is not None:
+                add(z, ext_dv, z)
+            if neg_weight_dv is not None:  # motor.arm_gravity_torque_nm
                 sub(angle, c.arm_at, t)
                 cos(t, t)
-                mul(neg_weight, t, t)
-                add(applied, t, applied)
-            # motor.mechanics_step
-            add(speed_big, applied, t)
-            sign(t, dirn)
+                mul(neg_weight_dv, t, t)
+                add(z, t, z)
+            # motor.shaft_speed_step: the free speed, then dry friction (at the starting speed)
+            if keep is None:
+                add(speed, z, z)
+            else:
+                mul(speed, keep, t)
+                add(t, z, z)
             mul(speed, speed, t)
-            mul(t, c.strib, t)
+            mul(t, strib, t)
             exp(t, t)
-            mul(c.dts, t, t)
-            add(c.tc, t, t)
-            mul(dirn, t, fric)
-            if viscous:
-                add(fric, speed_b, fric)
-            sub(applied, fric, t)
-            mul(t, c.dt_j, t)
-            if free is not None:
-                held[:] = angle
-            add(speed, t, speed)
-            mul(speed, dirn, t)
-            maximum(t, c.zero, out=t)
-            mul(t, dirn, speed)
-            mul(speed, c.dt, step_angle)
-            add(angle, step_angle, angle)
-            if free is not None:  # a held shaft keeps its angle
-                sub(angle, held, t)
-                mul(t, free, t)
-                add(held, t, angle)
+            mul(dts, t, t)
+            add(tc, t, t)
+            absolute(z, u)
+            minimum(u, t, out=u)
+            copysign(u, z, u)
+            sub(z, u, speed)
+            if free is not None:  # a held shaft does not turn
                 mul(speed, free, speed)
-            mul(cur, cur, i2_step)
-            add(i2_sum, i2_step, i2_sum)
             if before is not None:
                 same_ref = ref.tobytes() == before[0] and vel.tobytes() == before[1]
                 same_speed = speed.tobytes() == before[3]
@@ -400,3 +437,17 @@ class FusedNumpySteps:
                 self.cruising = same_speed and self.can_cruise
                 ref_resting = self.ref_resting = same_ref and disabled is None  # else it follows a free shaft
                 self.check_in = 0 if self.at_rest or self.cruising else CHECK_EVERY - 1
+        if rows:
+            self._add_heat(rows, i2_sum)
+
+
+def _min_max_clip(x, low, high, out):
+    """``minimum(maximum(x, low), high)``, for a numpy without the clip ufunc."""
+    np.maximum(x, low, out=out)
+    return np.minimum(out, high, out=out)
+
+
+#: ``clip`` as one ufunc call (the same values as maximum then minimum, half the calls); numpy
+#: exposes the ufunc only under its private core module, so fall back to the two calls.
+_clip = getattr(getattr(np, "_core", getattr(np, "core", None)), "umath", None)
+_clip = getattr(_clip, "clip", None) or _min_max_clip

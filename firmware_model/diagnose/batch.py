@@ -8,10 +8,10 @@ loop, with *per-servo parameter arrays* (which
 simulates a whole grid, or a point and its finite-difference neighbours.
 
 It is built from the model's own step functions
-(:func:`~firmware_model.setpoint.setpoint_step`,
+(:func:`~firmware_model.setpoint.setpoint_velocity`,
 :func:`~firmware_model.controller.symmetric_compliance_drive`,
-:func:`~firmware_model.motor.mechanics_step`, ...) in the same order as
-``PhysicalModel._run``, so with every knob at its null value it gives the
+:func:`~firmware_model.motor.shaft_speed_step`, ...) in the same order as
+:func:`~firmware_model.stepping.generic_steps`, so with every knob at its null value it gives the
 same registers as :func:`.replay.replay` (a test checks it).  Scope: joint
 mode, compliance control with symmetric registers, torque on: what a trace
 records.
@@ -28,9 +28,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..controller import compliance_plan, symmetric_compliance_drive
-from ..motor import arm_gravity_torque_nm, mechanics_step
+from ..motor import DryFriction, arm_gravity_torque_nm, shaft_speed_step
 from ..params import ServoParams
-from ..setpoint import apply_dead_zone, setpoint_step
+from ..setpoint import apply_dead_zone, setpoint_velocity
 from ..units import RAD_PER_POSITION_UNIT, RAD_S_PER_SPEED_UNIT
 from .replay import DEFAULT_REGISTERS
 from .schedule import Schedule
@@ -61,6 +61,14 @@ SENSING_KNOBS = {
 THERMAL_PERIOD_STEPS = 10
 _UNIT = float(RAD_PER_POSITION_UNIT)
 _SPEED_UNIT = float(RAD_S_PER_SPEED_UNIT)
+
+
+def load_dv(xp, angle_rad, weight_nm, step_over_inertia):
+    """The arm's gravity as a speed change per step, in the model's form (``-(m g L dt / J) cos``).
+
+    A seam: :mod:`.synthetic` adds an out-of-library torque here.
+    """
+    return arm_gravity_torque_nm(xp, angle_rad, weight_nm * step_over_inertia)
 
 
 def null_knobs(params: ServoParams) -> dict[str, float]:
@@ -105,6 +113,9 @@ def simulate(schedule: Schedule, params: ServoParams, knobs: dict[str, np.ndarra
     b = p.viscous_friction_nm_s_rad
     inertia = p.total_inertia_kg_m2 + kn["extra_inertia_kg_m2"]
     dt_j = np.where(kn["extra_inertia_kg_m2"] == 0, dt / p.total_inertia_kg_m2, dt / inertia)
+    eta_k_dv = eta_k * dt_j  # as StepConstants.eta_k_dv
+    friction = DryFriction.per_step(ts, tc, vs, dt_j)
+    keep = 1.0 - b * dt_j if b else None
     half_play = kn["backlash_rad"] / 2.0
     any_play = bool(np.any(half_play != 0))
     weight = kn["arm_weight_nm"]
@@ -126,17 +137,20 @@ def simulate(schedule: Schedule, params: ServoParams, knobs: dict[str, np.ndarra
         ext = seg.external_torque_nm
         if seg.replan:
             ref = apply_dead_zone(ref, ref_vel, goal, eps)
+        ext_dv = ext * dt_j if ext else None
         for step in range(seg.first + 1, seg.last + 1):
-            ref, ref_vel = setpoint_step(np, ref, ref_vel, goal, vmax, a, dt)
+            ref_vel = setpoint_velocity(np, ref, ref_vel, goal, vmax, a, dt)
+            ref = ref + ref_vel * dt
+            angle = angle + speed * dt
+            out = np.minimum(np.maximum(out, angle - half_play), angle + half_play) if any_play else angle
             error = ref * inv_unit - np.rint(out * inv_unit)
             drive, _ = symmetric_compliance_drive(np, error, margin, gain, punch, limit)
-            applied = eta_k * (drive * volts_r - k_r * speed)
+            applied_dv = (drive * volts_r - k_r * speed) * eta_k_dv
             if ext:
-                applied = applied + ext
+                applied_dv = applied_dv + ext_dv
             if any_arm:
-                applied = applied + arm_gravity_torque_nm(np, angle, weight)
-            angle, speed = mechanics_step(np, angle, speed, applied, ts, tc, b, vs, dt_j, dt)
-            out = np.minimum(np.maximum(out, angle - half_play), angle + half_play) if any_play else angle
+                applied_dv = applied_dv + load_dv(np, angle, weight, dt_j)
+            speed = shaft_speed_step(np, speed, applied_dv, friction, keep)
             rec_angle[step] = out
             rec_drive[step] = drive
     return Record(rec_angle, rec_drive)

@@ -101,15 +101,15 @@ def _simulate_with_cogging(schedule, params, knobs, cog):
     from . import batch
 
     amp, per = cog["amplitude_nm"], cog["periods_per_rad"]
-    original = batch.arm_gravity_torque_nm
+    original = batch.load_dv
 
-    def ripple(xp, angle, weight):
-        return original(xp, angle, weight) + amp * xp.sin(per * angle)
+    def ripple(xp, angle, weight, step_over_inertia):
+        return original(xp, angle, weight, step_over_inertia) + (amp * xp.sin(per * angle)) * step_over_inertia
 
-    batch.arm_gravity_torque_nm = ripple
+    batch.load_dv = ripple
     try:
         kn = {k: np.array([v]) for k, v in knobs.items()}
         kn["arm_weight_nm"] = np.array([knobs["arm_weight_nm"] or 1e-300])  # force the arm path on
         return simulate(schedule, params, kn, 1)
     finally:
-        batch.arm_gravity_torque_nm = original
+        batch.load_dv = original

@@ -4,16 +4,21 @@ import numpy as np
 import pytest
 
 from firmware_model.backend import NUMPY
-from firmware_model.motor import ARM_HORIZONTAL_RAD, arm_gravity_torque_nm, mechanics_step, motor_current_a
+from firmware_model.motor import ARM_HORIZONTAL_RAD, DryFriction, arm_gravity_torque_nm, motor_current_a, shaft_speed_step
 from firmware_model.params import ServoParams
 
 P = ServoParams()
 DT = 1e-3
 
 
-def _step(angle, speed, applied):
-    return mechanics_step(NUMPY, angle, speed, applied, P.static_friction_nm, P.coulomb_friction_nm,
-                          P.viscous_friction_nm_s_rad, P.stribeck_velocity_rad_s, DT / P.total_inertia_kg_m2, DT)
+DT_J = DT / P.total_inertia_kg_m2
+
+
+def _step(angle, speed, applied, viscous_nm_s_rad=P.viscous_friction_nm_s_rad):
+    """One step under ``applied`` N m; the angle moves with the speed the step starts from, as in the step loop."""
+    friction = DryFriction.per_step(P.static_friction_nm, P.coulomb_friction_nm, P.stribeck_velocity_rad_s, DT_J)
+    keep = 1.0 - viscous_nm_s_rad * DT_J if viscous_nm_s_rad else None
+    return angle + speed * DT, shaft_speed_step(NUMPY, speed, applied * DT_J, friction, keep)
 
 
 def test_sliding_to_rest_sticks_without_chatter():
@@ -38,6 +43,18 @@ def test_breakaway_above_static_and_slip_at_coulomb():
     _, slower = _step(angle, speed, np.array([0.0]))
     decel = (5.0 - slower[0]) / DT * P.total_inertia_kg_m2
     assert decel == pytest.approx(P.coulomb_friction_nm + P.viscous_friction_nm_s_rad * 5.0, rel=0.01)
+    _, slower = _step(angle, speed, np.array([0.0]), viscous_nm_s_rad=0.01)  # viscous friction adds b w
+    decel = (5.0 - slower[0]) / DT * P.total_inertia_kg_m2
+    assert decel == pytest.approx(P.coulomb_friction_nm + 0.01 * 5.0, rel=0.01)
+
+
+def test_friction_never_turns_a_motion_round():
+    """A sliding shaft pushed hard the other way stops at zero or reverses with the push, never past what the push gives."""
+    _, fast_back = _step(np.zeros(1), np.array([0.01]), np.array([-0.05]))  # push below static: stops at exactly 0
+    assert fast_back[0] == 0.0
+    _, reversed_ = _step(np.zeros(1), np.array([0.01]), np.array([-2.0]))  # push far beyond friction: reverses
+    free = 0.01 - 2.0 * DT_J
+    assert free < reversed_[0] < 0.0
 
 
 def test_motor_current_back_emf():
