@@ -23,9 +23,12 @@ plus Stribeck torque while sliding (taken at the step's starting speed).  So
 a shaft at rest stays at exactly zero while the applied torque is within
 static friction, a sliding shaft whose friction would carry it past zero
 stops there, and friction never turns a motion round by itself: no speed
-flips back and forth around zero, and "stuck" is simply ``w == 0``.  (It
-replaced Karnopp's method, which needs a separate direction test and a
-clamp: the same behaviour, three numpy calls more per step.)
+flips back and forth around zero, and "stuck" is simply ``w == 0``.  It
+replaced Karnopp's method, which needs a direction test and a clamp (three
+numpy calls more per step).  One difference: Karnopp stopped a shaft for a
+step whenever its speed would change sign, where this lets a push stronger
+than friction turn it round within the step, against the sliding friction of
+the starting speed.
 
 Arm gravity convention: the arm points horizontally at the centre position
 (raw 512, 150 degrees) and turns in a vertical plane with CCW (increasing

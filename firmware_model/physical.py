@@ -5,8 +5,9 @@ client should meet, with acceleration limits, overshoot, sag under load,
 stalls, heating and the slow Present Speed / Load of the real servo.  It
 wires the one-job modules together; each step is
 
-    setpoint (joint) or speed reference (wheel)  ->  controller drive
-    ->  motor current and torque  ->  friction, stick-slip, shaft motion
+    setpoint velocity (joint)  ->  reference and shaft move
+    ->  controller drive (joint) or speed loop (wheel)
+    ->  motor current and torque  ->  friction, stick-slip: the shaft's new speed
 
 and every thermal period (10 ms) heating and the overload timer, every
 sample period (``sample_hold_s``) the held Present Speed and Load.

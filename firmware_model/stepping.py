@@ -230,8 +230,8 @@ class FusedNumpySteps:
     reference and the shaft move in one pair of calls (they are the rows of
     one array, as are their velocities), the position error of both is scaled
     in one call, and the heating's squared currents are kept one row per step
-    and summed once per call (a reduction over rows adds them in order, so the
-    sum is the generic loop's to the bit).
+    and summed once per call (a running sum over the rows adds them in step
+    order, so the sum is the generic loop's to the bit).
     """
 
     def __init__(self, plan: SimpleNamespace, k: StepConstants, s: SimpleNamespace, n: int) -> None:
@@ -287,11 +287,12 @@ class FusedNumpySteps:
         """
         heat = self.heat
         np.copyto(heat[0], i2_sum)
-        block = heat[1:rows + 1]
+        block, used = heat[1:rows + 1], heat[:rows + 1]
         np.multiply(block, block, block)
-        np.add.reduce(heat[:rows + 1], axis=0, out=i2_sum)
         if self.at_rest or self.cruising:
             np.copyto(self.buf.i2_step, heat[rows])
+        np.add.accumulate(used, axis=0, out=used)  # strictly in row order (a reduce may pair them up)
+        np.copyto(i2_sum, heat[rows])
 
     def __call__(self, s: SimpleNamespace, count: int) -> None:
         sub, add, mul, absolute, sqrt, rint, exp, cos = np.subtract, np.add, np.multiply, np.abs, np.sqrt, np.rint, np.exp, np.cos

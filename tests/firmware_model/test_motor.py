@@ -1,4 +1,4 @@
-"""Motor, friction and stick-slip, on the bare mechanics step."""
+"""Motor, friction and stick-slip, on the bare shaft step (motor.shaft_speed_step)."""
 
 import numpy as np
 import pytest

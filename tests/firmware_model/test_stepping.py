@@ -64,6 +64,7 @@ def _trajectory(n: int, backend: str, fused: bool, load, make_commands, wheel: b
             t += every_s  # 7 ms: not a multiple of the thermal or sample period
             sensed = model.advance(t, cmds)
             states.append((model.angle_rad, model.speed_rad_s, model.reference_rad, model.drive, model.temperature_c,
+                           np.array(model._s.current_sq_sum),  # the heating's running sum, not only its rounding
                            *(getattr(sensed, name) for name in type(sensed).field_names())))
     held = (model.speed_rad_s == 0) & (wheel or model.reference_rad == model._cached_plan(cmds).goal_rad)
     assert held.any(), "the scenario should end with a servo holding still (the kernels' fixed-point shortcut)"
