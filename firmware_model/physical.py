@@ -247,12 +247,15 @@ class PhysicalModel:
                 busy = c.wheel_turning
             else:
                 busy = np.where(c.wheel, c.wheel_turning, np.abs(st.ref_vel) > 1e-9)
-            moving = (c.enabled & (busy | (np.abs(st.speed) > RAD_S_PER_SPEED_UNIT))).astype(np.int64)
+            busy = busy | (np.abs(st.speed) > RAD_S_PER_SPEED_UNIT)
+            moving = (busy if c.all_enabled else c.enabled & busy).astype(np.int64)
         if c is not None and c.any_wheel:  # endless turns: some shaft is usually in the gap
             return Sensed(present_position=position_rad_to_raw(st.angle), moving=moving, **slow)
-        units = st.angle / _UNIT_RAD
-        if units.min() >= 0.0 and units.max() < 1023.0:  # all on the track: the general conversion gives the same
-            return Sensed(present_position=np.rint(units).astype(np.int64), moving=moving, **slow)
+        raw = np.rint(st.angle / _UNIT_RAD).astype(np.int64)
+        # All round to 0..1023 (negatives wrap to huge as unsigned): on the track, or within half a
+        # unit of an end, where the general conversion gives the same.
+        if raw.view(np.uint64).max() <= POSITION_MAX_RAW:
+            return Sensed(present_position=raw, moving=moving, **slow)
         return Sensed(present_position=position_rad_to_raw(st.angle), moving=moving, **slow)
 
     def _slow_registers(self) -> dict[str, np.ndarray]:
@@ -318,7 +321,7 @@ class PhysicalModel:
             enabled=enabled, wheel=wheel, wheel_turning=(speed_raw & 0x3FF) != 0,
             temperature_limit=raw["temperature_limit"].copy(), min_voltage_limit=raw["min_voltage_limit"].copy(),
             max_voltage_limit=raw["max_voltage_limit"].copy(), any_wheel=bool(wheel.any()), all_wheel=bool(wheel.all()),
-            always_moving=None,
+            all_enabled=bool(enabled.all()), always_moving=None,
         )
         if plan.sensing.all_wheel and bool((enabled & plan.sensing.wheel_turning).all()):
             # Every servo driven at a speed in wheel mode: Moving is 1 whatever the shaft does, so

@@ -135,6 +135,20 @@ def test_scalar_position_quantiser_matches_units():
     assert [_position_raw(float(a)) for a in angles] == position_rad_to_raw(angles).tolist()
 
 
+def test_numpy_position_quantiser_matches_units_at_the_track_ends(commands):
+    """Many servos: Present Position agrees with units.position_rad_to_raw just inside, at and just past both ends."""
+    from firmware_model.units import RAD_PER_POSITION_UNIT, position_rad_to_raw
+
+    units = np.array([-0.7, -0.5, -0.49, -0.01, 0.0, 0.49, 0.51, 511.5, 1022.6, 1023.0, 1023.49, 1023.5, 1023.51, 1030.0])
+    for chosen in ([0, 1, 2, 3, 4, 5, 6, 7], [7, 8, 9, 10, 11], [2, 3, 7, 9, 10], list(range(len(units)))):
+        angles = units[chosen] * float(RAD_PER_POSITION_UNIT)
+        model = PhysicalModel(len(chosen))
+        for index, angle in enumerate(angles):
+            model.set_angle(index, float(angle))
+        model.advance(0.0, commands(len(chosen)))  # joint mode, no step: only the sensors
+        assert model.sense().present_position.tolist() == position_rad_to_raw(angles).tolist(), units[chosen]
+
+
 def test_sense_agrees_between_backends_while_moving(commands):
     """Sensed registers (position, moving, speed, load) are equal on the float and numpy paths mid-move."""
     outs = []
