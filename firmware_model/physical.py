@@ -122,6 +122,10 @@ class PhysicalModel:
         self._steps = 0
         self._xp = SCALAR if (backend == "scalar" or (backend == "auto" and n == 1)) else NUMPY
         self._thermal_steps = max(1, round(THERMAL_PERIOD_S / step_s))
+        self._thermal_period_s = self._thermal_steps * step_s
+        self._thermal_decay = math.exp(-self._thermal_period_s / (params.thermal_resistance_k_w * params.heat_capacity_j_k))
+        #: Steady-state rise per A**2 summed over a period's steps: R R_th / steps.
+        self._rise_k_per_a2_sum = params.winding_resistance_ohm * params.thermal_resistance_k_w / self._thermal_steps
         self._hold_steps = max(1, round(params.sample_hold_s / step_s))
         self.supply_voltage_v = params.supply_voltage_v
         angle = np.broadcast_to(np.asarray(initial_position_raw, dtype=float) * RAD_PER_POSITION_UNIT, (n,)).copy()
@@ -314,6 +318,7 @@ class PhysicalModel:
             wheel_ref=wheel_ref, wheel_ff=wheel_ff, cw_margin=comp.cw_margin, ccw_margin=comp.ccw_margin,
             cw_gain=comp.cw_gain, ccw_gain=comp.ccw_gain, punch=comp.punch, limit=comp.limit,
             en=enabled.astype(float), volts_r=np.where(enabled, volts / p.winding_resistance_ohm, 0.0),
+            overload_limit=np.where(enabled, comp.limit, np.inf),  # torque off cannot overload
         )
         plan = SimpleNamespace(**{k: self._to_backend(v.astype(float)) for k, v in per_servo.items()})
         plan.enabled, plan.wheel = (bool(enabled[0]), bool(wheel[0])) if self._xp is SCALAR else (enabled, wheel)
@@ -372,12 +377,14 @@ class PhysicalModel:
         overload alarm) may have changed, so ``sense`` recomputes them only then.
         """
         xp, p, s = self._xp, self.params, self._s
-        period = self._thermal_steps * self.step_s
-        decay = math.exp(-period / (p.thermal_resistance_k_w * p.heat_capacity_j_k))
-        s.temperature = thermal_step(xp, s.temperature, s.current_sq_sum / self._thermal_steps, p.winding_resistance_ohm,
-                                     p.thermal_resistance_k_w, p.ambient_temperature_c, decay)
-        s.current_sq_sum = s.current_sq_sum * 0.0
-        s.overload_timer = overload_timer_step(xp, s.overload_timer, plan.enabled, s.demand, plan.limit, s.speed,
+        period = self._thermal_period_s
+        s.temperature = thermal_step(xp, s.temperature, s.current_sq_sum * self._rise_k_per_a2_sum,
+                                     p.ambient_temperature_c, self._thermal_decay)
+        if xp is SCALAR:
+            s.current_sq_sum = 0.0
+        else:  # in place: the fused kernel owns this array and need not copy a new one in
+            s.current_sq_sum.fill(0.0)
+        s.overload_timer = overload_timer_step(xp, s.overload_timer, s.demand, plan.overload_limit, s.speed,
                                                p.stall_speed_rad_s, period)
         # Only wheel mode turns endlessly; a joint-mode shaft keeps a continuous angle, so an
         # overshoot below 0 reads as a small negative error, not as a jump to the far end.

@@ -30,16 +30,23 @@ from .interface import ALARM_INPUT_VOLTAGE, ALARM_OVERHEATING, ALARM_OVERLOAD
 __all__ = ["thermal_step", "overload_timer_step", "alarm_bits"]
 
 
-def thermal_step(xp, temperature_c, mean_current_sq_a2, resistance_ohm: float, thermal_resistance_k_w: float,
-                 ambient_c: float, decay: float):
-    """Exact update of the lumped node over one thermal period; ``decay = exp(-period / (R_th C))``."""
-    steady = ambient_c + mean_current_sq_a2 * resistance_ohm * thermal_resistance_k_w
+def thermal_step(xp, temperature_c, steady_rise_k, ambient_c: float, decay: float):
+    """Exact update of the lumped node over one thermal period.
+
+    ``steady_rise_k`` is the rise the period's mean ``i**2 R R_th`` would hold
+    in the steady state; ``decay = exp(-period / (R_th C))``.
+    """
+    steady = ambient_c + steady_rise_k
     return steady + (temperature_c - steady) * decay
 
 
-def overload_timer_step(xp, timer_s, enabled, demand, limit, speed_rad_s, stall_speed_rad_s: float, period_s: float):
-    """Time the overload condition has held without a break, seconds."""
-    overloaded = enabled & (demand > limit) & (xp.abs(speed_rad_s) < stall_speed_rad_s)
+def overload_timer_step(xp, timer_s, demand, limit_when_on, speed_rad_s, stall_speed_rad_s: float, period_s: float):
+    """Time the overload condition has held without a break, seconds.
+
+    ``limit_when_on`` is Torque Limit as a drive fraction, infinite for a servo
+    with torque off (it cannot overload).
+    """
+    overloaded = (demand > limit_when_on) & (xp.abs(speed_rad_s) < stall_speed_rad_s)
     return xp.where(overloaded, timer_s + period_s, 0.0)
 
 
