@@ -224,14 +224,16 @@ class FusedNumpySteps:
     """:func:`generic_steps` for N servos, all in wheel mode or all in joint mode with symmetric compliance, in place.
 
     Built once per plan (the commands' decoding): it broadcasts every constant
-    to shape (N,) and owns the scratch buffers, so a step is about 41 numpy
-    calls, none allocating (about 27 once the references rest).  It writes the
-    state arrays of ``s`` in place.  Three things are done in bulk: the
-    reference and the shaft move in one pair of calls (they are the rows of
-    one array, as are their velocities), the position error of both is scaled
-    in one call, and the heating's squared currents are kept one row per step
-    and summed once per call (a running sum over the rows adds them in step
-    order, so the sum is the generic loop's to the bit).
+    to shape (N,) and owns the scratch buffers, so a step is about 39 numpy
+    calls, none allocating (about 25 once the references rest).  It writes the
+    state arrays of ``s`` in place.  Work is done in bulk where rows of one
+    array allow it: the reference and the shaft move in one pair of calls,
+    the position error of both is scaled in one call, the motor's two
+    products (back-EMF and drive) take one call, and the heating's squared
+    currents are kept one row per step and summed once per call (a running
+    sum over the rows adds them in step order, so the sum is the generic
+    loop's to the bit).  Dry friction's ``copysign(minimum(|z|, F), z)`` is
+    computed as ``clip(z, -F, F)``, the same values in one call fewer.
     """
 
     def __init__(self, plan: SimpleNamespace, k: StepConstants, s: SimpleNamespace, n: int) -> None:
@@ -245,6 +247,7 @@ class FusedNumpySteps:
             dts=full(f.static_dv_rad_s - f.coulomb_dv_rad_s), tc=full(f.coulomb_dv_rad_s),
             keep=None if k.viscous_keep is None else full(k.viscous_keep),
             arm_at=full(ARM_HORIZONTAL_RAD), kv=full(k.wheel_gain_s_rad), inv_unit2=np.full((2, n), k.inv_unit),
+            kr_vr=np.stack([full(k.k_over_r), np.asarray(plan.volts_r, dtype=float)]),
         )
         self.plan = plan
         #: Every servo in wheel mode (fusable() allows no mix): a speed loop instead of setpoint and compliance.
@@ -255,14 +258,17 @@ class FusedNumpySteps:
         self.neg_weight_dv = -(s.weight_nm * k.step_over_inertia) if plan.any_arm else None
         self.free = 1.0 - s.blocked if plan.any_blocked else None
         self.buf = SimpleNamespace(**{name: np.empty(n) for name in ("e", "d", "t", "u", "err", "z", "i2_step")})
-        self.buf.in_units, self.buf.moves = np.empty((2, n)), np.empty((2, n))
+        self.buf.in_units, self.buf.moves, self.buf.products = np.empty((2, n)), np.empty((2, n)), np.empty((2, n))
         # The state the kernel updates in place.  Reference and angle are the two rows of one
-        # array, their velocities of another, so one pair of calls moves both.  A caller that
-        # rebinds a state array (an event, a new plan) is copied in at the next call; one that
-        # keeps a state array must copy it.
-        self.ref_angle, self.vel_speed = np.empty((2, n)), np.empty((2, n))
-        self.state = {"ref": self.ref_angle[0], "angle": self.ref_angle[1], "ref_vel": self.vel_speed[0],
-                      "speed": self.vel_speed[1], **{name: np.empty(n) for name in ("drive", "demand", "current_sq_sum")}}
+        # array, and the reference's velocity, the shaft's speed and the drive the three of
+        # another, so one pair of calls moves reference and shaft (velocity and speed rows) and
+        # one call gives the motor's two products (speed and drive rows).  A caller that rebinds
+        # a state array (an event, a new plan) is copied in at the next call; one that keeps a
+        # state array must copy it.
+        self.ref_angle, self.vel_speed_drive = np.empty((2, n)), np.empty((3, n))
+        self.state = {"ref": self.ref_angle[0], "angle": self.ref_angle[1], "ref_vel": self.vel_speed_drive[0],
+                      "speed": self.vel_speed_drive[1], "drive": self.vel_speed_drive[2],
+                      **{name: np.empty(n) for name in ("demand", "current_sq_sum")}}
         self.n = n
         self._grow_heat(16)
         # Fixed points found by a check after a step (see __call__); they hold while the plan (this
@@ -299,11 +305,10 @@ class FusedNumpySteps:
         minimum, copysign, heaviside = np.minimum, np.copysign, np.heaviside
         c, p, bf = self.c, self.plan, self.buf
         e, d, t, u, err, z, i2_step, in_units, moves = bf.e, bf.d, bf.t, bf.u, bf.err, bf.z, bf.i2_step, bf.in_units, bf.moves
-        goal, max_speed, margin, gain, punch, limit, volts_r, en = (p.goal_rad, p.max_speed, p.ccw_margin, p.ccw_gain, p.punch,
-                                                                    p.limit, p.volts_r, p.en)
+        goal, max_speed, margin, gain, punch, limit, en = p.goal_rad, p.max_speed, p.ccw_margin, p.ccw_gain, p.punch, p.limit, p.en
         q, two_a, half_adt, inv_dt, neg_adt, adt, dt, dt2, zero = (c.q, c.two_a, c.half_adt, c.inv_dt, c.neg_adt, c.adt, c.dt,
                                                                    c.dt2, c.zero)
-        k_r, eta_k_dv, strib, dts, tc, keep, inv_unit2 = c.k_r, c.eta_k_dv, c.strib, c.dts, c.tc, c.keep, c.inv_unit2
+        kr_vr, eta_k_dv, strib, dts, tc, keep, inv_unit2 = c.kr_vr, c.eta_k_dv, c.strib, c.dts, c.tc, c.keep, c.inv_unit2
         disabled, ext_dv, neg_weight_dv, free, wheel = self.disabled, self.ext_dv, self.neg_weight_dv, self.free, self.wheel
         state = self.state
         for name, own in state.items():
@@ -318,7 +323,8 @@ class FusedNumpySteps:
         if count > len(self.heat_rows) - 1:
             self._grow_heat(count)
         heat_rows = self.heat_rows
-        ref_angle, vel_speed = self.ref_angle, self.vel_speed
+        ref_angle, vel_speed, speed_drive = self.ref_angle, self.vel_speed_drive[:2], self.vel_speed_drive[1:]
+        products = bf.products
         ref, angle, speed, vel, drive, demand, i2_sum = (state["ref"], state["angle"], state["speed"], state["ref_vel"],
                                                          state["drive"], state["demand"], state["current_sq_sum"])
         step_angle = moves[1]
@@ -401,9 +407,8 @@ class FusedNumpySteps:
             # motor current; an open bridge (torque off) carries none
             if disabled is not None:
                 mul(drive, en, drive)
-            mul(drive, volts_r, cur)
-            mul(k_r, speed, t)
-            sub(cur, t, cur)
+            mul(speed_drive, kr_vr, products)  # (k/R) speed and drive V/R
+            sub(products[1], products[0], cur)
             if disabled is not None:
                 mul(cur, en, cur)
             mul(cur, eta_k_dv, z)
@@ -425,9 +430,8 @@ class FusedNumpySteps:
             exp(t, t)
             mul(dts, t, t)
             add(tc, t, t)
-            absolute(z, u)
-            minimum(u, t, out=u)
-            copysign(u, z, u)
+            np.negative(t, u)  # copysign(minimum(|z|, F), z) is clip(z, -F, F)
+            _clip(z, u, t, u)
             sub(z, u, speed)
             if free is not None:  # a held shaft does not turn
                 mul(speed, free, speed)
