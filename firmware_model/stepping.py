@@ -325,6 +325,9 @@ class FusedNumpySteps:
         heat_rows = self.heat_rows
         ref_angle, vel_speed, speed_drive = self.ref_angle, self.vel_speed_drive[:2], self.vel_speed_drive[1:]
         products = bf.products
+        # Row views made once per call: indexing a row costs about as much as a small ufunc call.
+        ref_units, angle_units = in_units
+        emf_product, drive_product = products
         ref, angle, speed, vel, drive, demand, i2_sum = (state["ref"], state["angle"], state["speed"], state["ref_vel"],
                                                          state["drive"], state["demand"], state["current_sq_sum"])
         step_angle = moves[1]
@@ -394,8 +397,8 @@ class FusedNumpySteps:
                     np.copyto(ref, angle, where=disabled)
                 # controller.symmetric_compliance_drive, on the error in units
                 mul(ref_angle, inv_unit2, in_units)
-                rint(in_units[1], t)
-                sub(in_units[0], t, err)
+                rint(angle_units, t)
+                sub(ref_units, t, err)
                 absolute(err, d)
                 sub(d, margin, d)
                 mul(d, gain, demand)
@@ -408,7 +411,7 @@ class FusedNumpySteps:
             if disabled is not None:
                 mul(drive, en, drive)
             mul(speed_drive, kr_vr, products)  # (k/R) speed and drive V/R
-            sub(products[1], products[0], cur)
+            sub(drive_product, emf_product, cur)
             if disabled is not None:
                 mul(cur, en, cur)
             mul(cur, eta_k_dv, z)
