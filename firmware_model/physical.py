@@ -79,6 +79,13 @@ _STATE = ("angle", "speed", "ref", "ref_vel", "drive", "demand", "integral", "pr
           "blocked")
 
 
+def _per_servo(values, n: int) -> np.ndarray:
+    """``values`` as an array of shape (n,): as it is when it has that shape (the usual case, and
+    ``broadcast_to`` costs about 10 us a call), else broadcast."""
+    array = np.asarray(values)
+    return array if array.shape == (n,) else np.broadcast_to(array, (n,))
+
+
 def _position_raw(angle_rad: float) -> int:
     """:func:`~firmware_model.units.position_rad_to_raw` for one float (tests check they agree)."""
     wrapped = angle_rad % _TWO_PI
@@ -299,7 +306,7 @@ class PhysicalModel:
     def _plan(self, c: Commands) -> SimpleNamespace:
         """Decode the command registers into per-servo constants for the step loop."""
         p, n = self.params, self.n
-        raw = {name: np.broadcast_to(np.asarray(getattr(c, name)), (n,)) for name in Commands.field_names()}
+        raw = {name: _per_servo(getattr(c, name), n) for name in _COMMAND_FIELDS}
         enabled = raw["torque_enable"] != 0
         wheel = (raw["cw_angle_limit"] == 0) & (raw["ccw_angle_limit"] == 0)
         speed_raw = raw["moving_speed"].astype(np.int64)
