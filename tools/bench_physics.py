@@ -13,7 +13,7 @@ model's checked fixed points save (see :mod:`firmware_model.stepping`).
 Timing on a shared machine is noisy, so each count runs ``--repeat`` times
 and the best run is reported (as ``timeit`` does: noise only ever slows a
 run down), with the median and the worst beside it.  On the development VM
-the same process swings between about 17x and 31x for 253 servos within
+the same process swings between about 19x and 42x for 253 servos within
 seconds (other tenants of the host), so the best shows what the code does on
 a free core and the median what a run on this machine typically sees.
 
