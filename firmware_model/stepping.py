@@ -20,8 +20,11 @@ steps, until it finds one, it compares the state after a step with the one
 before; a reference resting on its goal is not stepped again, a state that
 did not change at all (servos holding still) only accumulates heating, and
 wheels whose speed did not change (cruising) only turn by the same angle and
-heat.  What it found holds across calls, until the plan changes or someone
-rebinds a state array the finding depends on.
+heat.  References cruising at their speed limit (and the resting ones) are
+not stepped either, for as many steps as the braking curve provably leaves
+their velocity alone, counted when a step changed no velocity.  What it
+found holds across calls, until the plan changes or someone rebinds a state
+array the finding depends on.
 
 The step is ordered for few calls.  Positions move first, with the
 velocities the step starts from (the reference's chosen now by the setpoint
@@ -274,12 +277,15 @@ class FusedNumpySteps:
         # Fixed points found by a check after a step (see __call__); they hold while the plan (this
         # object) lives and nobody rebinds the state arrays they depend on.
         self.ref_resting = self.at_rest = self.cruising = False
+        #: Steps for which every reference provably keeps its velocity (see _reference_cruise_steps).
+        self.ref_cruise_left = 0
+        self.safe_distance = None if plan.any_wheel else _cruise_safe_distance(self.c, plan.max_speed)
         #: Cruising applies when the speed update depends on the speed alone: all in wheel mode
         #: (no position controller), no arm (gravity depends on the angle), no blocked shaft.
         self.can_cruise = plan.any_wheel and not plan.any_arm and not plan.any_blocked
         self.check_in = 0
         #: Steps taken by each shortcut (for tests and benchmarks: that they run at all).
-        self.rest_steps = self.cruise_steps = 0
+        self.rest_steps = self.cruise_steps = self.ref_cruise_steps = 0
 
     def _grow_heat(self, rows: int) -> None:
         """Room for ``rows`` steps' currents (row 0 takes the running sum when they are added up)."""
@@ -300,6 +306,29 @@ class FusedNumpySteps:
         np.add.accumulate(used, axis=0, out=used)  # strictly in row order (a reduce may pair them up)
         np.copyto(i2_sum, heat[rows])
 
+    def _reference_cruise_steps(self, ref: np.ndarray, vel: np.ndarray) -> int:
+        """How many coming steps provably leave every reference's velocity as it is (0: none).
+
+        Called after a step that changed no velocity.  A reference resting on
+        its goal stays (the step is a map of reference and velocity alone, and
+        it just mapped them onto themselves).  One cruising toward its goal at
+        exactly its speed limit keeps that velocity while the braking curve
+        allows more than the limit, that is while it is at least
+        ``safe_distance`` from the goal (:func:`_cruise_safe_distance`); each
+        step brings it ``|v| dt`` closer, plus rounding, allowed for.  Any
+        other reference (accelerating, braking) gives 0.
+        """
+        p = self.plan
+        error = p.goal_rad - ref
+        distance = np.abs(error)
+        resting = (distance == 0.0) & (vel == 0.0)
+        cruising = np.copysign(p.max_speed, error) == vel
+        per_step = np.abs(vel) * (self.c.dt * (1.0 + 1e-9)) + 1e-12
+        room = np.where(cruising, np.floor((distance - self.safe_distance) / per_step), 0.0)
+        steps = np.where(resting, np.inf, np.maximum(room, 0.0))
+        least = float(steps.min())
+        return 0 if least == np.inf else int(least)
+
     def __call__(self, s: SimpleNamespace, count: int) -> None:
         sub, add, mul, absolute, sqrt, rint, exp, cos = np.subtract, np.add, np.multiply, np.abs, np.sqrt, np.rint, np.exp, np.cos
         minimum, copysign, heaviside = np.minimum, np.copysign, np.heaviside
@@ -318,8 +347,10 @@ class FusedNumpySteps:
                 setattr(s, name, own)
                 if name in ("ref", "ref_vel", "angle"):
                     self.ref_resting = self.at_rest = False
+                    self.ref_cruise_left = 0
                 elif name == "speed":
                     self.ref_resting = self.at_rest = self.cruising = False
+                    self.ref_cruise_left = 0
         if count > len(self.heat_rows) - 1:
             self._grow_heat(count)
         heat_rows = self.heat_rows
@@ -375,6 +406,11 @@ class FusedNumpySteps:
                 if ref_resting:  # only the shaft moves
                     mul(speed, dt, step_angle)
                     add(angle, step_angle, angle)
+                elif self.ref_cruise_left:  # every reference keeps its velocity: both move
+                    self.ref_cruise_left -= 1
+                    self.ref_cruise_steps += 1
+                    mul(vel_speed, dt2, moves)
+                    add(ref_angle, moves, ref_angle)
                 else:  # setpoint.setpoint_velocity, then reference and shaft move together
                     sub(goal, ref, e)
                     absolute(e, d)
@@ -445,8 +481,32 @@ class FusedNumpySteps:
                 self.cruising = same_speed and self.can_cruise
                 ref_resting = self.ref_resting = same_ref and disabled is None  # else it follows a free shaft
                 self.check_in = 0 if self.at_rest or self.cruising else CHECK_EVERY - 1
+                if (not (wheel or ref_resting or self.ref_cruise_left) and disabled is None
+                        and vel.tobytes() == before[1]):
+                    self.ref_cruise_left = self._reference_cruise_steps(ref, vel)
         if rows:
             self._add_heat(rows, i2_sum)
+
+
+def _cruise_safe_distance(c: SimpleNamespace, max_speed: np.ndarray) -> np.ndarray:
+    """Per servo, a distance to the goal from which on the setpoint's limit is ``max_speed`` itself.
+
+    From ``sqrt(q + 2 a d) - a dt / 2 = v`` (the braking curve, see
+    :func:`~firmware_model.setpoint.braking_speed`) with a margin, then
+    checked with the kernel's own operations and widened until it holds.
+    Every operation in the check rounds monotonically, so it holds for every
+    larger distance too.
+    """
+    v = np.asarray(max_speed, dtype=float)
+    distance = ((v + c.half_adt) ** 2 - c.q) / c.two_a
+    distance = np.maximum(distance, v / c.inv_dt) * (1.0 + 1e-9) + 1e-12
+    for _ in range(60):
+        curve = np.sqrt(distance * c.two_a + c.q) - c.half_adt
+        ok = np.minimum(max_speed, np.minimum(curve, distance * c.inv_dt)) == v
+        if ok.all():
+            return distance
+        distance = np.where(ok, distance, distance * (1.0 + 1e-6) + 1e-9)
+    raise AssertionError("no safe cruise distance found")  # cannot happen for finite speeds
 
 
 def _min_max_clip(x, low, high, out):

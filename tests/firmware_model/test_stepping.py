@@ -109,9 +109,10 @@ def kernels(monkeypatch) -> list:
 
 
 def test_fixed_point_shortcuts_run_in_the_scenarios_above(commands, kernels):
-    """Guards the comparisons: servos holding still and wheels cruising take the shortcuts there."""
+    """Guards the comparisons: servos holding still, references cruising and wheels cruising take the shortcuts there."""
     _trajectory(3, "numpy", True, LOADS["none"], commands, wheel=False)
     assert sum(k.rest_steps for k in kernels) > 100
+    assert sum(k.ref_cruise_steps for k in kernels) > 100
     kernels.clear()
     _trajectory(3, "numpy", True, LOADS["external torque"], commands, wheel=True, every_s=0.001)
     assert sum(k.cruise_steps for k in kernels) > 100
@@ -130,6 +131,26 @@ def test_fused_kernel_equals_the_generic_loop_through_wraps_while_cruising(comma
         turned_rad += np.abs(models[0].speed_rad_s) * 0.001
     assert (turned_rad > 2 * 2 * np.pi).all()  # two turns or more each, so wraps came while cruising
     assert sum(k.cruise_steps for k in kernels) > 1500
+
+
+@pytest.mark.parametrize("every_s", [0.001, 0.01])
+def test_fused_kernel_equals_the_generic_loop_through_long_cruises(commands, kernels, every_s):
+    """Servos told to go far at moderate speeds cruise together for hundreds of steps (the setpoint skipped),
+    then brake one after the other and rest; a goal changed mid-cruise turns some round."""
+    n = 5
+    legs = [(1.5, commands(n, goal_position=[1000, 20, 900, 100, 512], moving_speed=[150, 150, 200, 90, 300])),
+            (1.2, commands(n, goal_position=[600, 300, 900, 400, 700], moving_speed=[150, 400, 200, 90, 0]))]
+    models = [PhysicalModel(n, fused=flag) for flag in (True, False)]
+    t = 0.0
+    for duration_s, cmds in legs:
+        end = t + duration_s
+        while t < end - 1e-12:
+            t += every_s
+            readings = [model.advance(t, cmds) for model in models]
+            states = [(model.angle_rad, model.speed_rad_s, model.reference_rad, model.drive, model._s.current_sq_sum,
+                       r.present_position, r.present_speed, r.moving) for model, r in zip(models, readings)]
+            assert all(_same_bits(x, y) for x, y in zip(*states)), f"differs at {t:.3f} s"
+    assert sum(k.ref_cruise_steps for k in kernels) > 300
 
 
 def test_usual_configuration_runs_fused_and_others_the_generic_loop(commands):
