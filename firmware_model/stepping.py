@@ -315,15 +315,18 @@ class FusedNumpySteps:
         exactly its speed limit keeps that velocity while the braking curve
         allows more than the limit, that is while it is at least
         ``safe_distance`` from the goal (:func:`_cruise_safe_distance`); each
-        step brings it ``|v| dt`` closer, plus rounding, allowed for.  Any
-        other reference (accelerating, braking) gives 0.
+        step brings it ``|v| dt`` closer, plus rounding, allowed for, and one
+        step is kept in hand.  Any other reference (accelerating, braking)
+        gives 0.
         """
         p = self.plan
         error = p.goal_rad - ref
         distance = np.abs(error)
         resting = (distance == 0.0) & (vel == 0.0)
         cruising = np.copysign(p.max_speed, error) == vel
-        per_step = np.abs(vel) * (self.c.dt * (1.0 + 1e-9)) + 1e-12
+        # Each step brings it |v| dt closer, give or take the rounding of ref + v dt: at most half
+        # the spacing of floats as large as the larger of reference and goal (it moves between them).
+        per_step = np.abs(vel) * (self.c.dt * (1.0 + 1e-9)) + np.spacing(np.maximum(np.abs(ref), np.abs(p.goal_rad))) + 1e-12
         room = np.where(cruising, np.floor((distance - self.safe_distance) / per_step), 0.0)
         steps = np.where(resting, np.inf, np.maximum(room, 0.0))
         least = float(steps.min())

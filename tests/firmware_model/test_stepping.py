@@ -133,13 +133,39 @@ def test_fused_kernel_equals_the_generic_loop_through_wraps_while_cruising(comma
     assert sum(k.cruise_steps for k in kernels) > 1500
 
 
+def test_cruise_safe_distance_keeps_every_speed_limit_exactly():
+    """From the safe distance on, the setpoint's own arithmetic asks for exactly the limit, for every Moving Speed."""
+    from firmware_model.stepping import StepConstants, _cruise_safe_distance
+    from firmware_model.controller import PidGains
+    from firmware_model.units import RAD_S_PER_SPEED_UNIT
+
+    n = 1023
+    k = StepConstants.from_params(ServoParams(), 1e-3, "compliance", PidGains())
+    adt = k.accel_rad_s2 * k.step_s
+    full = lambda value: np.full(n, float(value))  # noqa: E731
+    c = type("C", (), dict(q=full(0.25 * adt * adt), two_a=full(2.0 * k.accel_rad_s2), half_adt=full(0.5 * adt),
+                           inv_dt=full(1.0 / k.step_s)))
+    limit = np.arange(1, n + 1) * RAD_S_PER_SPEED_UNIT
+    safe = _cruise_safe_distance(c, limit)
+    for scale in (1.0, 1.0 + 1e-12, 1.37, 1e3):
+        d = safe * scale
+        curve = np.sqrt(d * c.two_a + c.q) - c.half_adt
+        assert (np.minimum(limit, np.minimum(curve, d * c.inv_dt)) == limit).all()
+    # and not far beyond what the braking curve needs, (v**2 + v a dt) / 2a, or one step at v
+    needed = np.maximum((limit**2 + limit * adt) / (2 * k.accel_rad_s2), limit * k.step_s)
+    assert (safe < needed * (1 + 1e-6) + 1e-9).all()
+
+
 @pytest.mark.parametrize("every_s", [0.001, 0.01])
-def test_fused_kernel_equals_the_generic_loop_through_long_cruises(commands, kernels, every_s):
-    """Servos told to go far at moderate speeds cruise together for hundreds of steps (the setpoint skipped),
-    then brake one after the other and rest; a goal changed mid-cruise turns some round."""
-    n = 5
-    legs = [(1.5, commands(n, goal_position=[1000, 20, 900, 100, 512], moving_speed=[150, 150, 200, 90, 300])),
-            (1.2, commands(n, goal_position=[600, 300, 900, 400, 700], moving_speed=[150, 400, 200, 90, 0]))]
+def test_fused_kernel_equals_the_generic_loop_through_slow_cruises(commands, kernels, every_s):
+    """Moving Speed 1 to 7 (0.7 to 5 degrees a second): long cruises at the slowest references, bit for bit."""
+    n = 4
+    legs = [(2.5, commands(n, goal_position=[600, 400, 530, 500], moving_speed=[1, 3, 7, 2]))]
+    _compare_fused_and_generic(n, legs, every_s)
+    assert sum(k.ref_cruise_steps for k in kernels) > 1000
+
+
+def _compare_fused_and_generic(n: int, legs, every_s: float) -> None:
     models = [PhysicalModel(n, fused=flag) for flag in (True, False)]
     t = 0.0
     for duration_s, cmds in legs:
@@ -150,6 +176,16 @@ def test_fused_kernel_equals_the_generic_loop_through_long_cruises(commands, ker
             states = [(model.angle_rad, model.speed_rad_s, model.reference_rad, model.drive, model._s.current_sq_sum,
                        r.present_position, r.present_speed, r.moving) for model, r in zip(models, readings)]
             assert all(_same_bits(x, y) for x, y in zip(*states)), f"differs at {t:.3f} s"
+
+
+@pytest.mark.parametrize("every_s", [0.001, 0.01])
+def test_fused_kernel_equals_the_generic_loop_through_long_cruises(commands, kernels, every_s):
+    """Servos told to go far at moderate speeds cruise together for hundreds of steps (the setpoint skipped),
+    then brake one after the other and rest; a goal changed mid-cruise turns some round."""
+    n = 5
+    legs = [(1.5, commands(n, goal_position=[1000, 20, 900, 100, 512], moving_speed=[150, 150, 200, 90, 300])),
+            (1.2, commands(n, goal_position=[600, 300, 900, 400, 700], moving_speed=[150, 400, 200, 90, 0]))]
+    _compare_fused_and_generic(n, legs, every_s)
     assert sum(k.ref_cruise_steps for k in kernels) > 300
 
 
