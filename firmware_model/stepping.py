@@ -332,16 +332,21 @@ class FusedNumpySteps:
         least = float(steps.min())
         return 0 if least == np.inf else int(least)
 
+    def _repeat_fixed_point(self, count: int) -> None:
+        """``count`` steps of a fixed point found before: only heating, and for cruising wheels the same turn."""
+        add, i2_sum, i2_step = np.add, self.state["current_sq_sum"], self.buf.i2_step
+        if self.at_rest:
+            self.rest_steps += count
+            for _ in range(count):
+                add(i2_sum, i2_step, i2_sum)
+        else:
+            self.cruise_steps += count
+            angle, step_angle = self.state["angle"], self.buf.moves[1]
+            for _ in range(count):
+                add(angle, step_angle, angle)
+                add(i2_sum, i2_step, i2_sum)
+
     def __call__(self, s: SimpleNamespace, count: int) -> None:
-        sub, add, mul, absolute, sqrt, rint, exp, cos = np.subtract, np.add, np.multiply, np.abs, np.sqrt, np.rint, np.exp, np.cos
-        minimum, copysign, heaviside = np.minimum, np.copysign, np.heaviside
-        c, p, bf = self.c, self.plan, self.buf
-        e, d, t, u, err, z, i2_step, in_units, moves = bf.e, bf.d, bf.t, bf.u, bf.err, bf.z, bf.i2_step, bf.in_units, bf.moves
-        goal, max_speed, margin, gain, punch, limit, en = p.goal_rad, p.max_speed, p.ccw_margin, p.ccw_gain, p.punch, p.limit, p.en
-        q, two_a, half_adt, inv_dt, neg_adt, adt, dt, dt2, zero = (c.q, c.two_a, c.half_adt, c.inv_dt, c.neg_adt, c.adt, c.dt,
-                                                                   c.dt2, c.zero)
-        kr_vr, eta_k_dv, strib, dts, tc, keep, inv_unit2 = c.kr_vr, c.eta_k_dv, c.strib, c.dts, c.tc, c.keep, c.inv_unit2
-        disabled, ext_dv, neg_weight_dv, free, wheel = self.disabled, self.ext_dv, self.neg_weight_dv, self.free, self.wheel
         state = self.state
         for name, own in state.items():
             current = getattr(s, name)
@@ -354,6 +359,18 @@ class FusedNumpySteps:
                 elif name == "speed":
                     self.ref_resting = self.at_rest = self.cruising = False
                     self.ref_cruise_left = 0
+        if self.at_rest or self.cruising:  # before setting up a step: servo loops call one step at a time
+            self._repeat_fixed_point(count)
+            return
+        sub, add, mul, absolute, sqrt, rint, exp, cos = np.subtract, np.add, np.multiply, np.abs, np.sqrt, np.rint, np.exp, np.cos
+        minimum, copysign, heaviside = np.minimum, np.copysign, np.heaviside
+        c, p, bf = self.c, self.plan, self.buf
+        e, d, t, u, err, z, in_units, moves = bf.e, bf.d, bf.t, bf.u, bf.err, bf.z, bf.in_units, bf.moves
+        goal, max_speed, margin, gain, punch, limit, en = p.goal_rad, p.max_speed, p.ccw_margin, p.ccw_gain, p.punch, p.limit, p.en
+        q, two_a, half_adt, inv_dt, neg_adt, adt, dt, dt2, zero = (c.q, c.two_a, c.half_adt, c.inv_dt, c.neg_adt, c.adt, c.dt,
+                                                                   c.dt2, c.zero)
+        kr_vr, eta_k_dv, strib, dts, tc, keep, inv_unit2 = c.kr_vr, c.eta_k_dv, c.strib, c.dts, c.tc, c.keep, c.inv_unit2
+        disabled, ext_dv, neg_weight_dv, free, wheel = self.disabled, self.ext_dv, self.neg_weight_dv, self.free, self.wheel
         if count > len(self.heat_rows) - 1:
             self._grow_heat(count)
         heat_rows = self.heat_rows
@@ -378,16 +395,7 @@ class FusedNumpySteps:
                 if rows:
                     self._add_heat(rows, i2_sum)
                     rows = 0
-                left = count - step
-                if self.at_rest:
-                    self.rest_steps += left
-                    for _ in range(left):
-                        add(i2_sum, i2_step, i2_sum)
-                else:
-                    self.cruise_steps += left
-                    for _ in range(left):
-                        add(angle, step_angle, angle)
-                        add(i2_sum, i2_step, i2_sum)
+                self._repeat_fixed_point(count - step)
                 break
             before = None
             if self.check_in <= 0:
