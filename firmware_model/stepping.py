@@ -246,7 +246,7 @@ class FusedNumpySteps:
         self.c = SimpleNamespace(
             q=full(0.25 * adt * adt), two_a=full(2.0 * k.accel_rad_s2), half_adt=full(0.5 * adt), inv_dt=full(1.0 / k.step_s),
             neg_adt=full(-adt), adt=full(adt), dt=full(k.step_s), dt2=np.full((2, n), k.step_s), zero=full(0.0),
-            k_r=full(k.k_over_r), eta_k_dv=full(k.eta_k_dv), strib=full(f.stribeck_coef_s2_rad2),
+            eta_k_dv=full(k.eta_k_dv), strib=full(f.stribeck_coef_s2_rad2),
             dts=full(f.static_dv_rad_s - f.coulomb_dv_rad_s), tc=full(f.coulomb_dv_rad_s),
             keep=None if k.viscous_keep is None else full(k.viscous_keep),
             arm_at=full(ARM_HORIZONTAL_RAD), kv=full(k.wheel_gain_s_rad), inv_unit2=np.full((2, n), k.inv_unit),
@@ -326,7 +326,8 @@ class FusedNumpySteps:
         cruising = np.copysign(p.max_speed, error) == vel
         # Each step brings it |v| dt closer, give or take the rounding of ref + v dt: at most half
         # the spacing of floats as large as the larger of reference and goal (it moves between them).
-        per_step = np.abs(vel) * (self.c.dt * (1.0 + 1e-9)) + np.spacing(np.maximum(np.abs(ref), np.abs(p.goal_rad))) + 1e-12
+        rounding = np.spacing(np.maximum(np.abs(ref), np.abs(p.goal_rad))) + 1e-12
+        per_step = np.abs(vel) * (self.c.dt * (1.0 + 1e-9)) + rounding
         room = np.where(cruising, np.floor((distance - self.safe_distance) / per_step), 0.0)
         steps = np.where(resting, np.inf, np.maximum(room, 0.0))
         least = float(steps.min())
