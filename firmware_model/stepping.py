@@ -227,8 +227,9 @@ class FusedNumpySteps:
     """:func:`generic_steps` for N servos, all in wheel mode or all in joint mode with symmetric compliance, in place.
 
     Built once per plan (the commands' decoding): it broadcasts every constant
-    to shape (N,) and owns the scratch buffers, so a step is about 39 numpy
-    calls, none allocating (about 25 once the references rest).  It writes the
+    to shape (N,) and owns the scratch buffers, so a step is 38 numpy calls
+    (39 with viscous friction), none allocating (25 once the references rest
+    or cruise), and 2 to 4 more a call.  It writes the
     state arrays of ``s`` in place.  Work is done in bulk where rows of one
     array allow it: the reference and the shaft move in one pair of calls,
     the position error of both is scaled in one call, the motor's two
@@ -298,6 +299,13 @@ class FusedNumpySteps:
         While a fixed point holds, the last square is what every later step adds.
         """
         heat = self.heat
+        if rows == 1:  # one step a call (a serving loop): add it as the generic loop does
+            last = heat[1]
+            np.multiply(last, last, last)
+            if self.at_rest or self.cruising:
+                np.copyto(self.buf.i2_step, last)
+            np.add(i2_sum, last, i2_sum)
+            return
         np.copyto(heat[0], i2_sum)
         block, used = heat[1:rows + 1], heat[:rows + 1]
         np.multiply(block, block, block)
