@@ -299,18 +299,15 @@ class FusedNumpySteps:
         While a fixed point holds, the last square is what every later step adds.
         """
         heat = self.heat
-        if rows == 1:  # one step a call (a serving loop): add it as the generic loop does
-            last = heat[1]
-            np.multiply(last, last, last)
-            if self.at_rest or self.cruising:
-                np.copyto(self.buf.i2_step, last)
-            np.add(i2_sum, last, i2_sum)
-            return
-        np.copyto(heat[0], i2_sum)
-        block, used = heat[1:rows + 1], heat[:rows + 1]
+        block = heat[1:rows + 1]
         np.multiply(block, block, block)
         if self.at_rest or self.cruising:
             np.copyto(self.buf.i2_step, heat[rows])
+        if rows == 1:  # one step a call (a serving loop): add it as the generic loop does
+            np.add(i2_sum, heat[1], i2_sum)
+            return
+        np.copyto(heat[0], i2_sum)
+        used = heat[:rows + 1]
         np.add.accumulate(used, axis=0, out=used)  # strictly in row order (a reduce may pair them up)
         np.copyto(i2_sum, heat[rows])
 
@@ -362,12 +359,11 @@ class FusedNumpySteps:
             if current is not own:  # rebound since the last call: take the new values in
                 np.copyto(own, current)
                 setattr(s, name, own)
-                if name in ("ref", "ref_vel", "angle"):
+                if name in ("ref", "ref_vel", "angle", "speed"):
                     self.ref_resting = self.at_rest = False
                     self.ref_cruise_left = 0
-                elif name == "speed":
-                    self.ref_resting = self.at_rest = self.cruising = False
-                    self.ref_cruise_left = 0
+                    if name == "speed":
+                        self.cruising = False
         if self.at_rest or self.cruising:  # before setting up a step: servo loops call one step at a time
             self._repeat_fixed_point(count)
             return
