@@ -16,7 +16,7 @@ and collisions on the wire (``server.py``), electrical faults.
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Sequence
 from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
@@ -172,31 +172,44 @@ class Bus:
         """
         return [reply for replies in self.answer(data, now_s, line_bps=line_bps) for reply in replies]
 
-    def answer(self, data: bytes, now_s: float | None = None, *, line_bps: float | None = None,
-               cache: bool = True) -> list[list[Reply]]:
-        """Feed bytes; return the replies to each packet they completed, one list per packet.
+    def cached_replies(self, data: bytes, line_bps: float | None = None) -> Sequence[Reply] | None:
+        """The replies to ``data`` from the reply cache, or None when it must be decoded.
 
-        A chunk that repeats a cached READ or PING (exactly one whole packet,
-        no partial packet held before it) is answered from the reply cache if
-        nothing it reads changed (see :mod:`ax12emu.reply_cache`); physics is
-        brought up first, as :meth:`dispatch` does.  Never with faults
-        installed (they act per packet) or debug logging on (``-v`` logs every
-        packet); ``cache=False`` bypasses it, e.g. when bytes may have collided.
+        Why apart from :meth:`answer`: a host polling one register runs this
+        path thousands of times a second, so it holds nothing but the checks
+        a hit needs (issue 2's throughput goal).  A hit needs exactly one whole READ or PING in ``data`` with no partial
+        packet held before it, no faults installed (they act per packet), no
+        debug logging (``-v`` logs every packet), and the servos it reached
+        unchanged since (see :mod:`ax12emu.reply_cache`); physics is brought
+        up first, as :meth:`dispatch` does.
         """
-        replies_cache = None
-        if cache and self.faults is None and not self.framer.buffered and not log.isEnabledFor(logging.DEBUG):
-            replies_cache = self.reply_cache
-            if len(data) >= 6 and len(data) == data[3] + 4:
-                self.plant.advance(self.clock.now_s() - self.request_lag_s)
-                key = data if type(data) is bytes else bytes(data)
-                cached = replies_cache.lookup(key, line_bps, self._by_id)
-                if cached is not None:
-                    return [cached]
+        if (self.faults is not None or len(data) < 6 or len(data) != data[3] + 4 or self.framer.buffered
+                or log.isEnabledFor(logging.DEBUG)):
+            return None
+        model, sim_time_s = self.model, self.clock.now_s() - self.request_lag_s
+        if sim_time_s >= model.time_s + model.step_s:  # Plant.advance's own test, without the call
+            self.plant.advance(sim_time_s)
+        return self.reply_cache.lookup(data if type(data) is bytes else bytes(data), line_bps, self._by_id)
+
+    def answer(self, data: bytes, now_s: float | None = None, *, line_bps: float | None = None,
+               cache: bool = True) -> list[Sequence[Reply]]:
+        """Feed bytes; return the replies to each packet they completed, one sequence per packet.
+
+        With ``cache`` a repeated READ or PING is answered from the reply
+        cache (:meth:`cached_replies`) and a new one is stored there;
+        ``cache=False`` bypasses it, e.g. when bytes may have collided.
+        """
+        if cache:
+            cached = self.cached_replies(data, line_bps)
+            if cached is not None:
+                return [cached]
+            # Only a packet that stands alone is stored (see ReplyCache.store).
+            cache = self.faults is None and not self.framer.buffered and not log.isEnabledFor(logging.DEBUG)
         packets = self.framer.feed(data, now_s)
         answers = [self.dispatch(packet, line_bps=line_bps) for packet in packets]
-        if replies_cache is not None and len(packets) == 1 and not self.framer.buffered:
+        if cache and len(packets) == 1 and not self.framer.buffered:
             packet = packets[0]
-            replies_cache.store(bytes(data), line_bps, packet, self._by_id.get(packet.id), answers[0])
+            self.reply_cache.store(bytes(data), line_bps, packet, self._by_id.get(packet.id), answers[0])
         return answers
 
     def expire(self, now_s: float) -> None:

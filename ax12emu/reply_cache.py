@@ -18,6 +18,7 @@ packet), and anything while debug logging is on (``-v`` logs every packet).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 from .packets import BROADCAST_ID, Instruction, InstructionPacket
@@ -39,10 +40,11 @@ class ReplyCache:
 
     def __init__(self) -> None:
         #: (packet, line speed) -> (the servos reached, (servo, its table bytes, its alarms) each, replies).
-        self._entries: dict[tuple[bytes, float | None], tuple[list, tuple, list]] = {}
+        self._entries: dict[tuple[bytes, float | None], tuple[list, tuple, tuple[Reply, ...]]] = {}
         self.hits = 0
 
-    def lookup(self, data: bytes, line_bps: float | None, by_id: dict[int, list[VirtualServo]]) -> list[Reply] | None:
+    def lookup(self, data: bytes, line_bps: float | None,
+               by_id: dict[int, list[VirtualServo]]) -> tuple[Reply, ...] | None:
         """The replies stored for ``data`` if the servos it reached are unchanged; else None."""
         entry = self._entries.get((data, line_bps))
         if entry is None:
@@ -54,10 +56,10 @@ class ReplyCache:
             if servo.alarms != alarms or servo.table.row.tobytes() != row:
                 return None
         self.hits += 1
-        return replies.copy()
+        return replies
 
     def store(self, data: bytes, line_bps: float | None, packet: InstructionPacket,
-              targets: list[VirtualServo] | None, replies: list[Reply]) -> None:
+              targets: list[VirtualServo] | None, replies: Sequence[Reply]) -> None:
         """Keep ``replies`` to ``data`` if it was exactly one cacheable packet to one ID."""
         if (targets is None or packet.id == BROADCAST_ID or not packet.checksum_ok or packet.instruction not in CACHEABLE
                 or len(data) < 6 or len(data) != data[3] + 4 or data[:2] != b"\xff\xff"
@@ -66,4 +68,4 @@ class ReplyCache:
         if len(self._entries) >= MAX_ENTRIES:
             self._entries.clear()
         snapshot = tuple((servo, servo.table.row.tobytes(), servo.alarms) for servo in targets)
-        self._entries[(bytes(data), line_bps)] = (targets, snapshot, list(replies))
+        self._entries[(bytes(data), line_bps)] = (targets, snapshot, tuple(replies))

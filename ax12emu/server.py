@@ -33,7 +33,7 @@ import os
 import select
 import sys
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Future
 from typing import Any
 
@@ -61,7 +61,7 @@ PHYSICS_DEFER_S = 0.0003
 _DONE = object()
 
 
-def merge_replies(replies: list[Reply], start_s: float, *, per_byte: bool) -> list[tuple[float, bytes]]:
+def merge_replies(replies: Sequence[Reply], start_s: float, *, per_byte: bool) -> list[tuple[float, bytes]]:
     """Lay replies on the wire as (release time, bytes) chunks; colliding byte slots are AND-ed.
 
     Each reply starts ``delay_s`` after ``start_s`` and takes one byte time
@@ -190,7 +190,7 @@ class BusServer:
             self.packets_in += 1
             self._answer(replies, now, end)
 
-    def _answer(self, replies: list[Reply], now: float, end: float) -> None:
+    def _answer(self, replies: Sequence[Reply], now: float, end: float) -> None:
         """Put one packet's replies on the line: now, or queued for their delay (and pace)."""
         if not replies:
             return

@@ -14,7 +14,16 @@ Why the details matter (each one checked with dynamixel-sdk on Linux):
   blocked write would freeze every servo;
 * the host's bit rate is read from the slave's termios (``TCGETS2`` gives the
   exact rate, also for non-standard ones set with ``BOTHER``), so a servo at
-  another baud can be deaf to the host, as on hardware.
+  another baud can be deaf to the host, as on hardware;
+* that read is a system call, which per packet cost about 4 % of issue 2's
+  poll rate, so on Linux the rate is read once and again only after the host
+  changed its termios: the master runs in packet mode (``TIOCPKT``) and the
+  slave carries ``EXTPROC`` in its local flags, which makes the kernel put a
+  ``TIOCPKT_IOCTL`` status byte in the master's read stream at every termios
+  change, ahead of any byte the host writes after it.  ``EXTPROC`` leaves a
+  raw-mode host untouched (it only hands line editing in canonical mode to
+  the other side; ``stty -a`` shows it).  A host that clears it gets the
+  per-packet read back, and so does any platform but Linux.
 """
 
 from __future__ import annotations
@@ -24,6 +33,7 @@ import fcntl
 import os
 import pty
 import struct
+import sys
 import termios
 import tty
 from pathlib import Path
@@ -37,6 +47,13 @@ _TERMIOS2 = struct.Struct("4IB19B2I")
 _OSPEED = struct.Struct("I")
 _OSPEED_OFFSET = _TERMIOS2.size - _OSPEED.size
 _TCGETS2 = getattr(termios, "TCGETS2", 0x802C542A)
+_LFLAG = struct.Struct("I")
+_LFLAG_OFFSET = 3 * _LFLAG.size
+_TIOCPKT = getattr(termios, "TIOCPKT", 0x5420)
+#: Packet mode's first byte of a read: data follows, or (alone) what happened to the slave.
+_TIOCPKT_DATA = 0
+_TIOCPKT_IOCTL = 0x40
+_EXTPROC = getattr(termios, "EXTPROC", 0o200000)
 _SPEEDS = {
     getattr(termios, f"B{rate}"): float(rate)
     for rate in (
@@ -66,8 +83,12 @@ class PtyTransport(Transport):
         self.link: Path | None = None
         self._closed = False
         self._termios2 = True
-        # Filled in place by the ioctl (no new bytes object per call: it runs once per packet).
+        # Filled in place by the ioctl (no new bytes object per call: it may run once per packet).
         self._termios2_buffer = bytearray(_TERMIOS2.size)
+        #: The line speed last read, kept while the kernel will announce the next change.
+        self._line_bps: float | None = None
+        self._line_bps_known = False
+        self._packet_mode = sys.platform.startswith("linux") and self._enter_packet_mode()
         if link is not None:
             path = Path(link)
             if path.is_symlink():
@@ -86,15 +107,53 @@ class PtyTransport(Transport):
     def fds(self) -> list[int]:
         return [self._master]
 
+    def _enter_packet_mode(self) -> bool:
+        """Set ``EXTPROC`` on the slave and packet mode on the master, and check that a change is announced.
+
+        The check (set the same termios again, expect ``TIOCPKT_IOCTL`` at
+        once) guards against an ``EXTPROC`` value that is not this kernel's
+        (it differs on a few architectures) and anything else that would
+        leave a change unannounced; then both are undone and the speed is
+        read for every packet.
+        """
+        try:
+            original = termios.tcgetattr(self._slave)
+        except termios.error:
+            return False
+        attributes = termios.tcgetattr(self._slave)
+        attributes[3] |= _EXTPROC
+        try:
+            termios.tcsetattr(self._slave, termios.TCSANOW, attributes)
+            fcntl.ioctl(self._master, _TIOCPKT, struct.pack("i", 1))
+            termios.tcsetattr(self._slave, termios.TCSANOW, attributes)
+            status = os.read(self._master, 1)
+            if status[:1] and status[0] & _TIOCPKT_IOCTL:
+                return True
+        except (OSError, termios.error):  # BlockingIOError included: nothing was announced
+            pass
+        try:
+            fcntl.ioctl(self._master, _TIOCPKT, struct.pack("i", 0))
+            termios.tcsetattr(self._slave, termios.TCSANOW, original)
+        except (OSError, termios.error):
+            pass
+        return False
+
     def on_readable(self, fd: int) -> bytes:
         try:
-            return os.read(self._master, 4096)
+            data = os.read(self._master, 4097)
         except BlockingIOError:
             return b""
         except OSError as exc:
             if exc.errno == errno.EIO:  # no reader on the other side (cannot happen while we hold the slave)
                 return b""
             raise
+        if not (self._packet_mode and data):
+            return data
+        if data[0] == _TIOCPKT_DATA:
+            return data[1:]
+        if data[0] & _TIOCPKT_IOCTL:
+            self._line_bps_known = False  # the host changed its termios: read the speed again
+        return b""  # a status byte alone (also the flush before each of dynamixel-sdk's packets)
 
     def write(self, data: bytes) -> int:
         try:
@@ -107,15 +166,24 @@ class PtyTransport(Transport):
             raise
 
     def line_bps(self) -> float | None:
+        if self._line_bps_known:
+            return self._line_bps
+        speed: float | None = None
+        lflag = 0
         if self._termios2:
             try:
                 fcntl.ioctl(self._slave, _TCGETS2, self._termios2_buffer, True)
                 ospeed = _OSPEED.unpack_from(self._termios2_buffer, _OSPEED_OFFSET)[0]
-                if ospeed:
-                    return float(ospeed)
+                lflag = _LFLAG.unpack_from(self._termios2_buffer, _LFLAG_OFFSET)[0]
+                speed = float(ospeed) if ospeed else None
             except OSError:
                 self._termios2 = False  # not Linux, or an old kernel: fall back to termios constants
-        return _SPEEDS.get(termios.tcgetattr(self._slave)[5])
+        if speed is None:
+            attributes = termios.tcgetattr(self._slave)
+            speed, lflag = _SPEEDS.get(attributes[5]), attributes[3]
+        # Kept only while EXTPROC is set: then the next change, even one clearing it, is announced.
+        self._line_bps, self._line_bps_known = speed, self._packet_mode and bool(lflag & _EXTPROC)
+        return speed
 
     def close(self) -> None:
         if self._closed:

@@ -1,0 +1,121 @@
+"""The pty transport: raw bytes both ways, and the host's line speed as its termios say, kept up to date."""
+
+from __future__ import annotations
+
+import fcntl
+import os
+import sys
+import termios
+
+import pytest
+import serial
+
+from ax12emu.transports import pty as pty_transport
+from ax12emu.transports.pty import PtyTransport
+
+linux_only = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="packet mode is used on Linux only")
+
+
+@pytest.fixture
+def transport():
+    link = PtyTransport()
+    yield link
+    link.close()
+
+
+def _receive(transport: PtyTransport, tries: int = 1000) -> bytes:
+    """The next data the host sent, skipping the status bytes of packet mode."""
+    for _ in range(tries):
+        data = transport.on_readable(transport.fds()[0])
+        if data:
+            return data
+    raise AssertionError("nothing arrived")
+
+
+def test_bytes_pass_unchanged_both_ways(transport):
+    """Every byte value, 0x00 and the line editing characters included, crosses in both directions."""
+    everything = bytes(range(256))
+    with serial.Serial(transport.slave_path, 1_000_000, timeout=1.0) as host:
+        host.write(everything)
+        received = b""
+        while len(received) < len(everything):
+            received += _receive(transport)
+        assert received == everything
+        assert transport.write(everything) == len(everything)
+        assert host.read(len(everything)) == everything
+
+
+def test_line_speed_follows_every_change_the_host_makes(transport):
+    """Standard rates, a non-standard one (pyserial sets it with BOTHER), and a reopen at another rate."""
+    with serial.Serial(transport.slave_path, 1_000_000, timeout=1.0) as host:
+        for bps in (57_600, 250_000, 1_000_000, 9_600):
+            host.baudrate = bps
+            host.write(b"x")
+            assert _receive(transport) == b"x"
+            assert transport.line_bps() == bps
+    with serial.Serial(transport.slave_path, 115_200, timeout=1.0) as host:
+        host.write(b"y")
+        assert _receive(transport) == b"y"
+        assert transport.line_bps() == 115_200
+
+
+@linux_only
+def test_speed_is_read_once_until_the_host_changes_its_termios(transport, monkeypatch):
+    """Between changes the speed costs no system call; a change is announced before the host's next byte."""
+    calls = []
+    real_ioctl = fcntl.ioctl
+
+    def counting_ioctl(fd, request, *args):
+        if request == pty_transport._TCGETS2 and fd == transport._slave:  # pyserial calls it too
+            calls.append(fd)
+        return real_ioctl(fd, request, *args)
+
+    monkeypatch.setattr(pty_transport.fcntl, "ioctl", counting_ioctl)
+    with serial.Serial(transport.slave_path, 1_000_000, timeout=1.0) as host:
+        host.write(b"a")
+        assert _receive(transport) == b"a"
+        assert [transport.line_bps() for _ in range(100)] == [1_000_000] * 100
+        assert len(calls) == 1
+        host.baudrate = 57_600
+        host.write(b"b")
+        assert _receive(transport) == b"b"
+        assert transport.line_bps() == 57_600
+        assert len(calls) == 2
+
+
+@linux_only
+def test_a_host_that_clears_extproc_gets_a_fresh_reading_for_every_packet(transport):
+    """Without EXTPROC the kernel announces nothing, so the speed is read each time, and stays right."""
+    host = os.open(transport.slave_path, os.O_RDWR | os.O_NOCTTY)
+    try:
+        attributes = termios.tcgetattr(host)
+        attributes[3] &= ~pty_transport._EXTPROC
+        termios.tcsetattr(host, termios.TCSANOW, attributes)
+        os.write(host, b"a")
+        assert _receive(transport) == b"a"
+        assert transport.line_bps() == 38_400.0  # a fresh pty's rate, B38400
+        for speed, bps in ((termios.B57600, 57_600), (termios.B9600, 9_600)):
+            attributes = termios.tcgetattr(host)
+            attributes[4] = attributes[5] = speed
+            termios.tcsetattr(host, termios.TCSANOW, attributes)  # no announcement now
+            assert transport.line_bps() == bps
+    finally:
+        os.close(host)
+
+
+@linux_only
+def test_a_kernel_that_announces_nothing_gets_a_fresh_reading_for_every_packet(monkeypatch):
+    """If the start-up check sees no announcement, packet mode stays off and every reading is fresh."""
+    monkeypatch.setattr(pty_transport, "_EXTPROC", 0x10000000)  # not EXTPROC on x86 or arm: nothing is announced
+    link = PtyTransport()
+    try:
+        assert not link._packet_mode
+        assert not termios.tcgetattr(link._slave)[3] & 0x10000000  # the flag is taken back
+        with serial.Serial(link.slave_path, 1_000_000, timeout=1.0) as host:
+            host.write(b"\x00a")
+            assert _receive(link) == b"\x00a"  # no status byte to strip
+            assert link.line_bps() == 1_000_000
+            host.baudrate = 57_600
+            assert link.line_bps() == 57_600
+    finally:
+        link.close()
