@@ -5,7 +5,8 @@ reply with a ~34 ms timeout, so the emulator must react to input at once (no
 sleeps in the serving path) and put each status packet on the line exactly
 Return Delay Time after the instruction ended.  It sleeps in ``select`` until
 the next event (input, a reply falling due, a physics tick) and spins only
-for the last fraction of a millisecond before a reply, where a timeout
+while a host is mid-conversation (a fraction of a millisecond after each
+instruction and each reply) and before a reply falls due, where a timeout
 would be too coarse.  The 1 kHz physics step runs on the loop's tick, in
 pieces (step, sensors, tables: ``Bus.advance_in_pieces``), and while a host
 polls, each piece just after a packet was answered: the host is then busy
@@ -51,7 +52,7 @@ BITS_PER_BYTE = 10
 SPIN_S = 0.0003
 #: Below this much time to the next release, wait for it on the clock alone (no system call).
 EXACT_S = 0.00002
-#: After input, keep polling without sleeping this long: the host's next packet usually
+#: After input or a reply, keep polling without sleeping this long: the host's next packet usually
 #: follows within a few tens of microseconds, and waking from a sleep costs about as much.
 HOT_S = 0.0002
 #: A physics step is put off while a reply is due sooner than this (a step of many servos takes
