@@ -87,6 +87,13 @@ class StepConstants:
     def from_params(cls, p: ServoParams, step_s: float, controller: str, gains: PidGains) -> "StepConstants":
         unit = float(RAD_PER_POSITION_UNIT)
         dt_j = step_s / p.total_inertia_kg_m2
+        if p.viscous_friction_nm_s_rad * dt_j >= 1.0:
+            # The viscous loss is taken explicitly, 1 - b dt / J per step: past 1 it would turn the shaft round.
+            raise ValueError(
+                f"viscous friction {p.viscous_friction_nm_s_rad} N m s/rad is too strong for a {step_s * 1e3:g} ms step "
+                f"with inertia {p.total_inertia_kg_m2:.4g} kg m^2: it must stay below inertia / step = "
+                f"{p.total_inertia_kg_m2 / step_s:.4g} N m s/rad (or use a shorter step)"
+            )
         return cls(
             step_s=step_s, accel_rad_s2=p.max_acceleration_rad_s2, unit_rad=unit, inv_unit=1.0 / unit,
             k_over_r=p.torque_constant_nm_a / p.winding_resistance_ohm,

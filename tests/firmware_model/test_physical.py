@@ -1,9 +1,12 @@
 """PhysicalModel as a ServoModel: modes, determinism, vectorisation, run-time inputs."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
 from firmware_model.interface import ServoModel
+from firmware_model.params import ServoParams
 from firmware_model.physical import PhysicalModel
 from firmware_model.units import signed_raw_to_value
 
@@ -124,6 +127,14 @@ def test_constructor_rejects_bad_arguments():
     for kwargs in ({"n": 0}, {"n": 1, "step_s": 0.0}, {"n": 1, "controller": "bang"}, {"n": 2, "backend": "scalar"}):
         with pytest.raises(ValueError):
             PhysicalModel(**kwargs)
+
+
+def test_viscous_friction_too_strong_for_the_step_is_refused():
+    """b dt / J >= 1 would turn the shaft round each step; below it, a shorter step makes it usable."""
+    strong = dataclasses.replace(ServoParams(), viscous_friction_nm_s_rad=5.0)  # J / dt is 3.4 at 1 ms
+    with pytest.raises(ValueError, match="viscous friction 5.0 .* below inertia / step = 3.4"):
+        PhysicalModel(1, params=strong)
+    PhysicalModel(1, params=strong, step_s=0.5e-3)
 
 
 def test_scalar_position_quantiser_matches_units():

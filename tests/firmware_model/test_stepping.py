@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from firmware_model.params import ServoParams
 from firmware_model.physical import PhysicalModel
+from firmware_model import stepping
 from firmware_model.stepping import FusedNumpySteps, fused_scalar_steps, generic_steps
 
 LOADS = {
@@ -90,6 +91,17 @@ def test_fused_kernel_equals_the_generic_loop_one_step_per_call(load, mode, comm
     fused, generic = (_trajectory(3, "numpy", flag, LOADS[load], commands, mode == "wheel", every_s=0.001)
                       for flag in (True, False))
     assert len(fused) == len(generic) > 1000
+    for step, (a, b) in enumerate(zip(fused, generic)):
+        assert all(_same_bits(x, y) for x, y in zip(a, b)), f"differs at advance {step}"
+
+
+@pytest.mark.parametrize("mode", ["joint", "wheel"])
+def test_fused_kernel_without_the_clip_ufunc_equals_the_generic_loop(mode, commands, monkeypatch):
+    """A numpy without the clip ufunc gets maximum-then-minimum: the same numbers, bit for bit."""
+    monkeypatch.setattr(stepping, "_clip", stepping._min_max_clip)
+    fused, generic = (_trajectory(3, "numpy", flag, LOADS["external torque"], commands, mode == "wheel")
+                      for flag in (True, False))
+    assert len(fused) == len(generic) > 100
     for step, (a, b) in enumerate(zip(fused, generic)):
         assert all(_same_bits(x, y) for x, y in zip(a, b)), f"differs at advance {step}"
 
