@@ -142,13 +142,14 @@ class BusServer:
             self._seq += 1
             bisect.insort(self._queue, [release_s, self._seq, bytearray(data), is_reply])
 
-    def _flush(self, now: float) -> None:
+    def _flush(self, now: float) -> bool:
+        """Put on the line whatever is due; True if anything was."""
         queue = self._queue
         count = 0
         while count < len(queue) and queue[count][0] <= now:
             count += 1
         if not count:
-            return
+            return False
         data = queue[0][2] if count == 1 else b"".join(item[2] for item in queue[:count])
         del queue[:count]
         self._emit(bytes(data), now)
@@ -157,6 +158,7 @@ class BusServer:
         self._hot_until = now + HOT_S
         if self._yield_after_reply and not (queue or self.pace):
             os.sched_yield()
+        return True
 
     def _emit(self, data: bytes, now: float) -> None:
         self._account(data, self.transport.write(data), now)
@@ -247,11 +249,13 @@ class BusServer:
         # that come meanwhile are read just after it: with pace, a collision window at most
         # EXACT_S short, where checking for them first would put a system call before every
         # paced byte).
+        # A pass that put a reply on the line counts as one that answered a packet (below).
+        answered = False
         if queue and queue[0][0] - now < EXACT_S and self._exact_clock:
             due = queue[0][0]
             while now < due:
                 now = time.monotonic()
-            self._flush(now)
+            answered = self._flush(now)
         hot = now < self._hot_until
         if queue and queue[0][0] - now < SPIN_S or hot or self._physics is not None:
             wait_s = 0.0  # a reply is nearly due, a host is mid-conversation or a step is half done: spin
@@ -269,19 +273,18 @@ class BusServer:
         else:  # select() takes microseconds; poll/epoll round a timeout up to whole milliseconds
             readable, _, _ = select.select(fds, (), (), wait_s)
         now = time.monotonic()
-        answered = False
         for fd in readable:
             data = self.transport.on_readable(fd)
             if data:
                 self._on_bytes(data, now)
                 self._hot_until = now + HOT_S
                 answered = True
-        if queue:
-            self._flush(time.monotonic())
+        if queue and self._flush(time.monotonic()):
+            answered = True
         # Step physics on the loop's tick, not in the request path: a request then rarely pays
         # for a step (see Bus.request_lag_s).  The step comes in pieces, one per pass; while a
-        # host is mid-conversation, a piece runs just after a packet was answered, when the host
-        # is busy with the reply rather than waiting for one.
+        # host is mid-conversation, a piece runs just after a packet was answered or a delayed
+        # reply went out, when the host is busy with the reply rather than waiting for one.
         if not (queue and queue[0][0] - now < PHYSICS_DEFER_S) and (answered or not hot):
             if self._physics is None and now >= self._next_physics:
                 self._physics = self.bus.advance_in_pieces()

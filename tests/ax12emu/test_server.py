@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import time
 
+import pytest
 import serial
 
 from ax12emu.bus import Bus, Reply
@@ -110,13 +111,15 @@ class _PipeTransport(Transport):
         os.close(self.write_fd)
 
 
-def test_physics_steps_in_pieces_while_a_host_polls_without_pause():
+@pytest.mark.parametrize("return_delay", [0, 250])
+def test_physics_steps_in_pieces_while_a_host_polls_without_pause(return_delay):
     """A host sending the next READ the moment a reply arrives keeps the loop busy: every read is
-    answered, and the 1 kHz step still runs, in pieces between the packets, rather than falling
-    behind until a request has to pay for it (margins wide: a shared machine jitters)."""
+    answered, and the 1 kHz step still runs, in pieces between the packets (after a delayed reply
+    too), rather than falling behind until a request has to pay for it (margins wide: a shared
+    machine jitters)."""
     bus = Bus([1, 2, 3])
     for servo in bus.servos:
-        for name, value in (("return_delay_time", 0), ("cw_angle_limit", 0), ("ccw_angle_limit", 0),
+        for name, value in (("return_delay_time", return_delay), ("cw_angle_limit", 0), ("ccw_angle_limit", 0),
                             ("moving_speed", 300), ("torque_enable", 1)):
             servo.table.set(name, value)
     bus.plant.tables_changed()
@@ -128,6 +131,15 @@ def test_physics_steps_in_pieces_while_a_host_polls_without_pause():
         finished.append(bus.clock.now_s())
 
     bus.advance_in_pieces = _counted
+    paid = []  # whole steps taken in the request path
+    advance = bus.plant.advance
+
+    def _paid(sim_time_s):
+        stepped = advance(sim_time_s)
+        paid.extend([sim_time_s] * stepped)
+        return stepped
+
+    bus.plant.advance = _paid
     read = encode_instruction(1, 0x02, bytes([36, 2]))
     with _PipeTransport() as transport:
         server = BusServer(bus, transport)
@@ -142,6 +154,7 @@ def test_physics_steps_in_pieces_while_a_host_polls_without_pause():
         elapsed_ms = (time.monotonic() - start) * 1e3
     assert len(transport.replies) == 8 * sent and sent > 100
     assert len(finished) >= 0.5 * elapsed_ms, (len(finished), elapsed_ms)
+    assert len(paid) <= 0.1 * elapsed_ms, (len(paid), len(finished), elapsed_ms)
     assert bus.model.time_s >= bus.clock.now_s() - 0.01
 
 
