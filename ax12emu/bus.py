@@ -186,7 +186,7 @@ class Bus:
         if (self.faults is not None or len(data) < 6 or len(data) != data[3] + 4 or self.framer.buffered
                 or log.isEnabledFor(logging.DEBUG)):
             return None
-        model, sim_time_s = self.model, self.clock.now_s() - self.request_lag_s
+        model, sim_time_s = self.plant.model, self.clock.now_s() - self.request_lag_s
         if sim_time_s >= model.time_s + model.step_s:  # Plant.advance's own test, without the call
             self.plant.advance(sim_time_s)
         return self.reply_cache.lookup(data if type(data) is bytes else bytes(data), line_bps, self._by_id)
@@ -256,6 +256,10 @@ class Bus:
             self.plant.tables_changed()
             if instruction == Instruction.RESET:
                 self.plant.refresh()
+            if faults is not None:
+                # Held registers and a stall's drive timer see the write now, at its time, not at
+                # whichever comes next of a physics tick or a packet (in virtual time, a later step).
+                faults.after_physics()
         if moved:
             self._reindex()
         if faults is not None and replies:

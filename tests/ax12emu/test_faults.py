@@ -144,6 +144,20 @@ def test_stalled_shaft_holds_position_and_overloads():
         assert ph.read2ByteTxRx(port, 1, PRESENT_POSITION) == (800, COMM_SUCCESS, 0)
 
 
+def test_stall_drive_timer_starts_at_the_goal_write_not_at_the_next_step():
+    """Virtual time without a serving loop: the write is the only event before the step, yet it counts."""
+    clock = VirtualClock()
+    bus = Bus([1], clock=clock, model=KinematicModel(1))
+    bus.faults = Faults(bus)
+    bus.faults.stall(1, overload_after_s=1.0)
+    bus.receive(encode_instruction(1, 0x03, bytes([24, 1])))
+    bus.receive(encode_instruction(1, 0x03, bytes([30, 0x20, 0x03])))  # goal 800: driving from t = 0
+    clock.advance(1.05)
+    bus.advance()
+    (reply,) = bus.receive(encode_instruction(1, 0x02, bytes([36, 2])))
+    assert reply.data[4] == StatusError.OVERLOAD
+
+
 def test_stalled_shaft_in_the_physical_model():
     """Physical model: the blocked shaft stays put while the motor drives at full load; the model's own
     overload timer (0.5 s) raises Overload; released, the servo moves on from where it was held."""
