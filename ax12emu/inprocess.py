@@ -78,10 +78,8 @@ class InProcessLink:
             now = time.monotonic()
             if self.trace is not None:
                 self.trace.record(IN, data, now)
-            bus = self.bus
-            for packet in bus.framer.feed(data, now):
+            for replies in self.bus.answer(data, now, line_bps=line_bps):  # with the reply cache, as the server
                 self.packets_in += 1
-                replies = bus.dispatch(packet, line_bps=line_bps)
                 if replies:
                     for release_s, chunk in merge_replies(replies, now, per_byte=False):
                         self._seq += 1
