@@ -20,10 +20,21 @@ Why the details matter (each one checked with dynamixel-sdk on Linux):
   changed its termios: the master runs in packet mode (``TIOCPKT``) and the
   slave carries ``EXTPROC`` in its local flags, which makes the kernel put a
   ``TIOCPKT_IOCTL`` status byte in the master's read stream at every termios
-  change, ahead of any byte the host writes after it.  ``EXTPROC`` leaves a
-  raw-mode host untouched (it only hands line editing in canonical mode to
-  the other side; ``stty -a`` shows it).  A host that clears it gets the
-  per-packet read back, and so does any platform but Linux.
+  change.  It comes ahead of whatever the host wrote after the change, but
+  for bytes that arrive while one read of ours is under way (a window of
+  microseconds, never seen in 3,000 tries); per-packet reading had the
+  mirror image, bytes sent just before a change judged at the new rate.
+* ``EXTPROC`` leaves a raw-mode host untouched (``stty -a`` shows it), as
+  every Dynamixel library is; but it would switch off a host's own input
+  processing (``ICRNL``, echo, canonical mode, ``IXON``) that on a real
+  adapter would mangle its packets.  So when a host that asks for any of
+  that sends a packet, the emulator takes ``EXTPROC`` off first, and reads
+  the rate for every packet from then on, as it does once a host clears the
+  flag itself (the C DynamixelSDK sets all local flags to 0) and on any
+  platform but Linux.  Taking it off writes the termios just read back, so a
+  change the host makes in the microseconds between would be lost: only a
+  host that is not raw, and reconfigures its port at once after writing a
+  packet, could meet that.
 """
 
 from __future__ import annotations
@@ -54,6 +65,13 @@ _TIOCPKT = getattr(termios, "TIOCPKT", 0x5420)
 _TIOCPKT_DATA = 0
 _TIOCPKT_IOCTL = 0x40
 _EXTPROC = getattr(termios, "EXTPROC", 0o200000)
+_TCSETS2 = getattr(termios, "TCSETS2", 0x402C542B)
+_IFLAG = struct.Struct("I")
+#: Input processing a host can ask of its line discipline, all of which EXTPROC switches off
+#: (n_tty takes its raw receive path and no canonical reads); without any of it, EXTPROC is inert.
+_COOKED_IFLAG = termios.ISTRIP | termios.IGNCR | termios.ICRNL | termios.INLCR | termios.IXON | termios.PARMRK \
+    | getattr(termios, "IUCLC", 0)
+_COOKED_LFLAG = termios.ICANON | termios.ISIG | termios.ECHO
 _SPEEDS = {
     getattr(termios, f"B{rate}"): float(rate)
     for rate in (
@@ -171,11 +189,20 @@ class PtyTransport(Transport):
         speed: float | None = None
         lflag = 0
         if self._termios2:
+            buffer = self._termios2_buffer
             try:
-                fcntl.ioctl(self._slave, _TCGETS2, self._termios2_buffer, True)
-                ospeed = _OSPEED.unpack_from(self._termios2_buffer, _OSPEED_OFFSET)[0]
-                lflag = _LFLAG.unpack_from(self._termios2_buffer, _LFLAG_OFFSET)[0]
+                fcntl.ioctl(self._slave, _TCGETS2, buffer, True)
+                ospeed = _OSPEED.unpack_from(buffer, _OSPEED_OFFSET)[0]
+                lflag = _LFLAG.unpack_from(buffer, _LFLAG_OFFSET)[0]
                 speed = float(ospeed) if ospeed else None
+                if lflag & _EXTPROC and self._packet_mode and (
+                        _IFLAG.unpack_from(buffer, 0)[0] & _COOKED_IFLAG or lflag & _COOKED_LFLAG):
+                    lflag &= ~_EXTPROC  # a host that is not raw: let its line discipline work as on hardware
+                    _LFLAG.pack_into(buffer, _LFLAG_OFFSET, lflag)
+                    try:
+                        fcntl.ioctl(self._slave, _TCSETS2, buffer)
+                    except OSError:
+                        pass  # then nothing is announced for this host either: the rate is read every time
             except OSError:
                 self._termios2 = False  # not Linux, or an old kernel: fall back to termios constants
         if speed is None:

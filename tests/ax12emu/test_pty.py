@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import fcntl
 import os
+import select
 import sys
 import termios
+import time
 
 import pytest
 import serial
@@ -23,9 +25,11 @@ def transport():
     link.close()
 
 
-def _receive(transport: PtyTransport, tries: int = 1000) -> bytes:
+def _receive(transport: PtyTransport, timeout_s: float = 2.0) -> bytes:
     """The next data the host sent, skipping the status bytes of packet mode."""
-    for _ in range(tries):
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        select.select(transport.fds(), [], [], max(0.0, deadline - time.monotonic()))
         data = transport.on_readable(transport.fds()[0])
         if data:
             return data
@@ -106,11 +110,11 @@ def test_a_host_that_clears_extproc_gets_a_fresh_reading_for_every_packet(transp
 @linux_only
 def test_a_kernel_that_announces_nothing_gets_a_fresh_reading_for_every_packet(monkeypatch):
     """If the start-up check sees no announcement, packet mode stays off and every reading is fresh."""
-    monkeypatch.setattr(pty_transport, "_EXTPROC", 0x10000000)  # not EXTPROC on x86 or arm: nothing is announced
+    monkeypatch.setattr(pty_transport, "_TIOCPKT_IOCTL", 0)  # the check then sees no announcement
     link = PtyTransport()
     try:
         assert not link._packet_mode
-        assert not termios.tcgetattr(link._slave)[3] & 0x10000000  # the flag is taken back
+        assert not termios.tcgetattr(link._slave)[3] & pty_transport._EXTPROC  # the flag is taken back
         with serial.Serial(link.slave_path, 1_000_000, timeout=1.0) as host:
             host.write(b"\x00a")
             assert _receive(link) == b"\x00a"  # no status byte to strip
@@ -119,3 +123,21 @@ def test_a_kernel_that_announces_nothing_gets_a_fresh_reading_for_every_packet(m
             assert link.line_bps() == 57_600
     finally:
         link.close()
+
+
+@linux_only
+def test_a_host_that_is_not_raw_gets_its_line_discipline_back(transport):
+    """EXTPROC would switch off a host's ICRNL and echo; at its first packet the emulator takes it off."""
+    with serial.Serial(transport.slave_path, 1_000_000, timeout=1.0) as host:
+        attributes = termios.tcgetattr(host.fd)
+        attributes[0] |= termios.ICRNL  # CR to NL on input, as a port left half-cooked would do
+        termios.tcsetattr(host.fd, termios.TCSANOW, attributes)
+        assert termios.tcgetattr(host.fd)[3] & pty_transport._EXTPROC  # kept by the host's read-modify-write
+        host.write(b"a")
+        assert _receive(transport) == b"a"
+        assert transport.line_bps() == 1_000_000
+        assert not termios.tcgetattr(host.fd)[3] & pty_transport._EXTPROC
+        assert transport.write(b"\r") == 1
+        assert host.read(1) == b"\n"  # what the host's line discipline makes of it on hardware too
+        host.baudrate = 57_600  # no longer announced: read for every packet
+        assert transport.line_bps() == 57_600
