@@ -17,7 +17,7 @@ __all__ = ["__version__", "VirtualBus", "FaultConfig"]
 _register_url_handler()
 
 #: Public names imported lazily: name -> module.
-_LAZY = {"VirtualBus": ".virtual_bus", "FaultConfig": ".faults"}
+_LAZY = {"VirtualBus": ".virtual_bus", "FaultConfig": ".fault_config"}
 
 
 def __getattr__(name: str) -> Any:

@@ -14,7 +14,7 @@ from collections.abc import Callable
 
 from .bus import parse_ids
 from .control_table import DEFAULT_PROFILE, PROFILES
-from .faults import FAULT_OPTIONS, FaultConfig
+from .fault_config import FAULT_OPTIONS, FaultConfig
 
 __all__ = ["add_serve_flags", "add_commands", "fault_config", "COMMANDS"]
 

@@ -32,7 +32,8 @@ from firmware_model.interface import ServoModel
 
 from .bus import Bus
 from .clock import VirtualClock, WallClock
-from .faults import FaultConfig, Faults
+from .fault_config import FaultConfig
+from .faults import Faults
 from .inprocess import InProcessLink, register, unregister
 from .model_factory import ModelChoice, build_model
 from .servo import ServoOptions

@@ -33,7 +33,7 @@ from serial.serialutil import PortNotOpenError, SerialBase, SerialException
 
 from ..bus import Bus, parse_ids
 from ..clock import VirtualClock, WallClock
-from ..faults import FAULT_OPTIONS, FaultConfig
+from ..fault_config import FAULT_OPTIONS, FaultConfig
 from ..inprocess import InProcessLink, LinkBusy, lookup
 from ..servo import ServoOptions
 from ..trace import TraceWriter

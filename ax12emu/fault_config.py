@@ -1,0 +1,130 @@
+"""Faults as data: the ``serve`` flags and ``ax12emu://`` URL options parsed into a :class:`FaultConfig`.
+
+Why apart from :mod:`ax12emu.faults`: that module bends what the servos do
+while the bus runs; this one only turns text into a frozen description
+(with a clear ``ValueError`` naming the option for bad text) and installs
+it on a bus.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from .faults import Faults, parse_alarm_bits
+
+if TYPE_CHECKING:
+    from .bus import Bus
+
+__all__ = ["FaultConfig", "FAULT_OPTIONS"]
+
+
+def _fraction(text: str) -> float:
+    value = float(text)
+    if not 0.0 <= value <= 1.0:
+        raise ValueError(f"expected a fraction 0..1, got {text}")
+    return value
+
+
+def _pair(text: str) -> tuple[int, int]:
+    left, sep, right = text.partition(":")
+    if not sep:
+        raise ValueError(f"expected SLOT:ID, got {text!r}")
+    return int(left), int(right)
+
+
+def _vanish(text: str) -> tuple[int, float | None, float | None]:
+    """"ID" (absent) or "ID:EVERY_S:FOR_S" (absent FOR_S of every EVERY_S)."""
+    parts = text.split(":")
+    if len(parts) == 1:
+        return int(parts[0]), None, None
+    if len(parts) == 3:
+        return int(parts[0]), float(parts[1]), float(parts[2])
+    raise ValueError(f"expected ID or ID:EVERY_S:FOR_S, got {text!r}")
+
+
+def _alarm(text: str) -> tuple[int, int]:
+    slot, sep, names = text.partition(":")
+    if not sep:
+        raise ValueError(f"expected ID:ALARMS (e.g. 1:overload), got {text!r}")
+    return int(slot), parse_alarm_bits(names)
+
+
+def _ids(text: str) -> tuple[int, ...]:
+    return tuple(int(part) for part in text.split(",") if part.strip())
+
+
+@dataclass(frozen=True)
+class FaultConfig:
+    """Faults as data, for ``ax12emu serve`` flags and ``ax12emu://`` URL options."""
+
+    #: Fraction of status packets dropped (client: timeout).
+    drop: float = 0.0
+    #: Fraction of status packets sent with a wrong checksum (client: corrupt packet).
+    corrupt: float = 0.0
+    #: Fraction of status packets sent ``delay_s`` late (client: timeout, then stray bytes).
+    delay: float = 0.0
+    delay_s: float = 0.1
+    #: Wire IDs the three above apply to; empty: all.
+    fault_ids: tuple[int, ...] = ()
+    #: Seed of the random choices.
+    seed: int = 0
+    #: (slot, every_s, for_s): unplugged servos, always or periodically.
+    vanish: tuple[tuple[int, float | None, float | None], ...] = ()
+    #: (slot, as_id): a servo answering to another's ID.
+    duplicate: tuple[tuple[int, int], ...] = ()
+    #: (slot, bits): forced alarm bits.
+    alarm: tuple[tuple[int, int], ...] = ()
+    #: Slots whose shaft is blocked.
+    stall: tuple[int, ...] = ()
+
+    @property
+    def active(self) -> bool:
+        """Whether any fault is configured."""
+        return any((self.drop, self.corrupt, self.delay, self.vanish, self.duplicate, self.alarm, self.stall))
+
+    def install(self, bus: "Bus") -> Faults:
+        """Attach a :class:`Faults` with this configuration to ``bus`` and return it."""
+        faults = Faults(bus, seed=self.seed)
+        faults.set_reply_faults(
+            drop=self.drop, corrupt=self.corrupt, delay=self.delay, delay_s=self.delay_s, ids=self.fault_ids or None
+        )
+        for slot, every_s, for_s in self.vanish:
+            faults.vanish(slot, every_s=every_s, for_s=for_s)
+        for slot, as_id in self.duplicate:
+            faults.duplicate(slot, as_id)
+        for slot, bits in self.alarm:
+            faults.force_alarm(slot, bits)
+        for slot in self.stall:
+            faults.stall(slot)
+        bus.faults = faults
+        return faults
+
+    @classmethod
+    def from_options(cls, options: Mapping[str, list[str]]) -> "FaultConfig":
+        """Build from name -> values (URL query or flags); unknown names are the caller's business."""
+        values: dict[str, object] = {}
+        for name, texts in options.items():
+            parse, repeated = FAULT_OPTIONS[name]
+            try:
+                parsed = [parse(text) for text in texts]
+            except ValueError as exc:
+                raise ValueError(f"{name}: {exc}") from None
+            values[name] = tuple(parsed) if repeated else parsed[-1]
+        return cls(**values)  # type: ignore[arg-type]
+
+
+#: Option name -> (parser of one value, may repeat).
+FAULT_OPTIONS: Mapping[str, tuple[Callable[[str], object], bool]] = {
+    "drop": (_fraction, False),
+    "corrupt": (_fraction, False),
+    "delay": (_fraction, False),
+    "delay_s": (float, False),
+    "fault_ids": (_ids, False),
+    "seed": (int, False),
+    "vanish": (_vanish, True),
+    "duplicate": (_pair, True),
+    "alarm": (_alarm, True),
+    "stall": (int, True),
+}

@@ -1,0 +1,29 @@
+"""FaultConfig: fault options as text (serve flags, URL query) parsed into data, and bad text refused."""
+
+from __future__ import annotations
+
+import pytest
+
+from ax12emu.fault_config import FaultConfig
+from ax12emu.packets import StatusError
+
+
+def test_options_parse_into_the_config():
+    """Single options take their last value, repeatable ones collect every value, in order."""
+    config = FaultConfig.from_options({
+        "drop": ["0.1", "0.25"], "fault_ids": ["1,3"], "seed": ["7"],
+        "vanish": ["2", "3:1.0:0.25"], "duplicate": ["1:9"], "alarm": ["1:overload+overheating"], "stall": ["4"],
+    })
+    assert config == FaultConfig(
+        drop=0.25, fault_ids=(1, 3), seed=7, vanish=((2, None, None), (3, 1.0, 0.25)), duplicate=((1, 9),),
+        alarm=((1, int(StatusError.OVERLOAD | StatusError.OVERHEATING)),), stall=(4,),
+    )
+    assert config.active and not FaultConfig().active
+
+
+def test_fault_config_rejects_bad_values():
+    """Fractions outside 0..1, unknown alarms and malformed pairs are ValueErrors naming the option."""
+    for options, message in (({"drop": ["2"]}, "drop"), ({"alarm": ["1:hot"]}, "unknown alarm"),
+                             ({"duplicate": ["1"]}, "SLOT:ID"), ({"vanish": ["1:2"]}, "ID:EVERY_S:FOR_S")):
+        with pytest.raises(ValueError, match=message):
+            FaultConfig.from_options(options)
