@@ -279,7 +279,8 @@ class BusServer:
                 self._on_bytes(data, now)
                 self._hot_until = now + HOT_S
                 answered = True
-        if queue and self._flush(time.monotonic()):
+        now = time.monotonic()  # handling input may have taken a while (a yield, a timeslice)
+        if queue and self._flush(now):
             answered = True
         # Step physics on the loop's tick, not in the request path: a request then rarely pays
         # for a step (see Bus.request_lag_s).  The step comes in pieces, one per pass; while a

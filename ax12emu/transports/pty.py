@@ -31,7 +31,9 @@ Why the details matter (each one checked with dynamixel-sdk on Linux):
   that sends a packet, the emulator takes ``EXTPROC`` off first, and reads
   the rate for every packet from then on, as it does once a host clears the
   flag itself (the C DynamixelSDK sets all local flags to 0) and on any
-  platform but Linux.  Taking it off writes the termios just read back, so a
+  platform but Linux.  The flag is not put back for a later host (one that
+  copies the flags it finds, as pyserial does, keeps it off), since that
+  would be a second write racing the host's own.  Taking it off writes the termios just read back, so a
   change the host makes in the microseconds between would be lost: only a
   host that is not raw, and reconfigures its port at once after writing a
   packet, could meet that.
@@ -67,10 +69,10 @@ _TIOCPKT_IOCTL = 0x40
 _EXTPROC = getattr(termios, "EXTPROC", 0o200000)
 _TCSETS2 = getattr(termios, "TCSETS2", 0x402C542B)
 _IFLAG = struct.Struct("I")
-#: Input processing a host can ask of its line discipline, all of which EXTPROC switches off
-#: (n_tty takes its raw receive path and no canonical reads); without any of it, EXTPROC is inert.
-_COOKED_IFLAG = termios.ISTRIP | termios.IGNCR | termios.ICRNL | termios.INLCR | termios.IXON | termios.PARMRK \
-    | getattr(termios, "IUCLC", 0)
+#: Input processing a host can ask of its line discipline that EXTPROC switches off (n_tty then
+#: takes its raw receive path and makes no canonical reads; ISTRIP and IUCLC it still applies).
+#: These are the flags of n_tty's own test for raw mode, in which EXTPROC is inert.
+_COOKED_IFLAG = termios.IGNCR | termios.ICRNL | termios.INLCR | termios.IXON | termios.PARMRK
 _COOKED_LFLAG = termios.ICANON | termios.ISIG | termios.ECHO
 _SPEEDS = {
     getattr(termios, f"B{rate}"): float(rate)
@@ -202,7 +204,7 @@ class PtyTransport(Transport):
                     try:
                         fcntl.ioctl(self._slave, _TCSETS2, buffer)
                     except OSError:
-                        pass  # then nothing is announced for this host either: the rate is read every time
+                        lflag |= _EXTPROC  # still set, so still announced: keep the reading until then
             except OSError:
                 self._termios2 = False  # not Linux, or an old kernel: fall back to termios constants
         if speed is None:
