@@ -177,11 +177,12 @@ class Bus:
 
         Why apart from :meth:`answer`: a host polling one register runs this
         path thousands of times a second, so it holds nothing but the checks
-        a hit needs (issue 2's throughput goal).  A hit needs exactly one whole READ or PING in ``data`` with no partial
-        packet held before it, no faults installed (they act per packet), no
-        debug logging (``-v`` logs every packet), and the servos it reached
-        unchanged since (see :mod:`ax12emu.reply_cache`); physics is brought
-        up first, as :meth:`dispatch` does.
+        a hit needs (issue 2's throughput goal).  A hit needs exactly one
+        whole READ or PING in ``data`` with no partial packet held before it,
+        no faults installed (they act per packet), no debug logging (``-v``
+        logs every packet), and the servos it reached unchanged since (see
+        :mod:`ax12emu.reply_cache`); physics is brought up first, as
+        :meth:`dispatch` does.
         """
         if (self.faults is not None or len(data) < 6 or len(data) != data[3] + 4 or self.framer.buffered
                 or log.isEnabledFor(logging.DEBUG)):

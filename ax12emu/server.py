@@ -245,12 +245,11 @@ class BusServer:
         """Wait for the next event and handle everything that is due."""
         now = time.monotonic()
         queue = self._queue
+        answered = False  # a pass that put a reply on the line counts as one that answered a packet
         # A release a few microseconds away is met on the clock, with no system call (host bytes
         # that come meanwhile are read just after it: with pace, a collision window at most
         # EXACT_S short, where checking for them first would put a system call before every
         # paced byte).
-        # A pass that put a reply on the line counts as one that answered a packet (below).
-        answered = False
         if queue and queue[0][0] - now < EXACT_S and self._exact_clock:
             due = queue[0][0]
             while now < due:

@@ -33,10 +33,10 @@ Why the details matter (each one checked with dynamixel-sdk on Linux):
   flag itself (the C DynamixelSDK sets all local flags to 0) and on any
   platform but Linux.  The flag is not put back for a later host (one that
   copies the flags it finds, as pyserial does, keeps it off), since that
-  would be a second write racing the host's own.  Taking it off writes the termios just read back, so a
-  change the host makes in the microseconds between would be lost: only a
-  host that is not raw, and reconfigures its port at once after writing a
-  packet, could meet that.
+  would be a second write racing the host's own.  Taking it off writes the
+  termios just read back, so a change the host makes in the microseconds
+  between would be lost: only a host that is not raw, and reconfigures its
+  port at once after writing a packet, could meet that.
 """
 
 from __future__ import annotations
@@ -57,18 +57,16 @@ __all__ = ["PtyTransport"]
 
 # struct termios2 on Linux: 4 tcflag_t, c_line, 19 cc, then c_ispeed, c_ospeed.
 _TERMIOS2 = struct.Struct("4IB19B2I")
-_OSPEED = struct.Struct("I")
-_OSPEED_OFFSET = _TERMIOS2.size - _OSPEED.size
+#: One tcflag_t or speed_t field of it, and where the ones read here sit.
+_FIELD = struct.Struct("I")
+_IFLAG_OFFSET, _LFLAG_OFFSET, _OSPEED_OFFSET = 0, 3 * _FIELD.size, _TERMIOS2.size - _FIELD.size
 _TCGETS2 = getattr(termios, "TCGETS2", 0x802C542A)
-_LFLAG = struct.Struct("I")
-_LFLAG_OFFSET = 3 * _LFLAG.size
 _TIOCPKT = getattr(termios, "TIOCPKT", 0x5420)
 #: Packet mode's first byte of a read: data follows, or (alone) what happened to the slave.
 _TIOCPKT_DATA = 0
 _TIOCPKT_IOCTL = 0x40
 _EXTPROC = getattr(termios, "EXTPROC", 0o200000)
 _TCSETS2 = getattr(termios, "TCSETS2", 0x402C542B)
-_IFLAG = struct.Struct("I")
 #: Input processing a host can ask of its line discipline that EXTPROC switches off (n_tty then
 #: takes its raw receive path and makes no canonical reads; ISTRIP and IUCLC it still applies).
 #: These are the flags of n_tty's own test for raw mode, in which EXTPROC is inert.
@@ -194,13 +192,13 @@ class PtyTransport(Transport):
             buffer = self._termios2_buffer
             try:
                 fcntl.ioctl(self._slave, _TCGETS2, buffer, True)
-                ospeed = _OSPEED.unpack_from(buffer, _OSPEED_OFFSET)[0]
-                lflag = _LFLAG.unpack_from(buffer, _LFLAG_OFFSET)[0]
+                ospeed = _FIELD.unpack_from(buffer, _OSPEED_OFFSET)[0]
+                lflag = _FIELD.unpack_from(buffer, _LFLAG_OFFSET)[0]
                 speed = float(ospeed) if ospeed else None
                 if lflag & _EXTPROC and self._packet_mode and (
-                        _IFLAG.unpack_from(buffer, 0)[0] & _COOKED_IFLAG or lflag & _COOKED_LFLAG):
+                        _FIELD.unpack_from(buffer, _IFLAG_OFFSET)[0] & _COOKED_IFLAG or lflag & _COOKED_LFLAG):
                     lflag &= ~_EXTPROC  # a host that is not raw: let its line discipline work as on hardware
-                    _LFLAG.pack_into(buffer, _LFLAG_OFFSET, lflag)
+                    _FIELD.pack_into(buffer, _LFLAG_OFFSET, lflag)
                     try:
                         fcntl.ioctl(self._slave, _TCSETS2, buffer)
                     except OSError:
