@@ -193,15 +193,17 @@ class Bus:
         return self.reply_cache.lookup(data if type(data) is bytes else bytes(data), line_bps, self._by_id)
 
     def answer(self, data: bytes, now_s: float | None = None, *, line_bps: float | None = None,
-               cache: bool = True) -> list[Sequence[Reply]]:
+               cache: bool = True, looked_up: bool = False) -> list[Sequence[Reply]]:
         """Feed bytes; return the replies to each packet they completed, one sequence per packet.
 
         With ``cache`` a repeated READ or PING is answered from the reply
         cache (:meth:`cached_replies`) and a new one is stored there;
         ``cache=False`` bypasses it, e.g. when bytes may have collided.
+        ``looked_up`` says the caller already asked :meth:`cached_replies`
+        for ``data`` and missed: only the storing is left.
         """
         if cache:
-            cached = self.cached_replies(data, line_bps)
+            cached = None if looked_up else self.cached_replies(data, line_bps)
             if cached is not None:
                 return [cached]
             # Only a packet that stands alone is stored (see ReplyCache.store).

@@ -200,7 +200,7 @@ class BusServer:
                 self.packets_in += 1
                 self._answer(cached, now, end)
                 return
-        for replies in self.bus.answer(data, now, line_bps=line_bps, cache=not self.pace):
+        for replies in self.bus.answer(data, now, line_bps=line_bps, cache=not self.pace, looked_up=not self.pace):
             self.packets_in += 1
             self._answer(replies, now, end)
 
