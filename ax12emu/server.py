@@ -7,10 +7,11 @@ Return Delay Time after the instruction ended.  It sleeps in ``select`` until
 the next event (input, a reply falling due, a physics tick) and spins only
 while a host is mid-conversation (a fraction of a millisecond after each
 instruction and each reply) and before a reply falls due, where a timeout
-would be too coarse.  The 1 kHz physics step runs on the loop's tick, in
-pieces (step, sensors, tables: ``Bus.advance_in_pieces``), and while a host
-polls, each piece just after a packet was answered: the host is then busy
-with the reply, so the step costs it almost nothing.
+would be too coarse.  The 1 kHz physics step runs on the loop's tick, which
+lands when the model's next step falls due, in pieces (step, sensors,
+tables: ``Bus.advance_in_pieces``), and while a host polls, each piece just
+after a packet was answered: the host is then busy with the reply, so the
+step costs it almost nothing.
 
 The wire, as it is modelled here:
 
@@ -30,6 +31,7 @@ from __future__ import annotations
 import bisect
 import collections
 import logging
+import math
 import os
 import select
 import sys
@@ -108,9 +110,11 @@ class BusServer:
         self.pace = pace
         self.echo = echo
         self.physics_period_s = physics_period_s
+        #: Simulated seconds per wall second when the bus follows the wall clock; None in virtual time.
+        self._time_scale: float | None = getattr(bus.clock, "time_scale", None)
         # The loop steps physics between packets, so a request may find it up to one
-        # period behind, as the AX-12's own registers are (its control loop runs every 1 ms).
-        bus.request_lag_s = physics_period_s
+        # tick behind, as the AX-12's own registers are (its control loop runs every 1 ms).
+        bus.request_lag_s = self._steps_per_tick() * bus.model.step_s if self._time_scale else physics_period_s
         self._queue: list[list] = []  # [release_s, seq, data, is_reply], sorted
         self._seq = 0
         self._stop = False
@@ -120,6 +124,7 @@ class BusServer:
         self._yield_after_reply = getattr(transport, "yield_after_reply", False) and hasattr(os, "sched_yield")
         #: Whether the clock is fine enough to wait on for a few microseconds (not Windows before 3.13).
         self._exact_clock = time.get_clock_info("monotonic").resolution <= 1e-6
+        bus.advance()  # from the clock's start to now: the first request should not pay for it
         self._next_physics = time.monotonic()
         # Linux only: elsewhere poll() may not take a pty's descriptor (macOS returns POLLNVAL).
         self._poller = select.poll() if sys.platform.startswith("linux") else None
@@ -289,11 +294,32 @@ class BusServer:
             if self._physics is None and now >= self._next_physics:
                 self._physics = self.bus.advance_in_pieces()
                 self.bus.expire(now)
-                self._next_physics = max(self._next_physics + self.physics_period_s, now)
+                self._next_physics = self._next_tick_s(now)
             if self._physics is not None and next(self._physics, _DONE) is _DONE:
                 self._physics = None
         if self._calls:
             self._run_calls()
+
+    def _steps_per_tick(self) -> int:
+        """Model steps per tick: one at real time, more when simulated time runs faster."""
+        return max(1, round(self.physics_period_s * self._time_scale / self.bus.model.step_s))
+
+    def _next_tick_s(self, now: float) -> float:
+        """When the physics tick after the one starting now falls due (``now``: the pass's clock).
+
+        On the model's own step grid: the tick comes as soon as its whole steps
+        are due, so a request finds physics behind by less than one tick plus
+        the loop's own lateness, and pays for a step only when the loop was
+        held up (a tick on a free-running 1 ms beat could fall up to a whole
+        step after the step was due, and a request just before it paid).
+        """
+        scale = self._time_scale
+        if scale is None:  # virtual time: the clock moves only when a test moves it
+            return max(self._next_physics + self.physics_period_s, now)
+        step_s = self.bus.model.step_s
+        wall_s, sim_now_s = time.monotonic(), self.bus.clock.now_s()
+        due_sim_s = (math.floor(sim_now_s / step_s + 1e-9) + self._steps_per_tick()) * step_s
+        return wall_s + (due_sim_s - sim_now_s) / scale + 1e-6  # 1 us: the two clocks are read one after the other
 
     # -- calls from other threads -----------------------------------------------------
     def call(self, fn: Callable[[Bus], Any], timeout_s: float = 5.0) -> Any:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import os
 import time
 
@@ -9,6 +10,7 @@ import pytest
 import serial
 
 from ax12emu.bus import Bus, Reply
+from ax12emu.clock import WallClock
 from ax12emu.packets import encode_instruction, encode_status
 from ax12emu.server import BusServer, merge_replies
 from ax12emu.transports.base import Transport
@@ -115,8 +117,10 @@ class _PipeTransport(Transport):
 def test_physics_steps_in_pieces_while_a_host_polls_without_pause(return_delay):
     """A host sending the next READ the moment a reply arrives keeps the loop busy: every read is
     answered, and the 1 kHz step still runs, in pieces between the packets (after a delayed reply
-    too), rather than falling behind until a request has to pay for it (margins wide: a shared
-    machine jitters)."""
+    too), rather than falling behind until a request has to pay for it.  A request may pay when
+    the shared machine took the core away from the loop (over 0.5 ms of the last 2 ms: wall time
+    less the thread's CPU time), so those steps are excused, as is the start before the first
+    tick, and the tick count is held to the time the loop had the core; margins wide."""
     bus = Bus([1, 2, 3])
     for servo in bus.servos:
         for name, value in (("return_delay_time", return_delay), ("cw_angle_limit", 0), ("ccw_angle_limit", 0),
@@ -131,32 +135,78 @@ def test_physics_steps_in_pieces_while_a_host_polls_without_pause(return_delay):
         finished.append(bus.clock.now_s())
 
     bus.advance_in_pieces = _counted
-    paid = []  # whole steps taken in the request path
+    passes: list[tuple[float, float]] = []  # (wall clock, this thread's CPU time) as each pass of the loop began
+    paid: list[bool] = []  # per whole step taken in the request path: was the loop held up just before?
     advance = bus.plant.advance
 
+    def _away_s(edges):
+        """Wall time less CPU time between the first and last edge: how long the core was taken away."""
+        return (edges[-1][0] - edges[0][0]) - (edges[-1][1] - edges[0][1])
+
     def _paid(sim_time_s):
+        now = (time.monotonic(), time.thread_time())
         before_s = bus.model.time_s
         stepped = advance(sim_time_s)
-        paid.extend([sim_time_s] * round((bus.model.time_s - before_s) / bus.model.step_s))
+        steps = round((bus.model.time_s - before_s) / bus.model.step_s)
+        if steps and finished:  # from the first tick on: before it, the loop is starting up
+            recent = [p for p in passes if p[0] > now[0] - 2e-3]
+            paid.extend([_away_s(passes[-len(recent) - 1:] + [now]) > 0.5e-3] * steps)
         return stepped
 
-    bus.plant.advance = _paid
     read = encode_instruction(1, 0x02, bytes([36, 2]))
     with _PipeTransport() as transport:
         server = BusServer(bus, transport)
-        start = time.monotonic()
-        sent = 0
-        while time.monotonic() - start < 0.3:
-            os.write(transport.write_fd, read)
-            sent += 1
-            expected = 8 * sent
-            while len(transport.replies) < expected:
-                server.run_once()
-        elapsed_ms = (time.monotonic() - start) * 1e3
+        bus.plant.advance = _paid
+        gc.disable()  # a full collection of pytest's heap holds a pass up for ms, on the core
+        try:
+            start = time.monotonic()
+            sent = 0
+            while time.monotonic() - start < 0.3:
+                sent_sim_s = bus.clock.now_s()
+                os.write(transport.write_fd, read)
+                sent += 1
+                expected = 8 * sent
+                while len(transport.replies) < expected:
+                    passes.append((time.monotonic(), time.thread_time()))
+                    server.run_once()
+            elapsed_ms = (time.monotonic() - start) * 1e3
+        finally:
+            gc.enable()
     assert len(transport.replies) == 8 * sent and sent > 100
-    assert len(finished) >= 0.5 * elapsed_ms, (len(finished), elapsed_ms)
-    assert len(paid) <= 0.1 * elapsed_ms, (len(paid), len(finished), elapsed_ms)
-    assert bus.model.time_s >= bus.clock.now_s() - 0.01
+    away_ms = 1e3 * _away_s(passes)
+    assert len(finished) >= 0.5 * (elapsed_ms - away_ms), (len(finished), elapsed_ms, away_ms)
+    unexcused = paid.count(False)
+    assert unexcused <= 0.05 * elapsed_ms, (unexcused, len(paid), len(finished), elapsed_ms)
+    assert bus.model.time_s >= sent_sim_s - 0.01  # the last request found physics at most a tick behind
+
+
+@pytest.mark.parametrize("time_scale", [1.0, 0.5])
+def test_physics_ticks_land_when_the_models_next_step_falls_due(time_scale):
+    """The loop's tick comes as soon as the model's next whole step is due, whatever the phase
+    between the bus's clock and the loop's start (and in slow motion too); on a beat of its own it
+    could come up to a step late, and a request in between paid for the step.  The server starts
+    half a step off the grid here; the median tick starts within a quarter step after a grid point
+    (wide: select wakes late)."""
+    bus = Bus([1], clock=WallClock(time_scale))
+    step_s = bus.model.step_s
+    while not 0.45 < (bus.clock.now_s() / step_s) % 1 < 0.55:
+        pass  # at most one step
+    starts = []
+    pieces = bus.advance_in_pieces
+
+    def _counted():
+        starts.append(bus.clock.now_s())
+        yield from pieces()
+
+    bus.advance_in_pieces = _counted
+    with _PipeTransport() as transport:
+        server = BusServer(bus, transport)
+        end = time.monotonic() + 0.1
+        while time.monotonic() < end:
+            server.run_once()
+    phases = sorted((start / step_s) % 1 for start in starts[1:])
+    assert len(phases) > 30, len(phases)
+    assert phases[len(phases) // 2] < 0.25, phases
 
 
 def test_a_delayed_reply_is_released_after_its_return_delay_not_before():
