@@ -113,8 +113,10 @@ class BusServer:
         #: Simulated seconds per wall second when the bus follows the wall clock; None in virtual time.
         self._time_scale: float | None = getattr(bus.clock, "time_scale", None)
         # The loop steps physics between packets, so a request may find it up to one
-        # tick behind, as the AX-12's own registers are (its control loop runs every 1 ms).
-        bus.request_lag_s = self._steps_per_tick() * bus.model.step_s if self._time_scale else physics_period_s
+        # period behind, as the AX-12's own registers are (its control loop runs every 1 ms).
+        # Faster than real time, a tick takes several steps, and a request between ticks pays
+        # for the steps past that: the registers stay about one step old in simulated time.
+        bus.request_lag_s = physics_period_s
         self._queue: list[list] = []  # [release_s, seq, data, is_reply], sorted
         self._seq = 0
         self._stop = False
@@ -124,7 +126,6 @@ class BusServer:
         self._yield_after_reply = getattr(transport, "yield_after_reply", False) and hasattr(os, "sched_yield")
         #: Whether the clock is fine enough to wait on for a few microseconds (not Windows before 3.13).
         self._exact_clock = time.get_clock_info("monotonic").resolution <= 1e-6
-        bus.advance()  # from the clock's start to now: the first request should not pay for it
         self._next_physics = time.monotonic()
         # Linux only: elsewhere poll() may not take a pty's descriptor (macOS returns POLLNVAL).
         self._poller = select.poll() if sys.platform.startswith("linux") else None
@@ -265,7 +266,8 @@ class BusServer:
             wait_s = 0.0  # a reply is nearly due, a host is mid-conversation or a step is half done: spin
         else:
             deadline = min(self._next_physics, queue[0][0] - SPIN_S) if queue else self._next_physics
-            wait_s = max(0.0, deadline - now)
+            # Capped at one period: calls and stop() are seen within it, even when slow motion spaces the ticks out.
+            wait_s = min(max(0.0, deadline - now), self.physics_period_s)
         fds = self.transport.fds()
         if wait_s == 0.0 and self._poller is not None:  # spinning: poll() costs half what select() does
             if fds != self._polled_fds:
@@ -302,24 +304,24 @@ class BusServer:
 
     def _steps_per_tick(self) -> int:
         """Model steps per tick: one at real time, more when simulated time runs faster."""
-        return max(1, round(self.physics_period_s * self._time_scale / self.bus.model.step_s))
+        return max(1, round(self.physics_period_s * self._time_scale / self.bus.plant.model.step_s))
 
     def _next_tick_s(self, now: float) -> float:
         """When the physics tick after the one starting now falls due (``now``: the pass's clock).
 
         On the model's own step grid: the tick comes as soon as its whole steps
-        are due, so a request finds physics behind by less than one tick plus
-        the loop's own lateness, and pays for a step only when the loop was
-        held up (a tick on a free-running 1 ms beat could fall up to a whole
-        step after the step was due, and a request just before it paid).
+        are due, so at real time a request pays for a step only when the loop
+        was held up (a tick on a free-running 1 ms beat could fall up to a
+        whole step after the step was due, and a request just before it paid).
         """
         scale = self._time_scale
         if scale is None:  # virtual time: the clock moves only when a test moves it
             return max(self._next_physics + self.physics_period_s, now)
-        step_s = self.bus.model.step_s
-        wall_s, sim_now_s = time.monotonic(), self.bus.clock.now_s()
+        step_s = self.bus.plant.model.step_s
+        sim_now_s = self.bus.clock.now_s()
+        wall_s = time.monotonic()  # read second: the tick may come a hair late, never early
         due_sim_s = (math.floor(sim_now_s / step_s + 1e-9) + self._steps_per_tick()) * step_s
-        return wall_s + (due_sim_s - sim_now_s) / scale + 1e-6  # 1 us: the two clocks are read one after the other
+        return wall_s + (due_sim_s - sim_now_s) / scale
 
     # -- calls from other threads -----------------------------------------------------
     def call(self, fn: Callable[[Bus], Any], timeout_s: float = 5.0) -> Any:

@@ -117,10 +117,10 @@ class _PipeTransport(Transport):
 def test_physics_steps_in_pieces_while_a_host_polls_without_pause(return_delay):
     """A host sending the next READ the moment a reply arrives keeps the loop busy: every read is
     answered, and the 1 kHz step still runs, in pieces between the packets (after a delayed reply
-    too), rather than falling behind until a request has to pay for it.  A request may pay when
-    the shared machine took the core away from the loop (over 0.5 ms of the last 2 ms: wall time
-    less the thread's CPU time), so those steps are excused, as is the start before the first
-    tick, and the tick count is held to the time the loop had the core; margins wide."""
+    too), rather than falling behind until a request has to pay for it.  A request may pay after
+    the shared machine held the loop up (a pass of over 0.5 ms within the last 2 ms), so those
+    steps are excused, as is the start before the first tick, and the tick count is held to the
+    time the loop was not held up; margins wide."""
     bus = Bus([1, 2, 3])
     for servo in bus.servos:
         for name, value in (("return_delay_time", return_delay), ("cw_angle_limit", 0), ("ccw_angle_limit", 0),
@@ -135,22 +135,23 @@ def test_physics_steps_in_pieces_while_a_host_polls_without_pause(return_delay):
         finished.append(bus.clock.now_s())
 
     bus.advance_in_pieces = _counted
-    passes: list[tuple[float, float]] = []  # (wall clock, this thread's CPU time) as each pass of the loop began
+    passes: list[float] = []  # when each pass of the loop began
     paid: list[bool] = []  # per whole step taken in the request path: was the loop held up just before?
     advance = bus.plant.advance
 
-    def _away_s(edges):
-        """Wall time less CPU time between the first and last edge: how long the core was taken away."""
-        return (edges[-1][0] - edges[0][0]) - (edges[-1][1] - edges[0][1])
+    def _held_up_s(edges):
+        """Time spent in passes over 0.5 ms (a pass takes microseconds, a step ~0.1 ms): the core was
+        taken away, or ran several times slower than usual (a shared VM does both)."""
+        return sum(gap for gap in (b - a for a, b in zip(edges, edges[1:])) if gap > 0.5e-3)
 
     def _paid(sim_time_s):
-        now = (time.monotonic(), time.thread_time())
+        now = time.monotonic()  # before the step: a step slowing its own pass must not excuse it
         before_s = bus.model.time_s
         stepped = advance(sim_time_s)
         steps = round((bus.model.time_s - before_s) / bus.model.step_s)
         if steps and finished:  # from the first tick on: before it, the loop is starting up
-            recent = [p for p in passes if p[0] > now[0] - 2e-3]
-            paid.extend([_away_s(passes[-len(recent) - 1:] + [now]) > 0.5e-3] * steps)
+            recent = [t for t in passes if t > now - 2e-3]
+            paid.extend([_held_up_s(passes[-len(recent) - 1:] + [now]) > 0] * steps)
         return stepped
 
     read = encode_instruction(1, 0x02, bytes([36, 2]))
@@ -167,14 +168,14 @@ def test_physics_steps_in_pieces_while_a_host_polls_without_pause(return_delay):
                 sent += 1
                 expected = 8 * sent
                 while len(transport.replies) < expected:
-                    passes.append((time.monotonic(), time.thread_time()))
+                    passes.append(time.monotonic())
                     server.run_once()
             elapsed_ms = (time.monotonic() - start) * 1e3
         finally:
             gc.enable()
     assert len(transport.replies) == 8 * sent and sent > 100
-    away_ms = 1e3 * _away_s(passes)
-    assert len(finished) >= 0.5 * (elapsed_ms - away_ms), (len(finished), elapsed_ms, away_ms)
+    held_ms = 1e3 * _held_up_s(passes)
+    assert len(finished) >= 0.5 * (elapsed_ms - held_ms), (len(finished), elapsed_ms, held_ms)
     unexcused = paid.count(False)
     assert unexcused <= 0.05 * elapsed_ms, (unexcused, len(paid), len(finished), elapsed_ms)
     assert bus.model.time_s >= sent_sim_s - 0.01  # the last request found physics at most a tick behind

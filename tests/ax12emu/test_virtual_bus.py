@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import threading
+import time
 
 import pytest
 import serial
@@ -49,6 +50,22 @@ def test_state_access_by_name():
         assert bus.read(7, "id") == 7
         with pytest.raises(KeyError, match="no servo with ID 2"):
             bus.read(2, "led")
+
+
+def test_slow_motion_answers_calls_and_stops_within_a_period():
+    """At a thousandth of real time a physics tick is a second of wall time apart; state access
+    and close still take about a millisecond, as at real time (wide margins: 0.2 s each)."""
+    bus = VirtualBus([1], time_scale=0.001, model="kinematic").start()
+    try:
+        for _ in range(3):
+            start = time.monotonic()
+            bus.write(1, "led", 1)
+            assert bus.read(1, "led") == 1
+            assert time.monotonic() - start < 0.2
+    finally:
+        start = time.monotonic()
+        bus.close()
+    assert time.monotonic() - start < 0.2 and not _threads()
 
 
 def test_virtual_time_steps_are_deterministic():
