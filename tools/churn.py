@@ -30,11 +30,15 @@ from dataclasses import dataclass, field
 
 import serial
 
+from ax12emu.framing import DEFAULT_SILENCE_TIMEOUT_S
 from ax12emu.packets import encode_instruction, encode_status
 
 PING = encode_instruction(1, 0x01)
 PONG = encode_status(1, 0)
 READ_LED = encode_instruction(1, 0x02, bytes([25, 1]))
+#: Silence after a half packet, so the emulator drops it before the next packet: several times the
+#: framer's timeout, which runs from when the emulator read the half (late, if it was held up).
+QUIET_S = 5 * DEFAULT_SILENCE_TIMEOUT_S
 
 
 @dataclass
@@ -53,7 +57,7 @@ def check_alive(port: str, process: subprocess.Popen | None = None) -> None:
     """The emulator still runs and answers a PING on ``port`` (a pty path or socket:// URL)."""
     if process is not None and process.poll() is not None:
         raise AssertionError(f"the emulator exited with {process.returncode}")
-    time.sleep(0.03)  # past the framer's silence timeout: a partial packet is dropped
+    time.sleep(QUIET_S)  # past the framer's silence timeout: a partial packet is dropped
     with serial.serial_for_url(port, baudrate=1_000_000, timeout=1.0) as link:
         link.reset_input_buffer()
         link.write(PING)
@@ -83,7 +87,7 @@ def pty_churn(path: str, opens: int, *, seed: int = 0) -> ChurnReport:
                 link.write(READ_LED)
                 link.read(2)  # the reply has arrived; 5 of its bytes stay unread at close
         if action == "half":
-            time.sleep(0.025)  # the next opener's packet must not be glued to this half (silence timeout)
+            time.sleep(QUIET_S)  # the next opener's packet must not be glued to this half (silence timeout)
         report.cycles += 1
     return report
 

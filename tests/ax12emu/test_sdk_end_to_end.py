@@ -215,7 +215,7 @@ def test_baud_change_makes_servo_deaf_until_host_follows(bus):
 
 def test_return_delay_time_is_honoured(bus):
     """Return Delay Time 250 (500 us): no PING round trip is shorter than the delay, and 0 is much faster."""
-    def fastest_ping_s(port, ph, count=100):
+    def fastest_ping_s(port, ph, count=20):
         """The fastest of ``count`` round trips: load on a shared machine only ever adds time."""
         times = []
         for _ in range(count):
@@ -225,11 +225,13 @@ def test_return_delay_time_is_honoured(bus):
             assert comm == COMM_SUCCESS
         return min(times)
 
+    fast = slow = 1.0
     with sdk_port(bus.port) as (port, ph):
-        ph.write1ByteTxRx(port, 1, 5, 0)
-        fast = fastest_ping_s(port, ph)
-        ph.write1ByteTxRx(port, 1, 5, 250)
-        slow = fastest_ping_s(port, ph)
+        for _ in range(5):  # alternating blocks: a spell of load weighs on both settings alike
+            ph.write1ByteTxRx(port, 1, 5, 0)
+            fast = min(fast, fastest_ping_s(port, ph))
+            ph.write1ByteTxRx(port, 1, 5, 250)
+            slow = min(slow, fastest_ping_s(port, ph))
     # No round trip is shorter than the delay; and the fastest ones differ by about the delay
     # (it runs from the packet's arrival, so the emulator's own processing hides inside it).
     # The upper bound is wide: a loaded machine can delay even the fastest of 100 round trips
