@@ -76,6 +76,31 @@ def test_tcp_send_then_hang_up_is_seen_in_one_read():
         assert not transport.connected
 
 
+def test_new_client_is_accepted_when_the_old_ones_hang_up_is_seen_after_it():
+    """The connection is handled before the old client's EOF (its FIN trailed the new handshake,
+    or select listed the listener first): the old client is found gone and the new one served."""
+    from ax12emu.transports.tcp import TcpTransport
+
+    with TcpTransport() as transport:
+        listener = transport.fds()[0]
+        old = socket.create_connection((transport.host, transport.port))
+        transport.on_readable(listener)  # accept
+        old.close()
+        new = socket.create_connection((transport.host, transport.port))
+        time.sleep(0.05)
+        transport.on_readable(listener)  # before the old client's fd is read
+        assert transport.refused == 0 and transport.connections == 2 and transport.connected
+        new.sendall(PING)
+        time.sleep(0.05)
+        assert transport.on_readable(transport.fds()[0]) == PING
+        intruder = socket.create_connection((transport.host, transport.port))
+        time.sleep(0.05)
+        transport.on_readable(listener)  # the new client is alive: this one is turned away
+        assert transport.refused == 1 and transport.connections == 2
+        intruder.close()
+        new.close()
+
+
 def test_new_tcp_client_is_not_glued_to_the_previous_ones_half_packet(emulator):
     """A client that left mid-packet must not swallow the next client's first packet (a new connection is a new host)."""
     served = emulator("--tcp", "127.0.0.1:0")
