@@ -302,10 +302,6 @@ class BusServer:
         if self._calls:
             self._run_calls()
 
-    def _steps_per_tick(self) -> int:
-        """Model steps per tick: one at real time, more when simulated time runs faster."""
-        return max(1, round(self.physics_period_s * self._time_scale / self.bus.plant.model.step_s))
-
     def _next_tick_s(self, now: float) -> float:
         """When the physics tick after the one starting now falls due (``now``: the pass's clock).
 
@@ -318,9 +314,10 @@ class BusServer:
         if scale is None:  # virtual time: the clock moves only when a test moves it
             return max(self._next_physics + self.physics_period_s, now)
         step_s = self.bus.plant.model.step_s
+        steps = max(1, round(self.physics_period_s * scale / step_s))  # one at real time, more when faster
         sim_now_s = self.bus.clock.now_s()
         wall_s = time.monotonic()  # read second: the tick may come a hair late, never early
-        due_sim_s = (math.floor(sim_now_s / step_s + 1e-9) + self._steps_per_tick()) * step_s
+        due_sim_s = (math.floor(sim_now_s / step_s + 1e-9) + steps) * step_s
         return wall_s + (due_sim_s - sim_now_s) / scale
 
     # -- calls from other threads -----------------------------------------------------

@@ -5,9 +5,10 @@ URL format: ``tcp://HOST:PORT`` (PORT 0 picks a free port).
 pyserial's ``socket://HOST:PORT`` is a ready client.  One host at a time, as
 on a real bus with one master: while a client is connected, a second one is
 accepted and closed at once (it sees EOF), so bytes of two hosts never
-interleave; unless the first one turns out to have just hung up (its EOF
-may land up to HANGUP_GRACE_S after the new connection).  A client that disconnects, even mid-packet, leaves the bus
-serving; its partial packet is dropped by the framer's silence timeout.
+interleave, unless the first one turns out to have just hung up (its EOF
+may land up to HANGUP_GRACE_S after the new connection).  A client that
+disconnects, even mid-packet, leaves the bus serving; its partial packet is
+dropped by the framer's silence timeout.
 TCP carries no line speed, so every servo hears whatever its baud setting.
 """
 
