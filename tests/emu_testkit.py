@@ -13,6 +13,9 @@ from dynamixel_sdk import COMM_SUCCESS, PacketHandler, PortHandler
 #: SDK then takes the late reply for the next transaction's.  The tests check what the bus
 #: answers; how fast it answers, with the stock port, is tools/bench_protocol.py's job.
 PATIENCE_MS = 250.0
+#: The same for the conformance suite's runs in tests (its 50 ms default suits hardware; a silent
+#: check waits this long, so each run takes about a second more).
+CONFORMANCE_TIMEOUT_S = 0.2
 
 
 class PatientPortHandler(PortHandler):

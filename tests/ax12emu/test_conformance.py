@@ -6,15 +6,13 @@ import subprocess
 import sys
 
 import pytest
+from emu_testkit import CONFORMANCE_TIMEOUT_S
 
 from ax12emu import VirtualBus, conformance
 from ax12emu.conformance import FAIL, PASS
 
 IDS = [1, 2]
 TRANSPORTS = ["pty", "tcp", "inprocess"]
-#: Reply timeout for these runs: the suite's 50 ms default suits hardware, but a shared CI machine
-#: can hold the emulator up longer (a silent check waits this long, so each run takes ~1 s more).
-PATIENCE_S = 0.2
 
 
 @pytest.mark.parametrize("transport", TRANSPORTS)
@@ -27,11 +25,11 @@ def test_full_suite_passes(transport, emulator):
     """
     if transport == "inprocess":
         with VirtualBus(IDS, transport=transport, model="kinematic") as bus:
-            report = conformance.run(bus.port, IDS, destructive=True, timeout_s=PATIENCE_S)
+            report = conformance.run(bus.port, IDS, destructive=True, timeout_s=CONFORMANCE_TIMEOUT_S)
     else:
         where = ["--tcp", "127.0.0.1:0"] if transport == "tcp" else []
         served = emulator("--ids", ",".join(map(str, IDS)), "--model", "kinematic", *where)
-        report = conformance.run(served.port, IDS, destructive=True, timeout_s=PATIENCE_S)
+        report = conformance.run(served.port, IDS, destructive=True, timeout_s=CONFORMANCE_TIMEOUT_S)
     assert report.passed, report.table()
     for name in ("ID change", "RESET", "return delay", "status return levels", "resync after garbage", "table unchanged"):
         assert report.outcome(name) == PASS, report.table()
@@ -64,13 +62,13 @@ def test_non_destructive_mode_changes_nothing(transport, emulator):
     if transport == "inprocess":
         with VirtualBus(IDS, transport=transport, model="kinematic") as bus:
             before = {i: bus.table(i) for i in IDS}
-            report = conformance.run(bus.port, IDS, timeout_s=PATIENCE_S)
+            report = conformance.run(bus.port, IDS, timeout_s=CONFORMANCE_TIMEOUT_S)
             after = {i: bus.table(i) for i in IDS}
     else:
         where = ["--tcp", "127.0.0.1:0"] if transport == "tcp" else []
         served = emulator("--ids", ",".join(map(str, IDS)), "--model", "kinematic", *where)
         before = _tables_over_the_port(served.port)
-        report = conformance.run(served.port, IDS, timeout_s=PATIENCE_S)
+        report = conformance.run(served.port, IDS, timeout_s=CONFORMANCE_TIMEOUT_S)
         after = _tables_over_the_port(served.port)
     assert report.passed, report.table()
     assert report.outcome("RESET") == "skip"
@@ -79,7 +77,7 @@ def test_non_destructive_mode_changes_nothing(transport, emulator):
 
 def test_private_url_passes_like_the_pty():
     """serial_for_url("ax12emu://?ids=1,2"), with no VirtualBus at all, passes the same suite."""
-    report = conformance.run("ax12emu://?ids=1,2", IDS, destructive=True, timeout_s=PATIENCE_S)
+    report = conformance.run("ax12emu://?ids=1,2", IDS, destructive=True, timeout_s=CONFORMANCE_TIMEOUT_S)
     assert report.passed, report.table()
 
 
@@ -94,7 +92,8 @@ def test_cli_conformance_against_served_tcp(emulator):
     """ax12emu conformance socket://... prints the table and exits 0; a broken device exits 1."""
     served = emulator("--tcp", "127.0.0.1:0", "--ids", "1,2", "--model", "kinematic")
     result = subprocess.run(
-        [sys.executable, "-m", "ax12emu", "conformance", served.port, "--ids", "1,2", "--timeout-ms", "200"],
+        [sys.executable, "-m", "ax12emu", "conformance", served.port, "--ids", "1,2",
+         "--timeout-ms", str(round(CONFORMANCE_TIMEOUT_S * 1e3))],
         capture_output=True, text=True, timeout=60,
     )
     assert result.returncode == 0, result.stdout + result.stderr

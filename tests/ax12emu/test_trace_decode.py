@@ -6,6 +6,8 @@ import json
 import subprocess
 import sys
 
+from emu_testkit import CONFORMANCE_TIMEOUT_S
+
 from ax12emu import conformance
 from ax12emu.conformance.link import Link, open_port
 from ax12emu.decoder import ECHO, GARBAGE, INSTRUCTION, STATUS, decode, format_decoded
@@ -21,7 +23,7 @@ def test_conformance_trace_decodes_back_to_the_packets_sent(tmp_path, emulator):
     """
     path = tmp_path / "bus.jsonl"
     served = emulator("--ids", "1,2", "--trace", str(path))
-    link = Link(open_port(served.port, 1_000_000), timeout_s=0.2)  # patient: a shared machine stalls (see test_conformance)
+    link = Link(open_port(served.port, 1_000_000), timeout_s=CONFORMANCE_TIMEOUT_S)
     try:
         report = conformance.run_on_link(link, [1, 2])
     finally:
