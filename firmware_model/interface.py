@@ -17,8 +17,9 @@ write) belong to the protocol side.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, fields
-from typing import Protocol
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
@@ -30,6 +31,9 @@ __all__ = [
     "Commands",
     "Sensed",
     "ServoModel",
+    "SteppableTo",
+    "Blockable",
+    "AngleSettable",
 ]
 
 #: Status-byte bits a model may raise (e-manual Protocol 1.0, error field).
@@ -125,4 +129,36 @@ class ServoModel(Protocol):
 
     def set_external_torque(self, torque_nm: np.ndarray) -> None:
         """Set a torque acting on each output shaft (N·m, positive = CCW)."""
+        ...
+
+
+# Optional capabilities.  A model declares one by having the method; callers test with
+# ``isinstance(model, Capability)`` once (not per step: a protocol check costs microseconds),
+# so nothing probes a model's attributes by name.
+
+
+@runtime_checkable
+class SteppableTo(Protocol):
+    """A model that can step without reading its sensors, so a serving loop can split a step in pieces."""
+
+    def step_to(self, to_time_s: float, commands: Commands) -> None:
+        """:meth:`ServoModel.advance` without reading the sensors."""
+        ...
+
+
+@runtime_checkable
+class Blockable(Protocol):
+    """A model whose shafts can be held still, as by a hand or an obstacle, while the motor keeps driving."""
+
+    def set_blocked(self, blocked: Sequence[bool] | np.ndarray) -> None:
+        """Block (True) or free each output shaft."""
+        ...
+
+
+@runtime_checkable
+class AngleSettable(Protocol):
+    """A model whose shaft can be turned by hand to an angle."""
+
+    def set_angle(self, index: int, angle_rad: float) -> None:
+        """Put shaft ``index`` at ``angle_rad`` (radians from the CW end), at rest."""
         ...

@@ -73,6 +73,13 @@ class KinematicModel:
         """Accepted for interface parity; a kinematic servo is infinitely stiff."""
         self.external_torque_nm = np.broadcast_to(np.asarray(torque_nm, dtype=float), (self.n,)).copy()
 
+    def set_angle(self, index: int, angle_rad: float) -> None:
+        """Put shaft ``index`` at ``angle_rad`` (by hand), at rest; the readings follow at once."""
+        self.angle_rad[index] = float(angle_rad)
+        self.speed_rad_s[index] = 0.0
+        self._rest_commands = None
+        self._sensed = None
+
     def advance(self, to_time_s: float, commands: Commands) -> Sensed:
         """Step from ``time_s`` to ``to_time_s`` (whole steps only) with ``commands`` held."""
         self.step_to(to_time_s, commands)
@@ -82,7 +89,7 @@ class KinematicModel:
         """:meth:`advance` without reading the sensors."""
         target_steps = int(np.floor(to_time_s / self.step_s + 1e-9))
         count = target_steps - self._steps
-        if count > 0 and not (commands is self._rest_commands):
+        if count > 0 and commands is not self._rest_commands:
             self._integrate(count * self.step_s, commands)
             # At rest under unchanged commands, further steps change nothing: skip them.
             self._rest_commands = commands if not self.speed_rad_s.any() else None

@@ -7,7 +7,6 @@ from contextlib import contextmanager
 
 from dynamixel_sdk import COMM_SUCCESS, PacketHandler, PortHandler
 
-
 #: How long a test's port waits for a status packet, at least.  dynamixel-sdk's own timeout is
 #: about 34 ms at 1 Mbps; a shared CI machine can hold the emulator up longer than that, and the
 #: SDK then takes the late reply for the next transaction's.  The tests check what the bus

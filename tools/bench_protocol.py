@@ -178,7 +178,7 @@ def configure(rdt: int, ids: list[int], moving: bool, baud_value: int | None = N
 
 def transaction_times(trace: Path) -> list[float]:
     """From an emulator trace: time from a READ's arrival to the last byte of its 8-byte reply."""
-    from ax12emu.trace import IN, read_trace
+    from ax12emu.tracing.trace import IN, read_trace
 
     times, start_s, pending = [], None, 0
     for chunk in read_trace(trace):

@@ -30,8 +30,8 @@ from dataclasses import dataclass, field
 
 import serial
 
-from ax12emu.framing import DEFAULT_SILENCE_TIMEOUT_S
-from ax12emu.packets import encode_instruction, encode_status
+from ax12emu.protocol.framing import DEFAULT_SILENCE_TIMEOUT_S
+from ax12emu.protocol.packets import encode_instruction, encode_status
 
 PING = encode_instruction(1, 0x01)
 PONG = encode_status(1, 0)

@@ -39,7 +39,7 @@ from pathlib import Path
 
 import serial
 
-from ax12emu.packets import encode_instruction
+from ax12emu.protocol.packets import encode_instruction
 
 #: Factory state (no write yet): ID 1, Return Delay 250, CW 0, CCW 1023.
 FACTORY = {"id": 1, "return_delay_time": 250, "cw_angle_limit": 0, "ccw_angle_limit": 1023}

@@ -4,7 +4,7 @@ A case is a stream of mostly near-valid instruction packets (right header,
 LENGTH and checksum; random IDs, instructions, addresses, lengths and
 values), mutated ones (a flipped byte or checksum, a cut, a wrong LENGTH,
 stray 0xFF) and raw garbage, cut into chunks fed to a two-servo
-:class:`ax12emu.bus.Bus` in virtual time, sometimes after a pause longer
+:class:`ax12emu.bus.bus.Bus` in virtual time, sometimes after a pause longer
 than the framer's silence timeout and sometimes after a physics step.
 
 After every input (one chunk) the harness checks:
@@ -76,18 +76,18 @@ _COVERAGE = (
     else None
 )
 
-import numpy as np  # noqa: E402
 import hypothesis  # noqa: E402
+import numpy as np  # noqa: E402
 from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
-from ax12emu.bus import Bus
-from ax12emu.clock import VirtualClock
-from ax12emu.control_table import TABLE_SIZE, Access, layout
-from ax12emu.framing import DEFAULT_SILENCE_TIMEOUT_S, MAX_FRAME_BYTES, Framer
-from ax12emu.model_factory import ModelChoice, build_model
-from ax12emu.packets import BROADCAST_ID, Instruction, StatusError, checksum, encode_instruction, encode_status
-from ax12emu.servo import ServoOptions, baud_bps
+from ax12emu.bus.bus import Bus
+from ax12emu.bus.clock import VirtualClock
+from ax12emu.protocol.control_table import TABLE_SIZE, Access, layout
+from ax12emu.protocol.framing import DEFAULT_SILENCE_TIMEOUT_S, MAX_FRAME_BYTES, Framer
+from ax12emu.protocol.packets import BROADCAST_ID, Instruction, StatusError, checksum, encode_instruction, encode_status
+from ax12emu.servo.model_factory import ModelChoice, build_model
+from ax12emu.servo.virtual_servo import ServoOptions, baud_bps
 
 #: One chunk taking longer than this counts as a hang.
 HANG_S = 2.0

@@ -15,7 +15,8 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from ..control_table import DEFAULT_PROFILE
+from ax12emu.protocol.control_table import DEFAULT_PROFILE
+
 from .checks import CHECKS, Check, Context, Failed, Note, Skipped, table_differences
 from .link import Link, open_port
 

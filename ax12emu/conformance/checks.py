@@ -21,9 +21,10 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
-from ..control_table import TABLE_SIZE, Access, Area, layout
-from ..describe import describe_error
-from ..packets import BROADCAST_ID, Instruction, StatusError, StatusPacket, encode_instruction
+from ax12emu.protocol.control_table import TABLE_SIZE, Access, Area, layout
+from ax12emu.protocol.describe import describe_error
+from ax12emu.protocol.packets import BROADCAST_ID, Instruction, StatusError, StatusPacket, encode_instruction
+
 from .link import Link
 
 __all__ = ["Check", "CHECKS", "Context", "Failed", "Skipped", "Note", "DYNAMIC", "table_differences"]
@@ -499,9 +500,11 @@ def _write_back(ctx: Context, image: bytes) -> None:
         if entry.area is Area.RAM and entry.name == "torque_enable":
             continue
         ctx.put(1, entry.name, value)
-    ctx.put(1, "torque_enable", image[24])
-    ctx.put(1, "id", image[3])
-    ctx.put(image[3], "baud_rate", image[4])
+    by_name = lay.by_name
+    ctx.put(1, "torque_enable", by_name["torque_enable"].value_in(image))
+    servo_id = by_name["id"].value_in(image)
+    ctx.put(1, "id", servo_id)
+    ctx.put(servo_id, "baud_rate", by_name["baud_rate"].value_in(image))
 
 
 CHECKS: tuple[Check, ...] = (

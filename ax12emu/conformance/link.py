@@ -16,8 +16,8 @@ from typing import NamedTuple
 
 import serial
 
-from ..framing import Framer
-from ..packets import StatusPacket
+from ax12emu.protocol.framing import Framer
+from ax12emu.protocol.packets import StatusPacket
 
 __all__ = ["Link", "Response", "open_port"]
 

@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import pytest
 
-from ax12emu.bus import Bus, parse_ids
+from ax12emu.bus import Bus
+from ax12emu.bus.clock import VirtualClock
+from ax12emu.bus.state_store import StateFileError, StateStore
+from ax12emu.protocol.ids import parse_ids
+from ax12emu.protocol.packets import BROADCAST_ID, encode_instruction, encode_status
+from ax12emu.servo.virtual_servo import ServoOptions
 from firmware_model import KinematicModel
-from ax12emu.clock import VirtualClock
-from ax12emu.packets import BROADCAST_ID, encode_instruction, encode_status
-from ax12emu.servo import ServoOptions
-from ax12emu.state_store import StateFileError, StateStore
 
 
 def ping(servo_id):

@@ -5,9 +5,9 @@ from __future__ import annotations
 import socket
 import time
 
-
-from ax12emu.packets import encode_instruction, encode_status
 from emu_testkit import load_tool
+
+from ax12emu.protocol.packets import encode_instruction, encode_status
 
 PING, PONG = encode_instruction(1, 0x01), encode_status(1, 0)
 
@@ -63,7 +63,7 @@ def test_client_reconnecting_at_once_is_not_refused(emulator):
 
 def test_tcp_send_then_hang_up_is_seen_in_one_read():
     """The transport returns a client's last bytes and notices its EOF in the same call."""
-    from ax12emu.transports.tcp import TcpTransport
+    from ax12emu.serve.transports.tcp import TcpTransport
 
     with TcpTransport() as transport:
         client = socket.create_connection((transport.host, transport.port))
@@ -79,7 +79,7 @@ def test_tcp_send_then_hang_up_is_seen_in_one_read():
 def test_new_client_is_accepted_when_the_old_ones_hang_up_is_seen_after_it():
     """The connection is handled before the old client's EOF (its FIN trailed the new handshake,
     or select listed the listener first): the old client is found gone and the new one served."""
-    from ax12emu.transports.tcp import TcpTransport
+    from ax12emu.serve.transports.tcp import TcpTransport
 
     with TcpTransport() as transport:
         listener = transport.fds()[0]
@@ -112,6 +112,6 @@ def test_new_tcp_client_is_not_glued_to_the_previous_ones_half_packet(emulator):
         sock.settimeout(0.3)
         try:
             reply = churn._recv_exactly(sock, 6)
-        except socket.timeout:
+        except TimeoutError:
             reply = b""
     assert reply == PONG

@@ -7,7 +7,7 @@ import sys
 
 import pytest
 
-from ax12emu.cli import parse_args
+from ax12emu.cli.main import parse_args
 
 
 def run(*args: str) -> subprocess.CompletedProcess:

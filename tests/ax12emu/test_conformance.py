@@ -39,7 +39,7 @@ def _tables_over_the_port(port: str) -> dict[int, bytes]:
     """Every servo's whole table, read by a client of its own (raw READ packets, pty path or socket:// URL)."""
     import serial
 
-    from ax12emu.packets import encode_instruction
+    from ax12emu.protocol.packets import encode_instruction
 
     tables = {}
     with serial.serial_for_url(port, baudrate=1_000_000, timeout=1.0) as link:

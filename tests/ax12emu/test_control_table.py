@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from ax12emu.control_table import EEPROM_END, PROFILES, TABLE_SIZE, ControlTable, layout
-from ax12emu.packets import StatusError
+from ax12emu.protocol.control_table import EEPROM_END, PROFILES, TABLE_SIZE, ControlTable, layout
+from ax12emu.protocol.packets import StatusError
 
 
 def test_layout_covers_the_ax12_table():

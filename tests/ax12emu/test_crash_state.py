@@ -2,15 +2,11 @@
 
 from __future__ import annotations
 
-
 import numpy as np
-
-from ax12emu.control_table import ControlTable
-from ax12emu.state_store import StateStore
 from emu_testkit import load_tool
 
-
-
+from ax12emu.bus.state_store import StateStore
+from ax12emu.protocol.control_table import ControlTable
 
 crash_state = load_tool("crash_state")
 

@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 import serial
 
-from ax12emu.control_table import ControlTable
-from ax12emu.packets import encode_instruction, encode_status
-from ax12emu.state_store import StateFileError, StateStore
+from ax12emu.bus.state_store import StateFileError, StateStore
+from ax12emu.protocol.control_table import ControlTable
+from ax12emu.protocol.packets import encode_instruction, encode_status
 
 
 def run(*args: str, cwd=None, timeout_s: float = 30) -> subprocess.CompletedProcess:

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from ax12emu.fault_config import FaultConfig
-from ax12emu.packets import StatusError
+from ax12emu.faults.config import FaultConfig
+from ax12emu.protocol.packets import StatusError
 
 
 def test_options_parse_into_the_config():

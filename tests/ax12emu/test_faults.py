@@ -8,13 +8,12 @@ import pytest
 from dynamixel_sdk import COMM_RX_CORRUPT, COMM_RX_TIMEOUT, COMM_SUCCESS
 from emu_testkit import ok, sdk_port
 
-from firmware_model import KinematicModel
-
 from ax12emu import FaultConfig, VirtualBus
-from ax12emu.bus import Bus
-from ax12emu.clock import VirtualClock
-from ax12emu.faults import Faults, parse_alarm_bits
-from ax12emu.packets import StatusError, encode_instruction
+from ax12emu.bus.bus import Bus
+from ax12emu.bus.clock import VirtualClock
+from ax12emu.faults.injection import Faults, parse_alarm_bits
+from ax12emu.protocol.packets import StatusError, encode_instruction
+from firmware_model import KinematicModel
 
 PRESENT_POSITION = 36
 

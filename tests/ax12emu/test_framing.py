@@ -6,8 +6,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from ax12emu.framing import MAX_FRAME_BYTES, Framer
-from ax12emu.packets import InstructionPacket, encode_instruction
+from ax12emu.protocol.framing import MAX_FRAME_BYTES, Framer
+from ax12emu.protocol.packets import InstructionPacket, encode_instruction
 
 PING = encode_instruction(1, 0x01)
 READ = encode_instruction(1, 0x02, bytes([0x2B, 0x01]))

@@ -2,18 +2,14 @@
 
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
+from emu_testkit import load_tool
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from ax12emu import request_handler
-from ax12emu.packets import Instruction, StatusError
-from emu_testkit import load_tool
-
-
-
+from ax12emu.protocol.packets import Instruction, StatusError
+from ax12emu.servo import request_handler
 
 fuzz = load_tool("fuzz")
 

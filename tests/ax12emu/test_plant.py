@@ -2,8 +2,9 @@
 
 import pytest
 
-from ax12emu.bus import Bus
-from ax12emu.clock import VirtualClock
+from ax12emu.bus.bus import Bus
+from ax12emu.bus.clock import VirtualClock
+from ax12emu.servo.model_factory import ModelChoice, build_model
 from firmware_model.interface import Sensed
 from firmware_model.units import RAD_PER_POSITION_UNIT
 
@@ -135,8 +136,7 @@ def test_a_model_without_step_to_is_stepped_whole():
                 raise AttributeError(name)
             return getattr(self._model, name)
 
-    bus = Bus([1], clock=VirtualClock())
-    bus.plant.model = WholeStepsOnly(bus.model)
+    bus = Bus([1], model=WholeStepsOnly(build_model(ModelChoice(), 1)), clock=VirtualClock())
     bus.clock.advance(0.005)
     assert list(bus.advance_in_pieces()) == []
     assert bus.model.time_s == pytest.approx(0.005)

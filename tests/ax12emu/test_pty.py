@@ -12,8 +12,8 @@ import time
 import pytest
 import serial
 
-from ax12emu.transports import pty as pty_transport
-from ax12emu.transports.pty import PtyTransport
+from ax12emu.serve.transports import pty as pty_transport
+from ax12emu.serve.transports.pty import PtyTransport
 
 linux_only = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="packet mode is used on Linux only")
 

@@ -7,7 +7,7 @@ import threading
 import pytest
 import serial
 
-from ax12emu.packets import encode_instruction, encode_status
+from ax12emu.protocol.packets import encode_instruction, encode_status
 
 pytest_plugins = ["pytester"]
 

@@ -6,11 +6,11 @@ import logging
 
 import pytest
 
-from ax12emu.bus import Bus
-from ax12emu.clock import VirtualClock
-from ax12emu.faults import Faults
-from ax12emu.packets import encode_instruction, encode_status
-from ax12emu.reply_cache import MAX_ENTRIES
+from ax12emu.bus.bus import Bus
+from ax12emu.bus.clock import VirtualClock
+from ax12emu.bus.reply_cache import MAX_ENTRIES
+from ax12emu.faults.injection import Faults
+from ax12emu.protocol.packets import encode_instruction, encode_status
 from firmware_model import KinematicModel
 
 READ_POSITION = encode_instruction(1, 0x02, bytes([36, 2]))
@@ -92,7 +92,7 @@ def test_faults_and_debug_logging_bypass_the_cache(caplog):
     bus.faults.set_reply_faults(drop=1.0)
     assert bus.receive(READ_POSITION) == []
     bus.faults = None
-    with caplog.at_level(logging.DEBUG, logger="ax12emu.bus"):
+    with caplog.at_level(logging.DEBUG, logger="ax12emu.bus.bus"):
         bus.receive(READ_POSITION)
     assert bus.reply_cache.hits == 0
     assert any("rx" in record.getMessage() for record in caplog.records)

@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from ax12emu.packets import BROADCAST_ID, InstructionPacket, StatusError, encode_status
-from ax12emu.request_handler import handle
-from ax12emu.servo import ServoOptions, VirtualServo
+from ax12emu.protocol.packets import BROADCAST_ID, InstructionPacket, StatusError, encode_status
+from ax12emu.servo.request_handler import handle
+from ax12emu.servo.virtual_servo import ServoOptions, VirtualServo
 
 
 def servo(**options) -> VirtualServo:

@@ -14,8 +14,8 @@ from dynamixel_sdk import (
 )
 from emu_testkit import ok, sdk_port
 
-from ax12emu.control_table import layout
-from ax12emu.packets import StatusError
+from ax12emu.protocol.control_table import layout
+from ax12emu.protocol.packets import StatusError
 
 IDS = [1, 2, 5]
 #: Registers the firmware computes, compared by rule rather than against a default.

@@ -10,10 +10,11 @@ import pytest
 import serial
 
 from ax12emu.bus import Bus, Reply
-from ax12emu.clock import WallClock
-from ax12emu.packets import encode_instruction, encode_status
-from ax12emu.server import BusServer, merge_replies
-from ax12emu.transports.base import Transport
+from ax12emu.bus.clock import WallClock
+from ax12emu.bus.reply import merge_replies
+from ax12emu.protocol.packets import encode_instruction, encode_status
+from ax12emu.serve.server import BusServer
+from ax12emu.serve.transports.base import Transport
 
 PING = encode_instruction(1, 0x01)
 

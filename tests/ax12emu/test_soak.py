@@ -4,9 +4,6 @@ from __future__ import annotations
 
 from emu_testkit import load_tool
 
-
-
-
 soak = load_tool("soak")
 
 

@@ -7,7 +7,7 @@ import time
 
 import serial
 
-from ax12emu.packets import encode_instruction, encode_status
+from ax12emu.protocol.packets import encode_instruction, encode_status
 
 PING = encode_instruction(1, 0x01)
 

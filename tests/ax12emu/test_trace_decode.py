@@ -10,9 +10,9 @@ from emu_testkit import CONFORMANCE_TIMEOUT_S
 
 from ax12emu import conformance
 from ax12emu.conformance.link import Link, open_port
-from ax12emu.decoder import ECHO, GARBAGE, INSTRUCTION, STATUS, decode, format_decoded
-from ax12emu.packets import encode_instruction, encode_status
-from ax12emu.trace import Chunk, read_trace
+from ax12emu.protocol.packets import encode_instruction, encode_status
+from ax12emu.tracing.decoder import ECHO, GARBAGE, INSTRUCTION, STATUS, decode, format_decoded
+from ax12emu.tracing.trace import Chunk, read_trace
 
 
 def test_conformance_trace_decodes_back_to_the_packets_sent(tmp_path, emulator):

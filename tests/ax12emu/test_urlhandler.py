@@ -9,8 +9,8 @@ import serial
 
 import ax12emu  # noqa: F401  (registers the handler)
 from ax12emu import VirtualBus
-from ax12emu.packets import encode_instruction, encode_status
-from ax12emu.urlhandler.protocol_ax12emu import UrlError
+from ax12emu.harness.urlhandler.protocol_ax12emu import UrlError
+from ax12emu.protocol.packets import encode_instruction, encode_status
 
 PING = encode_instruction(1, 0x01)
 

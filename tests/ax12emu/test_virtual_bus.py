@@ -11,7 +11,7 @@ import serial
 
 import ax12emu
 from ax12emu import VirtualBus
-from ax12emu.packets import encode_instruction, encode_status
+from ax12emu.protocol.packets import encode_instruction, encode_status
 
 
 def _threads() -> set[str]:
@@ -35,7 +35,7 @@ def test_exception_in_block_still_shuts_down():
     """An exception in the with body propagates and the bus is torn down anyway."""
     with pytest.raises(ZeroDivisionError):
         with VirtualBus([1]) as bus:
-            1 / 0
+            _ = 1 / 0
     assert not bus.running and not _threads()
     bus.close()  # a second close is harmless
 

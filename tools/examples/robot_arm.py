@@ -53,8 +53,8 @@ class Arm:
 
     def enable(self, speed: int = 300) -> None:
         for joint in self.joint_ids:
-            self._retry(lambda: self.packets.write2ByteTxRx(self.port, joint, MOVING_SPEED, speed))
-            self._retry(lambda: self.packets.write1ByteTxRx(self.port, joint, TORQUE_ENABLE, 1))
+            self._retry(lambda joint=joint: self.packets.write2ByteTxRx(self.port, joint, MOVING_SPEED, speed))
+            self._retry(lambda joint=joint: self.packets.write1ByteTxRx(self.port, joint, TORQUE_ENABLE, 1))
 
     def move_to(self, joint: int, position: int, timeout_s: float = 3.0) -> bool:
         """Command a position and wait until the joint stops; False if it never gets there."""
@@ -72,6 +72,6 @@ class Arm:
         """Alarms each joint reports in its status byte."""
         report = {}
         for joint in self.joint_ids:
-            _, error = self._retry(lambda: self.packets.read1ByteTxRx(self.port, joint, MOVING))
+            _, error = self._retry(lambda joint=joint: self.packets.read1ByteTxRx(self.port, joint, MOVING))
             report[joint] = [name for bit, name in ALARMS.items() if error & bit]
         return report

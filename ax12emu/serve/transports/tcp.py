@@ -14,6 +14,7 @@ TCP carries no line speed, so every servo hears whatever its baud setting.
 
 from __future__ import annotations
 
+import ipaddress
 import logging
 import select
 import socket
@@ -28,6 +29,16 @@ log = logging.getLogger(__name__)
 #: client that hangs up and reconnects at once can have its FIN trail the new handshake (on
 #: loopback the two may be queued on different CPUs); seen once in 200 reconnections on CI.
 HANGUP_GRACE_S = 0.002
+
+
+def is_loopback(host: str) -> bool:
+    """True for "localhost" and loopback addresses (127.0.0.0/8, ::1); binding anything else needs consent."""
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
 
 
 def parse_host_port(text: str) -> tuple[str, int]:
@@ -66,6 +77,12 @@ class TcpTransport(Transport):
         self.refused = 0
         #: Clients accepted so far (a change tells the server a new host began).
         self.connections = 0
+
+    @property
+    def url(self) -> str:
+        """``socket://HOST:PORT`` for pyserial, an IPv6 host in brackets."""
+        host = f"[{self.host}]" if ":" in self.host else self.host
+        return f"socket://{host}:{self.port}"
 
     @property
     def connected(self) -> bool:

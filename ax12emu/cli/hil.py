@@ -1,6 +1,6 @@
 """Command-line parts for testing with the emulator: trace and fault flags, ``decode``, ``conformance``.
 
-Why it exists: keeps :mod:`ax12emu.cli` about serving while these grow;
+Why it exists: keeps :mod:`ax12emu.cli.main` about serving while these grow;
 ``cli.py`` calls :func:`add_serve_flags`, :func:`add_commands`,
 :func:`fault_config` and dispatches through :data:`COMMANDS`.  ``print`` is
 allowed here as in ``cli.py``.
@@ -12,9 +12,9 @@ import argparse
 import sys
 from collections.abc import Callable
 
-from .bus import parse_ids
-from .control_table import DEFAULT_PROFILE, PROFILES
-from .fault_config import FAULT_OPTIONS, FaultConfig
+from ax12emu.faults.config import FAULT_OPTIONS, FaultConfig
+from ax12emu.protocol.control_table import DEFAULT_PROFILE, PROFILES
+from ax12emu.protocol.ids import parse_ids
 
 __all__ = ["add_serve_flags", "add_commands", "fault_config", "COMMANDS"]
 
@@ -35,11 +35,11 @@ def _ids(text: str) -> list[int]:
 
 
 def add_serve_flags(serve: argparse.ArgumentParser) -> None:
-    """``serve --trace FILE`` and the fault-injection flags (see :mod:`ax12emu.faults`)."""
+    """``serve --trace FILE`` and the fault-injection flags (see :mod:`ax12emu.faults.injection`)."""
     serve.add_argument("--trace", metavar="FILE", help="record every byte in and out as JSON lines (ax12emu decode FILE)")
     group = serve.add_argument_group(
         "fault injection",
-        "what a client sees is listed in the docs of ax12emu.faults; servos are named by their --ids slot",
+        "what a client sees is listed in the docs of ax12emu.faults.injection; servos are named by their --ids slot",
     )
     parse = {name: _typed(parser) for name, (parser, _) in FAULT_OPTIONS.items()}
     group.add_argument("--drop", type=parse["drop"], default=0.0, metavar="F", help="drop this fraction of status packets (client: timeout)")
@@ -88,8 +88,8 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
 
 
 def _decode(args: argparse.Namespace) -> int:
-    from .decoder import decode, format_decoded
-    from .trace import read_capture, read_raw
+    from ax12emu.tracing.decoder import decode, format_decoded
+    from ax12emu.tracing.trace import read_capture, read_raw
 
     chunks = read_raw(args.file) if args.raw else read_capture(args.file)
     for item in decode(chunks, profile=args.profile):
@@ -98,7 +98,7 @@ def _decode(args: argparse.Namespace) -> int:
 
 
 def _conformance(args: argparse.Namespace) -> int:
-    from . import conformance
+    from ax12emu import conformance
 
     report = conformance.run(
         args.port,

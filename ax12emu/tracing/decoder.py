@@ -5,7 +5,7 @@ protocol decoder does: one line per packet with time, direction,
 instruction or status, ID, register names and values, error bits, and the
 bytes thrown away while hunting for a frame.  It reuses the emulator's own
 framer (status packets share the instruction packets' framing) and
-:mod:`ax12emu.describe`, so the decoder and the servos agree on every byte.
+:mod:`ax12emu.protocol.describe`, so the decoder and the servos agree on every byte.
 
 Direction: a trace says which way each chunk went.  A raw capture does not,
 so each packet is classified by context: a packet from the ID the last
@@ -21,10 +21,11 @@ from __future__ import annotations
 from collections.abc import Iterable
 from typing import NamedTuple
 
-from .control_table import DEFAULT_PROFILE
-from .describe import describe_instruction, describe_status
-from .framing import Framer
-from .packets import BROADCAST_ID, Instruction, InstructionPacket
+from ax12emu.protocol.control_table import DEFAULT_PROFILE
+from ax12emu.protocol.describe import describe_instruction, describe_status
+from ax12emu.protocol.framing import Framer
+from ax12emu.protocol.packets import BROADCAST_ID, Instruction, InstructionPacket
+
 from .trace import IN, OUT, Chunk
 
 __all__ = ["Decoded", "decode", "format_decoded", "INSTRUCTION", "STATUS", "ECHO", "GARBAGE"]

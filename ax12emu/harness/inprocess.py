@@ -5,7 +5,7 @@ process.  A host's ``write`` runs the bus at once under a lock; the replies
 wait in a timed queue and a ``read`` returns them only once their Return
 Delay Time (plus any injected delay) has passed, blocking up to its timeout
 like a real port.  Replies of several servos are laid on the line as the
-server does (:func:`ax12emu.server.merge_replies`), so duplicate IDs
+server does (:func:`ax12emu.serve.server.merge_replies`), so duplicate IDs
 collide the same way.  The host's baud rate is passed to the bus, so a
 servo at another baud is deaf, as on a pty.
 
@@ -24,11 +24,12 @@ import heapq
 import threading
 import time
 import weakref
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
-from .bus import Bus
-from .server import merge_replies
-from .trace import IN, OUT, TraceWriter
+from ax12emu.bus.bus import Bus
+from ax12emu.bus.reply import merge_replies
+from ax12emu.tracing.trace import IN, OUT, TraceWriter
 
 __all__ = ["InProcessLink", "register", "lookup", "LinkBusy"]
 

@@ -32,9 +32,10 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .control_table import EEPROM_END
-from .packets import BROADCAST_ID, Instruction, InstructionPacket, StatusError, encode_status
-from .servo import VirtualServo
+from ax12emu.protocol.control_table import EEPROM_END
+from ax12emu.protocol.packets import BROADCAST_ID, Instruction, InstructionPacket, StatusError, encode_status
+
+from .virtual_servo import VirtualServo
 
 __all__ = ["Outcome", "handle", "HANDLERS"]
 
@@ -75,9 +76,10 @@ def _read(servo: VirtualServo, packet: InstructionPacket) -> tuple[StatusError, 
 
 def _angle_error(servo: VirtualServo, candidate: np.ndarray) -> StatusError:
     """Angle Limit Error if the resulting Goal Position lies outside the limits in joint mode."""
-    cw = int(candidate[6]) | int(candidate[7]) << 8
-    ccw = int(candidate[8]) | int(candidate[9]) << 8
-    goal = int(candidate[30]) | int(candidate[31]) << 8
+    by_name = servo.table.layout.by_name
+    cw = by_name["cw_angle_limit"].value_in(candidate)
+    ccw = by_name["ccw_angle_limit"].value_in(candidate)
+    goal = by_name["goal_position"].value_in(candidate)
     if (cw or ccw) and not cw <= goal <= ccw:
         return StatusError.ANGLE_LIMIT
     return StatusError.NONE
@@ -89,7 +91,8 @@ def _apply_write(servo: VirtualServo, address: int, data: bytes) -> StatusError:
     candidate, error = table.check_write(address, data)
     if candidate is None:
         return error
-    if table.row[47] and not candidate[47]:
+    lock = table.layout.by_name["lock"]
+    if lock.value_in(table.row) and not lock.value_in(candidate):
         return StatusError.RANGE  # Lock is released only by power-off (e-manual, Lock)
     if address <= 31 and address + len(data) > 30:
         error |= _angle_error(servo, candidate)

@@ -122,6 +122,11 @@ class PtyTransport(Transport):
             self.link = path
         self.name = str(self.link or self.slave_path)
 
+    @property
+    def url(self) -> str:
+        """The slave side's device path (``/dev/pts/N``); the link, when one was asked for, points at it."""
+        return self.slave_path
+
     def fds(self) -> list[int]:
         return [self._master]
 

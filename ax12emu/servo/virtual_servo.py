@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .control_table import DEFAULT_PROFILE, PROFILES, ControlTable
+from ax12emu.protocol.control_table import DEFAULT_PROFILE, PROFILES, ControlTable
 
 __all__ = ["ServoOptions", "VirtualServo", "baud_bps"]
 
@@ -50,6 +50,12 @@ class VirtualServo:
     def __init__(self, table: ControlTable, options: ServoOptions, *, index: int) -> None:
         self.table = table
         self.options = options
+        by_name = table.layout.by_name
+        # Read on every packet: the addresses are looked up once, by name.
+        self._id_at = by_name["id"].address
+        self._baud_rate_at = by_name["baud_rate"].address
+        self._return_delay_at = by_name["return_delay_time"].address
+        self._status_return_level_at = by_name["status_return_level"].address
         #: Position in the bus's arrays (rows, model state), fixed for life.
         self.index = index
         #: Physical alarm bits raised by the model (voltage, overheating, overload).
@@ -68,23 +74,23 @@ class VirtualServo:
 
     @property
     def id(self) -> int:
-        """Present ID (address 3)."""
-        return int(self.table.row[3])
+        """Present ID."""
+        return int(self.table.row[self._id_at])
 
     @property
     def baud_bps(self) -> float:
         """The rate this servo listens and talks at."""
-        return baud_bps(int(self.table.row[4]))
+        return baud_bps(int(self.table.row[self._baud_rate_at]))
 
     @property
     def return_delay_s(self) -> float:
         """Return Delay Time in seconds: 2 us per unit (e-manual)."""
-        return int(self.table.row[5]) * 2e-6
+        return int(self.table.row[self._return_delay_at]) * 2e-6
 
     @property
     def status_return_level(self) -> int:
         """0: answer PING only; 1: PING and READ; 2: everything (e-manual)."""
-        return int(self.table.row[16])
+        return int(self.table.row[self._status_return_level_at])
 
     def power_on(self) -> None:
         """Power-up rules: Torque Limit loads Max Torque; Goal Position follows Present Position."""

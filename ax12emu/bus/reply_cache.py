@@ -21,11 +21,12 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
-from .packets import BROADCAST_ID, Instruction, InstructionPacket
+from ax12emu.protocol.packets import BROADCAST_ID, Instruction, InstructionPacket
 
 if TYPE_CHECKING:
-    from .bus import Reply
-    from .servo import VirtualServo
+    from ax12emu.servo.virtual_servo import VirtualServo
+
+    from .reply import Reply
 
 __all__ = ["ReplyCache", "CACHEABLE"]
 

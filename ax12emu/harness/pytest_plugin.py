@@ -40,7 +40,7 @@ def _default_transport() -> str:
 @pytest.fixture
 def ax12_bus(request: pytest.FixtureRequest) -> Iterator[Any]:
     """A running virtual AX-12 bus; ``ax12_bus.port`` is the port to open."""
-    from ax12emu.virtual_bus import VirtualBus
+    from ax12emu.harness.virtual_bus import VirtualBus
 
     ids: list[int] = [1]
     marker = request.node.get_closest_marker("ax12_ids")

@@ -16,10 +16,10 @@ from collections.abc import Iterator, Sequence
 
 import numpy as np
 
-from firmware_model.interface import Commands, Sensed, ServoModel
+from ax12emu.protocol.control_table import Layout
+from firmware_model.interface import Commands, Sensed, ServoModel, SteppableTo
 
-from .control_table import Layout
-from .servo import VirtualServo
+from .virtual_servo import VirtualServo
 
 __all__ = ["Plant"]
 
@@ -45,13 +45,18 @@ class Plant:
         self._torque_enable = lay.by_name["torque_enable"].address
         self._shutdown = lay.by_name["shutdown"].address
         self._cached_commands: Commands | None = None
+        #: Whether the model can step without sensing (checked once: a protocol test is slow per step).
+        self._steps_to = isinstance(model, SteppableTo)
         self._any_alarm = True
         #: The arrays last written, by register: a model may hand over the same read-only
         #: array until the value changes (see ServoModel.sense), which then needs no copying.
-        #: So whoever else writes a sensed register into a row must say so (tables_changed or
-        #: refresh), or the model's value returns only when it changes.
+        #: A register set by name (``ControlTable.set``, as faults and harnesses do) drops this
+        #: and the decoded commands through ``on_set``, so the model's value returns at the next
+        #: write-back; bytes written into a row directly (a packet) are followed by tables_changed.
         self._written: dict[str, object] = {}
         self._refreshes = 0
+        for servo in servos:
+            servo.table.on_set = self._on_set
         for name, (address, size) in {**self._commands, **self._sensed}.items():
             if size == 2 and address % 2:
                 raise AssertionError(f"{name} at odd address {address}: the word view cannot read it")
@@ -70,6 +75,9 @@ class Plant:
                 }
             )
         return self._cached_commands
+
+    def _on_set(self, name: str) -> None:
+        self.tables_changed()
 
     def tables_changed(self) -> None:
         """Tell the plant a client may have written commands (or any register: all are rewritten next)."""
@@ -95,11 +103,10 @@ class Plant:
         show the previous step (see ``Bus.request_lag_s``).
         """
         model = self.model
-        step_to = getattr(model, "step_to", None)
-        if step_to is None or sim_time_s < model.time_s + model.step_s:
+        if not self._steps_to or sim_time_s < model.time_s + model.step_s:
             self.advance(sim_time_s)  # without step_to (it is optional), the whole step at once
             return
-        step_to(sim_time_s, self.commands())
+        model.step_to(sim_time_s, self.commands())  # type: ignore[attr-defined]
         stepped_to_s = model.time_s
         yield
         sensed = model.sense()

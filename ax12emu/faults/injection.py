@@ -2,7 +2,7 @@
 
 Why it exists: hardware shows a lost reply, a noisy line or an overheating
 servo rarely and never on cue, yet robot code must survive them.  A
-:class:`Faults` object attached to a :class:`~ax12emu.bus.Bus` (``bus.faults``)
+:class:`Faults` object attached to a :class:`~ax12emu.bus.bus.Bus` (``bus.faults``)
 bends what the servos do; with none attached the bus pays one ``is None``
 test per packet.  Every random choice comes from one ``random.Random(seed)``
 drawn once per status packet, so a run is repeatable with the same seed and
@@ -50,13 +50,13 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+from ax12emu.protocol.packets import StatusError
+from firmware_model.interface import AngleSettable, Blockable
 from firmware_model.units import RAD_PER_POSITION_UNIT
 
-from .packets import StatusError
-
 if TYPE_CHECKING:
-    from .bus import Bus, Reply
-    from .servo import VirtualServo
+    from ax12emu.bus import Bus, Reply
+    from ax12emu.servo.virtual_servo import VirtualServo
 
 __all__ = ["Faults", "ALARM_NAMES", "parse_alarm_bits"]
 
@@ -181,22 +181,24 @@ class Faults:
         servo = self.bus.servos[index]
         self._duplicates.setdefault(index, servo.id)
         servo.table.set("id", as_id)
-        self.bus._reindex()
+        self.bus.reindex()
 
     def unduplicate(self, slot: int) -> None:
         """Give the servo back the ID it had before :meth:`duplicate`."""
         index = self._index(slot)
         if index in self._duplicates:
             self.bus.servos[index].table.set("id", self._duplicates.pop(index))
-            self.bus._reindex()
+            self.bus.reindex()
 
     def _model_blocks(self) -> bool:
         """Whether the model itself can hold a shaft (the physical model can)."""
-        return hasattr(self.bus.model, "set_blocked")
+        return isinstance(self.bus.model, Blockable)
 
     def _set_model_blocked(self) -> None:
         blocked = [index in self._blocked for index in range(len(self.bus.servos))]
-        self.bus.model.set_blocked(blocked)
+        model = self.bus.model
+        assert isinstance(model, Blockable)
+        model.set_blocked(blocked)
         self.bus.plant.tables_changed()
 
     def stall(self, slot: int, *, overload_after_s: float = 1.0) -> None:
@@ -288,7 +290,6 @@ class Faults:
             table.set("torque_enable", 0)
         else:
             table.set("torque_limit", 0)
-        self.bus.plant.tables_changed()
 
     def on_replies(self, replies: "list[Reply]") -> "list[Reply]":
         """Drop, corrupt or delay status packets by the configured fractions."""
@@ -322,8 +323,9 @@ class Faults:
             for name, value in held.items():
                 table.set(name, value)
         now_s = bus.clock.now_s()
-        # Only a plain array attribute can be held; a property (the physical model's) is read-only.
-        holdable = "angle_rad" in vars(bus.model)
+        # A model that cannot block its shaft (else the stall would be there) is held at the stall's angle.
+        model = bus.model
+        holdable = isinstance(model, AngleSettable)
         for index, stall in self._stalls.items():
             servo = bus.servos[index]
             table = servo.table
@@ -343,7 +345,7 @@ class Faults:
             else:
                 stall.driving_since_s = None
             if holdable:
-                bus.model.angle_rad[index] = stall.position * RAD_PER_POSITION_UNIT
+                model.set_angle(index, stall.position * RAD_PER_POSITION_UNIT)
 
 
 #: Alarm bits a held sensor reading can raise.

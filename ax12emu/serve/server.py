@@ -40,16 +40,15 @@ from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Future
 from typing import Any
 
-from .bus import Bus, Reply
-from .trace import IN, OUT, TraceWriter
+from ax12emu.bus import BITS_PER_BYTE, Bus, Reply, merge_replies
+from ax12emu.tracing.trace import IN, OUT, TraceWriter
+
 from .transports.base import Transport
 
-__all__ = ["BusServer", "merge_replies"]
+__all__ = ["BusServer"]
 
 log = logging.getLogger(__name__)
 
-#: Bits per byte on the wire: start + 8 data + stop (8N1, e-manual).
-BITS_PER_BYTE = 10
 #: Below this much time to the next reply, busy-wait instead of sleeping in select.
 SPIN_S = 0.0003
 #: Below this much time to the next release, wait for it on the clock alone (no system call).
@@ -62,30 +61,6 @@ HOT_S = 0.0002
 PHYSICS_DEFER_S = 0.0003
 #: What ``next`` returns from a finished physics step.
 _DONE = object()
-
-
-def merge_replies(replies: Sequence[Reply], start_s: float, *, per_byte: bool) -> list[tuple[float, bytes]]:
-    """Lay replies on the wire as (release time, bytes) chunks; colliding byte slots are AND-ed.
-
-    Each reply starts ``delay_s`` after ``start_s`` and takes one byte time
-    (10 bits at its servo's baud) per byte.  Bytes of different replies that
-    fall in the same byte slot are AND-ed, as on an open-drain TTL line.
-    With ``per_byte`` each byte is released when its last bit has arrived
-    (wire pacing); otherwise a single reply goes out whole at its due time.
-    """
-    if len(replies) == 1 and not per_byte:
-        reply = replies[0]
-        return [(start_s + reply.delay_s, reply.data)]
-    byte_s = BITS_PER_BYTE / replies[0].baud_bps
-    slots: dict[int, int] = {}
-    for reply in replies:
-        first_slot = round(reply.delay_s / byte_s)
-        for i, value in enumerate(reply.data):
-            slots[first_slot + i] = slots.get(first_slot + i, 0xFF) & value
-    ordered = sorted(slots)
-    if per_byte:
-        return [(start_s + (slot + 1) * byte_s, bytes((slots[slot],))) for slot in ordered]
-    return [(start_s + ordered[0] * byte_s, bytes(slots[slot] for slot in ordered))]
 
 
 class BusServer:

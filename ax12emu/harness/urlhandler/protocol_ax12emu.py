@@ -13,9 +13,9 @@
 #   virtual_time=0|1  physics in virtual time (it then stands still)
 #   trace=FILE        record every byte as JSON lines (ax12emu decode FILE)
 #   drop, corrupt, delay, delay_s, fault_ids, seed, vanish, duplicate, alarm, stall:
-#                     fault injection, as the serve flags (see ax12emu.faults)
+#                     fault injection, as the serve flags (see ax12emu.faults.injection)
 # Options of any URL:
-#   logging=debug|info|warning|error   per-handler logger "ax12emu.urlhandler"
+#   logging=debug|info|warning|error   per-handler logger "ax12emu.harness.urlhandler"
 #
 # Reads block up to the port's timeout like a real port and return the
 # bytes that have arrived; a status packet arrives Return Delay Time after
@@ -31,12 +31,13 @@ import urllib.parse
 
 from serial.serialutil import PortNotOpenError, SerialBase, SerialException
 
-from ..bus import Bus, parse_ids
-from ..clock import VirtualClock, WallClock
-from ..fault_config import FAULT_OPTIONS, FaultConfig
-from ..inprocess import InProcessLink, LinkBusy, lookup
-from ..servo import ServoOptions
-from ..trace import TraceWriter
+from ax12emu.bus import Bus
+from ax12emu.bus.clock import VirtualClock, WallClock
+from ax12emu.faults.config import FAULT_OPTIONS, FaultConfig
+from ax12emu.harness.inprocess import InProcessLink, LinkBusy, lookup
+from ax12emu.protocol.ids import parse_ids
+from ax12emu.servo.virtual_servo import ServoOptions
+from ax12emu.tracing.trace import TraceWriter
 
 __all__ = ["Serial", "UrlError", "EXPECTED"]
 
@@ -108,7 +109,7 @@ class Serial(SerialBase):
         if level is not None:
             if level[-1] not in LOGGER_LEVELS:
                 raise UrlError(f"{EXPECTED}: unknown logging level {level[-1]!r}")
-            self.logger = logging.getLogger("ax12emu.urlhandler")
+            self.logger = logging.getLogger("ax12emu.harness.urlhandler")
             self.logger.setLevel(LOGGER_LEVELS[level[-1]])
         name = (parts.netloc + parts.path).strip("/")
         if name:

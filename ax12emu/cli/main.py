@@ -11,20 +11,21 @@ line on stdout is the port to open (the pty's slave path, or the
 from __future__ import annotations
 
 import argparse
-import ipaddress
 import logging
 import signal
 import sys
 from collections.abc import Sequence
 
-from . import __version__, cli_hil
-from .bus import Bus, parse_ids
-from .clock import WallClock
-from .control_table import DEFAULT_PROFILE, PROFILES
-from .model_factory import MODELS, ModelChoice, build_model, parse_arm
-from .servo import ServoOptions
-from .state_store import StateFileError, StateStore
-from .trace import TraceWriter
+from ax12emu import __version__
+from ax12emu.bus import Bus
+from ax12emu.bus.clock import WallClock
+from ax12emu.bus.state_store import StateFileError, StateStore
+from ax12emu.cli import hil as cli_hil
+from ax12emu.protocol.control_table import DEFAULT_PROFILE, PROFILES
+from ax12emu.protocol.ids import parse_ids
+from ax12emu.servo.model_factory import MODELS, ModelChoice, build_model, parse_arm
+from ax12emu.servo.virtual_servo import ServoOptions
+from ax12emu.tracing.trace import TraceWriter
 
 __all__ = ["parse_args", "main", "build_parser"]
 
@@ -138,31 +139,21 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         if args.link and args.tcp:
             parser.error("--link applies to a pty, not to --tcp")
         if args.tcp:
-            from .transports.tcp import parse_host_port
+            from ax12emu.serve.transports.tcp import is_loopback, parse_host_port
 
             try:
                 host, port = parse_host_port(args.tcp)
             except ValueError as exc:
                 parser.error(f"--tcp: {exc}")
-            if not _is_loopback(host) and not args.allow_remote:
+            if not is_loopback(host) and not args.allow_remote:
                 parser.error(f"--tcp {host}: binding beyond loopback needs --allow-remote")
             args.tcp_address = (host, port)
     return args
 
 
-def _is_loopback(host: str) -> bool:
-    if host == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(host).is_loopback
-    except ValueError:
-        return False
-
-
 def _serve(args: argparse.Namespace) -> int:
-    from .server import BusServer
-    from .transports.pty import PtyTransport
-    from .transports.tcp import TcpTransport
+    from ax12emu.serve import BusServer, open_transport
+    from ax12emu.serve.transports.tcp import is_loopback
 
     options = ServoOptions(
         profile=args.profile,
@@ -196,14 +187,13 @@ def _serve(args: argparse.Namespace) -> int:
         faults.install(bus)
     trace = TraceWriter(args.trace, profile=args.profile) if args.trace else None
     if args.tcp:
-        transport = TcpTransport(*args.tcp_address)
-        host = f"[{transport.host}]" if ":" in transport.host else transport.host
-        where = f"socket://{host}:{transport.port}"
-        if not _is_loopback(transport.host):
-            log.warning("serving on %s, reachable from other machines", where)
+        host, port = args.tcp_address
+        transport = open_transport("tcp", host=host, port=port)
+        if not is_loopback(host):
+            log.warning("serving on %s, reachable from other machines", transport.url)
     else:
-        transport = PtyTransport(args.link)
-        where = transport.slave_path
+        transport = open_transport("pty", link=args.link)
+    where = transport.url
     server = BusServer(bus, transport, pace=args.pace, echo=args.echo, trace=trace)
 
     def _stop(signum: int, frame: object) -> None:

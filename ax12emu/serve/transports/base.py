@@ -24,6 +24,14 @@ class Transport(abc.ABC):
     #: Hosts connected so far, for a transport that accepts several in turn (TCP); a new one is a new host.
     connections: int | None = None
 
+    @property
+    def url(self) -> str:
+        """What a client opens to reach the bus: a device path, or a pyserial URL such as ``socket://HOST:PORT``.
+
+        A transport no client opens by name (a test's pipe) may leave it as its ``name``.
+        """
+        return self.name
+
     @abc.abstractmethod
     def fds(self) -> list[int]:
         """File descriptors to watch for readability now."""

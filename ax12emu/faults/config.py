@@ -1,6 +1,6 @@
 """Faults as data: the ``serve`` flags and ``ax12emu://`` URL options parsed into a :class:`FaultConfig`.
 
-Why apart from :mod:`ax12emu.faults`: that module bends what the servos do
+Why apart from :mod:`ax12emu.faults.injection`: that module bends what the servos do
 while the bus runs; this one only turns text into a frozen description
 (with a clear ``ValueError`` naming the option for bad text) and installs
 it on a bus.
@@ -12,10 +12,10 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from .faults import Faults, parse_alarm_bits
+from .injection import Faults, parse_alarm_bits
 
 if TYPE_CHECKING:
-    from .bus import Bus
+    from ax12emu.bus.bus import Bus
 
 __all__ = ["FaultConfig", "FAULT_OPTIONS"]
 

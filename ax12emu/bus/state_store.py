@@ -19,7 +19,7 @@ import os
 import tempfile
 from pathlib import Path
 
-from .control_table import Access, Area, ControlTable
+from ax12emu.protocol.control_table import Access, Area, ControlTable
 
 __all__ = ["StateStore", "StateFileError"]
 

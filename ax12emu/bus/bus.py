@@ -17,28 +17,26 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Iterable, Iterator, Sequence
-from typing import TYPE_CHECKING, NamedTuple
+from typing import Protocol
 
 import numpy as np
 
+from ax12emu.protocol.control_table import TABLE_SIZE
+from ax12emu.protocol.describe import describe_error, describe_instruction
+from ax12emu.protocol.framing import Framer
+from ax12emu.protocol.packets import BROADCAST_ID, MAX_ID, Instruction, InstructionPacket
+from ax12emu.servo.model_factory import ModelChoice, build_model
+from ax12emu.servo.plant import Plant
+from ax12emu.servo.request_handler import handle
+from ax12emu.servo.virtual_servo import ServoOptions, VirtualServo
 from firmware_model.interface import ServoModel
 
 from .clock import VirtualClock, WallClock
-from .control_table import TABLE_SIZE
-from .describe import describe_error, describe_instruction
-from .framing import Framer
-from .model_factory import ModelChoice, build_model
-from .packets import BROADCAST_ID, MAX_ID, Instruction, InstructionPacket
-from .plant import Plant
+from .reply import Reply
 from .reply_cache import ReplyCache
-from .request_handler import handle
-from .servo import ServoOptions, VirtualServo
 from .state_store import StateStore
 
-if TYPE_CHECKING:
-    from .faults import Faults
-
-__all__ = ["Bus", "Reply", "BAUD_TOLERANCE", "parse_ids"]
+__all__ = ["Bus", "BAUD_TOLERANCE", "Interceptor"]
 
 log = logging.getLogger(__name__)
 
@@ -48,37 +46,24 @@ _CHANGES_TABLES = frozenset(int(i) for i in (Instruction.WRITE, Instruction.ACTI
 BAUD_TOLERANCE = 0.03
 
 
-class Reply(NamedTuple):
-    """A status packet to put on the line ``delay_s`` after the instruction ended."""
+class Interceptor(Protocol):
+    """What the bus calls around packets and physics so faults can bend them (:class:`ax12emu.faults.Faults`).
 
-    servo_id: int
-    data: bytes
-    delay_s: float
-    #: The replying servo's bit rate, for pacing and collision timing.
-    baud_bps: float
+    Declared here, implemented above: the bus knows when to call, the
+    fault layer what to do, and the bus imports nothing of it.
+    """
 
+    def after_physics(self) -> None:
+        """After the model stepped or a packet changed tables: hold what is held."""
+        ...
 
-def parse_ids(text: str) -> list[int]:
-    """Parse "1,2,5" or "1-18" (or a mix) into a list of distinct servo IDs 0..253."""
-    ids: list[int] = []
-    for part in text.split(","):
-        part = part.strip()
-        if not part:
-            raise ValueError(f"empty item in ID list {text!r}")
-        low, sep, high = part.partition("-")
-        try:
-            first, last = (int(low), int(high)) if sep else (int(part), int(part))
-        except ValueError:
-            raise ValueError(f"{part!r} is not an ID or range of IDs (e.g. 1,2,5 or 1-18)") from None
-        if first > last:
-            raise ValueError(f"range {part!r} runs backwards")
-        for servo_id in range(first, last + 1):
-            if not 0 <= servo_id <= MAX_ID:
-                raise ValueError(f"ID {servo_id} is outside 0..{MAX_ID}")
-            if servo_id in ids:
-                raise ValueError(f"ID {servo_id} is listed twice")
-            ids.append(servo_id)
-    return ids
+    def admit(self, servo: VirtualServo) -> bool:
+        """Before ``servo`` handles a packet: False if it is absent from the wire."""
+        ...
+
+    def on_replies(self, replies: list[Reply]) -> list[Reply]:
+        """The replies as they reach the wire (dropped, corrupted, delayed)."""
+        ...
 
 
 class Bus:
@@ -119,19 +104,20 @@ class Bus:
         for servo in self.servos:
             servo.power_on()
         self._by_id: dict[int, list[VirtualServo]] = {}
-        self._reindex()
+        self.reindex()
         #: How far behind the clock physics may be when a packet is served.  0 (the
         #: default) brings it to the present first; a serving loop that steps physics
         #: between packets sets one step, so requests rarely pay for a step.
         self.request_lag_s = 0.0
-        #: Injected faults (``faults.Faults``); None costs one test per packet.
-        self.faults: Faults | None = None
-        #: Replies to repeated READ / PING packets (see :mod:`ax12emu.reply_cache`).
+        #: Injected faults (an :class:`Interceptor`, normally ``ax12emu.faults.Faults``); None costs one test per packet.
+        self.faults: Interceptor | None = None
+        #: Replies to repeated READ / PING packets (see :mod:`ax12emu.bus.reply_cache`).
         self.reply_cache = ReplyCache()
         self._closed = False
 
     # -- lookup ------------------------------------------------------------------------
-    def _reindex(self) -> None:
+    def reindex(self) -> None:
+        """Look servos up by the IDs in their tables again (after an ID changed outside a packet)."""
         by_id: dict[int, list[VirtualServo]] = {}
         for servo in self.servos:
             by_id.setdefault(servo.id, []).append(servo)
@@ -181,7 +167,7 @@ class Bus:
         whole READ or PING in ``data`` with no partial packet held before it,
         no faults installed (they act per packet), no debug logging (``-v``
         logs every packet), and the servos it reached unchanged since (see
-        :mod:`ax12emu.reply_cache`); physics is brought up first, as
+        :mod:`ax12emu.bus.reply_cache`); physics is brought up first, as
         :meth:`dispatch` does.
         """
         if (self.faults is not None or len(data) < 6 or len(data) != data[3] + 4 or self.framer.buffered
@@ -264,7 +250,7 @@ class Bus:
                 # whichever comes next of a physics tick or a packet (in virtual time, a later step).
                 faults.after_physics()
         if moved:
-            self._reindex()
+            self.reindex()
         if faults is not None and replies:
             replies = faults.on_replies(replies)
         return replies

@@ -3,7 +3,7 @@
 Why it exists: a user's test wants servos in a few lines and must be able
 to do to them what the bench cannot: set a temperature, block a shaft, push
 on it, drop replies, or step time exactly.  :class:`VirtualBus` owns a
-:class:`~ax12emu.bus.Bus`, a transport and (for a pty or TCP) the serving
+:class:`~ax12emu.bus.bus.Bus`, a transport and (for a pty or TCP) the serving
 thread, and tears all of it down on ``close``, also when the ``with`` body
 raises.  Everything that touches the bus runs on the serving thread (or
 under the in-process link's lock), so a test never races a packet::
@@ -15,7 +15,7 @@ under the in-process link's lock), so a test never races a packet::
 
 Servos are addressed by their present ID in the state methods, and by their
 *slot* (the ID they were launched with) in ``bus.faults`` (see
-:mod:`ax12emu.faults`).
+:mod:`ax12emu.faults.injection`).
 """
 
 from __future__ import annotations
@@ -28,16 +28,16 @@ from typing import Any
 
 import numpy as np
 
-from firmware_model.interface import ServoModel
+from ax12emu.bus.bus import Bus
+from ax12emu.bus.clock import VirtualClock, WallClock
+from ax12emu.faults.config import FaultConfig
+from ax12emu.faults.injection import Faults
+from ax12emu.servo.model_factory import ModelChoice, build_model
+from ax12emu.servo.virtual_servo import ServoOptions
+from ax12emu.tracing.trace import TraceWriter
+from firmware_model.interface import AngleSettable, ServoModel
 
-from .bus import Bus
-from .clock import VirtualClock, WallClock
-from .fault_config import FaultConfig
-from .faults import Faults
 from .inprocess import InProcessLink, register, unregister
-from .model_factory import ModelChoice, build_model
-from .servo import ServoOptions
-from .trace import TraceWriter
 
 __all__ = ["VirtualBus", "TRANSPORTS"]
 
@@ -135,18 +135,14 @@ class VirtualBus:
                 register(self.name, self._link)
                 self.port = f"ax12emu://{self.name}"
                 return self
-            from .server import BusServer
+            from ax12emu.serve import BusServer, open_transport
 
             if self.transport_name == "pty":
-                from .transports.pty import PtyTransport
-
-                self._transport = PtyTransport()
-                self.port = self._transport.slave_path
+                self._transport = open_transport("pty")
             else:
-                from .transports.tcp import TcpTransport
-
-                self._transport = TcpTransport(*self._tcp_address)
-                self.port = f"socket://{self._transport.host}:{self._transport.port}"
+                host, port = self._tcp_address
+                self._transport = open_transport("tcp", host=host, port=port)
+            self.port = self._transport.url
             self._server = BusServer(self.bus, self._transport, pace=self._pace, echo=self._echo, trace=self._trace)
             self._thread = threading.Thread(target=self._serve, name=f"ax12emu-{self.name}", daemon=True)
             self._thread.start()
@@ -214,7 +210,7 @@ class VirtualBus:
 
     @property
     def faults(self) -> Any:
-        """The bus's :class:`~ax12emu.faults.Faults` (created on first use); methods take slots."""
+        """The bus's :class:`~ax12emu.faults.injection.Faults` (created on first use); methods take slots."""
         return _FaultsOnBus(self)
 
     # -- time ----------------------------------------------------------------------------------
@@ -246,10 +242,9 @@ class VirtualBus:
         def _write(bus: Bus) -> None:
             servo = bus.servo(servo_id)
             servo.table.layout.by_name[name]
-            servo.table.set(name, value)
-            bus.plant.tables_changed()
+            servo.table.set(name, value)  # the plant hears of it (ControlTable.on_set)
             if name == "id":
-                bus._reindex()
+                bus.reindex()
 
         self.call(_write)
 
@@ -267,14 +262,9 @@ class VirtualBus:
         def _set(bus: Bus) -> None:
             model = bus.model
             index = bus.servo(servo_id).index
-            if hasattr(model, "set_angle"):
-                model.set_angle(index, degrees / _DEG_PER_RAD)
-            elif "angle_rad" in vars(model):
-                model.angle_rad[index] = degrees / _DEG_PER_RAD
-            else:
-                raise NotImplementedError(f"{type(model).__name__} does not let its angle be set (use model='kinematic')")
-            if hasattr(model, "_sensed"):
-                model._sensed = None  # the kinematic model caches its readings until it steps
+            if not isinstance(model, AngleSettable):
+                raise NotImplementedError(f"{type(model).__name__} does not let its angle be set (no set_angle)")
+            model.set_angle(index, degrees / _DEG_PER_RAD)
             bus.plant.tables_changed()
             bus.plant.refresh()
 

@@ -19,7 +19,7 @@ from __future__ import annotations
 import dataclasses
 import enum
 import functools
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
 
@@ -87,6 +87,13 @@ class Entry:
     def end(self) -> int:
         """One past the last byte."""
         return self.address + self.size
+
+    def value_in(self, image: np.ndarray | bytes) -> int:
+        """This entry's value in a table image (a row, a candidate row or saved bytes), little-endian."""
+        value = int(image[self.address])
+        if self.size == 2:
+            value |= int(image[self.address + 1]) << 8
+        return value
 
 
 R, RW = Access.R, Access.RW
@@ -214,7 +221,7 @@ class Layout:
     defaults: bytes
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def layout(profile: str = DEFAULT_PROFILE) -> Layout:
     """Compile ``profile``, checking there are no overlaps and every default is in range."""
     try:
@@ -266,6 +273,8 @@ class ControlTable:
         if row.shape != (TABLE_SIZE,) or row.dtype != np.uint8:
             raise ValueError(f"control table row must be uint8[{TABLE_SIZE}]")
         self.row = row
+        #: Called with the register's name after every :meth:`set` (see there); None: nobody listens.
+        self.on_set: Callable[[str], None] | None = None
         self.factory_reset()
 
     @property
@@ -302,18 +311,21 @@ class ControlTable:
     # -- registers by name (firmware side: no access or range checks) ----------------
     def get(self, name: str) -> int:
         """Value of the named register."""
-        entry = self.layout.by_name[name]
-        row = self.row
-        if entry.size == 1:
-            return int(row[entry.address])
-        return int(row[entry.address]) | (int(row[entry.address + 1]) << 8)
+        return self.layout.by_name[name].value_in(self.row)
 
     def set(self, name: str, value: int) -> None:
-        """Set a register as the firmware does (no access or range check)."""
+        """Set a register as the firmware does (no access or range check), and tell :attr:`on_set`.
+
+        Whatever caches values derived from the table (the plant's decoded
+        commands, the readings it last wrote) listens here, so a writer
+        outside the packet path (faults, a test harness) cannot leave it stale.
+        """
         entry = self.layout.by_name[name]
         self.row[entry.address] = value & 0xFF
         if entry.size == 2:
             self.row[entry.address + 1] = (value >> 8) & 0xFF
+        if self.on_set is not None:
+            self.on_set(name)
 
     # -- bus access -------------------------------------------------------------------
     def read(self, address: int, length: int) -> tuple[bytes, StatusError]:
@@ -341,17 +353,16 @@ class ControlTable:
         lay = self.layout
         if not data or end > TABLE_SIZE:
             return None, StatusError.RANGE
-        if self.row[47] and not (address in lay.profile.lock_writable and end - 1 in lay.profile.lock_writable):
+        if self.row[lay.by_name["lock"].address] and not (
+            address in lay.profile.lock_writable and end - 1 in lay.profile.lock_writable
+        ):
             return None, StatusError.RANGE
         if not lay.writable[address:end].all():
             return None, StatusError.RANGE
         candidate = self.row.copy()
         candidate[address:end] = np.frombuffer(bytes(data), dtype=np.uint8)
         for entry in self.entries_touched(address, len(data)):
-            value = int(candidate[entry.address])
-            if entry.size == 2:
-                value |= int(candidate[entry.address + 1]) << 8
-            if not entry.minimum <= value <= entry.maximum:
+            if not entry.minimum <= entry.value_in(candidate) <= entry.maximum:
                 return None, StatusError.RANGE
         return candidate, StatusError.NONE
 

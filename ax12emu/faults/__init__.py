@@ -1,0 +1,10 @@
+"""Fault injection: the configuration users write, and the faults a bus runs.
+
+Above :mod:`ax12emu.bus`: wire faults filter the bus's replies; servo faults
+act through the bus's and the model's declared interfaces.
+"""
+
+from .config import FAULT_OPTIONS, FaultConfig
+from .injection import Faults, parse_alarm_bits
+
+__all__ = ["FAULT_OPTIONS", "FaultConfig", "Faults", "parse_alarm_bits"]
