@@ -7,6 +7,7 @@ import select
 import signal
 import subprocess
 import sys
+import threading
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -56,6 +57,111 @@ def start_emulator(*args: str, timeout_s: float = 20.0) -> Served:
     process.kill()
     _, err = process.communicate(timeout=5)
     raise RuntimeError(f"emulator did not start: {err.strip()}")
+
+
+def _open_fds() -> set[int]:
+    """Open descriptors (Linux); the listing's own, closed again by the time of the fstat, drops out."""
+    if not os.path.isdir("/proc/self/fd"):
+        return set()
+    still_open = set()
+    for name in os.listdir("/proc/self/fd"):
+        try:
+            os.fstat(int(name))
+        except OSError:
+            continue
+        still_open.add(int(name))
+    return still_open
+
+
+def _children() -> set[int]:
+    """Live child processes of this process (Linux: each thread's ``children`` list)."""
+    pids: set[int] = set()
+    try:
+        for task in os.listdir("/proc/self/task"):
+            with open(f"/proc/self/task/{task}/children") as listing:
+                pids.update(int(pid) for pid in listing.read().split())
+    except OSError:
+        return set()
+    return pids
+
+
+#: How long a test's threads, descriptors and processes get to finish closing after it ends.
+LEAK_GRACE_S = 3.0
+
+
+@pytest.fixture(autouse=True)
+def leaves_nothing_behind(request):
+    """Fail a test that leaves threads, file descriptors or child processes behind.
+
+    Autouse, so it is set up first and torn down last: the other fixtures'
+    clean-up (an emulator stopped by pid, a VirtualBus closed) has run when it
+    looks.  A bounded grace lets a closing thread finish.
+    """
+    threads_before, fds_before, children_before = set(threading.enumerate()), _open_fds(), _children()
+    yield
+    deadline = time.monotonic() + LEAK_GRACE_S
+    while True:
+        threads = [t.name for t in threading.enumerate() if t not in threads_before and t.is_alive()]
+        fds = sorted(_open_fds() - fds_before)
+        children = sorted(_children() - children_before)
+        if not (threads or fds or children) or time.monotonic() > deadline:
+            break
+        time.sleep(0.01)
+    if threads or fds or children:
+        described = {fd: _describe_fd(fd) for fd in fds}
+        pytest.fail(f"left behind: threads {threads}, file descriptors {described}, child processes {children}")
+
+
+def _describe_fd(fd: int) -> str:
+    try:
+        return os.readlink(f"/proc/self/fd/{fd}")
+    except OSError:
+        return "?"
+
+
+@dataclass
+class PortKind:
+    """One way a client reaches a bus, and what that way carries of a real line."""
+
+    name: str
+    #: The host's bit rate reaches the servos (a pty's termios, the in-process link's baud);
+    #: over TCP it does not, so a servo at another baud still hears the host.
+    carries_baud: bool
+
+
+#: The ways in that every transport-independent scenario runs over (python-can's back-to-back idea).
+PORT_KINDS = (PortKind("pty", True), PortKind("tcp", False), PortKind("inprocess", True))
+
+
+@dataclass
+class OpenBus:
+    """A bus a client can open at ``port`` (a device path or a pyserial URL)."""
+
+    port: str
+    kind: PortKind
+
+
+@pytest.fixture(params=PORT_KINDS, ids=lambda kind: kind.name)
+def served_bus(request, emulator) -> Iterator[Callable[..., OpenBus]]:
+    """Factory: a bus with the given IDs behind each way in: a real ``ax12emu serve`` on a pty or TCP, or in process."""
+    kind: PortKind = request.param
+    buses = []
+
+    def _open(ids: list[int]) -> OpenBus:
+        id_list = ",".join(map(str, ids))
+        if kind.name == "pty":
+            return OpenBus(emulator("--ids", id_list).port, kind)
+        if kind.name == "tcp":
+            return OpenBus(emulator("--ids", id_list, "--tcp", "127.0.0.1:0").port, kind)
+        from ax12emu import VirtualBus
+
+        bus = VirtualBus(ids, transport="inprocess").start()
+        buses.append(bus)
+        return OpenBus(bus.port, kind)
+
+    yield _open
+    for bus in buses:
+        bus.close()
 
 
 @pytest.fixture

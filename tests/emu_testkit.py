@@ -25,10 +25,33 @@ class PatientPortHandler(PortHandler):
         self.packet_timeout = max(self.packet_timeout, PATIENCE_MS)
 
 
+class UrlPortHandler(PatientPortHandler):
+    """A patient port that opens pyserial URLs (``socket://``, ``ax12emu://``) as well as devices.
+
+    dynamixel-sdk opens ports with ``serial.Serial(name)``, which knows no
+    URLs; this is the subclass the docs show users, so the same scenario runs
+    over a pty, TCP and the in-process link.
+    """
+
+    def setupPort(self, cflag_baud):  # noqa: N802 (the SDK's name)
+        import serial
+
+        if self.is_open:
+            self.closePort()
+        self.ser = serial.serial_for_url(self.port_name, baudrate=self.baudrate, timeout=0)
+        self.is_open = True
+        self.ser.reset_input_buffer()
+        self.tx_time_per_byte = (1000.0 / self.baudrate) * 10.0
+        return True
+
+
 @contextmanager
 def sdk_port(path: str, baud: int = 1_000_000) -> Iterator[tuple[PortHandler, PacketHandler]]:
-    """An open dynamixel-sdk port (patient: see PATIENCE_MS) and a Protocol 1.0 packet handler; closed afterwards."""
-    port = PatientPortHandler(path)
+    """An open dynamixel-sdk port (patient: see PATIENCE_MS) and a Protocol 1.0 packet handler; closed afterwards.
+
+    ``path`` is a device or a pyserial URL.
+    """
+    port = UrlPortHandler(path) if "://" in path else PatientPortHandler(path)
     assert port.openPort(), f"could not open {path}"
     assert port.setBaudRate(baud)
     try:

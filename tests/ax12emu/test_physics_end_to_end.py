@@ -5,8 +5,12 @@ from __future__ import annotations
 import statistics
 import time
 
+import pytest
 from dynamixel_sdk import COMM_RX_CORRUPT, COMM_SUCCESS
 from emu_testkit import ok, sdk_port
+
+#: Real time and real ports: the wall-clock tier (CI runs it too).
+pytestmark = pytest.mark.wallclock
 
 
 def runs(values: list[int]) -> list[int]:

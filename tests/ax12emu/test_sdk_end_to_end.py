@@ -1,4 +1,8 @@
-"""dynamixel-sdk drives a real ``ax12emu serve`` process over a real pty, as it drives hardware."""
+"""dynamixel-sdk drives the bus as it drives hardware: a real ``ax12emu serve`` over a pty or TCP, and in process.
+
+The scenarios that do not depend on the way in run over all three
+(``served_bus`` in conftest); the rest say what they need.
+"""
 
 from __future__ import annotations
 
@@ -22,10 +26,14 @@ IDS = [1, 2, 5]
 DYNAMIC = {"present_position", "present_speed", "present_load", "present_voltage", "present_temperature", "goal_position"}
 
 
+#: Wall-clock runs: real processes and real time (CI runs this tier too).
+pytestmark = pytest.mark.wallclock
+
+
 @pytest.fixture
-def bus(emulator):
-    """A three-servo emulator on a pty."""
-    return emulator("--ids", ",".join(map(str, IDS)))
+def bus(served_bus):
+    """A three-servo bus behind each way in (pty, TCP, in process)."""
+    return served_bus(IDS)
 
 
 def test_ping_every_id_reports_model_12(bus):
@@ -202,6 +210,8 @@ def test_client_closes_and_reopens_the_port(bus):
 
 def test_baud_change_makes_servo_deaf_until_host_follows(bus):
     """After Baud Rate 34 (57,142 bps) the servo ignores 1 Mbps traffic and answers at 57,600."""
+    if not bus.kind.carries_baud:
+        pytest.skip(f"{bus.kind.name} carries no line rate: a servo at another baud still hears the host")
     with sdk_port(bus.port) as (port, ph):
         assert ph.write1ByteTxRx(port, 1, 4, 34) == (COMM_SUCCESS, 0)
         _, comm, _ = ph.ping(port, 1)

@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+import pytest
 from emu_testkit import load_tool
+
+#: Real time and real ports: the wall-clock tier (CI runs it too).
+pytestmark = pytest.mark.wallclock
 
 soak = load_tool("soak")
 

@@ -29,7 +29,7 @@ import logging
 import numbers
 import urllib.parse
 
-from serial.serialutil import PortNotOpenError, SerialBase, SerialException
+from serial.serialutil import PortNotOpenError, SerialBase, SerialException, to_bytes
 
 from ax12emu.bus import Bus
 from ax12emu.bus.clock import VirtualClock, WallClock
@@ -163,10 +163,14 @@ class Serial(SerialBase):
         return data
 
     def write(self, data) -> int:
-        """Send bytes to the servos; they act on whole packets at once."""
+        """Send bytes to the servos; they act on whole packets at once.
+
+        Takes what pyserial's own ports take (``to_bytes``): bytes-likes and
+        sequences of ints, which dynamixel-sdk writes.
+        """
         if not self.is_open or self._link is None:
             raise PortNotOpenError()
-        payload = bytes(memoryview(data))
+        payload = bytes(to_bytes(data))
         if self.logger:
             self.logger.debug("write %s", payload.hex(" "))
         return self._link.write(payload, float(self._baudrate))

@@ -5,9 +5,13 @@ from __future__ import annotations
 import socket
 import time
 
+import pytest
 from emu_testkit import load_tool
 
 from ax12emu.protocol.packets import encode_instruction, encode_status
+
+#: Real time and real ports: the wall-clock tier (CI runs it too).
+pytestmark = pytest.mark.wallclock
 
 PING, PONG = encode_instruction(1, 0x01), encode_status(1, 0)
 

@@ -5,9 +5,13 @@ from __future__ import annotations
 import socket
 import time
 
+import pytest
 import serial
 
 from ax12emu.protocol.packets import encode_instruction, encode_status
+
+#: Real time and real ports: the wall-clock tier (CI runs it too).
+pytestmark = pytest.mark.wallclock
 
 PING = encode_instruction(1, 0x01)
 

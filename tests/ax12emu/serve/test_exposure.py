@@ -16,6 +16,9 @@ from ax12emu.bus.state_store import StateFileError, StateStore
 from ax12emu.protocol.control_table import ControlTable
 from ax12emu.protocol.packets import encode_instruction, encode_status
 
+#: Real time and real ports: the wall-clock tier (CI runs it too).
+pytestmark = pytest.mark.wallclock
+
 
 def run(*args: str, cwd=None, timeout_s: float = 30) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "ax12emu", *args], capture_output=True, text=True,

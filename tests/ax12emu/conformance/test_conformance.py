@@ -11,6 +11,9 @@ from emu_testkit import CONFORMANCE_TIMEOUT_S
 from ax12emu import VirtualBus, conformance
 from ax12emu.conformance import FAIL, PASS
 
+#: Real time and real ports: the wall-clock tier (CI runs it too).
+pytestmark = pytest.mark.wallclock
+
 IDS = [1, 2]
 TRANSPORTS = ["pty", "tcp", "inprocess"]
 

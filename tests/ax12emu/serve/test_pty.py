@@ -15,6 +15,9 @@ import serial
 from ax12emu.serve.transports import pty as pty_transport
 from ax12emu.serve.transports.pty import PtyTransport
 
+#: Real time and real ports: the wall-clock tier (CI runs it too).
+pytestmark = pytest.mark.wallclock
+
 linux_only = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="packet mode is used on Linux only")
 
 

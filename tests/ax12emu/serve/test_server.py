@@ -16,6 +16,9 @@ from ax12emu.protocol.packets import encode_instruction, encode_status
 from ax12emu.serve.server import BusServer
 from ax12emu.serve.transports.base import Transport
 
+#: Real time and real ports: the wall-clock tier (CI runs it too).
+pytestmark = pytest.mark.wallclock
+
 PING = encode_instruction(1, 0x01)
 
 

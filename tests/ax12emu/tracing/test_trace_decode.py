@@ -6,6 +6,7 @@ import json
 import subprocess
 import sys
 
+import pytest
 from emu_testkit import CONFORMANCE_TIMEOUT_S
 
 from ax12emu import conformance
@@ -13,6 +14,9 @@ from ax12emu.conformance.link import Link, open_port
 from ax12emu.protocol.packets import encode_instruction, encode_status
 from ax12emu.tracing.decoder import ECHO, GARBAGE, INSTRUCTION, STATUS, decode, format_decoded
 from ax12emu.tracing.trace import Chunk, read_trace
+
+#: Real time and real ports: the wall-clock tier (CI runs it too).
+pytestmark = pytest.mark.wallclock
 
 
 def test_conformance_trace_decodes_back_to_the_packets_sent(tmp_path, emulator):
