@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Benchmark the diagnosis workflow: a confusion table over the effect library, and seconds per trace.
 
-Why it exists: issue 4's goals are >= 95 % correct names over all effects x
+Why it exists: the workflow's goals are >= 95 % correct names over all effects x
 >= 5 seeds, <= 1 false positive in 20 clean traces, and < 60 s per 20 s
 trace at 100 Hz on a 2-core machine.  Each trace has one hidden effect (or
 none) with random values (firmware_model.diagnose.synthetic); a trace counts

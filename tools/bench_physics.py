@@ -2,7 +2,7 @@
 """Benchmark the physical model: simulated seconds per wall second at a fixed step.
 
 Why it exists: the model must keep ahead of the wall clock behind a live bus
-(issue 3's goals: >= 100x real time for 1 servo, >= 20x for 253, one core,
+(the goals: >= 100x real time for 1 servo, >= 20x for 253, one core,
 1 kHz).  Two scenarios, because the cost of a step depends on what the servos
 do: ``moving`` (every servo swings 123 degrees at full speed and back each
 second, so hardly ever at rest: every step computed) is the worst case, and
@@ -34,7 +34,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from firmware_model.interface import Commands  # noqa: E402
 from firmware_model.physical import PhysicalModel  # noqa: E402
 
-#: Issue 3's goals, simulated seconds per wall second.
+#: The goals, simulated seconds per wall second.
 GOALS = {1: 100.0, 253: 20.0}
 
 

@@ -8,7 +8,7 @@ ratios against two references taken on this machine in this run:
 * the wire limit: a 2-byte READ is 8 bytes out and 8 back, 10 bits each,
   so 160 bit-times per read (6,250 reads/s at 1 Mbps).
 
-Goals (issue 2): at Return Delay Time 0, >= 80 % of the bare responder's
+Goals: at Return Delay Time 0, >= 80 % of the bare responder's
 rate with p99 < 1 ms; Return Delay Time 250 adds 500 +/- 50 us per read;
 with ``--pace`` the rate matches the wire limit within 5 %.  For ``--pace`` the
 emulator's own part of each read (from the instruction's arrival to the

@@ -163,7 +163,7 @@ class Bus:
 
         Why apart from :meth:`answer`: a host polling one register runs this
         path thousands of times a second, so it holds nothing but the checks
-        a hit needs (issue 2's throughput goal).  A hit needs exactly one
+        a hit needs (the throughput goal of tools/bench_protocol.py).  A hit needs exactly one
         whole READ or PING in ``data`` with no partial packet held before it,
         no faults installed (they act per packet), no debug logging (``-v``
         logs every packet), and the servos it reached unchanged since (see

@@ -2,7 +2,7 @@
 
 Why it exists: a client polling a register sends the same few bytes thousands
 of times a second, and decoding, dispatching and encoding each one costs more
-than the pty round trip itself (issue 2's throughput goal).  The reply to a
+than the pty round trip itself (the serving loop's throughput goal: tools/bench_protocol.py).  The reply to a
 READ or PING addressed to one ID depends only on the addressed servos'
 control tables (the data read, ID, Status Return Level, Return Delay Time,
 baud), their alarm bits and the host's line speed.  So each entry keeps the

@@ -119,7 +119,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="RESET's status packet comes from the old ID (e-manual example, default) or the new ID 1",
     )
     serve.add_argument("-v", "--verbose", action="store_true", help="log every packet, one line each")
-    # -- issue 5: --trace and fault flags on serve; decode and conformance commands (cli_hil.py)
+    # --trace and fault flags on serve; decode and conformance commands (cli/hil.py)
     cli_hil.add_serve_flags(serve)
     cli_hil.add_commands(sub)
     diagnose = sub.add_parser(
@@ -182,7 +182,7 @@ def _serve(args: argparse.Namespace) -> int:
     )
     if args.factory_reset:
         bus.state_store = store
-    faults = cli_hil.fault_config(args)  # issue 5: fault injection
+    faults = cli_hil.fault_config(args)
     if faults.active:
         faults.install(bus)
     trace = TraceWriter(args.trace, profile=args.profile) if args.trace else None

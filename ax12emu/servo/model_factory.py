@@ -23,7 +23,7 @@ MODELS = ("physical", "kinematic")
 class ModelChoice:
     """What to put behind the servos."""
 
-    #: "physical" (issue 3's firmware and physics, the default) or "kinematic" (constant-speed moves).
+    #: "physical" (firmware and physics, the default) or "kinematic" (constant-speed moves).
     name: str = "physical"
     #: A TOML file of ServoParams (e.g. written by ``firmware_model.diagnose``); None: the defaults.
     params_path: str | None = None

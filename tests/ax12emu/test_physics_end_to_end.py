@@ -27,8 +27,8 @@ def runs(values: list[int]) -> list[int]:
 def _transact(port, call, *args) -> tuple:
     """One dynamixel-sdk transaction, tried again (up to twice) if it failed.
 
-    Why: on a loaded machine (seen with other processes busy on both cores, also with the
-    emulator of before this test was written) a reply can come later than dynamixel-sdk's
+    Why: on a loaded machine (seen with other processes busy on both cores) a reply can come
+    later than dynamixel-sdk's
     34 ms timeout; that late status packet is then taken as the reply to the next instruction,
     and ``read2ByteTxRx`` even raises IndexError on it (no data bytes).  So after a failure the
     late packet is given time to arrive and is discarded before the retry.

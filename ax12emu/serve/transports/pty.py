@@ -15,7 +15,7 @@ Why the details matter (each one checked with dynamixel-sdk on Linux):
 * the host's bit rate is read from the slave's termios (``TCGETS2`` gives the
   exact rate, also for non-standard ones set with ``BOTHER``), so a servo at
   another baud can be deaf to the host, as on hardware;
-* that read is a system call, which per packet cost about 4 % of issue 2's
+* that read is a system call, which per packet cost about 4 % of the serving loop's
   poll rate, so on Linux the rate is read once and again only after the host
   changed its termios: the master runs in packet mode (``TIOCPKT``) and the
   slave carries ``EXTPROC`` in its local flags, which makes the kernel put a
