@@ -24,6 +24,15 @@ Values are raw control-table units as a client reads them::
   ``-80`` rather than ``1104``), -1023..1023.
 * ``torque_limit`` (0..1023), ``voltage`` (0.1 V units), ``external_torque_nm``
   (N m, positive CCW) (optional): what was applied from ``t`` on.
+* ``command_t`` (s, optional): when the row's commands were sent, on the
+  clock of ``t``.  Read only on rows whose commands differ from the row
+  before, where it must lie after the previous row's ``t`` and before the
+  next row's.  With it the trace *records when commands were given*: the
+  replay applies each change at that time, and a latency between the shaft
+  and the reading (the ``delay`` effect) can be told apart from it.  Without
+  it a change is only known to fall somewhere between its row's reading and
+  the next one, and the workflow fits when as a property of the recording
+  (:mod:`.nuisance`), never as an effect.
 
 Blank lines and lines starting with ``#`` are ignored (comments).  Any other
 problem raises :class:`TraceFormatError` naming the line and the column.
@@ -39,19 +48,22 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["Trace", "TraceFormatError", "read_trace", "write_trace", "REQUIRED", "OPTIONAL", "COLUMNS"]
+__all__ = ["Trace", "TraceFormatError", "read_trace", "write_trace", "REQUIRED", "OPTIONAL", "COLUMNS",
+           "COMMAND_COLUMNS", "command_time_errors"]
 
 #: Columns every trace has, in the order the writer uses.
 REQUIRED = ("t", "goal_position", "moving_speed", "present_position")
 #: Columns a trace may have.
-OPTIONAL = ("present_speed", "present_load", "torque_limit", "voltage", "external_torque_nm")
+OPTIONAL = ("present_speed", "present_load", "torque_limit", "voltage", "external_torque_nm", "command_t")
 COLUMNS = REQUIRED + OPTIONAL
 #: Inclusive ranges of the integer columns.
 _INT_RANGES = {
     "goal_position": (0, 1023), "moving_speed": (0, 1023), "present_position": (0, 1023),
     "present_speed": (-1023, 1023), "present_load": (-1023, 1023), "torque_limit": (0, 1023), "voltage": (0, 255),
 }
-_FLOAT_COLUMNS = ("t", "external_torque_nm")
+_FLOAT_COLUMNS = ("t", "external_torque_nm", "command_t")
+#: Columns that are commands (a change in any of them is a command change).
+COMMAND_COLUMNS = ("goal_position", "moving_speed", "torque_limit", "voltage", "external_torque_nm")
 
 
 class TraceFormatError(ValueError):
@@ -95,6 +107,20 @@ class Trace:
         """Sample times relative to the first row, seconds."""
         return self.columns["t"] - self.columns["t"][0]
 
+    @property
+    def records_command_times(self) -> bool:
+        """Whether the trace says when each command was sent (a ``command_t`` column)."""
+        return "command_t" in self.columns
+
+    def change_rows(self) -> np.ndarray:
+        """Rows whose commands differ from the row before (row 0 included), shape (m,)."""
+        changed = np.zeros(len(self), dtype=bool)
+        changed[0] = True
+        for name in COMMAND_COLUMNS:
+            if name in self.columns:
+                changed[1:] |= self.columns[name][1:] != self.columns[name][:-1]
+        return np.flatnonzero(changed)
+
     def with_columns(self, **columns: np.ndarray) -> "Trace":
         """A copy with some columns replaced or added (e.g. simulated sensed values)."""
         return Trace({**self.columns, **columns}, list(self.comments))
@@ -136,6 +162,7 @@ def parse_trace(text: str, source: str = "trace") -> Trace:
     comments: list[str] = []
     header: list[str] | None = None
     rows: list[list[float | int]] = []
+    data_lines: list[int] = []
     for line_no, raw in enumerate(io.StringIO(text), start=1):
         stripped = raw.strip()
         if not stripped:
@@ -163,12 +190,31 @@ def parse_trace(text: str, source: str = "trace") -> Trace:
         if rows and not t > rows[-1][header.index("t")]:
             raise TraceFormatError(f"time {t} does not increase", line_no, "t", source)
         rows.append(row)
+        data_lines.append(line_no)
     if header is None:
         raise TraceFormatError("empty file: no header", source=source)
     if len(rows) < 2:
         raise TraceFormatError("need at least two rows", source=source)
     data = np.array(rows, dtype=float)
-    return Trace({name: data[:, i] for i, name in enumerate(header)}, comments)
+    trace = Trace({name: data[:, i] for i, name in enumerate(header)}, comments)
+    bad = command_time_errors(trace)
+    if len(bad):
+        row = int(bad[0])
+        line = data_lines[row]
+        raise TraceFormatError("a command change's time must lie after the previous row's t and before the next "
+                               "row's", line, "command_t", source)
+    return trace
+
+
+def command_time_errors(trace: Trace) -> np.ndarray:
+    """Rows (0-based) whose command change has a ``command_t`` outside (previous row's t, next row's t)."""
+    if not trace.has("command_t"):
+        return np.zeros(0, dtype=np.int64)
+    t, ct = trace["t"], trace["command_t"]
+    rows = trace.change_rows()
+    rows = rows[rows > 0]
+    nxt = np.append(t, np.inf)[rows + 1]
+    return rows[~((ct[rows] > t[rows - 1]) & (ct[rows] < nxt))]
 
 
 def write_trace(trace: Trace, path: str | Path) -> None:

@@ -38,3 +38,14 @@ def test_row_length_error():
     """A short row names its line."""
     with pytest.raises(TraceFormatError, match=":4"):
         parse_trace(GOOD.replace(",80\n", "\n"))
+
+
+def test_command_times():
+    """``command_t`` is read on command changes only, and must fall between the neighbouring rows' readings."""
+    text = ("t,goal_position,moving_speed,present_position,command_t\n"
+            "0.0,512,0,512,0.0\n0.01,600,0,512,0.013\n0.02,600,0,513,0.5\n0.03,600,0,520,0.03\n")
+    tr = parse_trace(text)
+    assert tr.records_command_times and list(tr.change_rows()) == [0, 1]
+    with pytest.raises(TraceFormatError) as info:
+        parse_trace(text.replace("0.01,600,0,512,0.013", "0.01,600,0,512,0.021"), "c.csv")
+    assert info.value.line == 3 and info.value.column == "command_t"

@@ -1,0 +1,287 @@
+"""DYNAMIXEL Wizard 2 graph exports ("DYNAMIXEL Graph" CSV), read as they are.
+
+Why it exists: most people who own an AX-12 have Wizard 2, not a logging
+script, and its graph view exports exactly what the diagnosis workflow
+needs (a measured trajectory) in its own format, with its own flaws.  This
+module reads that format and nothing else; turning an export into a
+:class:`~firmware_model.diagnose.trace.Trace` needs what the file does not
+record (the goal, when it was written, Moving Speed, the supply), which
+:func:`to_trace` takes as arguments and the command line asks for.
+
+Format (Wizard 2's graph export)::
+
+    DYNAMIXEL Graph,2                    <- magic and format version
+    AX-12A,12                            <- model name, model number
+    ItemCount,1                          <- how many items were plotted
+    Present Position,#ffff00,0,1,0       <- one line per item: name, colour, display settings
+    Time[ms],Present Position            <- column header: time, then the items in the same order
+    0,1                                  <- one row per sample, about 16 ms apart
+    96,1
+    ...
+
+Samples are whatever the Wizard's polling loop got: about 16 ms apart, with
+gaps, and with a few rows garbled (a lost field or digit: ``499`` alone,
+``5,499`` between ``2496`` and ``2512``) or repeating an earlier time.  Such
+rows are skipped and counted (:attr:`WizardExport.skipped`, with the line
+numbers in :attr:`WizardExport.skipped_lines`), never guessed at: a row is
+kept only if every field parses and its time is later than the last kept
+row's.  Anything wrong with the header is an error
+(:class:`WizardFormatError`, a ``ValueError`` naming the file and line).
+
+Items map to trace columns by name (:data:`ITEM_COLUMNS`); items that map to
+none (e.g. Present Temperature) are listed in
+:attr:`WizardExport.ignored_items` and not read.  Present Speed and Present
+Load arrive as the register's raw value (bit 10 = CW) and are converted to
+the trace's signed form (positive when the position increases).
+
+API::
+
+    from firmware_model.diagnose.wizard import is_wizard_export, read_wizard, to_trace
+
+    if is_wizard_export("AX12A_NOLOAD_1.csv"):
+        ex = read_wizard("AX12A_NOLOAD_1.csv")   # WizardExport
+        ex.model_name, ex.model_number            # "AX-12A", 12
+        ex.t_s                                    # sample times, s from the first kept row, shape (n,)
+        ex.values["present_position"]             # int64 array (n,); also goal_position, present_speed, ...
+        ex.rows_read, ex.skipped                  # 206, {"garbled": 1, "repeated_time": 0, "time_back": 2}
+        trace = to_trace(ex, goal_position=500, onset_s=0.29, moving_speed=0, voltage_v=12.0)
+"""
+
+from __future__ import annotations
+
+import io
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..units import DIRECTION_BIT
+from .trace import Trace, TraceFormatError
+
+__all__ = ["WizardExport", "WizardFormatError", "ITEM_COLUMNS", "SIGNED_ITEMS", "MAGIC", "is_wizard_export",
+           "read_wizard", "parse_wizard", "to_trace"]
+
+#: First field of the first line of every Wizard 2 graph export.
+MAGIC = "DYNAMIXEL Graph"
+#: Wizard item name -> trace column (see :mod:`.trace`).  Other items are listed as ignored.
+ITEM_COLUMNS = {
+    "Present Position": "present_position",
+    "Goal Position": "goal_position",
+    "Moving Speed": "moving_speed",
+    "Present Speed": "present_speed",
+    "Present Load": "present_load",
+    "Torque Limit": "torque_limit",
+    "Present Voltage": "voltage",
+}
+#: Columns whose raw register value carries the direction in bit 10 (converted to a signed value).
+SIGNED_ITEMS = ("present_speed", "present_load")
+#: The time column's header.
+TIME_HEADER = "Time[ms]"
+#: Kinds of skipped rows, in report order.
+SKIP_KINDS = ("garbled", "repeated_time", "time_back")
+
+
+class WizardFormatError(TraceFormatError):
+    """A malformed Wizard export; the message names the file and line (a ``ValueError``)."""
+
+
+@dataclass
+class WizardExport:
+    """One Wizard graph export in memory (only the rows that parsed cleanly)."""
+
+    source: str
+    model_name: str
+    model_number: int
+    #: Plotted items, in column order, as the file names them.
+    items: tuple[str, ...]
+    #: Sample times, s, relative to the first kept row.
+    t_s: np.ndarray
+    #: Trace column name -> int64 values (signed for speed and load), one per kept row.
+    values: dict[str, np.ndarray]
+    #: Items that map to no trace column (not read).
+    ignored_items: tuple[str, ...] = ()
+    #: Data rows seen (kept + skipped), blank lines not counted.
+    rows_seen: int = 0
+    #: Skipped rows by kind: ``garbled`` (a field missing or not a number), ``repeated_time`` (same time as the
+    #: last kept row), ``time_back`` (earlier than the last kept row).
+    skipped: dict[str, int] = field(default_factory=lambda: dict.fromkeys(SKIP_KINDS, 0))
+    #: 1-based line numbers of the skipped rows.
+    skipped_lines: list[int] = field(default_factory=list)
+    #: Time of the first kept row in the file's own clock, ms.
+    t0_ms: float = 0.0
+
+    @property
+    def rows_read(self) -> int:
+        """Rows kept."""
+        return len(self.t_s)
+
+    @property
+    def rows_skipped(self) -> int:
+        """Rows skipped, all kinds."""
+        return sum(self.skipped.values())
+
+    def summary(self) -> str:
+        """One line: model, rows read and skipped by kind, items read and ignored."""
+        kinds = ", ".join(f"{v} {k.replace('_', ' ')}" for k, v in self.skipped.items() if v) or "none"
+        out = (f"{self.source}: Wizard 2 graph export of an {self.model_name} (model {self.model_number}); "
+               f"{self.rows_read} rows read, {self.rows_skipped} skipped ({kinds}); "
+               f"items read: {', '.join(i for i in self.items if i in ITEM_COLUMNS)}")
+        if self.ignored_items:
+            out += f"; ignored: {', '.join(self.ignored_items)}"
+        return out
+
+
+def is_wizard_export(path: str | Path) -> bool:
+    """Whether the file starts like a Wizard graph export (its first field is ``DYNAMIXEL Graph``)."""
+    try:
+        with open(path, "r", encoding="utf-8-sig", errors="replace") as f:
+            first = f.readline()
+    except OSError:
+        return False
+    return first.split(",")[0].strip() == MAGIC
+
+
+def read_wizard(path: str | Path) -> WizardExport:
+    """Read a Wizard graph export; raise :class:`WizardFormatError` (file and line) if it is malformed."""
+    path = Path(path)
+    try:
+        text = path.read_bytes().decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise WizardFormatError(f"not UTF-8 text ({exc.reason})", source=str(path)) from None
+    return parse_wizard(text, source=str(path))
+
+
+def _int(text: str) -> int | None:
+    """An integer cell (``12`` or ``12.0``), or None if it is not one."""
+    try:
+        value = float(text)
+    except ValueError:
+        return None
+    if not math.isfinite(value) or value != int(value):
+        return None
+    return int(value)
+
+
+def parse_wizard(text: str, source: str = "wizard export") -> WizardExport:
+    """:func:`read_wizard` on a string (``source`` names it in errors)."""
+    lines = [(n, raw.strip()) for n, raw in enumerate(io.StringIO(text), start=1)]
+    header = [(n, s) for n, s in lines if s][:3]
+
+    def fail(message: str, line: int | None) -> WizardFormatError:
+        return WizardFormatError(message, line, None, source)
+
+    if not header:
+        raise fail("empty file: no 'DYNAMIXEL Graph' header", None)
+    n, s = header[0]
+    if s.split(",")[0].strip() != MAGIC:
+        raise fail(f"not a Wizard graph export: the first line is {s[:40]!r}, expected {MAGIC!r},<version>", n)
+    if len(header) < 3:
+        raise fail("header ends early: expected the model line and 'ItemCount,<n>'", header[-1][0])
+    n, s = header[1]
+    model = [c.strip() for c in s.split(",")]
+    if len(model) != 2 or _int(model[1]) is None:
+        raise fail(f"expected the model line '<name>,<model number>', got {s[:40]!r}", n)
+    n, s = header[2]
+    count = [c.strip() for c in s.split(",")]
+    if len(count) != 2 or count[0] != "ItemCount" or _int(count[1]) is None or _int(count[1]) < 1:
+        raise fail(f"expected 'ItemCount,<n>' with n >= 1, got {s[:40]!r}", n)
+    n_items = _int(count[1])
+    rest = [(n, s) for n, s in lines if s and n > header[2][0]]
+    if len(rest) < n_items + 1:
+        raise fail(f"header ends early: ItemCount is {n_items} but only {max(len(rest) - 1, 0)} item line(s) "
+                   "and no column header follow", rest[-1][0] if rest else header[2][0])
+    items = tuple(s.split(",")[0].strip() for _, s in rest[:n_items])
+    for (n, s), item in zip(rest[:n_items], items):
+        if not item or item == TIME_HEADER:
+            raise fail(f"expected an item line '<name>,<colour>,...', got {s[:40]!r}", n)
+    n, s = rest[n_items]
+    cols = [c.strip() for c in s.split(",")]
+    if cols[0] != TIME_HEADER:
+        raise fail(f"expected the column header '{TIME_HEADER},{','.join(items)}', got {s[:60]!r}", n)
+    if tuple(cols[1:]) != items:
+        raise fail(f"column header names {cols[1:]} but the item lines name {list(items)}", n)
+    ex = WizardExport(source, model[0], _int(model[1]), items, np.zeros(0), {},
+                      ignored_items=tuple(i for i in items if i not in ITEM_COLUMNS))
+    kept: list[list[int | float]] = []
+    for n, s in rest[n_items + 1:]:
+        ex.rows_seen += 1
+        cells = [c.strip() for c in s.split(",")]
+        t = _number(cells[0]) if len(cells) == len(items) + 1 else None
+        vals = [_int(c) for c in cells[1:]] if t is not None else [None]
+        kind = None
+        if t is None or any(v is None for v in vals):
+            kind = "garbled"
+        elif kept and t == kept[-1][0]:
+            kind = "repeated_time"
+        elif kept and t < kept[-1][0]:
+            kind = "time_back"
+        if kind:
+            ex.skipped[kind] += 1
+            ex.skipped_lines.append(n)
+            continue
+        kept.append([t, *vals])
+    if len(kept) < 2:
+        raise fail(f"need at least two readable data rows, found {len(kept)} "
+                   f"({ex.rows_skipped} skipped)", rest[-1][0])
+    data = np.array(kept, dtype=float)
+    ex.t0_ms = float(data[0, 0])
+    ex.t_s = (data[:, 0] - data[0, 0]) / 1000.0
+    for j, item in enumerate(items, start=1):
+        col = ITEM_COLUMNS.get(item)
+        if col is None:
+            continue
+        v = data[:, j].astype(np.int64)
+        if col in SIGNED_ITEMS:
+            v = np.where(v >= DIRECTION_BIT, -(v & (DIRECTION_BIT - 1)), v)
+        ex.values[col] = v
+    return ex
+
+
+def _number(text: str) -> float | None:
+    """A finite time cell, or None."""
+    try:
+        value = float(text)
+    except ValueError:
+        return None
+    return value if math.isfinite(value) else None
+
+
+def to_trace(ex: WizardExport, goal_position: int, onset_s: float, moving_speed: int = 0,
+             voltage_v: float | None = None, initial_goal: int | None = None) -> Trace:
+    """The export as a trace, with the commands it does not record supplied by the caller.
+
+    The goal is ``initial_goal`` (default: the first Present Position, i.e.
+    the servo was holding where it stood) until ``onset_s`` (s from the first
+    kept row), then ``goal_position``; recorded Goal Position / Moving Speed
+    columns, where plotted, are used instead.  ``onset_s`` goes into the
+    trace's ``command_t`` column at the row it falls after, so the replay
+    applies it to the millisecond.  ``voltage_v``: supply, unless the export
+    plotted Present Voltage (None: the model's default).
+    """
+    t = ex.t_s
+    n = len(t)
+    if "present_position" not in ex.values:
+        raise WizardFormatError("the export has no Present Position column: nothing to compare the model with",
+                                source=ex.source)
+    pos = ex.values["present_position"]
+    cols: dict[str, np.ndarray] = {"t": t, "present_position": pos}
+    cols.update({k: v for k, v in ex.values.items() if k != "present_position"})
+    if "goal_position" not in cols:
+        goal = np.full(n, int(pos[0]) if initial_goal is None else int(initial_goal), dtype=np.int64)
+        command_t = t.copy()
+        if onset_s <= t[0]:  # written before the recording started
+            goal[:] = int(goal_position)
+        else:
+            row = min(int(np.searchsorted(t, onset_s, side="right")) - 1, n - 2)  # last reading before the onset
+            goal[row:] = int(goal_position)
+            command_t[row] = min(float(onset_s), float(np.nextafter(t[row + 1], t[row])))
+        cols["goal_position"] = goal
+        cols["command_t"] = command_t
+    if "moving_speed" not in cols:
+        cols["moving_speed"] = np.full(n, int(moving_speed), dtype=np.int64)
+    if "voltage" not in cols and voltage_v is not None:
+        cols["voltage"] = np.full(n, int(round(voltage_v * 10)), dtype=np.int64)
+    comments = [f"from {ex.source}: {ex.model_name} Wizard 2 graph export, {ex.rows_read} rows read, "
+                f"{ex.rows_skipped} skipped"]
+    return Trace(cols, comments)

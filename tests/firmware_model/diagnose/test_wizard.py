@@ -1,0 +1,125 @@
+"""The Wizard 2 graph-export reader: good files, skipped rows counted, header errors at their line, the real files."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from firmware_model.diagnose.trace import command_time_errors
+from firmware_model.diagnose.wizard import WizardFormatError, is_wizard_export, parse_wizard, read_wizard, to_trace
+
+REAL = Path(__file__).resolve().parents[3] / ".." / "shared" / "reference" / "real-ax12a"
+
+HEAD = "DYNAMIXEL Graph,2\nAX-12A,12\nItemCount,1\nPresent Position,#ffff00,0,1,0\nTime[ms],Present Position\n"
+GOOD = HEAD + "0,1\n96,1\n112,3\n128,20\n144,60\n160,110\n"
+
+
+def _write(tmp_path, text, name="w.csv"):
+    path = tmp_path / name
+    path.write_text(text, encoding="utf-8")
+    return path
+
+
+def test_good_file(tmp_path):
+    """Header, model, items and every row read; times in s from the first row."""
+    path = _write(tmp_path, GOOD)
+    assert is_wizard_export(path)
+    ex = read_wizard(path)
+    assert (ex.model_name, ex.model_number, ex.items) == ("AX-12A", 12, ("Present Position",))
+    np.testing.assert_allclose(ex.t_s, [0, 0.096, 0.112, 0.128, 0.144, 0.160])
+    np.testing.assert_array_equal(ex.values["present_position"], [1, 1, 3, 20, 60, 110])
+    assert ex.rows_read == 6 and ex.rows_skipped == 0 and ex.ignored_items == ()
+
+
+def test_garbled_and_repeated_rows_are_skipped_and_counted():
+    """A lost field, a lost time digit, a repeated time and a non-number are skipped and counted by kind."""
+    text = HEAD + "0,1\n16,1\n499\n32,2\n5,3\n32,3\n48,x\n64,4\n64,5\n80,6\n"
+    ex = parse_wizard(text, "g.csv")
+    np.testing.assert_array_equal(ex.values["present_position"], [1, 1, 2, 4, 6])
+    assert ex.skipped == {"garbled": 2, "repeated_time": 2, "time_back": 1}
+    assert ex.skipped_lines == [8, 10, 11, 12, 14]
+    assert ex.rows_seen == 10 and ex.rows_read == 5
+    assert "5 rows read, 5 skipped (2 garbled, 2 repeated time, 1 time back)" in ex.summary()
+
+
+def test_several_items_signed_speed_and_an_unknown_item():
+    """Items map to trace columns by name; raw speed/load become signed; an unmapped item is listed, not read."""
+    text = ("DYNAMIXEL Graph,2\nAX-12A,12\nItemCount,4\nPresent Position,#ffff00,0,1,0\nPresent Speed,#ff0000,0,1,0\n"
+            "Present Temperature,#00ff00,0,1,0\nGoal Position,#0000ff,0,1,0\n"
+            "Time[ms],Present Position,Present Speed,Present Temperature,Goal Position\n"
+            "0,512,0,31,512\n16,520,300,31,600\n32,530,1324,32,600\n")
+    ex = parse_wizard(text)
+    np.testing.assert_array_equal(ex.values["present_speed"], [0, 300, -300])
+    np.testing.assert_array_equal(ex.values["goal_position"], [512, 600, 600])
+    assert ex.ignored_items == ("Present Temperature",) and "present_temperature" not in ex.values
+    tr = to_trace(ex, goal_position=900, onset_s=0.0)  # the recorded goal wins over the assumed one
+    np.testing.assert_array_equal(tr["goal_position"], [512, 600, 600])
+    assert not tr.records_command_times
+
+
+@pytest.mark.parametrize("text, line, words", [
+    ("", None, "empty file"),
+    ("\n\n", None, "empty file"),
+    ("t,goal_position\n0,1\n", 1, "not a Wizard graph export"),
+    ("DYNAMIXEL Graph,2\nAX-12A,12\n", 2, "header ends early"),
+    ("DYNAMIXEL Graph,2\nAX-12A\nItemCount,1\n", 2, "model line"),
+    ("DYNAMIXEL Graph,2\nAX-12A,12\nItems,1\n", 3, "ItemCount"),
+    ("DYNAMIXEL Graph,2\nAX-12A,12\nItemCount,2\nPresent Position,#ffff00,0,1,0\nTime[ms],Present Position\n0,1\n",
+     5, "item line"),
+    (HEAD.replace("Time[ms],Present Position", "Time[ms],Goal Position") + "0,1\n16,1\n", 5, "column header names"),
+    (HEAD.replace("Time[ms],", "Time,") + "0,1\n16,1\n", 5, "expected the column header"),
+    (HEAD, 5, "at least two readable data rows, found 0"),
+    (HEAD + "0,1\n", 6, "at least two readable data rows"),
+    (HEAD + "0,1\nabc\n", 7, "at least two readable data rows"),
+])
+def test_malformed_files_name_file_and_line(text, line, words):
+    """Header problems, and a file with under two readable rows, are a ValueError naming the file and line."""
+    with pytest.raises(ValueError, match=words) as info:
+        parse_wizard(text, "bad.csv")
+    assert isinstance(info.value, WizardFormatError)
+    assert str(info.value).startswith("bad.csv" + (f":{line}:" if line else ":"))
+
+
+def test_not_a_wizard_file(tmp_path):
+    """Detection looks at the first field only: a project trace, a missing file and an empty file are not exports."""
+    assert not is_wizard_export(_write(tmp_path, "t,goal_position,moving_speed,present_position\n0,1,0,1\n"))
+    assert not is_wizard_export(tmp_path / "missing.csv")
+    assert not is_wizard_export(_write(tmp_path, "", "empty.csv"))
+    with pytest.raises(WizardFormatError, match="empty.csv: empty file"):
+        read_wizard(tmp_path / "empty.csv")
+
+
+def test_to_trace_places_the_goal_at_the_onset():
+    """The assumed goal takes effect at ``onset_s``: the row before it gets the new goal and command_t = onset."""
+    ex = parse_wizard(GOOD)
+    tr = to_trace(ex, goal_position=500, onset_s=0.100, moving_speed=0, voltage_v=12.0)
+    np.testing.assert_array_equal(tr["goal_position"], [1, 500, 500, 500, 500, 500])
+    assert tr["command_t"][1] == pytest.approx(0.100)
+    assert tr.records_command_times and len(command_time_errors(tr)) == 0
+    assert set(tr["voltage"]) == {120} and set(tr["moving_speed"]) == {0}
+    early = to_trace(ex, goal_position=500, onset_s=-1.0)
+    assert set(early["goal_position"]) == {500}
+
+
+REAL_FILES = {  # file -> (rows after the header, rows skipped), counted by hand: a lost digit of the time
+    # ("5,499" after "2496,..."), a lost field ("499"), an earlier time repeated ("2480", "2496" again)
+    "AX12A_NOLOAD_1.csv": (207, 2),
+    "AX12A_LOAD3_1.csv": (182, 2),
+    "AX12A_LOAD2_1.csv": (240, 4),
+    "AX18A_NOLOAD_1.csv": (177, 0),
+}
+
+
+@pytest.mark.parametrize("name", list(REAL_FILES))
+def test_real_exports(name):
+    """The four shared real exports: every row accounted for, a step from about 0 to about 500."""
+    if not REAL.is_dir():
+        pytest.skip(f"real AX-12A exports not present at {REAL.resolve()}")
+    seen, skipped = REAL_FILES[name]
+    ex = read_wizard(REAL / name)
+    assert ex.rows_seen == seen and ex.rows_skipped == skipped, (ex.rows_seen, ex.skipped)
+    assert ex.rows_read == seen - skipped
+    assert ex.model_name == name.split("_")[0].replace("AX12A", "AX-12A").replace("AX18A", "AX-18A")
+    pos = ex.values["present_position"]
+    assert pos[0] <= 2 and 497 <= pos[-1] <= 500
+    assert np.all(np.diff(ex.t_s) > 0) and 0.012 < np.median(np.diff(ex.t_s)) < 0.020
