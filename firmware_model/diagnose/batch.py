@@ -33,7 +33,7 @@ from ..params import ServoParams
 from ..setpoint import apply_dead_zone, setpoint_velocity
 from ..units import RAD_PER_POSITION_UNIT, RAD_S_PER_SPEED_UNIT
 from .replay import DEFAULT_REGISTERS
-from .schedule import Schedule
+from .schedule import Schedule, Segment
 
 __all__ = ["DYNAMIC_KNOBS", "SENSING_KNOBS", "Record", "simulate", "sample", "null_knobs", "THERMAL_PERIOD_STEPS"]
 
@@ -93,8 +93,14 @@ def _knob(knobs: dict, name: str, k: int, default: float) -> np.ndarray:
     return np.broadcast_to(np.asarray(knobs.get(name, default), dtype=float), (k,)).copy()
 
 
-def simulate(schedule: Schedule, params: ServoParams, knobs: dict[str, np.ndarray], k: int) -> Record:
-    """Run K parameter sets (``knobs``: name -> scalar or array (K,); missing = null) over ``schedule``."""
+def simulate(schedule: Schedule, params: ServoParams, knobs: dict[str, np.ndarray], k: int,
+             onsets: np.ndarray | None = None) -> Record:
+    """Run K parameter sets (``knobs``: name -> scalar or array (K,); missing = null) over ``schedule``.
+
+    ``onsets``: the step after which each segment's commands start, shape
+    (segments,) or (segments, K) (default: each segment's ``first``), for a
+    recording that does not say when commands were sent (:mod:`.nuisance`).
+    """
     p, dt = params, schedule.step_s
     null = null_knobs(p)
     kn = {name: _knob(knobs, name, k, null[name]) for name in DYNAMIC_KNOBS}
@@ -130,29 +136,51 @@ def simulate(schedule: Schedule, params: ServoParams, knobs: dict[str, np.ndarra
     speed, ref, ref_vel, drive = np.zeros(k), angle.copy(), np.zeros(k), np.zeros(k)
     rec_angle[0], rec_drive[0] = out, drive
     eps = p.setpoint_eps_rad
-    for seg in schedule.segments:
-        goal, vmax = seg.goal_rad, seg.max_speed_rad_s
-        limit = np.minimum(seg.limit, ceiling)
-        volts_r = seg.supply_v / p.winding_resistance_ohm
-        ext = seg.external_torque_nm
-        if seg.replan:
-            ref = apply_dead_zone(ref, ref_vel, goal, eps)
-        ext_dv = ext * dt_j if ext else None
-        for step in range(seg.first + 1, seg.last + 1):
-            ref_vel = setpoint_velocity(np, ref, ref_vel, goal, vmax, a, dt)
-            ref = ref + ref_vel * dt
-            angle = angle + speed * dt
-            out = np.minimum(np.maximum(out, angle - half_play), angle + half_play) if any_play else angle
-            error = ref * inv_unit - np.rint(out * inv_unit)
-            drive, _ = symmetric_compliance_drive(np, error, margin, gain, punch, limit)
-            applied_dv = (drive * volts_r - k_r * speed) * eta_k_dv
-            if ext:
-                applied_dv = applied_dv + ext_dv
-            if any_arm:
-                applied_dv = applied_dv + load_dv(np, angle, weight, dt_j)
-            speed = shaft_speed_step(np, speed, applied_dv, friction, keep)
-            rec_angle[step] = out
-            rec_drive[step] = drive
+    segs = schedule.segments
+    if onsets is None:
+        on = np.broadcast_to(schedule.nominal_onsets()[:, None], (len(segs), k))
+    else:
+        on = np.broadcast_to(np.asarray(onsets, dtype=np.int64).reshape(len(segs), -1), (len(segs), k))
+    # each segment's commands start after its onset step, per simulation (the same step for all but a fitted onset)
+    events: dict[int, list[tuple[Segment, np.ndarray | None]]] = {}
+    for j, seg in enumerate(segs):
+        for at in np.unique(on[j]):
+            mask = on[j] == at
+            events.setdefault(int(at), []).append((seg, None if mask.all() else mask))
+    goal, vmax, limit, volts_r, ext = (np.zeros(k) for _ in range(5))
+    ext_dv, any_ext = None, False
+    for step in range(1, n + 1):
+        starting = events.get(step - 1)
+        if starting:
+            for seg, mask in starting:
+                new = (seg.goal_rad, seg.max_speed_rad_s, seg.limit, seg.supply_v / p.winding_resistance_ohm,
+                       seg.external_torque_nm)
+                if mask is None:
+                    goal, vmax, limit, volts_r, ext = (np.full(k, v) for v in new)
+                    if seg.replan:
+                        ref = apply_dead_zone(ref, ref_vel, goal, eps)
+                else:
+                    goal, vmax, limit, volts_r, ext = (np.where(mask, v, old) for v, old in
+                                                       zip(new, (goal, vmax, limit, volts_r, ext)))
+                    if seg.replan:
+                        ref = np.where(mask, apply_dead_zone(ref, ref_vel, goal, eps), ref)
+            limit = np.minimum(limit, ceiling)
+            any_ext = bool(np.any(ext != 0))
+            ext_dv = ext * dt_j if any_ext else None
+        ref_vel = setpoint_velocity(np, ref, ref_vel, goal, vmax, a, dt)
+        ref = ref + ref_vel * dt
+        angle = angle + speed * dt
+        out = np.minimum(np.maximum(out, angle - half_play), angle + half_play) if any_play else angle
+        error = ref * inv_unit - np.rint(out * inv_unit)
+        drive, _ = symmetric_compliance_drive(np, error, margin, gain, punch, limit)
+        applied_dv = (drive * volts_r - k_r * speed) * eta_k_dv
+        if any_ext:
+            applied_dv = applied_dv + ext_dv
+        if any_arm:
+            applied_dv = applied_dv + load_dv(np, angle, weight, dt_j)
+        speed = shaft_speed_step(np, speed, applied_dv, friction, keep)
+        rec_angle[step] = out
+        rec_drive[step] = drive
     return Record(rec_angle, rec_drive)
 
 

@@ -3,6 +3,21 @@
 Why it exists: one command from a measured trace to a verdict, a report and
 a parameter file ``ax12emu serve --params`` loads.  Progress goes to stderr;
 the verdict (or, with ``--json``, one JSON object) to stdout.
+
+Two input formats, told apart by the file's first line: the project's trace
+CSV (:mod:`.trace`) and DYNAMIXEL Wizard 2 graph exports (:mod:`.wizard`).
+A Wizard export records only what was plotted (usually Present Position),
+so the commands come from options, each with a documented default, and
+every assumption is printed with the verdict and in the report:
+
+* ``--goal`` (default :data:`DEFAULT_GOAL`): the Goal Position written once;
+* ``--initial-goal`` (default: the first Present Position, the servo holding
+  where it stood);
+* ``--onset`` (default: estimated from the first movement and fitted with the
+  base model, :mod:`.nuisance`): when the goal was written, s after the
+  first row read; giving it makes it known (the trace then records it);
+* ``--moving-speed`` (default 0, full speed) and ``--voltage`` (default
+  :data:`DEFAULT_VOLTAGE_V`).
 """
 
 from __future__ import annotations
@@ -10,45 +25,182 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from dataclasses import dataclass, field
+from pathlib import Path
 
 from ..params import ServoParams
 from .effects import LIBRARY
+from .nuisance import first_movement_onset, locate_onset
 from .output import verdict_json, verdict_text, write_outputs
-from .search import diagnose
-from .trace import TraceFormatError, read_trace
+from .search import Diagnosis, diagnose
+from .trace import Trace, TraceFormatError, read_trace
+from .wizard import WizardExport, is_wizard_export, read_wizard, to_trace
 
-__all__ = ["parse_args", "main"]
+__all__ = ["parse_args", "main", "load_input", "Input", "DEFAULT_GOAL", "DEFAULT_VOLTAGE_V"]
+
+#: Goal Position assumed for a Wizard export that did not plot it (the shared real exports step 0 -> about 500).
+DEFAULT_GOAL = 500
+#: Supply assumed for a Wizard export: the AX-12A's recommended 12 V (its 3-cell LiPo / bench supply).
+DEFAULT_VOLTAGE_V = 12.0
+#: The options that supply what a Wizard export does not record (dest names).
+_WIZARD_OPTIONS = ("goal", "initial_goal", "onset", "moving_speed", "voltage")
+
+
+@dataclass
+class Input:
+    """The trace the workflow runs on, and what was assumed or counted to make it."""
+
+    trace: Trace
+    kind: str
+    #: Lines for the report: rows read and skipped, each assumption and how to override it.
+    notes: list[str] = field(default_factory=list)
+    #: JSON-able facts about the input (format, rows, skipped rows, assumptions).
+    facts: dict = field(default_factory=dict)
 
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     """The command line (pure: no I/O)."""
     p = argparse.ArgumentParser(prog="python -m firmware_model.diagnose", description=__doc__.splitlines()[0])
-    p.add_argument("trace", metavar="MEASURED.csv", help="measured trace (format: firmware_model.diagnose.trace)")
+    p.add_argument("trace", metavar="MEASURED.csv",
+                   help="measured trace: the project's CSV (firmware_model.diagnose.trace) or a Wizard 2 graph export")
     p.add_argument("--out", required=True, metavar="DIR", help="where report.md, plots and params.toml go")
     p.add_argument("--json", action="store_true", help="print the verdict as one JSON object")
     p.add_argument("--params", metavar="FILE", help="start from these ServoParams (TOML) instead of the defaults")
     p.add_argument("--effects", metavar="LIST", help=f"comma-separated subset of: {', '.join(LIBRARY)}")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
+    w = p.add_argument_group("what a Wizard 2 export does not record (only for such files)")
+    w.add_argument("--goal", type=int, metavar="UNITS",
+                   help=f"Goal Position written once (default {DEFAULT_GOAL})")
+    w.add_argument("--initial-goal", type=int, metavar="UNITS",
+                   help="Goal Position before it (default: the first Present Position read)")
+    w.add_argument("--onset", type=float, metavar="S",
+                   help="when the goal was written, s after the first row read (default: estimated from the first "
+                        "movement and fitted)")
+    w.add_argument("--moving-speed", type=int, metavar="N", help="Moving Speed register (default 0: full speed)")
+    w.add_argument("--voltage", type=float, metavar="V", help=f"supply voltage (default {DEFAULT_VOLTAGE_V})")
     args = p.parse_args(argv)
     if args.effects:
         unknown = [e for e in args.effects.split(",") if e not in LIBRARY]
         if unknown:
             p.error(f"unknown effect(s): {', '.join(unknown)}")
+    for name in ("goal", "initial_goal", "moving_speed"):
+        value = getattr(args, name)
+        if value is not None and not 0 <= value <= 1023:
+            p.error(f"--{name.replace('_', '-')} must be 0..1023 raw units, got {value}")
+    if args.onset is not None and not args.onset == args.onset:
+        p.error("--onset must be a number of seconds")
     return args
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Run the workflow; exit 2 on a malformed trace."""
-    args = parse_args(argv)
-    try:
+def load_input(args: argparse.Namespace, params: ServoParams, say=lambda msg: None) -> Input:
+    """The trace named on the command line, in either format; raises ValueError / OSError on bad input."""
+    given = [f"--{n.replace('_', '-')}" for n in _WIZARD_OPTIONS if getattr(args, n, None) is not None]
+    if not is_wizard_export(args.trace):
+        if given:
+            raise ValueError(f"{', '.join(given)} only apply to Wizard 2 graph exports; {args.trace} is a trace CSV, "
+                             "which records its own commands")
         trace = read_trace(args.trace)
-    except (TraceFormatError, OSError) as exc:
+        notes = [f"{args.trace}: trace CSV, {len(trace)} rows"]
+        if not trace.records_command_times:
+            notes.append("the trace does not say when commands were sent (no command_t): each change's onset is "
+                         "fitted within its sample as part of the base model")
+        return Input(trace, "trace", notes, {"format": "trace", "rows": len(trace),
+                                             "records_command_times": trace.records_command_times})
+    return _wizard_input(read_wizard(args.trace), args, params, say)
+
+
+def _wizard_input(ex: WizardExport, args: argparse.Namespace, params: ServoParams, say) -> Input:
+    goal = DEFAULT_GOAL if args.goal is None else args.goal
+    speed = 0 if args.moving_speed is None else args.moving_speed
+    volts = DEFAULT_VOLTAGE_V if args.voltage is None else args.voltage
+    params.check_supply(volts, "--voltage")
+    if "present_position" not in ex.values:
+        raise ValueError(f"{ex.source}: the export has no Present Position column: nothing to compare the model with")
+    initial = int(ex.values["present_position"][0]) if args.initial_goal is None else args.initial_goal
+
+    def build(onset_s: float, known: bool = False) -> Trace:
+        return to_trace(ex, goal, onset_s, speed, volts, initial, onset_known=known)
+
+    recorded = [c for c in ("goal_position", "moving_speed", "voltage") if c in ex.values]
+    facts = {"format": "wizard", "model": ex.model_name, "rows_seen": ex.rows_seen, "rows_read": ex.rows_read,
+             "skipped": dict(ex.skipped), "items_ignored": list(ex.ignored_items), "recorded": recorded}
+    notes = [ex.summary()]
+    if ex.model_name.replace("-", "").upper() != "AX12A":
+        notes.append(f"the export is from an {ex.model_name}; the model is an AX-12A's (its parameters are not "
+                     "that servo's unless --params says otherwise)")
+    assumed = []
+    if "goal_position" not in ex.values:
+        assumed.append(f"goal {goal} written once (from {initial}"
+                       + (")" if args.initial_goal is not None else ", the first reading)"))
+        facts["goal"], facts["initial_goal"] = goal, initial
+        if args.onset is not None:
+            trace = build(args.onset, known=True)
+            assumed.append(f"written at {args.onset:.3f} s (given, so known)")
+            facts["onset_s"], facts["onset_source"] = args.onset, "given"
+        else:
+            guess = first_movement_onset(build(0.0), params)
+            onset, trace = locate_onset(build, params, guess)
+            say(f"goal write estimated at {onset:.3f} s (first movement suggests {guess:.3f} s)")
+            assumed.append(f"written at an unrecorded time, estimated {onset:.3f} s from the first movement and "
+                           "re-fitted with the model (not an effect)")
+            facts["onset_s"], facts["onset_source"] = onset, "estimated"
+    else:
+        trace = build(0.0)
+    if "moving_speed" not in ex.values:
+        assumed.append(f"Moving Speed {speed}" + (" (full speed)" if speed == 0 else ""))
+        facts["moving_speed"] = speed
+    if "voltage" not in ex.values:
+        assumed.append(f"{volts:.1f} V")
+        facts["voltage_v"] = volts
+    if assumed:
+        notes.append("assumed: " + ", ".join(assumed)
+                     + " — override with --goal, --initial-goal, --onset, --moving-speed, --voltage")
+    facts["assumed"] = assumed
+    return Input(trace, "wizard", notes, facts)
+
+
+def _recording_notes(d: Diagnosis, trace: Trace) -> list[str]:
+    from .schedule import compile_schedule
+
+    nominal = compile_schedule(trace).nominal_onsets()
+    out = [f"recording traits fitted with the base model (not effects): {d.nuisance.describe(1e-3, nominal)}"]
+    out += [f"not offered: {name} ({why})" for name, why in d.not_offered.items()]
+    return out
+
+
+def _insert_input_section(report: Path, notes: list[str]) -> None:
+    """Put an "Input and assumptions" section after the report's verdict."""
+    text = report.read_text(encoding="utf-8")
+    section = "## Input and assumptions\n\n" + "\n".join(f"* {n}" for n in notes) + "\n\n"
+    at = text.find("## Named effects")
+    report.write_text(text[:at] + section + text[at:] if at >= 0 else text + "\n" + section, encoding="utf-8")
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the workflow; exit 2 on a malformed trace or a bad option for it."""
+    args = parse_args(argv)
+    progress = None if args.quiet else (lambda msg: print(msg, file=sys.stderr, flush=True))
+    say = progress or (lambda msg: None)
+    try:
+        params = ServoParams.from_toml(args.params) if args.params else ServoParams()
+        data = load_input(args, params, say)
+    except (TraceFormatError, ValueError, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    params = ServoParams.from_toml(args.params) if args.params else ServoParams()
-    progress = None if args.quiet else (lambda msg: print(msg, file=sys.stderr, flush=True))
-    d = diagnose(trace, params, progress=progress or (lambda msg: None),
-                 effects=args.effects.split(",") if args.effects else None)
-    write_outputs(trace, d, args.out, source=args.trace, params=params)
-    print(json.dumps(verdict_json(d)) if args.json else verdict_text(d))
+    for note in data.notes:
+        say(note)
+    d = diagnose(data.trace, params, progress=say, effects=args.effects.split(",") if args.effects else None)
+    notes = data.notes + _recording_notes(d, data.trace)
+    write_outputs(data.trace, d, args.out, source=args.trace, params=params)
+    _insert_input_section(Path(args.out) / "report.md", notes)
+    verdict = verdict_json(d)
+    verdict["input"] = data.facts
+    verdict["recording"] = {"hold_phase_s": d.nuisance.hold_phase_s, "onsets_fitted": d.nuisance.onsets_fitted,
+                            "not_offered": d.not_offered}
+    (Path(args.out) / "verdict.json").write_text(json.dumps(verdict, indent=2), encoding="utf-8")
+    if args.json:
+        print(json.dumps(verdict))
+    else:
+        print("\n".join(notes[1:] if data.kind == "trace" else notes))
+        print(verdict_text(d))
     return 0

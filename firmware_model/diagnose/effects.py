@@ -80,6 +80,13 @@ class Effect:
     starts: int = 1
     #: Function evaluations of each fit, as a multiple of the search's default (a rough surface needs more).
     effort: int = 1
+    #: Recording nuisances (:data:`.nuisance.PROFILERS`) whose best value depends on this effect's values: the
+    #: search re-fits them at each of its grid points (a hold period screened at the base fit's phase would look
+    #: wrong only because the phase belongs to another period).
+    nuisances: tuple[str, ...] = ()
+    #: Only offered on traces that record when commands were sent (``command_t``): without them the effect is
+    #: indistinguishable from when the commands took effect, which the base fit estimates (:mod:`.nuisance`).
+    needs_command_times: bool = False
 
     def null_values(self) -> dict[str, float]:
         """The parameter values that reproduce the base model."""
@@ -135,15 +142,13 @@ LIBRARY: dict[str, Effect] = {e.name: e for e in (
         "Latency between the shaft and the reading (or equivalently the command): ADC, firmware loop, bus.",
         "Residual proportional to speed, antisymmetric across each move, zero at rest; all channels shifted in time.",
         (Param("delay_s", 0.0, -0.01, 0.15, (0.005, 0.01, 0.02, 0.03, 0.05, 0.08), 0.002, (0.01, 0.05)),),
-        lambda v, k: {"delay_s": v["delay_s"]}, ("delay_s",), sensing=True),
+        lambda v, k: {"delay_s": v["delay_s"]}, ("delay_s",), sensing=True, needs_command_times=True),
     Effect(
         "sample_hold",
-        "Present Speed / Load are latched at an unknown period and phase, not the model's 0.1 s from the start.",
-        "Position fits; speed and load residuals are staircases that change at the wrong instants.",
-        (Param("hold_s", 0.1, 0.02, 0.3, _HOLD_GRID, 0.01, (0.05, 0.2)),
-         Param("hold_phase_s", 0.0, 0.0, 0.29, tuple(round(0.01 * i, 2) for i in range(30)), 0.01, (0.0, 0.09))),
-        lambda v, k: {"hold_s": v["hold_s"], "hold_phase_s": v["hold_phase_s"]}, ("hold_s", "hold_phase_s"),
-        sensing=True, smooth=False),
+        "Present Speed / Load are latched at another period than the model's 0.1 s (the firmware's own timer).",
+        "Position fits; speed and load residuals are staircases whose steps come at the wrong spacing.",
+        (Param("hold_s", 0.1, 0.02, 0.3, _HOLD_GRID, 0.01, (0.05, 0.2)),),
+        lambda v, k: {"hold_s": v["hold_s"]}, ("hold_s",), sensing=True, smooth=False, nuisances=("hold_phase",)),
     Effect(
         "torque_saturation",
         "The drive tops out below full (a lower torque limit, a weak supply or a current-limited driver).",

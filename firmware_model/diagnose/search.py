@@ -58,6 +58,7 @@ from ..params import ServoParams
 from .effects import BASE_PARAMS, LIBRARY, Effect, Param, apply_effects
 from .evaluate import Evaluator, Lockstep
 from .metrics import F_SCALE, effective_count, gaps, trimmed_rms
+from .nuisance import PROFILERS, Nuisance, fit_onsets, profile_hold_phase
 from .phases import PHASES
 from .trace import Trace
 
@@ -133,6 +134,10 @@ class Diagnosis:
     residual_rms_sd: dict[str, float]
     seconds: float
     simulations: int
+    #: The recording's traits fitted with the base model (hold phase, command onsets), never named as effects.
+    nuisance: Nuisance = field(default_factory=Nuisance)
+    #: Effects not offered on this trace, with the reason.
+    not_offered: dict[str, str] = field(default_factory=dict)
 
     @property
     def named(self) -> list[str]:
@@ -160,12 +165,21 @@ class _Search:
                                        p.fd_step, p.hidden) for p in BASE_PARAMS)
         self.base = {p.name: p.null for p in self.base_params}
         self.chosen: dict[str, dict[str, float]] = {}
+        self.nuisance = Nuisance(onsets_fitted=not self.ev.schedule.onsets_known)
 
     def knobs(self, base: dict[str, float], chosen: dict[str, dict[str, float]]) -> dict[str, float]:
-        """Simulator knobs for base values plus chosen effects."""
+        """Simulator knobs for base values, the recording's nuisance and chosen effects."""
         k = dict(self.ev.null)
         k.update(base)
+        k.update(self.nuisance.knobs())
         return apply_effects(k, chosen)
+
+    def fit_nuisance(self) -> None:
+        """Re-fit the recording's traits to the current model (see :mod:`.nuisance`): onsets, then the hold phase."""
+        if self.nuisance.onsets_fitted:
+            self.nuisance.onsets = fit_onsets(self.ev, self.knobs(self.base, self.chosen), self.nuisance.onsets)
+            self.ev.onsets = self.nuisance.onsets
+        self.nuisance.hold_phase_s = profile_hold_phase(self.ev, self.knobs(self.base, self.chosen))
 
     # ------------------------------------------------------------------ scoring
     def score(self, z: np.ndarray) -> tuple[float, float, float]:
@@ -265,9 +279,10 @@ class _Search:
             e = LIBRARY[name]
             for combo in itertools.product(*(p.grid for p in e.params)):
                 vals = dict(zip([p.name for p in e.params], combo))
-                if name == "sample_hold" and vals["hold_phase_s"] >= vals["hold_s"]:
-                    continue
-                grid_reqs.append(self.knobs(self.base, {**self.chosen, name: vals}))
+                req = self.knobs(self.base, {**self.chosen, name: vals})
+                for nuisance in e.nuisances:  # re-fitted for this grid point (sensing only: no new simulation)
+                    req.update(PROFILERS[nuisance](ev, req))
+                grid_reqs.append(req)
                 owners.append((name, vals))
         self.progress(f"round {round_no}: screening {len(remaining)} effects on {len(grid_reqs)} grid points")
         zs = ev.whiten(ev.run(grid_reqs))
@@ -367,10 +382,20 @@ def diagnose(trace: Trace, params: ServoParams = ServoParams(), progress: Callab
     ev = srch.ev
     say(f"{len(trace)} rows, {ev.schedule.n_steps} model steps; channel sd "
         + ", ".join(f"{ch.replace('present_', '')} {ev.scales[ch]:.2f}" for ch in ev.channels))
+    srch.fit_nuisance()
+    say("recording: " + srch.nuisance.describe(ev.schedule.step_s, ev.schedule.nominal_onsets()))
     z_before = ev.whiten(ev.run([srch.knobs(srch.base, {})]))[0]
     sim_before = ev.measured + z_before * ev.sd
     z = z_before
     remaining = list(effects or LIBRARY)
+    not_offered = {}
+    if not ev.schedule.onsets_known:
+        not_offered = {n: "the trace does not record when commands were sent (no command_t), so this effect cannot "
+                          "be told from when they took effect, which the base fit estimates"
+                       for n in remaining if LIBRARY[n].needs_command_times}
+        remaining = [n for n in remaining if n not in not_offered]
+        if not_offered:
+            say(f"not offered: {', '.join(not_offered)} (the trace does not record when commands were sent)")
     rounds: list[list[Candidate]] = []
     accepted: list[Candidate] = []
     for round_no in range(1, MAX_ROUNDS + 1):
@@ -392,6 +417,7 @@ def diagnose(trace: Trace, params: ServoParams = ServoParams(), progress: Callab
         for c in accepted[:-1]:
             c.values = dict(srch.chosen[c.effect])
         remaining.remove(win.effect)
+        srch.fit_nuisance()
         z = ev.whiten(ev.run([srch.knobs(srch.base, srch.chosen)]))[0]
         say(f"round {round_no}: accepted {win.effect} " + ", ".join(f"{k}={v:.4g}" for k, v in win.values.items()))
     sim_after = ev.measured + z * ev.sd
@@ -425,6 +451,6 @@ def diagnose(trace: Trace, params: ServoParams = ServoParams(), progress: Callab
         gaps_before=gaps(measured_trace, as_dict(sim_before), ev.phases),
         gaps_after=gaps(measured_trace, as_dict(sim_after), ev.phases),
         unexplained=unexplained, unexplained_detail=detail, residual_rms_sd=rms,
-        seconds=time.perf_counter() - t0, simulations=ev.simulations,
+        seconds=time.perf_counter() - t0, simulations=ev.simulations, nuisance=srch.nuisance, not_offered=not_offered,
     )
 

@@ -42,8 +42,7 @@ def draw_effect(name: str, rng: np.random.Generator) -> dict[str, float]:
                 "periods_per_rad": float(rng.choice([20.0, 30.0]))}
     e = LIBRARY[name]
     if name == "sample_hold":
-        hold = float(rng.choice([h for h in np.round(np.arange(0.05, 0.21, 0.01), 2) if abs(h - 0.1) > 1e-9]))
-        return {"hold_s": hold, "hold_phase_s": float(np.round(rng.integers(0, round(hold * 100)) / 100.0, 2))}
+        return {"hold_s": float(rng.choice([h for h in np.round(np.arange(0.05, 0.21, 0.01), 2) if abs(h - 0.1) > 1e-9]))}
     if name == "sensor_offset_gain":
         lo, hi = e.param("position_offset_units").hidden
         glo, ghi = e.param("position_gain").hidden
@@ -54,11 +53,19 @@ def draw_effect(name: str, rng: np.random.Generator) -> dict[str, float]:
 
 def make_trace(hidden: dict[str, dict[str, float]], seed: int, duration_s: float = 20.0, rate_hz: float = 100.0,
                params: ServoParams = ServoParams(), base_spread: bool = True,
-               breakaway_s: float = 0.0) -> tuple[Trace, dict]:
+               breakaway_s: float = 0.0, live: bool = False) -> tuple[Trace, dict]:
     """A measured trace with ``hidden`` effects, and its answer key (effects, base values, noise).
 
     ``breakaway_s``: the last this many seconds run :data:`.excitation.BREAKAWAY` (see
     :func:`.excitation.program`).
+
+    By default each command takes effect at its row's reading and the trace
+    records it (``command_t``), and the speed/load hold starts with the
+    trace.  ``live=True`` records like a real-time client through
+    dynamixel-sdk instead: the hold's phase is random, each row is stamped
+    after its read returns (0.5-2.5 ms late, varying row to row), each
+    command goes out after that stamp (a further 0.3-4 ms, varying command to
+    command) and the trace does not say when (no ``command_t``).
     """
     rng = np.random.default_rng(seed)
     period = 1.0 / rate_hz
@@ -66,11 +73,18 @@ def make_trace(hidden: dict[str, dict[str, float]], seed: int, duration_s: float
     t_true = np.arange(n) * period + np.concatenate([[0.0], rng.uniform(-0.3, 0.3, n - 1) * period])
     t_true = np.maximum.accumulate(t_true + np.arange(n) * 1e-9)
     cmd = commands_at(t_true, program(duration_s, breakaway_s))
-    trace = Trace({"t": t_true, "present_position": np.full(n, 512), **cmd})
+    if live:  # stamps after the read returns; commands sent after the stamp, before the next read
+        read_lag = rng.uniform(0.5e-3, 2.5e-3, n)
+        sent = np.minimum(t_true + read_lag + rng.uniform(0.3e-3, 4e-3, n), np.append(t_true[1:], np.inf) - 1e-4)
+    else:
+        read_lag, sent = np.zeros(n), t_true
+    trace = Trace({"t": t_true, "present_position": np.full(n, 512), "command_t": sent, **cmd})
     schedule = compile_schedule(trace, 1e-3, params.supply_voltage_v)
     knobs = null_knobs(params)
     base = {p.name: float(rng.uniform(*p.hidden)) if base_spread else getattr(params, p.name) for p in BASE_PARAMS}
     knobs.update(base)
+    if live:
+        knobs["hold_phase_s"] = float(rng.integers(0, int(round(params.sample_hold_s * 1000)))) / 1000.0
     library_part = {k: v for k, v in hidden.items() if k in LIBRARY}
     knobs = apply_effects(knobs, library_part)
     cog = hidden.get("cogging")
@@ -82,17 +96,19 @@ def make_trace(hidden: dict[str, dict[str, float]], seed: int, duration_s: float
     noise_units = 0.25
     record.angle = record.angle + rng.normal(0.0, noise_units, record.angle.shape) * (np.pi * 300 / 180 / 1023)
     read = sample(schedule, record, params, {k: np.array([v]) for k, v in knobs.items()})
-    t_logged = t_true + rng.normal(0.0, 5e-5, n)
+    t_logged = t_true + read_lag + rng.normal(0.0, 5e-5, n)
     t_logged[1:] = np.maximum(t_logged[1:], t_logged[:-1] + 1e-6)
     t_logged = np.round(t_logged, 6)
+    recorded = {} if live else {"command_t": t_logged}
     measured = Trace({
-        "t": t_logged, **cmd,
+        "t": t_logged, **cmd, **recorded,
         "present_position": read["present_position"][:, 0],
         "present_speed": read["present_speed"][:, 0],
         "present_load": read["present_load"][:, 0],
     }, comments=[f"synthetic trace, seed {seed}, firmware_model.diagnose.synthetic"])
     key = {"effects": hidden, "base": base, "seed": seed, "duration_s": duration_s, "rate_hz": rate_hz,
-           "pot_noise_units": noise_units, "timestamp_noise_s": 5e-5, "breakaway_s": breakaway_s}
+           "pot_noise_units": noise_units, "timestamp_noise_s": 5e-5, "breakaway_s": breakaway_s, "live": live,
+           "hold_phase_s": knobs["hold_phase_s"], "command_sent_s": [float(x) for x in sent[trace.change_rows()]]}
     return measured, key
 
 

@@ -44,7 +44,7 @@ API::
         ex.t_s                                    # sample times, s from the first kept row, shape (n,)
         ex.values["present_position"]             # int64 array (n,); also goal_position, present_speed, ...
         ex.rows_read, ex.skipped                  # 206, {"garbled": 1, "repeated_time": 0, "time_back": 2}
-        trace = to_trace(ex, goal_position=500, onset_s=0.29, moving_speed=0, voltage_v=12.0)
+        trace = to_trace(ex, goal_position=500, onset_s=1.87, moving_speed=0, voltage_v=12.0)
 """
 
 from __future__ import annotations
@@ -248,16 +248,18 @@ def _number(text: str) -> float | None:
 
 
 def to_trace(ex: WizardExport, goal_position: int, onset_s: float, moving_speed: int = 0,
-             voltage_v: float | None = None, initial_goal: int | None = None) -> Trace:
+             voltage_v: float | None = None, initial_goal: int | None = None, onset_known: bool = False) -> Trace:
     """The export as a trace, with the commands it does not record supplied by the caller.
 
     The goal is ``initial_goal`` (default: the first Present Position, i.e.
     the servo was holding where it stood) until ``onset_s`` (s from the first
     kept row), then ``goal_position``; recorded Goal Position / Moving Speed
-    columns, where plotted, are used instead.  ``onset_s`` goes into the
-    trace's ``command_t`` column at the row it falls after, so the replay
-    applies it to the millisecond.  ``voltage_v``: supply, unless the export
-    plotted Present Voltage (None: the model's default).
+    columns, where plotted, are used instead.  The change goes on the last
+    row read before ``onset_s``; only with ``onset_known`` (the user knows
+    when the goal was written) does the trace also record the time itself
+    (``command_t``), otherwise the workflow fits it within that sample as a
+    trait of the recording (:mod:`.nuisance`).  ``voltage_v``: supply,
+    unless the export plotted Present Voltage (None: the model's default).
     """
     t = ex.t_s
     n = len(t)
@@ -277,7 +279,8 @@ def to_trace(ex: WizardExport, goal_position: int, onset_s: float, moving_speed:
             goal[row:] = int(goal_position)
             command_t[row] = min(float(onset_s), float(np.nextafter(t[row + 1], t[row])))
         cols["goal_position"] = goal
-        cols["command_t"] = command_t
+        if onset_known:
+            cols["command_t"] = command_t
     if "moving_speed" not in cols:
         cols["moving_speed"] = np.full(n, int(moving_speed), dtype=np.int64)
     if "voltage" not in cols and voltage_v is not None:

@@ -90,12 +90,14 @@ def test_not_a_wizard_file(tmp_path):
 
 
 def test_to_trace_places_the_goal_at_the_onset():
-    """The assumed goal takes effect at ``onset_s``: the row before it gets the new goal and command_t = onset."""
+    """The assumed goal takes effect at ``onset_s``: the row before it gets the new goal, command_t = onset if known."""
     ex = parse_wizard(GOOD)
     tr = to_trace(ex, goal_position=500, onset_s=0.100, moving_speed=0, voltage_v=12.0)
     np.testing.assert_array_equal(tr["goal_position"], [1, 500, 500, 500, 500, 500])
-    assert tr["command_t"][1] == pytest.approx(0.100)
-    assert tr.records_command_times and len(command_time_errors(tr)) == 0
+    assert not tr.records_command_times
+    known = to_trace(ex, goal_position=500, onset_s=0.100, onset_known=True)
+    assert known["command_t"][1] == pytest.approx(0.100)
+    assert known.records_command_times and len(command_time_errors(known)) == 0
     assert set(tr["voltage"]) == {120} and set(tr["moving_speed"]) == {0}
     early = to_trace(ex, goal_position=500, onset_s=-1.0)
     assert set(early["goal_position"]) == {500}
