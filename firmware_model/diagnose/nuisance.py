@@ -78,8 +78,11 @@ class Nuisance:
             parts.append(f"speed/load hold phase {1000 * self.hold_phase_s:.0f} ms")
         if self.onsets_fitted and self.onsets is not None and len(self.onsets) > 1:
             lag_ms = (self.onsets[1:] - nominal[1:]) * step_s * 1000
-            parts.append(f"{len(lag_ms)} command onset(s) fitted, {np.min(lag_ms):.0f}-{np.max(lag_ms):.0f} ms "
-                         f"after their rows (median {np.median(lag_ms):.0f})")
+            if len(lag_ms) == 1:
+                parts.append(f"the command's onset fitted {lag_ms[0]:.0f} ms after its row's reading")
+            else:
+                parts.append(f"{len(lag_ms)} command onsets fitted {np.min(lag_ms):.0f}-{np.max(lag_ms):.0f} ms "
+                             f"after their rows' readings (median {np.median(lag_ms):.0f})")
         return "; ".join(parts) or "none"
 
 

@@ -1,0 +1,109 @@
+"""The command line on Wizard 2 graph exports: detected, assumptions printed and overridable, bad options refused."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from firmware_model.diagnose.cli import main
+
+ROOT = Path(__file__).resolve().parents[3]
+REAL = ROOT / ".." / "shared" / "reference" / "real-ax12a"
+
+
+def _cli(*argv) -> subprocess.CompletedProcess:
+    """The CLI in its own process (plotting keeps matplotlib's font files open for the life of a process)."""
+    return subprocess.run([sys.executable, "-m", "firmware_model.diagnose", *map(str, argv)],
+                          capture_output=True, text=True, cwd=ROOT, timeout=600)
+
+
+def _wizard_file(path: Path, onset_s: float = 1.2347, seed: int = 5) -> Path:
+    """A Wizard-format export of the model's own step response (goal 1 -> 500 at ``onset_s``), with flawed rows."""
+    from test_nuisance import _step_response  # the same model-made recording the onset tests use
+
+    _, pos, t = _step_response(onset_s, seed)
+    lines = ["DYNAMIXEL Graph,2", "AX-12A,12", "ItemCount,1", "Present Position,#ffff00,0,1,0",
+             "Time[ms],Present Position"]
+    for i, (ti, p) in enumerate(zip(t, pos)):
+        lines.append(f"{int(round(ti * 1000))},{p}")
+        if i == 120:
+            lines += [f"{int(round(ti * 1000)) % 10},{p}", str(p)]  # a lost digit of the time, a lost field
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return path
+
+
+@pytest.fixture(autouse=True)
+def _importable(monkeypatch):
+    monkeypatch.syspath_prepend(str(Path(__file__).parent))
+
+
+def test_wizard_export_end_to_end(tmp_path):
+    """Detected without a flag; skipped rows counted; the goal write located; assumptions in stdout, report, JSON."""
+    f = _wizard_file(tmp_path / "w.csv")
+    r = _cli(f, "--out", tmp_path / "o", "--json", "-q")
+    assert r.returncode == 0, r.stderr
+    verdict = json.loads(r.stdout)
+    facts = verdict["input"]
+    assert facts["format"] == "wizard" and facts["skipped"] == {"garbled": 1, "repeated_time": 0, "time_back": 1}
+    assert facts["goal"] == 500 and facts["moving_speed"] == 0 and facts["voltage_v"] == 12.0
+    assert facts["onset_source"] == "estimated" and abs(facts["onset_s"] - 1.234) <= 0.002
+    assert verdict["named"] == []  # the model's own response: nothing to name
+    assert verdict["recording"]["not_offered"].keys() == {"delay"}
+    report = (tmp_path / "o" / "report.md").read_text()
+    assert "## Input and assumptions" in report and "assumed: goal 500 written once" in report
+    assert "12.0 V — override with --goal" in report and "1 garbled, 1 time back" in report
+
+
+def test_overrides_are_used_and_reported(tmp_path):
+    """--goal, --onset, --moving-speed and --voltage replace the defaults; a given onset is known, so delay is offered."""
+    f = _wizard_file(tmp_path / "w.csv")
+    r = _cli(f, "--out", tmp_path / "o", "-q", "--goal", "500", "--onset", "1.2347", "--moving-speed", "0",
+             "--voltage", "12", "--effects", "delay,coulomb_friction")
+    assert r.returncode == 0, r.stderr
+    out = r.stdout
+    assert "written at 1.235 s (given, so known)" in out and "not offered" not in out
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--goal", "2000"], "--goal must be 0..1023"),
+    (["--moving-speed", "-1"], "--moving-speed must be 0..1023"),
+])
+def test_bad_option_values(tmp_path, argv, words, capsys):
+    """Out-of-range raw values are refused by the parser (exit 2) with the option named."""
+    with pytest.raises(SystemExit) as info:
+        main([str(tmp_path / "w.csv"), "--out", str(tmp_path / "o"), *argv])
+    assert info.value.code == 2 and words in capsys.readouterr().err
+
+
+def test_wizard_options_refused_for_a_trace_and_bad_voltage(tmp_path, capsys):
+    """A trace CSV records its commands, so Wizard options are an error; a voltage out of range too."""
+    tr = tmp_path / "t.csv"
+    tr.write_text("t,goal_position,moving_speed,present_position\n0,512,0,512\n0.01,512,0,512\n")
+    assert main([str(tr), "--out", str(tmp_path / "o"), "--goal", "500"]) == 2
+    assert "--goal only apply to Wizard 2 graph exports" in capsys.readouterr().err
+    f = _wizard_file(tmp_path / "w.csv")
+    assert main([str(f), "--out", str(tmp_path / "o"), "--voltage", "30"]) == 2
+    assert "--voltage 30.0 V is outside" in capsys.readouterr().err
+
+
+def test_malformed_wizard_export_exits_2(tmp_path):
+    """A broken header is reported with file and line, no traceback."""
+    bad = tmp_path / "bad.csv"
+    bad.write_text("DYNAMIXEL Graph,2\nAX-12A,12\nItemCount,x\n")
+    r = _cli(bad, "--out", tmp_path / "o")
+    assert r.returncode == 2 and "bad.csv:3: expected 'ItemCount,<n>'" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_real_export_runs(tmp_path):
+    """A shared real export goes through: rows counted, assumptions stated, a verdict (whatever it is) printed."""
+    if not REAL.is_dir():
+        pytest.skip(f"real AX-12A exports not present at {REAL.resolve()}")
+    r = _cli(REAL / "AX12A_NOLOAD_1.csv", "--out", tmp_path / "o", "--json", "-q", "--goal", "500")
+    assert r.returncode == 0, r.stderr
+    v = json.loads(r.stdout)
+    assert v["input"]["rows_read"] == 205 and v["input"]["onset_source"] == "estimated"
+    assert 1.85 < v["input"]["onset_s"] < 1.936  # before the first reading that shows movement
+    assert np.isfinite(v["gap_rms_after"]["present_position"])
