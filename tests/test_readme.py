@@ -1,4 +1,4 @@
-"""The README stays true and short: its commands match .ci/run, every file it cites exists."""
+"""The README stays true and short: CI runs its test command, every file it cites exists."""
 
 from __future__ import annotations
 
@@ -22,10 +22,29 @@ def cited_paths(text: str) -> set[str]:
     return links | spans
 
 
+def steps_in_order(command: str, script: str) -> list[str]:
+    """The steps of ``command`` (joined by ``&&``) that ``script`` does not run, in their order, after the one before."""
+    missing, position = [], 0
+    for step in (part.strip() for part in command.split("&&")):
+        found = script.find(step, position)
+        if found < 0:
+            missing.append(step)
+        else:
+            position = found + len(step)
+    return missing
+
+
 def test_ci_runs_the_readme_test_command():
-    """.ci/run runs the README's test command, word for word."""
+    """.ci/run runs every step of the README's test command, word for word and in order (checks may come between)."""
     command = re.search(r"Run the tests.*?```sh\n(.*?)\n```", README, re.DOTALL).group(1).strip()
-    assert command in (ROOT / ".ci" / "run").read_text(encoding="utf-8")
+    assert "pytest" in command
+    assert steps_in_order(command, (ROOT / ".ci" / "run").read_text(encoding="utf-8")) == []
+
+
+def test_step_check_catches_a_missing_or_reordered_step():
+    assert steps_in_order("a && b && c", "a\nlint\nb && c") == []
+    assert steps_in_order("a && b && c", "a && c") == ["b"]
+    assert steps_in_order("a && b", "b\na") == ["b"]
 
 
 def test_every_cited_file_exists():
