@@ -4,7 +4,8 @@ Why it exists: it is the ground truth the fast batched simulator
 (:mod:`.batch`) is checked against, and the simplest way for a user to see
 "what would the emulator have done with these commands".  The model is
 advanced to each row's ``t`` with the previous row's commands and read, so
-the simulated trace is sampled exactly as the measurement was, including the
+the simulated trace is sampled exactly as the measurement was (a command
+change acting from its ``command_t`` where the trace records one), including the
 held Present Speed / Load (``ServoParams.sample_hold_s``, phase starting at
 the first row).  Commands a trace does not carry keep the e-manual defaults
 (compliance margin 1, slope 32, punch 32, joint mode over the full range).
@@ -51,19 +52,35 @@ def replay(trace: Trace, params: ServoParams = ServoParams(), step_s: float = 1e
     t = trace.t
     n = len(trace)
     pos, spd, load = np.zeros(n, np.int64), np.zeros(n, np.int64), np.zeros(n, np.int64)
+    # where the trace records when a change was sent, it acts from then (before or after its row's reading)
+    sent = trace["command_t"] - trace["t"][0] if trace.records_command_times else None
+    changes = set(trace.change_rows().tolist()) - {0}
+    state = {"ext": None, "volt": None}
+
+    def take(i: int) -> Commands:
+        """Row ``i``'s commands, with its external torque and supply applied to the model now."""
+        if trace.has("external_torque_nm") and trace["external_torque_nm"][i] != state["ext"]:
+            state["ext"] = float(trace["external_torque_nm"][i])
+            model.set_external_torque(np.array([state["ext"]]))
+        if trace.has("voltage") and trace["voltage"][i] != state["volt"]:
+            state["volt"] = int(trace["voltage"][i])
+            model.set_supply_voltage(state["volt"] / 10.0)
+        return commands_for_row(trace, i)
+
     sensed = model.sense()
-    ext_prev = volt_prev = None
+    cmds = None
     for i in range(n):
+        early = sent is not None and i in changes and sent[i] < t[i]
         if i > 0:
+            if early:
+                model.step_to(float(sent[i]), cmds)
+                cmds = take(i)
             sensed = model.advance(float(t[i]), cmds)
         pos[i] = sensed.present_position[0]
         spd[i] = signed_raw_to_value(sensed.present_speed)[0]
         load[i] = signed_raw_to_value(sensed.present_load)[0]
-        if trace.has("external_torque_nm") and trace["external_torque_nm"][i] != ext_prev:
-            ext_prev = float(trace["external_torque_nm"][i])
-            model.set_external_torque(np.array([ext_prev]))
-        if trace.has("voltage") and trace["voltage"][i] != volt_prev:
-            volt_prev = int(trace["voltage"][i])
-            model.set_supply_voltage(volt_prev / 10.0)
-        cmds = commands_for_row(trace, i)
+        if not early:
+            if sent is not None and i in changes and sent[i] > t[i]:
+                model.step_to(float(sent[i]), cmds)
+            cmds = take(i)
     return trace.with_columns(present_position=pos, present_speed=spd, present_load=load)

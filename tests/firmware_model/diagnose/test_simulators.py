@@ -44,3 +44,21 @@ def test_effects_change_something():
     for name, e in LIBRARY.items():
         vals = {p.name: p.hidden[1] if p.name != "position_gain" else 1.03 for p in e.params}
         assert apply_effects(base, {name: vals}) != base, name
+
+
+def test_batch_equals_replay_with_command_times():
+    """Command changes sent between readings (``command_t``, before and after their rows) act alike in both."""
+    tr = _trace(3.0)
+    rows = tr.change_rows()[1:]
+    t = tr["t"]
+    sent = t.copy()
+    sent[rows[::2]] += 0.6 * (t[rows[::2] + 1] - t[rows[::2]])   # after the row's reading
+    sent[rows[1::2]] -= 0.4 * (t[rows[1::2]] - t[rows[1::2] - 1])  # before it
+    tr = tr.with_columns(command_t=sent)
+    p = ServoParams()
+    ref = replay(tr, p)
+    s = compile_schedule(tr)
+    assert not np.array_equal(s.nominal_onsets()[1:], np.floor(t[rows] / 1e-3 + 1e-9))
+    out = sample(s, simulate(s, p, {}, 1), p)
+    for ch in ("present_position", "present_speed", "present_load"):
+        np.testing.assert_array_equal(out[ch][:, 0], ref[ch])
