@@ -5,7 +5,9 @@ TOML) and uses scipy; the model modules of :mod:`firmware_model` stay pure
 numpy with no I/O, and nothing there imports this.
 
 Modules, one job each: :mod:`.trace` (CSV format, reader and writer),
-:mod:`.schedule` (commands to whole-step segments), :mod:`.replay` (the
+:mod:`.wizard` (DYNAMIXEL Wizard 2 graph exports), :mod:`.schedule` (commands
+to whole-step segments), :mod:`.nuisance` (how the data was taken: hold
+phase, command onsets, fitted with the base model and never named), :mod:`.replay` (the
 trace through ``PhysicalModel``), :mod:`.batch` (many parameter sets at
 once), :mod:`.phases` (motion phases), :mod:`.metrics` (scales, costs,
 gaps), :mod:`.effects` (the effect library), :mod:`.evaluate` (batched
