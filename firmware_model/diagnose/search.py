@@ -3,6 +3,13 @@
 Why it exists: it turns "the model is off" into "this effect, with these
 values, explains it", with tests that keep it from naming noise.
 
+Before the first round and after each accepted effect, the recording's
+traits (:mod:`.nuisance`: the phase of the speed/load hold, and when each
+command took effect where the trace does not record it) are re-fitted to the
+current model.  They are part of the base model, never candidates; effects
+that only a recorded command time can tell from them (``delay``) are not
+offered on traces without one (:attr:`Diagnosis.not_offered`).
+
 Each round:
 
 1. **Screen** every remaining effect on its coarse grid (all of them in one

@@ -6,7 +6,9 @@ base model exactly when no effect is hidden) with some library effects (or
 an out-of-library one) switched on at random values, a small unit-to-unit
 spread of the motor's strength, and the imperfections of a real recording:
 irregular sample times (timing jitter), small timestamp noise, noisy
-potentiometer readings before quantisation, and the registers' quantisation.
+potentiometer readings before quantisation, and the registers' quantisation;
+with ``live=True`` also the traits of a real-time client's recording (see
+:func:`make_trace`), which the workflow must fit without naming them.
 The answer key is returned separately; the workflow never sees it.
 
 Out-of-library effect available for negative tests: ``cogging`` (a torque
