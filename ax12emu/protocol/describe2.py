@@ -1,0 +1,136 @@
+"""One-line human descriptions of Protocol 2.0 packets, for logs and the trace decoder.
+
+Why it exists: as ``describe.py`` does for Protocol 1.0, a trace should read
+"WRITE id=1 @116=512 (4 bytes)" rather than a hex dump.  The X-series control
+table is not in this project yet, so registers are named by address unless
+the caller passes ``names`` (address to register name).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+from .packets2 import ALERT_BIT, ERROR_NUMBER_MASK, ErrorNumber, Instruction2, InstructionPacket2, Malformed, StatusPacket2
+from .params2 import (
+    BulkRead,
+    BulkWrite,
+    Clear,
+    ControlTableBackup,
+    FactoryReset,
+    Read,
+    SyncRead,
+    SyncWrite,
+    Write,
+    parse_fast_status,
+    parse_params,
+    parse_ping_reply,
+)
+
+__all__ = ["describe_error2", "describe_instruction2", "describe_status2"]
+
+
+def describe_error2(error: int) -> str:
+    """Error byte as words, e.g. "ok", "DATA_RANGE", "ALERT|ACCESS", "ERROR_0x09"."""
+    number = error & ERROR_NUMBER_MASK
+    try:
+        words = [] if number == ErrorNumber.NONE else [ErrorNumber(number).name]
+    except ValueError:
+        words = [f"ERROR_{number:#04x}"]
+    if error & ALERT_BIT:
+        words.insert(0, "ALERT")
+    return "|".join(words) or "ok"
+
+
+def _at(address: int, names: Mapping[int, str] | None) -> str:
+    name = names.get(address) if names else None
+    return name if name else f"@{address}"
+
+
+def _value(data: bytes) -> str:
+    """Registers are 1, 2 or 4 bytes little-endian; other sizes are shown as bytes."""
+    if len(data) in (1, 2, 4):
+        return str(int.from_bytes(data, "little"))
+    return data.hex(" ") if data else "(none)"
+
+
+def _write(address: int, data: bytes, names: Mapping[int, str] | None) -> str:
+    return f"{_at(address, names)}={_value(data)} ({len(data)} byte{'' if len(data) == 1 else 's'})"
+
+
+def _name(instruction: int) -> str:
+    try:
+        return Instruction2(instruction).name
+    except ValueError:
+        return f"INSTR_{instruction:#04x}"
+
+
+def describe_instruction2(packet: InstructionPacket2, names: Mapping[int, str] | None = None) -> str:
+    """One line: instruction, ID and what it asks."""
+    head = f"{_name(packet.instruction)} id={packet.id}"
+    if not packet.crc_ok:
+        return f"{head} BAD-CRC"
+    parsed = parse_params(packet.instruction, packet.params)
+    if isinstance(parsed, Malformed):
+        detail = f" params={packet.params.hex(' ')}" if packet.params else ""
+        return f"{head} MALFORMED ({parsed.reason}){detail}"
+    if isinstance(parsed, Read):
+        return f"{head} {_at(parsed.address, names)} length={parsed.length}"
+    if isinstance(parsed, Write):
+        return f"{head} {_write(parsed.address, parsed.data, names)}"
+    if isinstance(parsed, (FactoryReset, Clear, ControlTableBackup)):
+        return f"{head} {parsed.option.name}"
+    if isinstance(parsed, SyncRead):
+        ids = ",".join(str(i) for i in parsed.ids)
+        return f"{head} {_at(parsed.address, names)} length={parsed.length} ids={ids}"
+    if isinstance(parsed, SyncWrite):
+        blocks = " ".join(f"[id={i} {_write(parsed.address, data, names)}]" for i, data in parsed.writes)
+        return f"{head} {blocks}" if blocks else head
+    if isinstance(parsed, BulkRead):
+        return head + "".join(f" [id={i} {_at(a, names)} length={n}]" for i, a, n in parsed.reads)
+    if isinstance(parsed, BulkWrite):
+        return head + "".join(f" [id={i} {_write(a, data, names)}]" for i, a, data in parsed.writes)
+    return head
+
+
+def _describe_fast(packet: StatusPacket2, parsed: object) -> str | None:
+    """A combined Fast Sync/Bulk Read status, servo by servo; None if it does not fit its request."""
+    if isinstance(parsed, SyncRead):
+        lengths: int | dict[int, int] = parsed.length
+    elif isinstance(parsed, BulkRead):
+        lengths = {servo_id: length for servo_id, _, length in parsed.reads}
+    else:
+        return None
+    entries = parse_fast_status(packet, lengths)
+    if isinstance(entries, Malformed):
+        return None
+    return "FAST-STATUS " + " ".join(
+        f"[id={e.id} {describe_error2(e.error)} {_value(e.data)}{'' if e.crc_ok else ' BAD-CRC'}]" for e in entries
+    )
+
+
+def describe_status2(
+    packet: StatusPacket2, request: InstructionPacket2 | None = None, names: Mapping[int, str] | None = None
+) -> str:
+    """One line for a status packet; the ``request`` it answers lets READ data and Fast replies be named."""
+    head = f"STATUS id={packet.id} {describe_error2(packet.error)}"
+    if not packet.crc_ok:
+        return f"{head} BAD-CRC"
+    parsed = parse_params(request.instruction, request.params) if request is not None and request.crc_ok else None
+    if request is not None and request.instruction in (Instruction2.FAST_SYNC_READ, Instruction2.FAST_BULK_READ):
+        fast = _describe_fast(packet, parsed)
+        if fast is not None:
+            return fast
+    if not packet.params:
+        return head
+    if request is not None and request.instruction == Instruction2.PING:
+        reply = parse_ping_reply(packet.params)
+        if not isinstance(reply, Malformed):
+            return f"{head} model={reply.model_number} firmware={reply.firmware_version}"
+    address = None
+    if isinstance(parsed, (Read, SyncRead)):
+        address = parsed.address
+    elif isinstance(parsed, BulkRead):
+        address = next((a for i, a, _ in parsed.reads if i == packet.id), None)
+    if address is not None:
+        return f"{head} {_at(address, names)}={_value(packet.params)}"
+    return f"{head} params={packet.params.hex(' ')}"
