@@ -5,6 +5,7 @@ from __future__ import annotations
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from protocol2_vectors import EMANUAL_ERRATA, EMANUAL_PACKETS
 
 from ax12emu.protocol.framing import Framer
 from ax12emu.protocol.framing2 import DEFAULT_MAX_LENGTH, Framer2
@@ -12,7 +13,9 @@ from ax12emu.protocol.packets import InstructionPacket, encode_instruction, enco
 from ax12emu.protocol.packets2 import (
     FastStatusPart,
     InstructionPacket2,
+    Malformed,
     StatusPacket2,
+    decode_packet2,
     encode_fast_status,
     encode_instruction2,
     encode_status2,
@@ -51,6 +54,30 @@ def test_every_split_point(index):
         assert framer.feed(wire[:split]) == [], split
         assert framer.feed(wire[split:]) == [EXPECTED[index]], split
         assert framer.buffered == 0 and framer.discarded_bytes == 0
+
+
+#: Every packet the e-manual prints, and the two with misprinted CRCs as printed (their CRC fails).
+EMANUAL_WIRES = [h(text) for text in EMANUAL_PACKETS.values()] + [
+    h(text) + printed.to_bytes(2, "little") for text, printed, _ in EMANUAL_ERRATA.values()
+]
+
+
+@pytest.mark.parametrize("wire", EMANUAL_WIRES, ids=[*EMANUAL_PACKETS, *EMANUAL_ERRATA])
+def test_emanual_packets_in_every_split(wire):
+    """Each e-manual packet split at every byte frames once, the same as decoding it whole."""
+    whole = decode_packet2(wire)
+    assert not isinstance(whole, Malformed)
+    for split in range(len(wire) + 1):
+        framer = Framer2()
+        assert framer.feed(wire[:split]) + framer.feed(wire[split:]) == [whole], split
+        assert framer.buffered == 0
+
+
+def test_emanual_packets_back_to_back():
+    """All the e-manual's packets in one stream: each comes out, the misprinted two marked bad."""
+    packets = Framer2().feed(b"".join(EMANUAL_WIRES))
+    assert packets == [decode_packet2(wire) for wire in EMANUAL_WIRES]
+    assert [p.crc_ok for p in packets].count(False) == len(EMANUAL_ERRATA)
 
 
 def test_byte_by_byte():
