@@ -139,6 +139,16 @@ class Framer2:
         self.expire(now_s)
         if now_s is not None and data:
             self._last_byte_s = now_s
+        # Fast path: exactly one plausible frame and nothing pending (the usual request); the CRC is
+        # still checked by packet_from_frame, so a corrupt one is reported as on the slow path.
+        if not self._buf and len(data) >= _PREAMBLE_BYTES and data.startswith(HEADER2):
+            length = data[5] | (data[6] << 8)
+            if (
+                len(data) == _HEADER_BYTES + 3 + length
+                and is_valid_packet_id(data[4])
+                and (MIN_STATUS_LENGTH if data[7] == Instruction2.STATUS else MIN_INSTRUCTION_LENGTH) <= length <= self.max_length
+            ):
+                return [packet_from_frame(data)]
         if data:
             self._buf += data
         return self._extract()
