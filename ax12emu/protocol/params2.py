@@ -298,7 +298,7 @@ def _bulk_write(params: bytes) -> BulkWrite | Malformed:
     return BulkWrite(tuple(writes))
 
 
-_PARSERS: Mapping[Instruction2, Callable[[bytes], Params | Malformed]] = {
+_PARSERS: Mapping[int, Callable[[bytes], Params | Malformed]] = {
     Instruction2.PING: _no_params,
     Instruction2.READ: _read,
     Instruction2.WRITE: _write,
@@ -319,7 +319,7 @@ _PARSERS: Mapping[Instruction2, Callable[[bytes], Params | Malformed]] = {
 
 def parse_params(instruction: int, params: bytes | bytearray) -> Params | Malformed:
     """Parse an instruction's parameters; an undefined instruction is Malformed too (the servo's Instruction Error)."""
-    parser = _PARSERS.get(instruction)  # type: ignore[call-overload]
+    parser = _PARSERS.get(instruction)
     if parser is None:
         return Malformed(f"instruction {instruction:#04x} is not defined in Protocol 2.0")
     return parser(bytes(params))
