@@ -87,7 +87,8 @@ if sys.version_info >= (3, 11):
 else:  # Python 3.10: the same parser, from PyPI
     import tomli as tomllib
 
-__all__ = ["ServoParams", "DERIVED", "REPORT_VISCOUS_NM_S_RAD", "derive_holding_slope", "derive_total_inertia"]
+__all__ = ["ServoParams", "ServoEffects", "EFFECT_RANGES", "EFFECT_NULLS", "DERIVED", "REPORT_VISCOUS_NM_S_RAD", "derive_holding_slope",
+           "derive_total_inertia"]
 
 #: The report's back-driven viscous coefficient (section 2.3.2), not used by the model (see module docstring).
 REPORT_VISCOUS_NM_S_RAD = 0.15
@@ -127,6 +128,97 @@ DERIVED = {
     "gearbox_efficiency": _C * 6.3 / _K,
     "rotor_inertia_reflected_kg_m2": _J - 1.35e-4,
 }
+
+
+#: Valid range of each effect, inclusive ``(low, high)``; a bound of None is open (strictly above / below).
+#: Wide enough for any servo the diagnosis could meet, narrow enough to catch a unit mix-up (degrees for
+#: radians, milliseconds for seconds, a register value for a fraction).
+EFFECT_RANGES: dict[str, tuple[float, float]] = {
+    "backlash_rad": (0.0, 0.5),
+    "sensing_delay_s": (0.0, 1.0),
+    "command_delay_s": (0.0, 1.0),
+    "drive_ceiling_fraction": (0.0, 1.0),
+    "arm_weight_moment_nm": (-10.0, 10.0),
+    "extra_compliance_margin_units": (0.0, 254.0),
+    "position_offset_units": (-1023.0, 1023.0),
+    "position_gain": (0.5, 1.5),
+}
+#: The value at which each effect does nothing (the same as absent).
+EFFECT_NULLS: dict[str, float] = {name: 0.0 for name in EFFECT_RANGES} | {"drive_ceiling_fraction": 1.0, "position_gain": 1.0}
+#: Effects whose low bound is excluded (a zero ceiling would be no drive at all).
+_OPEN_LOW = ("drive_ceiling_fraction",)
+
+
+@dataclass(frozen=True)
+class ServoEffects:
+    """Physical effects beyond the base model, as the diagnosis names them; None means "absent".
+
+    Why it exists: ``python -m firmware_model.diagnose`` fits these (the effect
+    library, :mod:`firmware_model.diagnose.effects`) and writes them into the
+    one ``params.toml`` beside the base parameters (TOML table ``[effects]``),
+    so the fitted twin is served as it was fitted.  Each field names the
+    library effect it carries; :class:`~firmware_model.physical.PhysicalModel`
+    reproduces it as the diagnosis's batched simulator defines it.  An absent
+    effect leaves the model bit for bit as it is without this class.
+    """
+
+    #: Gear play between motor and output, where the pot sits (effect ``backlash``): the output follows
+    #: the motor only once the slack is taken up, and the controller sees the output.
+    backlash_rad: float | None = None
+    #: Latency from the output shaft to Present Position / Speed / Load (effect ``delay``): each reads the
+    #: shaft this long ago (position interpolated between steps, speed and load from the latch then).
+    sensing_delay_s: float | None = None
+    #: Latency from a register write to the firmware acting on it (the other reading of effect ``delay``;
+    #: the diagnosis cannot tell them apart from a trace, and writes the sensing one).
+    command_delay_s: float | None = None
+    #: The drive tops out at this fraction of full whatever Torque Limit says (effect ``torque_saturation``:
+    #: a weak supply or a current-limited driver); the firmware's overload check still uses the register.
+    drive_ceiling_fraction: float | None = None
+    #: Weight moment ``m g L`` of an arm on the horn (effect ``gravity_load``; convention in
+    #: :mod:`firmware_model.motor`; negative: the arm points the other way).  ``set_arm`` replaces it.
+    arm_weight_moment_nm: float | None = None
+    #: Added to both Compliance Margin registers (effect ``compliance_deadband``).
+    extra_compliance_margin_units: float | None = None
+    #: Present Position reads ``gain (x - 511.5) + 511.5 + offset`` for the true ``x`` in units, and Present
+    #: Speed ``gain`` times the true one (effect ``sensor_offset_gain``); the controller sees the true ``x``.
+    position_offset_units: float | None = None
+    position_gain: float | None = None
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if value is None:
+                continue
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+                raise ValueError(f"ServoEffects.{f.name} must be a finite number or absent (None), got {value!r}")
+            low, high = EFFECT_RANGES[f.name]
+            below = value <= low if f.name in _OPEN_LOW else value < low
+            if below or value > high:
+                interval = f"{'(' if f.name in _OPEN_LOW else '['}{low:g}, {high:g}]"
+                raise ValueError(f"ServoEffects.{f.name} must lie in {interval}, got {value!r}")
+
+    def present(self) -> dict[str, float]:
+        """The effects that are set, name -> value."""
+        return {f.name: float(getattr(self, f.name)) for f in fields(self) if getattr(self, f.name) is not None}
+
+    def value(self, name: str, null: float) -> float:
+        """``name``'s value, or ``null`` when absent."""
+        value = getattr(self, name)
+        return null if value is None else float(value)
+
+    @classmethod
+    def from_table(cls, table: dict, where: str = "[effects]") -> "ServoEffects":
+        """From a parsed TOML table; unknown keys and non-numbers raise ``ValueError`` naming ``where``."""
+        known = {f.name for f in fields(cls)}
+        for key, value in table.items():
+            if key not in known:
+                raise ValueError(f"{where}: unknown effect {key!r}; known: {', '.join(sorted(known))}")
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise ValueError(f"{where}: effect {key!r} must be a number, got {type(value).__name__}")
+        try:
+            return cls(**{k: float(v) for k, v in table.items()})
+        except ValueError as exc:
+            raise ValueError(f"{where}: {exc}") from exc
 
 
 @dataclass(frozen=True)
@@ -176,9 +268,15 @@ class ServoParams:
     overload_delay_s: float = 0.5
     #: Below this output speed a shaft counts as stalled for the overload alarm: ours.
     stall_speed_rad_s: float = 0.2
+    #: Effects beyond the base model (backlash, delays, ...), all absent by default; see ServoEffects.
+    effects: ServoEffects = ServoEffects()
 
     def __post_init__(self) -> None:
+        if not isinstance(self.effects, ServoEffects):
+            raise ValueError(f"ServoParams.effects must be a ServoEffects, got {type(self.effects).__name__}")
         for f in fields(self):
+            if f.name == "effects":
+                continue
             value = getattr(self, f.name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
                 raise ValueError(f"ServoParams.{f.name} must be a finite number, got {value!r}")
@@ -243,15 +341,29 @@ class ServoParams:
         return supply_v / self.torque_constant_nm_a
 
     # ------------------------------------------------------------------ TOML
-    def to_toml(self, path: str | Path) -> None:
-        """Write all fields as one flat table of numbers (TOML by hand: no writer dependency)."""
+    def to_toml(self, path: str | Path, comments: tuple[str, ...] = ()) -> None:
+        """Write the base fields as a flat table of numbers, then the present effects as ``[effects]``.
+
+        TOML by hand (no writer dependency); absent effects are listed as comments, so a
+        reader sees what could be set.  ``comments`` go at the top, one ``#`` line each.
+        """
         lines = ["# ax12emu servo parameters, SI units (firmware_model.params.ServoParams)"]
-        lines += [f"{name} = {float(value)!r}" for name, value in asdict(self).items()]
+        lines += [f"# {line}" for line in comments]
+        lines += [f"{name} = {float(value)!r}" for name, value in asdict(self).items() if name != "effects"]
+        lines += ["", "# Effects beyond the base model (firmware_model.params.ServoEffects); a missing key is absent.",
+                  "[effects]"]
+        present = self.effects.present()
+        for f in fields(ServoEffects):
+            lines.append(f"{f.name} = {present[f.name]!r}" if f.name in present else f"# {f.name}: absent")
         Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8")
 
     @classmethod
     def from_toml(cls, path: str | Path) -> "ServoParams":
-        """Read a flat TOML table; missing keys keep their defaults, unknown or non-numeric keys raise."""
+        """Read the base table and an optional ``[effects]`` table (older files have none).
+
+        Missing keys keep their defaults (effects: absent); unknown, non-numeric or
+        out-of-range keys raise ``ValueError`` naming the file and the key.
+        """
         path = Path(path)
         try:
             data = tomllib.loads(path.read_text(encoding="utf-8"))
@@ -259,13 +371,20 @@ class ServoParams:
             raise ValueError(f"{path}: not valid TOML: {exc}") from exc
         except UnicodeDecodeError as exc:
             raise ValueError(f"{path}: not UTF-8 text: {exc}") from exc
-        known = {f.name for f in fields(cls)}
+        table = data.pop("effects", {})
+        if not isinstance(table, dict):
+            raise ValueError(f"{path}: 'effects' must be a table ([effects]), got {type(table).__name__}")
+        effects = ServoEffects.from_table(table, f"{path}: [effects]")
+        known = {f.name for f in fields(cls)} - {"effects"}
+        effect_names = {f.name for f in fields(ServoEffects)}
         for key, value in data.items():
+            if key in effect_names:
+                raise ValueError(f"{path}: {key!r} is an effect: put it under [effects]")
             if key not in known:
                 raise ValueError(f"{path}: unknown key {key!r}")
             if isinstance(value, bool) or not isinstance(value, (int, float)):
                 raise ValueError(f"{path}: key {key!r} must be a number, got {type(value).__name__}")
         try:
-            return cls(**{k: float(v) for k, v in data.items()})
+            return cls(**{k: float(v) for k, v in data.items()}, effects=effects)
         except ValueError as exc:
             raise ValueError(f"{path}: {exc}") from exc

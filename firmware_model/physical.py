@@ -40,6 +40,8 @@ shaft, so enabling torque never jumps.
 from __future__ import annotations
 
 import math
+from collections import deque
+from dataclasses import replace
 from functools import partial
 from types import SimpleNamespace
 
@@ -51,7 +53,7 @@ from .interface import Commands, Sensed
 from .motor import GRAVITY_M_S2
 from .params import ServoParams
 from .protection import alarm_bits, overload_timer_step, thermal_step
-from .sensors import held_speed_rad_s, registers
+from .sensors import DelayLine, LatchHistory, held_speed_rad_s, registers
 from .setpoint import apply_dead_zone
 from .stepping import FusedNumpySteps, StepConstants, fused_scalar_steps, fusable, generic_steps
 from .units import (
@@ -76,7 +78,7 @@ _COMMAND_FIELDS = Commands.field_names()
 _RANGE_RAD, _UNIT_RAD = float(POSITION_RANGE_RAD), float(RAD_PER_POSITION_UNIT)
 _STATE = ("angle", "speed", "ref", "ref_vel", "drive", "demand", "integral", "prev_error", "current_sq_sum",
           "temperature", "overload_timer", "sample_angle", "held_speed", "held_drive", "ext_nm", "weight_nm",
-          "blocked")
+          "blocked", "out")
 
 
 def _per_servo(values, n: int) -> np.ndarray:
@@ -138,9 +140,13 @@ class PhysicalModel:
         angle = np.broadcast_to(np.asarray(initial_position_raw, dtype=float) * RAD_PER_POSITION_UNIT, (n,)).copy()
         zeros = np.zeros(n)
         values = {name: zeros.copy() for name in _STATE}
-        values.update(angle=angle, ref=angle.copy(), sample_angle=angle.copy(),
+        values.update(angle=angle, ref=angle.copy(), sample_angle=angle.copy(), out=angle.copy(),
                       temperature=np.full(n, params.ambient_temperature_c))
+        fx = params.effects
+        if fx.arm_weight_moment_nm:  # an arm on every shaft, until set_arm replaces it
+            values["weight_nm"] = np.full(n, fx.arm_weight_moment_nm)
         self._s = SimpleNamespace(**{k: self._to_backend(v) for k, v in values.items()})
+        self._init_effects(fx, angle)
         #: Decoded commands, keyed by the registers' bytes (and the object, for a quick check).
         self._plan_cache: tuple[bytes, SimpleNamespace] | None = None
         self._plan_commands: Commands | None = None
@@ -149,6 +155,32 @@ class PhysicalModel:
         #: Rounded temperatures and overload flags at the last thermal event (see _thermal_event).
         self._thermal_key: tuple[bytes, bytes] | None = None
         self._sensing: SimpleNamespace | None = None
+
+    def _init_effects(self, fx, angle: np.ndarray) -> None:
+        """Constants and state of the effects in ``params.effects`` (None where absent: the plain model)."""
+        play = fx.value("backlash_rad", 0.0)
+        #: Half the gear play (the output sits within it of the motor side), or None.
+        self._half_play_rad = play / 2.0 if play else None
+        #: Drive ceiling (fraction of full) below any Torque Limit, or None.
+        self._drive_ceiling = fx.drive_ceiling_fraction if fx.value("drive_ceiling_fraction", 1.0) < 1.0 else None
+        self._extra_margin_units = fx.value("extra_compliance_margin_units", 0.0)
+        offset, gain = fx.value("position_offset_units", 0.0), fx.value("position_gain", 1.0)
+        #: Present Position's scale and offset, (gain, 511.5 (1 - gain) + offset), or None.
+        self._position_map = (gain, 511.5 * (1.0 - gain) + offset) if (gain != 1.0 or offset != 0.0) else None
+        self._speed_gain = gain if gain != 1.0 else None
+        delay_steps = fx.value("sensing_delay_s", 0.0) / self.step_s
+        self._delay_line = DelayLine(delay_steps, angle) if delay_steps > 0 else None
+        self._latches = (LatchHistory(int(math.ceil(delay_steps / self._hold_steps)) + 2, self.n)
+                         if self._delay_line is not None else None)
+        #: Steps between a command reaching the model and the firmware acting on it (0: at once).
+        self._command_delay_steps = round(fx.value("command_delay_s", 0.0) / self.step_s)
+        #: Commands received but not yet acted on: (step they act from, key, commands), oldest first.
+        self._pending: deque[tuple[int, bytes, Commands]] = deque()
+        self._acting: Commands | None = None
+        self._latest_key: bytes | None = None
+        #: Whether sense() reads anything but the plain registers at the present step.
+        self._effect_sense = (self._half_play_rad is not None or self._delay_line is not None
+                              or self._position_map is not None)
 
     # ------------------------------------------------------------------ run-time inputs
     def set_supply_voltage(self, volts: float) -> None:
@@ -163,7 +195,10 @@ class PhysicalModel:
         self._plan_cache = None
 
     def set_arm(self, mass_kg, length_m) -> None:
-        """Hang an arm (point mass at ``length_m``) on each shaft; convention in :mod:`firmware_model.motor`."""
+        """Hang an arm (point mass at ``length_m``) on each shaft; convention in :mod:`firmware_model.motor`.
+
+        It replaces any arm the parameters' effects hung (``arm_weight_moment_nm``).
+        """
         moment = np.asarray(mass_kg, dtype=float) * GRAVITY_M_S2 * np.asarray(length_m, dtype=float)
         if np.any(moment < 0):
             raise ValueError("arm mass and length must be >= 0")
@@ -185,8 +220,9 @@ class PhysicalModel:
 
     def set_angle(self, index: int, angle_rad: float) -> None:
         """Put shaft ``index`` at ``angle_rad`` (by hand), at rest; the reference follows it, so nothing jumps."""
-        values = {name: self._array(name) for name in ("angle", "speed", "ref", "ref_vel", "sample_angle")}
+        values = {name: self._array(name) for name in ("angle", "speed", "ref", "ref_vel", "sample_angle", "out")}
         values["angle"][index] = values["ref"][index] = values["sample_angle"][index] = float(angle_rad)
+        values["out"][index] = float(angle_rad)  # gear play taken up on neither side
         values["speed"][index] = values["ref_vel"][index] = 0.0
         for name, array in values.items():
             setattr(self._s, name, self._to_backend(array))
@@ -196,8 +232,9 @@ class PhysicalModel:
     # ------------------------------------------------------------------ state views
     @property
     def angle_rad(self) -> np.ndarray:
-        """Shaft angles, radians from the CW end, wrapped to [0, 2 pi)."""
-        return np.mod(self._array("angle"), _TWO_PI)
+        """Output shaft (horn) angles, radians from the CW end, wrapped to [0, 2 pi); with gear play, the
+        output side's."""
+        return np.mod(self._array("angle" if self._half_play_rad is None else "out"), _TWO_PI)
 
     @property
     def speed_rad_s(self) -> np.ndarray:
@@ -228,14 +265,77 @@ class PhysicalModel:
     def step_to(self, to_time_s: float, commands: Commands) -> None:
         """:meth:`advance` without reading the sensors."""
         target = int(math.floor(to_time_s / self.step_s + 1e-9))
+        if self._command_delay_steps:
+            self._step_delayed(target, commands)
+            return
         plan = self._cached_plan(commands)
         if target > self._steps:
             self._run(plan, self._steps, target)
             self._steps = target
             self.time_s = self._steps * self.step_s
 
+    def _step_delayed(self, target: int, commands: Commands) -> None:
+        """:meth:`step_to` when the firmware acts on commands ``command_delay_s`` after they arrive.
+
+        Until the first commands act the servo is inert (at rest, nothing driven).
+        """
+        key = self._commands_key(commands)
+        if key != self._latest_key:  # a copy: the caller may change its arrays in place
+            copy = Commands(**{name: np.array(getattr(commands, name)) for name in _COMMAND_FIELDS})
+            self._pending.append((self._steps + self._command_delay_steps, key, copy))
+            self._latest_key = key
+        step = self._steps
+        while step < target:
+            while self._pending and self._pending[0][0] <= step:
+                self._acting = self._pending.popleft()[2]
+            stop = min(target, self._pending[0][0]) if self._pending else target
+            if self._acting is None:
+                if self._delay_line is not None:
+                    self._delay_line.repeat(stop - step)
+            else:
+                self._run(self._cached_plan(self._acting), step, stop)
+            step = stop
+        if target > self._steps:
+            self._steps = target
+            self.time_s = self._steps * self.step_s
+        if self._acting is not None:
+            self._cached_plan(self._acting)  # sense() reads the acting plan's limits
+
     def sense(self) -> Sensed:
         """The registers at ``time_s`` without advancing."""
+        if self._effect_sense:
+            return self._sense_effects()
+        return self._sense_plain()
+
+    def _sense_effects(self) -> Sensed:
+        """:meth:`sense` with gear play, a sensing delay or a position offset / gain.
+
+        The same rules as the diagnosis's batched simulator
+        (:func:`firmware_model.diagnose.batch.sample`): the delayed angle
+        interpolated between steps, then ``gain x + offset`` in units, rounded and
+        pinned to 0..1023; speed and load from the latch at or before the delayed step.
+        """
+        plain = self._sense_plain()
+        seen = self._array("angle" if self._half_play_rad is None else "out")
+        changes = {}
+        if self._delay_line is not None:
+            seen, step = self._delay_line.read()
+            held_speed, held_drive = self._latches.at(step)
+            regs = registers(held_speed, held_drive, self.supply_voltage_v, self._array("temperature"))
+            changes.update(present_speed=regs["present_speed"], present_load=regs["present_load"])
+        x = seen / _UNIT_RAD
+        c = self._sensing
+        wheel = c.wheel if (c is not None and c.any_wheel) else None
+        if wheel is not None:  # endless turns: through the dead zone as the plain reading does
+            x = np.where(wheel, position_rad_to_raw(seen).astype(float), x)
+        if self._position_map is not None:
+            gain, shift = self._position_map
+            x = x * gain + shift
+        changes["present_position"] = np.clip(np.rint(x), 0, POSITION_MAX_RAW).astype(np.int64)
+        return replace(plain, **changes)
+
+    def _sense_plain(self) -> Sensed:
+        """The registers at ``time_s``, with no effect on the readings."""
         if self._slow is None:
             self._slow = self._slow_registers()
         slow = self._slow  # read-only arrays, shared until the next event: no copy per call
@@ -292,11 +392,16 @@ class PhysicalModel:
         value = getattr(self._s, name)
         return np.array([value]) if self._xp is SCALAR else value.copy()
 
+    @staticmethod
+    def _commands_key(commands: Commands) -> bytes:
+        """The command registers' bytes: equal keys, equal plans."""
+        return b"".join([np.ascontiguousarray(getattr(commands, name), dtype=np.int64).tobytes() for name in _COMMAND_FIELDS])
+
     def _cached_plan(self, commands: Commands) -> SimpleNamespace:
         """The decoded plan, rebuilt only when a register, the supply or an external load changed."""
         if self._plan_cache is not None and commands is self._plan_commands:
             return self._plan_cache[1]  # the bus hands over the same object until a register changes
-        key = b"".join([np.ascontiguousarray(getattr(commands, name), dtype=np.int64).tobytes() for name in _COMMAND_FIELDS])
+        key = self._commands_key(commands)
         if self._plan_cache is None or self._plan_cache[0] != key:
             self._plan_cache = (key, self._plan(commands))
             self._sensing, self._slow = self._plan_cache[1].sensing, None
@@ -314,6 +419,12 @@ class PhysicalModel:
         goal_raw = np.clip(raw["goal_position"], raw["cw_angle_limit"], np.maximum(raw["ccw_angle_limit"], raw["cw_angle_limit"]))
         comp = compliance_plan(raw["cw_compliance_margin"], raw["ccw_compliance_margin"], raw["cw_compliance_slope"],
                                raw["ccw_compliance_slope"], raw["punch"], raw["torque_limit"])
+        register_limit = comp.limit  # the firmware's overload check compares with the register
+        if self._extra_margin_units:  # a dead band wider than the registers say
+            comp.cw_margin = comp.cw_margin + self._extra_margin_units
+            comp.ccw_margin = comp.ccw_margin + self._extra_margin_units
+        if self._drive_ceiling is not None:  # the drive tops out below full whatever Torque Limit says
+            comp.limit = np.minimum(comp.limit, self._drive_ceiling)
         c_hold = p.holding_slope_nm_v
         volts = self.supply_voltage_v
         wheel_ref = np.where(speed_raw & DIRECTION_BIT, -magnitude, magnitude)
@@ -325,7 +436,7 @@ class PhysicalModel:
             wheel_ref=wheel_ref, wheel_ff=wheel_ff, cw_margin=comp.cw_margin, ccw_margin=comp.ccw_margin,
             cw_gain=comp.cw_gain, ccw_gain=comp.ccw_gain, punch=comp.punch, limit=comp.limit,
             en=enabled.astype(float), volts_r=np.where(enabled, volts / p.winding_resistance_ohm, 0.0),
-            overload_limit=np.where(enabled, comp.limit, np.inf),  # torque off cannot overload
+            overload_limit=np.where(enabled, register_limit, np.inf),  # torque off cannot overload
         )
         plan = SimpleNamespace(**{k: self._to_backend(v.astype(float)) for k, v in per_servo.items()})
         plan.enabled, plan.wheel = (bool(enabled[0]), bool(wheel[0])) if self._xp is SCALAR else (enabled, wheel)
@@ -346,6 +457,7 @@ class PhysicalModel:
         plan.any_ext = bool(np.any(self._array("ext_nm") != 0))
         plan.any_blocked = bool(np.any(self._array("blocked") != 0))
         plan.symmetric = bool(np.all(comp.cw_margin == comp.ccw_margin) and np.all(comp.cw_gain == comp.ccw_gain))
+        plan.half_play_rad, plan.history = self._half_play_rad, self._delay_line
         if not (self.fused and fusable(self._k, plan)):
             plan.kernel = partial(generic_steps, self._xp, plan, self._k)
         elif self._xp is SCALAR:
@@ -372,7 +484,7 @@ class PhysicalModel:
             if step % thermal_steps == 0:
                 slow_changed = self._thermal_event(plan)
                 if step % hold_steps == 0:
-                    self._sample_event()
+                    self._sample_event(step)
                     slow_changed = True
                 if slow_changed:
                     self._slow = None
@@ -399,16 +511,23 @@ class PhysicalModel:
             turns = np.asarray(s.angle / _TWO_PI)
             if turns.min() < 0.0 or turns.max() >= 1.0:  # some shaft is a turn off (else all stay bound as they are)
                 shift = xp.where(plan.wheel, xp.floor(turns if xp is NUMPY else float(turns)) * _TWO_PI, 0.0 * s.angle)
-                s.angle, s.sample_angle, s.ref = s.angle - shift, s.sample_angle - shift, s.ref - shift
+                s.angle, s.sample_angle, s.ref, s.out = s.angle - shift, s.sample_angle - shift, s.ref - shift, s.out - shift
+                if self._delay_line is not None:
+                    self._delay_line.shift(shift)
         key = (np.rint(s.temperature).tobytes(), np.asarray(s.overload_timer >= p.overload_delay_s - 1e-9).tobytes())
         changed = key != self._thermal_key
         self._thermal_key = key
         return changed
 
-    def _sample_event(self) -> None:
-        """Latch Present Speed and Present Load, once per sample period."""
+    def _sample_event(self, step: int) -> None:
+        """Latch Present Speed and Present Load, once per sample period (``step``: the step it is taken at)."""
         s = self._s
-        s.held_speed = held_speed_rad_s(s.angle, s.sample_angle, self._hold_steps * self.step_s)
+        seen = s.angle if self._half_play_rad is None else s.out  # the pot sits on the output
+        s.held_speed = held_speed_rad_s(seen, s.sample_angle, self._hold_steps * self.step_s)
+        if self._speed_gain is not None:  # the position's scale error scales the speed computed from it
+            s.held_speed = s.held_speed * self._speed_gain
         # Copies: the fused kernel updates the state arrays in place.
         s.held_drive = s.drive if self._xp is SCALAR else s.drive.copy()
-        s.sample_angle = s.angle if self._xp is SCALAR else s.angle.copy()
+        s.sample_angle = seen if self._xp is SCALAR else seen.copy()
+        if self._latches is not None:
+            self._latches.add(step, s.held_speed, s.held_drive)

@@ -105,7 +105,15 @@ class StepConstants:
 
 
 def fusable(k: StepConstants, plan: SimpleNamespace) -> bool:
-    """Whether the fused kernels cover this configuration (else the generic loop runs)."""
+    """Whether the fused kernels cover this configuration (else the generic loop runs).
+
+    Gear play and a sensing delay need a state the kernels do not keep (the
+    output's angle, each step's reading), so they run the generic loop; the
+    other effects of :class:`~firmware_model.params.ServoEffects` are plan
+    data the kernels already take (a lower limit, a wider margin, an arm).
+    """
+    if plan.half_play_rad is not None or plan.history is not None:
+        return False
     if plan.any_wheel:
         return not plan.any_joint  # all in wheel mode: no position controller at all
     return not k.pid and plan.symmetric
@@ -131,6 +139,10 @@ def generic_steps(xp, plan: SimpleNamespace, k: StepConstants, s: SimpleNamespac
     ext_dv = s.ext_nm * k.step_over_inertia if any_ext else None
     weight_dv = s.weight_nm * k.step_over_inertia if any_arm else None
     free, any_blocked = 1.0 - s.blocked, plan.any_blocked
+    # Gear play: the output (where the pot sits, what the controller sees) follows the motor side only
+    # once the slack is taken up; a sensing delay keeps each step's reading.
+    half_play, history = plan.half_play_rad, plan.history
+    out = seen = s.out if half_play is not None else None
     for _ in range(count):
         # Positions first, with the velocities the step starts from (the reference's is chosen now).
         if any_joint:
@@ -139,10 +151,16 @@ def generic_steps(xp, plan: SimpleNamespace, k: StepConstants, s: SimpleNamespac
                 ref_vel = ref_vel * en
             ref = ref + ref_vel * dt
         angle = angle + speed * dt
+        if half_play is None:
+            seen = angle
+        else:
+            out = seen = xp.minimum(xp.maximum(out, angle - half_play), angle + half_play)
+        if history is not None:
+            history.push(seen)
         if any_joint:
-            if any_disabled:  # torque off: the reference follows the shaft
-                ref = xp.where(enabled, ref, angle)
-            error = ref * inv_unit - xp.rint(angle * inv_unit)
+            if any_disabled:  # torque off: the reference follows the shaft (as the pot reads it)
+                ref = xp.where(enabled, ref, seen)
+            error = ref * inv_unit - xp.rint(seen * inv_unit)
             if pid:
                 error = error * unit
                 drive, demand, integral = pid_drive(xp, error, integral, prev_error, dt, gains, limit)
@@ -172,6 +190,8 @@ def generic_steps(xp, plan: SimpleNamespace, k: StepConstants, s: SimpleNamespac
         i2_sum = i2_sum + current * current
     s.angle, s.speed, s.ref, s.ref_vel = angle, speed, ref, ref_vel
     s.drive, s.demand, s.integral, s.prev_error, s.current_sq_sum = drive, demand, integral, prev_error, i2_sum
+    if half_play is not None:
+        s.out = out
 
 
 def fused_scalar_steps(plan: SimpleNamespace, k: StepConstants, s: SimpleNamespace, count: int) -> None:

@@ -3,22 +3,20 @@
 Why it exists: the search returns numbers; a user needs a verdict, the
 evidence, and files that close the loop.
 
-Parameter files (a decision, documented here and in the report):
-
-* ``params.toml`` holds **only** :class:`~firmware_model.params.ServoParams`
-  fields, so ``ax12emu serve --params params.toml`` loads it as it is.  The
-  effects that are ServoParams fields go in: ``coulomb_friction``
-  (``coulomb_friction_nm`` and ``static_friction_nm``), ``stribeck_friction``
-  (``static_friction_nm``, ``stribeck_velocity_rad_s``), ``extra_inertia``
-  (``load_inertia_kg_m2``), ``sample_hold`` (``sample_hold_s``; the phase is
-  a property of the recording, not of the servo) and the base
-  ``gearbox_efficiency``.
-* ``effects.toml`` holds one table per named effect that is *not* a
-  ServoParams field (``[backlash]``, ``[delay]``, ``[torque_saturation]``,
-  ``[gravity_load]``, ``[compliance_deadband]``, ``[sensor_offset_gain]``),
-  with the fitted values in SI units and, where one exists, the ``serve``
-  option that reproduces it (``gravity_load``: ``--arm``;
-  ``torque_saturation``: write Torque Limit).  ``serve`` does not read it.
+The parameter file: one ``params.toml`` holds the whole fitted twin, so
+``ax12emu serve --params params.toml`` serves what was fitted.  The base
+table has the :class:`~firmware_model.params.ServoParams` fields, with the
+effects that are base parameters folded in: ``coulomb_friction``
+(``coulomb_friction_nm`` and ``static_friction_nm``), ``stribeck_friction``
+(``static_friction_nm``, ``stribeck_velocity_rad_s``), ``extra_inertia``
+(``load_inertia_kg_m2``), ``sample_hold`` (``sample_hold_s``; the phase is a
+property of the recording, not of the servo) and the base
+``gearbox_efficiency``.  Its ``[effects]`` table
+(:class:`~firmware_model.params.ServoEffects`) has every other named effect,
+by :data:`EFFECT_FIELDS`; the physical model reproduces each as the batched
+simulator the fit ran on defines it.  A fitted value outside what a servo can
+be served with (a negative delay: the reading ahead of the shaft) is pinned to
+the nearest valid one, and the file says so in a comment.
 """
 
 from __future__ import annotations
@@ -30,19 +28,47 @@ from pathlib import Path
 
 import numpy as np
 
-from ..params import ServoParams
+from ..params import EFFECT_NULLS, EFFECT_RANGES, ServoEffects, ServoParams
 from .effects import LIBRARY
 from .phases import PHASES
 from .search import Diagnosis
 from .trace import Trace
 
-__all__ = ["verdict_text", "verdict_json", "fitted_params", "write_outputs"]
+__all__ = ["verdict_text", "verdict_json", "fitted_params", "fitted_effects", "write_outputs", "EFFECT_FIELDS",
+           "BASE_FIELD_EFFECTS"]
 
-_SERVO_FIELD_EFFECTS = ("coulomb_friction", "stribeck_friction", "extra_inertia", "sample_hold")
+#: Library effects folded into base ServoParams fields by :func:`fitted_params`.
+BASE_FIELD_EFFECTS = ("coulomb_friction", "stribeck_friction", "extra_inertia", "sample_hold")
+#: Library effects that are ServoEffects fields: effect -> {ServoEffects field: batch knob}.
+EFFECT_FIELDS = {
+    "backlash": {"backlash_rad": "backlash_rad"},
+    "delay": {"sensing_delay_s": "delay_s"},
+    "torque_saturation": {"drive_ceiling_fraction": "drive_ceiling"},
+    "gravity_load": {"arm_weight_moment_nm": "arm_weight_nm"},
+    "compliance_deadband": {"extra_compliance_margin_units": "extra_margin_units"},
+    "sensor_offset_gain": {"position_offset_units": "position_offset_units", "position_gain": "position_gain"},
+}
+
+
+def fitted_effects(named: list[str], knobs: dict[str, float]) -> tuple[ServoEffects, list[str]]:
+    """The ServoEffects of the ``named`` effects from the final knobs, and a note per value pinned to its range.
+
+    A value at the effect's null stays absent.
+    """
+    values, notes = {}, []
+    for effect in named:
+        for field_name, knob in EFFECT_FIELDS.get(effect, {}).items():
+            value = float(knobs[knob])
+            low, high = EFFECT_RANGES[field_name]
+            pinned = min(max(value, low), high)
+            if pinned != value:
+                notes.append(f"{effect}: fitted {field_name} = {value:.6g} is outside [{low:g}, {high:g}]; served as {pinned:g}")
+            values[field_name] = pinned
+    return ServoEffects(**{k: v for k, v in values.items() if v != EFFECT_NULLS[k]}), notes
 
 
 def fitted_params(d: Diagnosis, params: ServoParams = ServoParams()) -> ServoParams:
-    """ServoParams with the base re-fit and every named effect that is a ServoParams field."""
+    """ServoParams with the base re-fit and every named effect: base fields folded in, the rest as ``effects``."""
     k = d.knobs
     changes = {"gearbox_efficiency": k["gearbox_efficiency"], "coulomb_friction_nm": max(k["coulomb_friction_nm"], 0.0),
                "static_friction_nm": max(k["static_friction_nm"], k["coulomb_friction_nm"], 0.0),
@@ -50,6 +76,7 @@ def fitted_params(d: Diagnosis, params: ServoParams = ServoParams()) -> ServoPar
                "load_inertia_kg_m2": max(params.load_inertia_kg_m2 + k["extra_inertia_kg_m2"], 0.0)}
     if "sample_hold" in d.named:
         changes["sample_hold_s"] = round(k["hold_s"], 2)
+    changes["effects"] = fitted_effects(d.named, k)[0]
     return replace(params, **changes)
 
 
@@ -82,20 +109,6 @@ def verdict_text(d: Diagnosis) -> str:
     for ch in d.channels:
         lines.append(f"  {ch}: RMS gap {d.gaps_before[ch]['rms']:.2f} -> {d.gaps_after[ch]['rms']:.2f}")
     return "\n".join(lines)
-
-
-def _effects_toml(d: Diagnosis) -> str:
-    lines = ["# Effects named by firmware_model.diagnose that are not ServoParams fields (serve does not read this file)."]
-    for c in d.accepted:
-        if c.effect in _SERVO_FIELD_EFFECTS:
-            continue
-        lines.append(f"\n[{c.effect}]\n# {LIBRARY[c.effect].physics}")
-        lines += [f"{k} = {float(v)!r}" for k, v in c.values.items()]
-        if c.effect == "gravity_load":
-            lines.append(f"# serve: --arm {c.values['arm_weight_nm'] / 9.80665:.4f},1.0  (mass kg at 1 m)")
-        if c.effect == "torque_saturation":
-            lines.append(f"# serve: write Torque Limit = {int(round(c.values['drive_ceiling'] * 1023))}")
-    return "\n".join(lines) + "\n"
 
 
 def _plots(trace: Trace, d: Diagnosis, out: Path) -> list[str]:
@@ -162,19 +175,22 @@ def _report(trace: Trace, d: Diagnosis, files: list[str], source: str) -> str:
            ("Unexplained residual: " + d.unexplained_detail) if d.unexplained else
            "Residual at noise level: " + ", ".join(f"{ch} {v:.2f} sd" for ch, v in d.residual_rms_sd.items()), ""]
     md += ["## Plots", ""] + [f"![{f}]({f})" for f in files]
-    md += ["", "## Files", "", "* `params.toml`: ServoParams (load with `ax12emu serve --params params.toml`).",
-           "* `effects.toml`: named effects that are not ServoParams fields.", "",
+    md += ["", "## Files", "",
+           "* `params.toml`: the fitted twin, base parameters and named effects (`[effects]`); serve it with "
+           "`ax12emu serve --params params.toml`.", "",
            f"{d.simulations} batched simulations, {d.seconds:.1f} s."]
     return "\n".join(md) + "\n"
 
 
 def write_outputs(trace: Trace, d: Diagnosis, out: str | Path, source: str = "trace",
                   params: ServoParams = ServoParams()) -> None:
-    """Write report.md, the PNG plots, params.toml, effects.toml and verdict.json into ``out``."""
+    """Write report.md, the PNG plots, params.toml (base and effects) and verdict.json into ``out``."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     files = _plots(trace, d, out)
     (out / "report.md").write_text(_report(trace, d, files, source), encoding="utf-8")
-    fitted_params(d, params).to_toml(out / "params.toml")
-    (out / "effects.toml").write_text(_effects_toml(d), encoding="utf-8")
+    notes = fitted_effects(d.named, d.knobs)[1]
+    header = (f"fitted by firmware_model.diagnose from {source}; named effects: {', '.join(d.named) or 'none'}",
+              *notes)
+    fitted_params(d, params).to_toml(out / "params.toml", comments=header)
     (out / "verdict.json").write_text(json.dumps(verdict_json(d), indent=2), encoding="utf-8")

@@ -89,3 +89,66 @@ def test_non_utf8_params_file_names_the_file(tmp_path):
     bad.write_bytes(b"gear_ratio = 254 # \xe9\n")
     with pytest.raises(ValueError, match="latin1.toml"):
         ServoParams.from_toml(bad)
+
+
+# ---------------------------------------------------------------------- effects (one file holds the fitted twin)
+from firmware_model.params import EFFECT_RANGES, ServoEffects  # noqa: E402
+
+ALL_EFFECTS = ServoEffects(backlash_rad=0.05, sensing_delay_s=0.02, command_delay_s=0.01, drive_ceiling_fraction=0.6,
+                           arm_weight_moment_nm=-0.3, extra_compliance_margin_units=3.5, position_offset_units=-4.0,
+                           position_gain=1.02)
+
+
+def test_every_effect_has_a_range_and_defaults_to_absent():
+    assert set(EFFECT_RANGES) == {f.name for f in dataclasses.fields(ServoEffects)}
+    assert ServoParams().effects.present() == {}
+
+
+def test_toml_round_trip_with_effects(tmp_path):
+    """Base fields and every effect survive to_toml / from_toml; absent effects are listed as comments."""
+    p = dataclasses.replace(ServoParams(), coulomb_friction_nm=0.07, effects=ALL_EFFECTS)
+    path = tmp_path / "twin.toml"
+    p.to_toml(path, comments=("fitted from a test",))
+    assert ServoParams.from_toml(path) == p
+    some = dataclasses.replace(p, effects=ServoEffects(backlash_rad=0.05))
+    some.to_toml(path)
+    text = path.read_text()
+    assert "[effects]" in text and "# sensing_delay_s: absent" in text
+    assert ServoParams.from_toml(path) == some
+
+
+def test_file_without_effects_reads_as_before(tmp_path):
+    """A params.toml from before effects were served (a flat table) loads with every effect absent."""
+    path = tmp_path / "old.toml"
+    path.write_text("static_friction_nm = 0.2\nsample_hold_s = 0.13\n")
+    assert ServoParams.from_toml(path).effects == ServoEffects()
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("[effects]\nbacklash_deg = 3\n", "unknown effect 'backlash_deg'"),
+        ("[effects]\nbacklash_rad = 2.9\n", r"backlash_rad must lie in \[0, 0.5\]"),
+        ("[effects]\nsensing_delay_s = -0.01\n", "sensing_delay_s"),
+        ("[effects]\ndrive_ceiling_fraction = 0\n", r"drive_ceiling_fraction must lie in \(0, 1\]"),
+        ("[effects]\ndrive_ceiling_fraction = 800\n", "drive_ceiling_fraction"),
+        ("[effects]\nposition_gain = true\n", "position_gain"),
+        ('[effects]\ncommand_delay_s = "5 ms"\n', "command_delay_s"),
+        ("backlash_rad = 0.05\n", "is an effect: put it under \\[effects\\]"),
+        ("effects = 3\n", "must be a table"),
+    ],
+)
+def test_effect_errors_name_file_and_key(tmp_path, text, message):
+    """Unknown effects, out-of-range values, wrong types and misplaced effects raise ValueError naming file and key."""
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(ValueError, match=message) as info:
+        ServoParams.from_toml(path)
+    assert "bad.toml" in str(info.value)
+
+
+def test_effects_validate_in_python_too():
+    with pytest.raises(ValueError, match="arm_weight_moment_nm"):
+        ServoEffects(arm_weight_moment_nm=float("nan"))
+    with pytest.raises(ValueError, match="ServoParams.effects"):
+        ServoParams(effects={"backlash_rad": 0.1})

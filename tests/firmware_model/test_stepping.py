@@ -11,7 +11,7 @@ import dataclasses
 
 import numpy as np
 import pytest
-from firmware_model.params import ServoParams
+from firmware_model.params import ServoEffects, ServoParams
 from firmware_model.physical import PhysicalModel
 from firmware_model import stepping
 from firmware_model.stepping import FusedNumpySteps, fused_scalar_steps, generic_steps
@@ -43,8 +43,12 @@ def _scenario(n: int, make_commands, wheel: bool) -> list[tuple[float, object]]:
     ]
 
 
-#: The data-sheet parameters have no viscous friction; a fitted set may (the kernels have a branch for it).
-PARAMS = {"data sheet": ServoParams(), "viscous": dataclasses.replace(ServoParams(), viscous_friction_nm_s_rad=0.02)}
+#: The data-sheet parameters have no viscous friction; a fitted set may (the kernels have a branch for it).  A
+#: fitted twin's drive ceiling, wider dead band, arm and sensor offset are plan data the fused kernels take.
+PARAMS = {"data sheet": ServoParams(), "viscous": dataclasses.replace(ServoParams(), viscous_friction_nm_s_rad=0.02),
+          "plan-data effects": dataclasses.replace(ServoParams(), effects=ServoEffects(  # an arm light enough to hold
+              drive_ceiling_fraction=0.6, extra_compliance_margin_units=2.0, arm_weight_moment_nm=0.02,
+              position_offset_units=-3.0, position_gain=1.02))}
 
 
 def _same_bits(a: np.ndarray, b: np.ndarray) -> bool:
@@ -215,3 +219,7 @@ def test_usual_configuration_runs_fused_and_others_the_generic_loop(commands):
     assert isinstance(_kernel(PhysicalModel(3), ccw_angle_limit=0), FusedNumpySteps)  # wheel mode
     assert _kernel(PhysicalModel(1), ccw_angle_limit=0).func is fused_scalar_steps
     assert _kernel(PhysicalModel(2), ccw_angle_limit=[0, 1023]).func is generic_steps  # wheel and joint mixed
+    for state_effect in (ServoEffects(backlash_rad=0.03), ServoEffects(sensing_delay_s=0.02)):  # kept per step
+        twin = dataclasses.replace(ServoParams(), effects=state_effect)
+        assert _kernel(PhysicalModel(1, twin)).func is generic_steps
+        assert _kernel(PhysicalModel(3, twin)).func is generic_steps

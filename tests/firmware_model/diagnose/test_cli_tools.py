@@ -24,10 +24,11 @@ def test_make_dataset_and_cli(tmp_path):
     assert [e["effect"] for e in verdict["named"]] == ["gravity_load"]
     assert verdict["gap_rms_after"]["present_position"] < verdict["gap_rms_before"]["present_position"]
     assert "round 1" in out.stderr  # progress
-    for f in ("report.md", "measured_vs_model.png", "residual_by_phase.png", "effects.toml"):
+    for f in ("report.md", "measured_vs_model.png", "residual_by_phase.png", "params.toml"):
         assert (tmp_path / "o" / f).stat().st_size > 0
-    ServoParams.from_toml(tmp_path / "o" / "params.toml")
-    assert "[gravity_load]" in (tmp_path / "o" / "effects.toml").read_text()
+    assert not (tmp_path / "o" / "effects.toml").exists()  # one file holds the whole twin
+    fitted = ServoParams.from_toml(tmp_path / "o" / "params.toml")
+    assert fitted.effects.present().keys() == {"arm_weight_moment_nm"}
 
 
 def test_cli_reports_malformed_trace(tmp_path):

@@ -1,0 +1,73 @@
+"""The one params.toml the diagnosis writes serves the fitted twin: base parameters and every named effect."""
+
+import numpy as np
+import pytest
+
+from firmware_model.diagnose.batch import null_knobs
+from firmware_model.diagnose.effects import LIBRARY, apply_effects
+from firmware_model.diagnose.output import BASE_FIELD_EFFECTS, EFFECT_FIELDS, fitted_effects, write_outputs
+from firmware_model.diagnose.replay import replay
+from firmware_model.diagnose.search import diagnose
+from firmware_model.diagnose.synthetic import make_trace
+from firmware_model.params import ServoEffects, ServoParams
+
+
+def test_every_library_effect_has_a_place_in_the_params_file():
+    assert set(EFFECT_FIELDS) | set(BASE_FIELD_EFFECTS) == set(LIBRARY)
+    assert not set(EFFECT_FIELDS) & set(BASE_FIELD_EFFECTS)
+
+
+@pytest.mark.parametrize("effect", sorted(EFFECT_FIELDS))
+def test_fitted_effects_carry_the_fitted_values(effect):
+    values = {p.name: p.hidden[1] for p in LIBRARY[effect].params}
+    if effect == "sensor_offset_gain":  # its hidden range is the gain's distance from 1
+        values["position_gain"] = 1.0 + values["position_gain"]
+    knobs = apply_effects(null_knobs(ServoParams()), {effect: values})
+    effects, notes = fitted_effects([effect], knobs)
+    assert effects.present() == {field: knobs[knob] for field, knob in EFFECT_FIELDS[effect].items()} and not notes
+    assert fitted_effects([], knobs)[0] == ServoEffects()  # only named effects go in
+
+
+def test_a_value_that_cannot_be_served_is_pinned_with_a_note():
+    """A negative delay (the reading ahead of the shaft) is served as none, and the note says so."""
+    knobs = apply_effects(null_knobs(ServoParams()), {"delay": {"delay_s": -0.004}})
+    effects, notes = fitted_effects(["delay"], knobs)
+    assert effects == ServoEffects() and "sensing_delay_s" in notes[0] and "served as 0" in notes[0]
+
+
+@pytest.fixture(scope="module")
+def fonts_loaded():
+    """Matplotlib keeps the font files it loads open for the life of the process (a cache, not a leak): load them
+    before the per-test leak check looks (module scope is set up first)."""
+    import io
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots()
+    ax.plot([0, 1], [0, 1], label="x")
+    ax.legend()
+    fig.savefig(io.BytesIO(), format="png")
+    plt.close(fig)
+
+
+def test_params_file_serves_the_fitted_twin(tmp_path, fonts_loaded):
+    """Diagnose a trace with hidden effects, write the outputs, load params.toml into the physical model:
+    it reads exactly what the diagnosis's fitted model read, every register, every row."""
+    hidden = {"torque_saturation": {"drive_ceiling": 0.5}, "sensor_offset_gain": {"position_offset_units": 6.0,
+                                                                                   "position_gain": 1.0}}
+    trace, _ = make_trace(hidden, seed=5, duration_s=8.0)
+    d = diagnose(trace, effects=["torque_saturation", "sensor_offset_gain", "compliance_deadband"])
+    assert set(d.named) == set(hidden)
+    write_outputs(trace, d, tmp_path, source="synthetic")
+    assert not (tmp_path / "effects.toml").exists()
+    twin = ServoParams.from_toml(tmp_path / "params.toml")
+    assert set(twin.effects.present()) == {"drive_ceiling_fraction", "position_offset_units", "position_gain"}
+    served = replay(trace, twin)
+    for ch in ("present_position", "present_speed", "present_load"):
+        np.testing.assert_array_equal(served[ch], d.sim_after[ch], err_msg=ch)
+    plain_gap = np.sqrt(np.mean((replay(trace)["present_position"] - trace["present_position"]) ** 2.0))
+    twin_gap = np.sqrt(np.mean((served["present_position"] - trace["present_position"]) ** 2.0))
+    assert twin_gap < 0.1 * plain_gap
