@@ -76,8 +76,14 @@ def build_parser() -> argparse.ArgumentParser:
     where.add_argument("--tcp", metavar="HOST:PORT", help="serve the raw byte stream on TCP instead (PORT 0: pick one)")
     serve.add_argument("--link", metavar="PATH", help="with a pty: symlink PATH to its slave side (removed on exit)")
     serve.add_argument(
-        "--allow-remote", action="store_true", help="allow --tcp to bind an address other than loopback"
+        "--allow-remote", action="store_true", help="allow --tcp and --web to bind an address other than loopback"
     )
+    live = serve.add_argument_group("live view (docs: live-view.md)")
+    live.add_argument(
+        "--web", metavar="HOST:PORT",
+        help="serve a live page of the servos on HOST:PORT (loopback; PORT 0: pick one); its URL is the second stdout line",
+    )
+    live.add_argument("--monitor", action="store_true", help="draw a live table of the servos on stderr")
     serve.add_argument("--state-dir", metavar="DIR", help="persist each servo's EEPROM area in DIR")
     serve.add_argument(
         "--factory-reset", action="store_true", help="ignore saved state and start from factory defaults"
@@ -148,6 +154,16 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
             if not is_loopback(host) and not args.allow_remote:
                 parser.error(f"--tcp {host}: binding beyond loopback needs --allow-remote")
             args.tcp_address = (host, port)
+        if args.web:
+            from ax12emu.serve.transports.tcp import is_loopback, parse_host_port
+
+            try:
+                host, port = parse_host_port(args.web)
+            except ValueError as exc:
+                parser.error(f"--web: {exc}")
+            if not is_loopback(host) and not args.allow_remote:
+                parser.error(f"--web {host}: binding beyond loopback needs --allow-remote")
+            args.web_address = (host, port)
     return args
 
 
@@ -199,9 +215,29 @@ def _serve(args: argparse.Namespace) -> int:
     def _stop(signum: int, frame: object) -> None:
         server.stop()
 
+    live = None
+    if args.web or args.monitor:
+        try:
+            from ax12emu.live import LiveView
+        except ImportError as exc:
+            print(f"ax12emu: --web and --monitor need the web extra: pip install 'ax12emu[web]' ({exc})", file=sys.stderr)
+            transport.close()
+            bus.close()
+            return 2
+        try:
+            live = LiveView.for_server(
+                server, seed=args.fault_seed, web=getattr(args, "web_address", None), allow_remote=args.allow_remote, monitor=args.monitor
+            ).start()
+        except BaseException:
+            transport.close()
+            bus.close()
+            raise
+
     signal.signal(signal.SIGINT, _stop)
     signal.signal(signal.SIGTERM, _stop)
-    print(where, flush=True)
+    print(where, flush=True)  # the first stdout line: the port, which scripts and tests read
+    if live is not None and live.url:
+        print(live.url, flush=True)
     log.info(
         "serving IDs %s on %s (profile %s%s%s)",
         ",".join(map(str, bus.ids)),
@@ -213,6 +249,8 @@ def _serve(args: argparse.Namespace) -> int:
     try:
         server.serve_forever()
     finally:
+        if live is not None:
+            live.close()
         transport.close()
         bus.close()
         if trace is not None:

@@ -266,6 +266,24 @@ class Faults:
         for index in list(self._stalls):
             self.release(self.bus.slots[index])
 
+    def active(self, slot: int) -> list[str]:
+        """What is done to the servo launched as ``slot`` now, in words (for live views and logs)."""
+        index = self._index(slot)
+        out = []
+        if index in self._vanished:
+            every_s, for_s = self._vanished[index]
+            out.append("vanished" if every_s is None else f"vanishes {for_s:g} s of every {every_s:g} s")
+        if index in self._blocked or index in self._stalls:
+            out.append("stalled")
+        if index in self._alarms:
+            out.append(f"alarm {self._alarms[index]:#04x}")
+        if index in self._duplicates:
+            out.append(f"answers as ID {self.bus.servos[index].id}")
+        out.extend(f"{name} held at {value}" for name, value in self._held.get(index, {}).items())
+        if (self.drop or self.corrupt or self.delay) and (self.reply_ids is None or self.bus.servos[index].id in self.reply_ids):
+            out.append(f"replies: drop {self.drop:g}, corrupt {self.corrupt:g}, delay {self.delay:g}")
+        return out
+
     # -- hooks called by the bus -----------------------------------------------------
     def admit(self, servo: "VirtualServo") -> bool:
         """Before ``servo`` handles a packet: False if it is absent; apply forced alarms."""

@@ -14,17 +14,56 @@ IDs come from the ``ax12_ids`` marker, or from indirect parametrization
 default is ID 1.  The ``ax12_bus_options`` marker passes keyword arguments
 to :class:`~ax12emu.VirtualBus` (``transport="inprocess"``,
 ``virtual_time=True``, ``faults=FaultConfig(...)``, ...).
+
+``pytest --ax12-web`` serves a live page of each bus (see the live-view docs)
+and keeps it up after the test, pass or fail, until Ctrl-C, so a failing
+test can be watched and its last state inspected.
 """
 
 from __future__ import annotations
 
 import importlib.util
+import time
 from collections.abc import Iterator
 from typing import Any
 
 import pytest
 
 __all__ = ["ax12_bus"]
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    """``--ax12-web``: watch each ax12_bus in the browser; the page stays up after the test until Ctrl-C."""
+    group = parser.getgroup("ax12emu")
+    group.addoption(
+        "--ax12-web",
+        nargs="?",
+        const="127.0.0.1:0",
+        default=None,
+        metavar="HOST:PORT",
+        help="serve a live view of each ax12_bus (loopback, default a free port) and keep it up after the test until Ctrl-C",
+    )
+
+
+def _say(config: pytest.Config, text: str) -> None:
+    """A line on the terminal even while pytest captures output."""
+    capture = config.pluginmanager.getplugin("capturemanager")
+    writer = config.pluginmanager.getplugin("terminalreporter")
+    if capture is not None and writer is not None:
+        with capture.global_and_fixture_disabled():
+            writer.write_line(text)
+    elif writer is not None:
+        writer.write_line(text)
+
+
+def _linger(config: pytest.Config, url: str) -> None:
+    """Keep the page up until Ctrl-C, which ends the wait (and not the test run)."""
+    _say(config, f"ax12emu live view still at {url} - press Ctrl-C to close it and go on")
+    try:
+        while True:
+            time.sleep(0.2)
+    except KeyboardInterrupt:
+        _say(config, "ax12emu live view closed")
 
 
 def pytest_configure(config: pytest.Config) -> None:
@@ -52,5 +91,12 @@ def ax12_bus(request: pytest.FixtureRequest) -> Iterator[Any]:
     options_marker = request.node.get_closest_marker("ax12_bus_options")
     if options_marker is not None:
         options.update(options_marker.kwargs)
+    web = request.config.getoption("--ax12-web", None)
+    if web is not None:
+        options.setdefault("web", web)
     with VirtualBus(ids, **options) as bus:
+        if bus.web_url is not None:
+            _say(request.config, f"ax12emu live view of {request.node.nodeid}: {bus.web_url}")
         yield bus
+        if web is not None and bus.web_url is not None:
+            _linger(request.config, bus.web_url)

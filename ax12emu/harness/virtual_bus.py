@@ -59,6 +59,19 @@ def _next_name() -> str:
         return f"bus{_instances}"
 
 
+def _web_address(web: str | tuple[str, int] | bool | None) -> tuple[str, int] | None:
+    if web is None or web is False:
+        return None
+    if web is True:
+        return ("127.0.0.1", 0)
+    if isinstance(web, str):
+        from ax12emu.serve.transports.tcp import parse_host_port
+
+        return parse_host_port(web)
+    host, port = web
+    return (str(host), int(port))
+
+
 class _FaultsOnBus:
     """``bus.faults``: every Faults method, run where the bus is served."""
 
@@ -94,6 +107,7 @@ class VirtualBus:
         echo: bool = False,
         name: str | None = None,
         tcp_address: tuple[str, int] = ("127.0.0.1", 0),
+        web: str | tuple[str, int] | bool | None = None,
     ) -> None:
         if transport not in TRANSPORTS:
             raise ValueError(f"unknown transport {transport!r}; choose one of: {', '.join(TRANSPORTS)}")
@@ -110,6 +124,9 @@ class VirtualBus:
         self._trace_path = trace
         self._pace, self._echo = pace, echo
         self._tcp_address = tcp_address
+        #: Where to serve the live view (ax12emu.live): True for loopback on a free port, "HOST:PORT" or a pair.
+        self._web_address = _web_address(web)
+        self._live: Any = None
         self.name = name or _next_name()
         self.port = ""
         self._trace: TraceWriter | None = None
@@ -134,6 +151,7 @@ class VirtualBus:
                 self._link = InProcessLink(self.bus, trace=self._trace)
                 register(self.name, self._link)
                 self.port = f"ax12emu://{self.name}"
+                self._start_live()
                 return self
             from ax12emu.serve import BusServer, open_transport
 
@@ -146,10 +164,34 @@ class VirtualBus:
             self._server = BusServer(self.bus, self._transport, pace=self._pace, echo=self._echo, trace=self._trace)
             self._thread = threading.Thread(target=self._serve, name=f"ax12emu-{self.name}", daemon=True)
             self._thread.start()
+            self._start_live()
         except BaseException:
             self.close()
             raise
         return self
+
+    def _start_live(self) -> None:
+        """The live page (``web=...``): sampled through :meth:`call`; its controls are this object's methods."""
+        if self._web_address is None:
+            return
+        from ax12emu.live import ByteTap, LiveView
+
+        if self._link is not None:
+            link = self._link
+            tap = ByteTap(link.trace)
+            link.trace = tap
+            self._live = LiveView(
+                self.call, controls=self, tap=tap, counters=lambda: {"packets_in": link.packets_in}, web=self._web_address,
+                profile=self.bus.options.profile,
+            )
+        else:
+            self._live = LiveView.for_server(self._server, controls=self, web=self._web_address)
+        self._live.start()
+
+    @property
+    def web_url(self) -> str | None:
+        """The live page's address (``VirtualBus(web=True)``), or None."""
+        return None if self._live is None else self._live.url
 
     def _serve(self) -> None:
         try:
@@ -162,6 +204,8 @@ class VirtualBus:
         if self._closed:
             return
         self._closed = True
+        if self._live is not None:  # first: it reads the bus through the serving thread
+            self._live.close()
         if self._server is not None:
             self._server.stop()
         if self._thread is not None:

@@ -28,7 +28,7 @@ from ax12emu.protocol.packets import BROADCAST_ID, Instruction, InstructionPacke
 
 from .trace import IN, OUT, Chunk
 
-__all__ = ["Decoded", "decode", "format_decoded", "INSTRUCTION", "STATUS", "ECHO", "GARBAGE"]
+__all__ = ["Decoded", "Decoder", "decode", "format_decoded", "INSTRUCTION", "STATUS", "ECHO", "GARBAGE"]
 
 INSTRUCTION, STATUS, ECHO, GARBAGE = "instruction", "status", "echo", "garbage"
 _INSTRUCTIONS = frozenset(int(code) for code in Instruction)
@@ -105,20 +105,35 @@ class _Conversation:
         return Decoded(chunk.t, INSTRUCTION, packet, describe_instruction(packet, profile))
 
 
-def decode(chunks: Iterable[Chunk], *, profile: str = DEFAULT_PROFILE) -> list[Decoded]:
-    """Decode chunks (a trace or a raw capture) into packets in line order."""
-    streams = {IN: _Stream(), OUT: _Stream(), None: _Stream()}
-    talk = _Conversation()
-    out: list[Decoded] = []
-    for chunk in chunks:
+class Decoder:
+    """Decodes chunks as they come (a live view), keeping the framers and the conversation between calls."""
+
+    def __init__(self, *, profile: str = DEFAULT_PROFILE) -> None:
+        self.profile = profile
+        self._streams = {IN: _Stream(), OUT: _Stream(), None: _Stream()}
+        self._talk = _Conversation()
+
+    def feed(self, chunk: Chunk, out: list[Decoded] | None = None) -> list[Decoded]:
+        """Append the packets ``chunk`` completes to ``out`` (a new list by default) and return it."""
+        out = [] if out is None else out
+        stream = self._streams[chunk.direction]
         # Byte by byte, so discarded bytes are reported where they were on the line.
         for offset in range(len(chunk.data)):
-            packets, lost = streams[chunk.direction].feed(chunk.data[offset : offset + 1], chunk.t)
+            packets, lost = stream.feed(chunk.data[offset : offset + 1], chunk.t)
             if lost:
                 if out and out[-1].kind == GARBAGE and out[-1].t == chunk.t:
                     lost += out.pop().discarded
                 out.append(Decoded(chunk.t, GARBAGE, None, f"{lost} byte(s) discarded while hunting for a frame", discarded=lost))
-            out.extend(talk.describe(packet, chunk, profile) for packet in packets)
+            out.extend(self._talk.describe(packet, chunk, self.profile) for packet in packets)
+        return out
+
+
+def decode(chunks: Iterable[Chunk], *, profile: str = DEFAULT_PROFILE) -> list[Decoded]:
+    """Decode chunks (a trace or a raw capture) into packets in line order."""
+    decoder = Decoder(profile=profile)
+    out: list[Decoded] = []
+    for chunk in chunks:
+        decoder.feed(chunk, out)
     return out
 
 

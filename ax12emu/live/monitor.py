@@ -1,0 +1,88 @@
+"""``ax12emu serve --monitor``: the live picture in the terminal, redrawn in place.
+
+Why rich: its ``Live`` display redraws a table in place on any terminal
+(and degrades to plain lines where there is none), is widely used and well
+kept, and needs no curses screen.  The monitor draws on stderr, so the
+first stdout line (the port scripts read) is never disturbed, and it
+renders from the :class:`~ax12emu.live.sampler.Sampler`'s frames at
+``refresh_hz``, never touching the bus itself.
+"""
+
+from __future__ import annotations
+
+import sys
+from typing import IO, Any
+
+from rich.console import Console, Group
+from rich.live import Live
+from rich.table import Table
+from rich.text import Text
+
+from .sampler import Frame, Sampler
+
+__all__ = ["Monitor", "render"]
+
+#: Columns of the servo table: heading, how to show one servo.
+COLUMNS: tuple[tuple[str, Any], ...] = (
+    ("ID", lambda s: str(s["id"])),
+    ("model", lambda s: f"{s['model']} (P{s['protocol']})"),
+    ("position", lambda s: f"{s['registers']['present_position']:4d}"),
+    ("goal", lambda s: f"{s['registers']['goal_position']:4d}"),
+    ("limits", lambda s: "wheel" if s["wheel_mode"] else f"{s['registers']['cw_angle_limit']}..{s['registers']['ccw_angle_limit']}"),
+    ("speed", lambda s: f"{_signed(s['registers']['present_speed']):+5d}"),
+    ("load", lambda s: f"{_signed(s['registers']['present_load']):+5d}"),
+    ("V", lambda s: f"{s['registers']['present_voltage'] / 10:.1f}"),
+    ("°C", lambda s: str(s["registers"]["present_temperature"])),
+    ("torque", lambda s: "on" if s["registers"]["torque_enable"] else "off"),
+    ("LED", lambda s: "on" if s["registers"]["led"] else "off"),
+    ("alarms", lambda s: ",".join(s["alarm_names"]) or "-"),
+    ("faults", lambda s: "; ".join(s["faults"]) or "-"),
+)
+
+
+def _signed(value: int) -> int:
+    """Speed and load registers: bit 10 is the direction (CW), bits 0-9 the magnitude."""
+    return -(value & 0x3FF) if value & 0x400 else value
+
+
+def render(frame: Frame) -> Group:
+    """One frame as a rich renderable: a status line, the servo table, the newest log lines."""
+    stats = frame["stats"]
+    clock = "paused" if frame["paused"] else "running"
+    head = Text(
+        f"t={frame['sim_time_s']:.3f} s ({clock})  packets/s {stats['packets_per_s']:.0f}  packets {stats['packets']}  "
+        f"status errors {stats['status_errors']}  checksum errors {stats['checksum_errors']}  "
+        f"timeouts injected {stats['timeouts_injected']}  corrupt injected {stats['corrupt_injected']}"
+    )
+    table = Table(expand=False, show_edge=False, pad_edge=False)
+    for heading, _ in COLUMNS:
+        table.add_column(heading, no_wrap=True)
+    for servo in frame["servos"]:
+        style = "red" if servo["alarm_names"] or servo["faults"] else None
+        table.add_row(*(show(servo) for _, show in COLUMNS), style=style)
+    return Group(head, table)
+
+
+class Monitor:
+    """Redraws ``sampler``'s newest frame on ``stream`` (stderr by default) ``refresh_hz`` times a second."""
+
+    def __init__(self, sampler: Sampler, *, stream: IO[str] | None = None, refresh_hz: float = 5.0, force_terminal: bool | None = None) -> None:
+        self.sampler = sampler
+        self.console = Console(file=stream or sys.stderr, force_terminal=force_terminal)
+        self._every = max(1, round(1.0 / (refresh_hz * sampler.period_s)))
+        self._live = Live(console=self.console, auto_refresh=False, transient=False, redirect_stdout=False, redirect_stderr=False)
+        self.drawn = 0
+
+    def start(self) -> "Monitor":
+        self._live.start()
+        self.sampler.subscribe(self._on_frame)
+        return self
+
+    def _on_frame(self, frame: Frame) -> None:
+        if frame["seq"] % self._every == 0:
+            self._live.update(render(frame), refresh=True)
+            self.drawn += 1
+
+    def close(self) -> None:
+        self.sampler.unsubscribe(self._on_frame)
+        self._live.stop()

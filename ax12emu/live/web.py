@@ -1,0 +1,327 @@
+"""The live view's web server: a page, a JSON snapshot, a WebSocket stream and the controls.
+
+Why aiohttp: one well-kept package (the aio-libs project, released since 2014)
+gives an HTTP server, WebSockets and their limits (request body size,
+message size) on asyncio, with no other framework and no ASGI server to
+pair it with, and it runs in a thread of its own, beside the serving
+thread, with its own event loop.  Starlette with uvicorn would do the same
+job as two packages.
+
+Routes (all answers JSON except the page and its assets):
+
+* ``GET /``: the page (``assets/index.html``; scripts and styles from ``/assets/``,
+  nothing fetched from the internet).
+* ``GET /api/servos``: a snapshot of every servo (registers by name, alarms,
+  faults), the clock and the bus statistics, for scripts.
+* ``GET /api/log?n=N``: the newest packet-log lines (``ax12emu decode``'s).
+* ``GET /api/actions``: the controls and their parameters.
+* ``POST /api/control``: one control, ``{"action": NAME, ...}``
+  (see :mod:`ax12emu.live.controls`); also accepted as a WebSocket text message.
+* ``GET /ws``: a WebSocket of frames at the sampler's rate.
+
+Robustness: the bus never waits on this thread (frames come from the
+:class:`~ax12emu.live.sampler.Sampler`, which reads the bus at a bounded
+rate).  Request bodies over ``MAX_BODY_BYTES`` get 413, WebSocket messages
+over ``MAX_MESSAGE_BYTES`` close the socket with 1009 (message too big),
+malformed JSON or a bad control gets 400 with the reason; each WebSocket
+client has a queue of ``QUEUE_FRAMES`` frames, and a client that falls that
+far behind (one that never reads) is dropped; past ``max_connections`` open
+connections a new one gets 503 and is closed; idle keep-alive connections
+close after ``KEEPALIVE_S``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import socket
+import threading
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+from typing import Any
+
+from aiohttp import WSMsgType, web
+
+from ax12emu.serve.transports.tcp import is_loopback
+
+from .controls import ACTIONS, ControlError, Controls, apply
+from .sampler import Frame, Sampler
+
+__all__ = ["WebServer", "ASSETS", "MAX_BODY_BYTES", "MAX_MESSAGE_BYTES", "QUEUE_FRAMES"]
+
+log = logging.getLogger(__name__)
+
+#: The page's files, shipped as package data.
+ASSETS = Path(__file__).resolve().parent / "assets"
+#: Largest control request body; a control message is a few dozen bytes.
+MAX_BODY_BYTES = 16 * 1024
+#: Largest WebSocket message a client may send.
+MAX_MESSAGE_BYTES = 4 * 1024
+#: Frames queued per WebSocket client before it counts as not reading and is dropped.
+QUEUE_FRAMES = 8
+#: Idle keep-alive connections close after this long.
+KEEPALIVE_S = 15.0
+#: Newest log lines ``/api/log`` returns by default and at most.
+LOG_LINES = 200
+
+
+def _error(status: int, text: str) -> web.Response:
+    return web.json_response({"error": text}, status=status)
+
+
+class _Refuse(asyncio.Protocol):
+    """A connection past the limit: one 503 answer, then closed."""
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        body = b'{"error": "too many connections"}'
+        transport.write(  # type: ignore[attr-defined]
+            b"HTTP/1.1 503 Service Unavailable\r\nContent-Type: application/json\r\nConnection: close\r\n"
+            + f"Content-Length: {len(body)}\r\n\r\n".encode()
+            + body
+        )
+        transport.close()
+
+
+class WebServer:
+    """Serves the live view of ``sampler``'s bus on ``host:port`` in its own thread."""
+
+    def __init__(
+        self,
+        sampler: Sampler,
+        controls: Controls | None,
+        *,
+        host: str = "127.0.0.1",
+        port: int = 0,
+        allow_remote: bool = False,
+        max_connections: int = 256,
+        max_clients: int = 32,
+    ) -> None:
+        if not is_loopback(host) and not allow_remote:
+            raise ValueError(f"--web {host}: binding beyond loopback needs --allow-remote")
+        self.sampler = sampler
+        self.controls = controls
+        self.host, self.port = host, port
+        self.max_connections = max_connections
+        self.max_clients = max_clients
+        #: Each WebSocket client's frame queue and its connection (aborted when it is dropped).
+        self._clients: dict[web.WebSocketResponse, tuple[asyncio.Queue[str], asyncio.BaseTransport | None]] = {}
+        #: Clients dropped for not reading (diagnostics and tests).
+        self.dropped_clients = 0
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._thread: threading.Thread | None = None
+        self._ready = threading.Event()
+        self._failure: BaseException | None = None
+        # Controls wait for the serving thread (about a millisecond): never on the event loop.
+        self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="ax12emu-live-control")
+        self._runner: web.AppRunner | None = None
+        self._server: asyncio.base_events.Server | None = None
+
+    @property
+    def url(self) -> str:
+        host = f"[{self.host}]" if ":" in self.host else self.host
+        return f"http://{host}:{self.port}/"
+
+    # -- life cycle -------------------------------------------------------------------------
+    def start(self) -> "WebServer":
+        """Bind and serve; raises the bind error (a port in use) here, in the caller's thread."""
+        self._thread = threading.Thread(target=self._run, name="ax12emu-live-web", daemon=True)
+        self._thread.start()
+        self._ready.wait(10.0)
+        if self._failure is not None:
+            self._thread.join(5.0)
+            self._executor.shutdown(wait=True)
+            raise self._failure
+        self.sampler.subscribe(self._on_frame)
+        return self
+
+    def close(self) -> None:
+        self.sampler.unsubscribe(self._on_frame)
+        loop = self._loop
+        if loop is not None and self._thread is not None and self._thread.is_alive():
+            loop.call_soon_threadsafe(loop.stop)
+            self._thread.join(10.0)
+        self._executor.shutdown(wait=True)
+
+    def _run(self) -> None:
+        loop = asyncio.new_event_loop()
+        self._loop = loop
+        try:
+            loop.run_until_complete(self._setup())
+        except BaseException as exc:  # reported to start()
+            self._failure = exc
+            self._ready.set()
+            loop.run_until_complete(self._teardown())
+            loop.close()
+            return
+        self._ready.set()
+        try:
+            loop.run_forever()
+        finally:
+            loop.run_until_complete(self._teardown())
+            loop.close()
+
+    async def _setup(self) -> None:
+        app = web.Application(client_max_size=MAX_BODY_BYTES)
+        app.router.add_get("/", self._index)
+        app.router.add_static("/assets/", ASSETS, show_index=False)
+        app.router.add_get("/api/servos", self._servos)
+        app.router.add_get("/api/log", self._log)
+        app.router.add_get("/api/actions", self._actions)
+        app.router.add_post("/api/control", self._control)
+        app.router.add_get("/ws", self._ws)
+        self._runner = web.AppRunner(app, access_log=None, keepalive_timeout=KEEPALIVE_S, shutdown_timeout=1.0)
+        await self._runner.setup()
+        family = socket.AF_INET6 if ":" in self.host else socket.AF_INET
+        sock = socket.socket(family, socket.SOCK_STREAM)
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+            sock.bind((self.host, self.port))
+            sock.listen(128)
+            sock.setblocking(False)
+        except OSError:
+            sock.close()
+            raise
+        self.port = sock.getsockname()[1]
+        handler = self._runner.server
+        assert handler is not None
+
+        def protocol() -> asyncio.Protocol:
+            if len(handler.connections) >= self.max_connections:
+                return _Refuse()
+            return handler()
+
+        self._server = await asyncio.get_running_loop().create_server(protocol, sock=sock)
+
+    async def _teardown(self) -> None:
+        for ws in list(self._clients):
+            await self._drop(ws, "the live view is closing")
+        if self._server is not None:
+            self._server.close()
+            await self._server.wait_closed()
+        if self._runner is not None:
+            await self._runner.cleanup()
+
+    # -- frames -----------------------------------------------------------------------------
+    def _on_frame(self, frame: Frame) -> None:
+        """On the sampler thread: hand the frame to the loop (never blocks)."""
+        loop = self._loop
+        if loop is not None and self._clients:
+            try:
+                loop.call_soon_threadsafe(self._broadcast, frame)
+            except RuntimeError:  # the loop closed meanwhile
+                pass
+
+    def _broadcast(self, frame: Frame) -> None:
+        text = json.dumps({"type": "frame", **frame}, separators=(",", ":"))
+        for ws, (queue, _) in list(self._clients.items()):
+            try:
+                queue.put_nowait(text)
+            except asyncio.QueueFull:
+                self.dropped_clients += 1
+                self.sampler.note("dropped a live-view client that stopped reading")
+                asyncio.ensure_future(self._drop(ws, "not reading"))
+
+    async def _drop(self, ws: web.WebSocketResponse, why: str) -> None:
+        client = self._clients.pop(ws, None)
+        if client is None:
+            return
+        queue, transport = client
+        if not queue.full():
+            queue.put_nowait("")  # the writer ends
+        if transport is not None:
+            transport.abort()  # a client that does not read would hold a polite close up
+        log.info("live view: dropped a WebSocket client (%s)", why)
+
+    # -- routes -----------------------------------------------------------------------------
+    async def _index(self, request: web.Request) -> web.StreamResponse:
+        return web.FileResponse(ASSETS / "index.html")
+
+    def _snapshot(self) -> dict[str, Any] | None:
+        frame = self.sampler.latest
+        if frame is None:
+            return None
+        return {key: value for key, value in frame.items() if key != "log"}
+
+    async def _servos(self, request: web.Request) -> web.Response:
+        snapshot = self._snapshot()
+        if snapshot is None:
+            return _error(503, "no snapshot yet: the sampler has not read the bus")
+        return web.json_response(snapshot)
+
+    async def _log(self, request: web.Request) -> web.Response:
+        try:
+            count = int(request.query.get("n", LOG_LINES))
+        except ValueError:
+            return _error(400, f"n must be an integer, got {request.query.get('n')!r}")
+        if not 0 < count <= LOG_LINES:
+            return _error(400, f"n must be 1..{LOG_LINES}, got {count}")
+        lines = list(self.sampler.log_lines)[-count:]
+        return web.json_response({"lines": lines})
+
+    async def _actions(self, request: web.Request) -> web.Response:
+        return web.json_response({name: {"params": list(action.params), "defaults": dict(action.defaults or {})} for name, action in ACTIONS.items()})
+
+    async def _apply(self, message: Any) -> tuple[int, dict[str, Any]]:
+        if self.controls is None:
+            return 403, {"error": "this live view is read-only"}
+        loop = asyncio.get_running_loop()
+        try:
+            said = await loop.run_in_executor(self._executor, apply, self.controls, message)
+        except ControlError as exc:
+            return 400, {"error": str(exc)}
+        except TimeoutError:
+            return 503, {"error": "the bus did not answer in time"}
+        self.sampler.note(said, id=message.get("id", message.get("slot")))
+        return 200, {"ok": True, "log": said}
+
+    async def _control(self, request: web.Request) -> web.Response:
+        if request.content_length is not None and request.content_length > MAX_BODY_BYTES:
+            return _error(413, f"request body over {MAX_BODY_BYTES} bytes")
+        try:
+            message = await request.json()
+        except web.HTTPRequestEntityTooLarge:
+            return _error(413, f"request body over {MAX_BODY_BYTES} bytes")
+        except (ValueError, UnicodeDecodeError) as exc:
+            return _error(400, f"the body is not JSON: {exc}")
+        status, body = await self._apply(message)
+        return web.json_response(body, status=status)
+
+    async def _ws(self, request: web.Request) -> web.StreamResponse:
+        if len(self._clients) >= self.max_clients:
+            return _error(503, f"at most {self.max_clients} live-view clients at once")
+        ws = web.WebSocketResponse(max_msg_size=MAX_MESSAGE_BYTES, heartbeat=None)
+        await ws.prepare(request)
+        queue: asyncio.Queue[str] = asyncio.Queue(maxsize=QUEUE_FRAMES)
+        self._clients[ws] = (queue, request.transport)
+        hello = {"type": "hello", "log": list(self.sampler.log_lines)[-LOG_LINES:], "actions": list(ACTIONS)}
+        await ws.send_str(json.dumps(hello, separators=(",", ":")))
+        writer = asyncio.ensure_future(self._write(ws, queue))
+        try:
+            async for message in ws:
+                if message.type != WSMsgType.TEXT:
+                    if message.type == WSMsgType.ERROR:
+                        break
+                    await ws.send_str(json.dumps({"type": "error", "error": "send control messages as JSON text"}))
+                    continue
+                try:
+                    parsed = json.loads(message.data)
+                except ValueError as exc:
+                    await ws.send_str(json.dumps({"type": "error", "error": f"not JSON: {exc}"}))
+                    continue
+                status, body = await self._apply(parsed)
+                await ws.send_str(json.dumps({"type": "reply", "status": status, **body}))
+        finally:
+            writer.cancel()
+            self._clients.pop(ws, None)
+        return ws
+
+    async def _write(self, ws: web.WebSocketResponse, queue: asyncio.Queue[str]) -> None:
+        try:
+            while True:
+                text = await queue.get()
+                if not text or ws.closed:
+                    return
+                await ws.send_str(text)
+        except (ConnectionError, RuntimeError):
+            self._clients.pop(ws, None)
