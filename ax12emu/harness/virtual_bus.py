@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 import threading
 from collections.abc import Callable, Iterable
 from typing import Any
@@ -36,6 +37,7 @@ from ax12emu.servo.model_factory import ModelChoice, build_model
 from ax12emu.servo.virtual_servo import ServoOptions
 from ax12emu.tracing.trace import TraceWriter
 from firmware_model.interface import AngleSettable, ServoModel
+from firmware_model.params import ServoParams
 
 from .inprocess import InProcessLink, register, unregister
 
@@ -100,6 +102,7 @@ class VirtualBus:
         time_scale: float = 1.0,
         options: ServoOptions = ServoOptions(),
         model: ServoModel | str | None = None,
+        params: str | os.PathLike[str] | ServoParams | None = None,
         faults: FaultConfig | None = None,
         seed: int = 0,
         trace: str | None = None,
@@ -115,7 +118,12 @@ class VirtualBus:
         self.virtual_time = virtual_time
         clock = VirtualClock() if virtual_time else WallClock(time_scale)
         slots = list(ids)
-        if isinstance(model, str):
+        if params is not None:  # a parameter file (e.g. a fitted twin's params.toml, effects included) or object
+            if model is not None and not isinstance(model, str):
+                raise ValueError("params= builds the physical model; it cannot go with a model object")
+            given = {"params": params} if isinstance(params, ServoParams) else {"params_path": params}
+            model = build_model(ModelChoice(name=model or "physical", **given), len(slots))
+        elif isinstance(model, str):
             model = build_model(ModelChoice(name=model), len(slots))
         self.bus = Bus(slots, options=options, model=model, clock=clock)
         self.seed = seed

@@ -9,6 +9,7 @@ with a message fit for one line on stderr.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from os import PathLike
 
 from firmware_model import KinematicModel, PhysicalModel, ServoParams
 from firmware_model.interface import ServoModel
@@ -25,8 +26,11 @@ class ModelChoice:
 
     #: "physical" (firmware and physics, the default) or "kinematic" (constant-speed moves).
     name: str = "physical"
-    #: A TOML file of ServoParams (e.g. written by ``firmware_model.diagnose``); None: the defaults.
-    params_path: str | None = None
+    #: A TOML file of ServoParams, effects included (e.g. the params.toml ``firmware_model.diagnose`` writes);
+    #: None: the defaults.
+    params_path: str | PathLike[str] | None = None
+    #: ServoParams as an object (from Python), instead of ``params_path``.
+    params: ServoParams | None = None
     #: Supply voltage, V; None: the parameters' default (9.6 V).
     voltage_v: float | None = None
     #: Position controller of the physical model: "compliance" (e-manual) or "pid" (the 2008 report).
@@ -57,13 +61,16 @@ def build_model(choice: ModelChoice, n: int) -> ServoModel:
         raise ValueError(f"unknown model {choice.name!r}; choose one of: {', '.join(MODELS)}")
     if choice.name == "kinematic":
         extras = [flag for flag, used in (
-            ("--params", choice.params_path), ("--arm", choice.arm), ("--external-torque", choice.external_torque_nm),
+            ("--params", choice.params_path or choice.params), ("--arm", choice.arm), ("--external-torque", choice.external_torque_nm),
             ("--controller pid", choice.controller != "compliance"),
         ) if used]
         if extras:
             raise ValueError(f"{', '.join(extras)} need the physical model (--model physical)")
         return KinematicModel(n, supply_voltage_v=choice.voltage_v if choice.voltage_v is not None else 9.6)
-    params = ServoParams.from_toml(choice.params_path) if choice.params_path else ServoParams()
+    params = _params(choice)
+    if choice.arm is not None and params.effects.arm_weight_moment_nm:
+        raise ValueError(f"--arm and the parameters' arm (arm_weight_moment_nm = {params.effects.arm_weight_moment_nm:g} "
+                         "N m under [effects]) are two arms: give one")
     model = PhysicalModel(n, params, controller=choice.controller)
     if choice.voltage_v is not None:
         model.set_supply_voltage(choice.voltage_v)
@@ -72,3 +79,17 @@ def build_model(choice: ModelChoice, n: int) -> ServoModel:
     if choice.arm is not None:
         model.set_arm(*choice.arm)
     return model
+
+
+def _params(choice: ModelChoice) -> ServoParams:
+    """The choice's parameters: the object, the file (a missing or unreadable one as ValueError) or the defaults."""
+    if choice.params is not None and choice.params_path is not None:
+        raise ValueError("give servo parameters as a file or as an object, not both")
+    if choice.params is not None:
+        return choice.params
+    if choice.params_path is None:
+        return ServoParams()
+    try:
+        return ServoParams.from_toml(choice.params_path)
+    except OSError as exc:
+        raise ValueError(f"cannot read the parameter file {str(choice.params_path)!r}: {exc.strerror or exc}") from None

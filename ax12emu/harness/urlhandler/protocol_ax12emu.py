@@ -12,6 +12,7 @@
 #   profile=NAME      control-table profile (ax12a, ax12-2006)
 #   virtual_time=0|1  physics in virtual time (it then stands still)
 #   trace=FILE        record every byte as JSON lines (ax12emu decode FILE)
+#   params=FILE       servo parameters as TOML, effects included (e.g. firmware_model.diagnose's params.toml)
 #   drop, corrupt, delay, delay_s, fault_ids, seed, vanish, duplicate, alarm, stall:
 #                     fault injection, as the serve flags (see ax12emu.faults.injection)
 # Options of any URL:
@@ -36,18 +37,19 @@ from ax12emu.bus.clock import VirtualClock, WallClock
 from ax12emu.faults.config import FAULT_OPTIONS, FaultConfig
 from ax12emu.harness.inprocess import InProcessLink, LinkBusy, lookup
 from ax12emu.protocol.ids import parse_ids
+from ax12emu.servo.model_factory import ModelChoice, build_model
 from ax12emu.servo.virtual_servo import ServoOptions
 from ax12emu.tracing.trace import TraceWriter
 
 __all__ = ["Serial", "UrlError", "EXPECTED"]
 
 EXPECTED = (
-    'expected "ax12emu://[NAME][?ids=LIST&profile=NAME&virtual_time=0|1&trace=FILE&seed=N&drop=F&...'
+    'expected "ax12emu://[NAME][?ids=LIST&profile=NAME&virtual_time=0|1&trace=FILE&params=FILE&seed=N&drop=F&...'
     '&logging={debug|info|warning|error}]"'
 )
 LOGGER_LEVELS = {"debug": logging.DEBUG, "info": logging.INFO, "warning": logging.WARNING, "error": logging.ERROR}
 #: Options of a private bus besides the fault ones.
-BUS_OPTIONS = ("ids", "profile", "virtual_time", "trace")
+BUS_OPTIONS = ("ids", "profile", "virtual_time", "trace", "params")
 
 
 class UrlError(SerialException, ValueError):
@@ -129,8 +131,10 @@ class Serial(SerialBase):
             if virtual not in ("0", "1"):
                 raise ValueError(f"virtual_time must be 0 or 1, got {virtual!r}")
             trace_path = options.pop("trace", [None])[-1]
+            params_path = options.pop("params", [None])[-1]
+            model = build_model(ModelChoice(params_path=params_path), len(ids)) if params_path else None
             faults = FaultConfig.from_options(options)
-            bus = Bus(ids, options=ServoOptions(profile=profile), clock=VirtualClock() if virtual == "1" else WallClock())
+            bus = Bus(ids, model=model, options=ServoOptions(profile=profile), clock=VirtualClock() if virtual == "1" else WallClock())
         except ValueError as exc:
             raise UrlError(f"{EXPECTED}: {exc}") from None
         if faults.active:

@@ -1,0 +1,36 @@
+"""build_model: a parameter file with effects (the fitted twin the diagnosis writes) loads as it is written."""
+
+from __future__ import annotations
+
+import pytest
+
+from ax12emu.servo.model_factory import ModelChoice, build_model
+from firmware_model.params import ServoEffects, ServoParams
+
+TWIN = ServoParams(static_friction_nm=0.2, effects=ServoEffects(backlash_rad=0.04, arm_weight_moment_nm=0.3,
+                                                                  position_offset_units=5.0))
+
+
+def test_params_file_with_effects_builds_the_twin(tmp_path):
+    path = tmp_path / "params.toml"
+    TWIN.to_toml(path)
+    model = build_model(ModelChoice(params_path=path), 2)
+    assert model.params == TWIN
+    assert list(model._array("weight_nm")) == [0.3, 0.3]  # the effect's arm hangs on every shaft
+    assert build_model(ModelChoice(params=TWIN), 1).params == TWIN  # the same as an object
+
+
+@pytest.mark.parametrize(("choice", "message"), [
+    (dict(params_path="/nonexistent/params.toml"), "cannot read the parameter file '/nonexistent/params.toml'"),
+    (dict(params=TWIN, arm=(0.1, 0.2)), "two arms"),
+    (dict(params=TWIN, params_path="x.toml"), "not both"),
+    (dict(name="kinematic", params=TWIN), "--params need the physical model"),
+])
+def test_bad_choices_raise_one_line_errors(choice, message):
+    with pytest.raises(ValueError, match=message):
+        build_model(ModelChoice(**choice), 1)
+
+
+def test_arm_option_alone_still_hangs_an_arm():
+    model = build_model(ModelChoice(arm=(0.2, 0.1)), 1)
+    assert model._array("weight_nm")[0] == pytest.approx(0.2 * 9.80665 * 0.1)
