@@ -7,11 +7,19 @@ program as tools/make_dataset.py (firmware_model.diagnose.excitation),
 writing Goal Position / Moving Speed when they change and reading Present
 Position, Speed and Load (addresses 36-41, one read) at ``--rate``.  The
 program's external-load segments are plain holds here (a bus cannot apply a
-load; hang one by hand if wanted).  ``t`` is the host's monotonic clock at
-the read, relative to the first read.
+load; hang one by hand if wanted).  ``t`` is the host's monotonic clock
+midway between sending the read and its reply returning, relative to the
+start (the servo answers from registers of that moment; a stamp taken after
+the reply would be late by the reply's own time, 0.5-3 ms, varying).  Each
+command change is written right after a reading, and ``command_t`` records
+when it was sent: two recordings of the same servo differ mostly by when
+each command went out, and a trace that says so lets the diagnosis tell a
+reading latency (effect ``delay``) from it.  ``--write NAME=VALUE`` sets a
+control-table register (by its e-manual name, e.g. ``cw_compliance_margin=4``)
+before the excitation starts.
 
 Usage: ``python tools/record.py PORT OUT.csv [--id 1] [--baud 1000000] [--duration 20] [--rate 100]
-[--breakaway SECONDS]`` (``--breakaway``: end with that many seconds of small steps and moderate-speed
+[--breakaway SECONDS] [--write NAME=VALUE ...]`` (``--breakaway``: end with that many seconds of small steps and moderate-speed
 moves, which show breakaway/Stribeck friction; see firmware_model.diagnose.excitation).
 """
 
@@ -26,30 +34,73 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ax12emu.protocol.control_table import layout  # noqa: E402
 from firmware_model.diagnose.excitation import program  # noqa: E402
 from firmware_model.diagnose.trace import Trace, write_trace  # noqa: E402
 
-ADDR_TORQUE_ENABLE, ADDR_GOAL, ADDR_PRESENT = 24, 30, 36
+#: The registers the recorder itself uses (e-manual names; addresses and sizes from the control table).
+_TABLE = layout().by_name
+_PRESENT = ("present_position", "present_speed", "present_load")
+_COLUMNS = ("t", "goal_position", "moving_speed", "present_position", "present_speed", "present_load", "command_t")
 
 
 def _signed(raw: int) -> int:
     return -(raw & 0x3FF) if raw & 0x400 else raw & 0x3FF
 
 
+def parse_writes(items: list[str]) -> dict[str, int]:
+    """``NAME=VALUE`` strings -> {register name: value}, checked against the control table (ValueError if not)."""
+    out = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        entry = _TABLE.get(name.strip())
+        if not sep or entry is None:
+            known = ", ".join(e.name for e in _TABLE.values() if e.access.value == "RW")
+            raise ValueError(f"--write {item!r}: expected NAME=VALUE with NAME a writable register ({known})")
+        try:
+            number = int(value)
+        except ValueError:
+            raise ValueError(f"--write {item!r}: {value!r} is not an integer") from None
+        if entry.access.value != "RW" or not entry.minimum <= number <= entry.maximum:
+            raise ValueError(f"--write {item!r}: {name} takes {entry.minimum}..{entry.maximum} and must be writable")
+        out[entry.name] = number
+    return out
+
+
+def _write(ph, port, servo_id: int, name: str, value: int) -> None:
+    from dynamixel_sdk import COMM_SUCCESS
+
+    entry = _TABLE[name]
+    if entry.size == 1:
+        result, error = ph.write1ByteTxRx(port, servo_id, entry.address, value)
+    else:
+        result, error = ph.write2ByteTxRx(port, servo_id, entry.address, value)
+    if result != COMM_SUCCESS or error:
+        raise RuntimeError(f"writing {name}={value} to servo {servo_id} failed: {ph.getTxRxResult(result)} "
+                           f"{ph.getRxPacketError(error) if error else ''}".strip())
+
+
 def record(port_name: str, servo_id: int, baud: int, duration_s: float, rate_hz: float,
-           breakaway_s: float = 0.0) -> Trace:
-    """Run the excitation and return the trace."""
+           breakaway_s: float = 0.0, writes: dict[str, int] | None = None) -> Trace:
+    """Set ``writes`` (register name -> value), run the excitation and return the trace (with ``command_t``)."""
     from dynamixel_sdk import COMM_SUCCESS, PacketHandler, PortHandler
 
     port, ph = PortHandler(port_name), PacketHandler(1.0)
-    if not port.openPort() or not port.setBaudRate(baud):
-        raise SystemExit(f"cannot open {port_name} at {baud} baud")
+    if not port.openPort():
+        raise SystemExit(f"cannot open {port_name}")
+    goal = _TABLE["goal_position"]
+    first = _TABLE[_PRESENT[0]].address
+    span = _TABLE[_PRESENT[-1]].end - first
     try:
+        if not port.setBaudRate(baud):
+            raise SystemExit(f"cannot set {port_name} to {baud} baud")
+        for name, value in (writes or {}).items():
+            _write(ph, port, servo_id, name, value)
+        _write(ph, port, servo_id, "torque_enable", 1)
         steps = program(duration_s, breakaway_s)
         ends = np.cumsum([s.duration_s for s in steps])
-        ph.write1ByteTxRx(port, servo_id, ADDR_TORQUE_ENABLE, 1)
         rows: list[list] = []
-        written = None
+        written, sent_t = None, 0.0
         start = time.monotonic()
         next_read = start
         while True:
@@ -59,9 +110,10 @@ def record(port_name: str, servo_id: int, baud: int, duration_s: float, rate_hz:
             if now < next_read:
                 time.sleep(next_read - now)
             next_read += 1.0 / rate_hz
-            data, result, error = ph.readTxRx(port, servo_id, ADDR_PRESENT, 6)
-            t = time.monotonic() - start
-            if result != COMM_SUCCESS or len(data) < 6:
+            asked = time.monotonic()
+            data, result, error = ph.readTxRx(port, servo_id, first, span)
+            t = 0.5 * (asked + time.monotonic()) - start
+            if result != COMM_SUCCESS or len(data) < span:
                 continue
             pos = data[0] | data[1] << 8
             spd = _signed(data[2] | data[3] << 8)
@@ -70,14 +122,15 @@ def record(port_name: str, servo_id: int, baud: int, duration_s: float, rate_hz:
             cmd = (step.goal_position, step.moving_speed)
             if cmd != written:  # Goal Position and Moving Speed in one write, after the read
                 payload = [cmd[0] & 0xFF, cmd[0] >> 8, cmd[1] & 0xFF, cmd[1] >> 8]
-                ph.writeTxRx(port, servo_id, ADDR_GOAL, 4, payload)
+                sent_t = time.monotonic() - start
+                ph.writeTxRx(port, servo_id, goal.address, 4, payload)
                 written = cmd
-            rows.append([t, cmd[0], cmd[1], pos, spd, load])
+            rows.append([t, cmd[0], cmd[1], pos, spd, load, sent_t])
     finally:
         port.closePort()
     a = np.array(rows, dtype=float)
-    cols = ("t", "goal_position", "moving_speed", "present_position", "present_speed", "present_load")
-    return Trace({c: a[:, i] for i, c in enumerate(cols)}, comments=[f"recorded by tools/record.py on {port_name}"])
+    comment = f"recorded by tools/record.py on {port_name}" + "".join(f", {k}={v}" for k, v in (writes or {}).items())
+    return Trace({c: a[:, i] for i, c in enumerate(_COLUMNS)}, comments=[comment])
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -90,8 +143,16 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--duration", type=float, default=20.0)
     p.add_argument("--rate", type=float, default=100.0)
     p.add_argument("--breakaway", type=float, default=0.0, help="seconds of breakaway block at the end (default 0)")
+    p.add_argument("--write", action="append", default=[], metavar="NAME=VALUE",
+                   help="set a register before the excitation, e.g. torque_limit=512 (repeatable)")
     args = p.parse_args(argv)
-    trace = record(args.port, args.id, args.baud, args.duration, args.rate, args.breakaway)
+    try:
+        writes = parse_writes(args.write)
+    except ValueError as exc:
+        p.error(str(exc))
+    if not 0 < args.rate <= 1000 or not args.duration > 0:
+        p.error("--rate must be in (0, 1000] and --duration positive")
+    trace = record(args.port, args.id, args.baud, args.duration, args.rate, args.breakaway, writes)
     write_trace(trace, args.out)
     print(f"{args.out}: {len(trace)} rows over {trace.t[-1]:.2f} s")
     return 0
