@@ -340,6 +340,82 @@ class ServoParams:
         """Speed at which the back-EMF equals the supply (no friction at all)."""
         return supply_v / self.torque_constant_nm_a
 
+    # ------------------------------------------------------------------ from a data sheet
+    @classmethod
+    def from_datasheet(
+        cls,
+        stall_torque_nm: float,
+        no_load_speed_rad_s: float,
+        voltage_v: float,
+        *,
+        gear_ratio: float,
+        min_supply_voltage_v: float,
+        max_supply_voltage_v: float,
+        stall_current_a: float | None = None,
+        gearbox_efficiency: float | None = None,
+        static_friction_nm: float | None = None,
+        coulomb_friction_nm: float | None = None,
+        viscous_friction_nm_s_rad: float = 0.0,
+    ) -> "ServoParams":
+        """Parameters for another servo model from its data sheet, derived as the AX-12 defaults are.
+
+        The data sheet's stall torque ``S`` and no-load speed ``N`` at ``voltage_v`` are read as a
+        dynamometer reads them at full drive: ``S`` where the loaded shaft comes to rest (motor torque
+        less static friction, ``S = c V - t_s``), ``N`` where the unloaded shaft settles against its own
+        friction (``N = (c V - t_c) / (c k + b)``, Stribeck part gone at speed; :meth:`top_speed_rad_s`).
+        So ``c = (S + t_s) / V`` (step 1 of the module's derivation) and ``k = ((c V - t_c) / N - b) / c``
+        (step 3).  The third number is the winding resistance, either from the data sheet's stall
+        current (``R = V / I``: at stall the winding carries all of it; the electronics' tens of mA
+        are neglected) with the efficiency following as ``eta = c R / k``, or, where that would put
+        ``eta`` above one (a current-limited stall figure), from a given ``gearbox_efficiency``
+        (``R = eta k / c``).  Exactly one of ``stall_current_a`` and ``gearbox_efficiency`` is given.
+
+        What no data sheet gives is taken from the AX-12 defaults, scaled: friction as the same share
+        of the stall torque as the AX-12's at its recommended supply (unless given), the rotor inertia
+        as the AX-12's at the motor times ``gear_ratio**2``; the firmware and thermal constants as they
+        are.  A sheet whose figures cannot come from this model (efficiency above one, friction above
+        the stall torque) gets a ``ValueError``.
+        """
+        base = cls()
+        base_stall_nm = base.stall_torque_nm(base.supply_voltage_v) - base.static_friction_nm
+        t_s = stall_torque_nm * base.static_friction_nm / base_stall_nm if static_friction_nm is None else static_friction_nm
+        t_c = stall_torque_nm * base.coulomb_friction_nm / base_stall_nm if coulomb_friction_nm is None else coulomb_friction_nm
+        if (stall_current_a is None) == (gearbox_efficiency is None):
+            raise ValueError("from_datasheet needs exactly one of stall_current_a and gearbox_efficiency")
+        c = (stall_torque_nm + t_s) / voltage_v
+        if c * voltage_v <= t_c:
+            raise ValueError(f"Coulomb friction {t_c} N m leaves no drive at {voltage_v} V")
+        k = ((c * voltage_v - t_c) / no_load_speed_rad_s - viscous_friction_nm_s_rad) / c
+        if k <= 0:
+            raise ValueError(f"viscous friction {viscous_friction_nm_s_rad} N m s/rad alone exceeds the no-load damping")
+        if stall_current_a is not None:
+            resistance = voltage_v / stall_current_a
+            efficiency = c * resistance / k
+            if efficiency > 1:
+                raise ValueError(
+                    f"stall current {stall_current_a} A at {voltage_v} V with {stall_torque_nm} N m and "
+                    f"{no_load_speed_rad_s:.3f} rad/s needs a gearbox efficiency of {efficiency:.2f} (> 1): the sheet's "
+                    "stall current is not the winding's (current-limited); give gearbox_efficiency instead"
+                )
+        else:
+            efficiency = float(gearbox_efficiency)
+            resistance = efficiency * k / c
+        rotor_at_motor = base.rotor_inertia_reflected_kg_m2 / base.gear_ratio**2
+        return cls(
+            gear_ratio=gear_ratio,
+            winding_resistance_ohm=resistance,
+            torque_constant_nm_a=k,
+            gearbox_efficiency=efficiency,
+            rotor_inertia_reflected_kg_m2=rotor_at_motor * gear_ratio**2,
+            load_inertia_kg_m2=0.0,
+            static_friction_nm=t_s,
+            coulomb_friction_nm=t_c,
+            viscous_friction_nm_s_rad=viscous_friction_nm_s_rad,
+            supply_voltage_v=voltage_v,
+            min_supply_voltage_v=min_supply_voltage_v,
+            max_supply_voltage_v=max_supply_voltage_v,
+        )
+
     # ------------------------------------------------------------------ TOML
     def to_toml(self, path: str | Path, comments: tuple[str, ...] = ()) -> None:
         """Write the base fields as a flat table of numbers, then the present effects as ``[effects]``.

@@ -1,0 +1,419 @@
+"""Servo models as data: one TOML file per model, read and checked here.
+
+Why it exists: a servo model (AX-12A, MX-28, XL430-W250, ...) is its control table, its identity
+(model number, firmware, protocol) and its data-sheet physics, and all of that is data quoted from
+the ROBOTIS e-manual: adding a model is adding a file under ``ax12emu/protocol/models/``, no code.
+Every file is checked on load; a mistake gets a ``ValueError`` naming the file and the field.
+
+The format (``models/ax-12a.toml`` is the worked example)::
+
+    [model]
+    name = "XL430-W250"          # as ROBOTIS writes it
+    model_number = 1060          # must equal the table's model_number default
+    firmware_version = 45        # optional: the value the emulated servo reports
+    protocols = ["2.0"]          # "1.0" and/or "2.0": the protocol this table is for
+    source = "..."               # e-manual page and the emanual repository commit
+
+    [table]
+    size = 662                   # bytes: addresses 0 .. size-1
+    entries = [                  # one inline table per register, in the e-manual's order
+      { address = 0, size = 2, name = "model_number", access = "R", area = "EEPROM", default = 1060 },
+      { address = 20, size = 4, name = "homing_offset", access = "RW", area = "EEPROM", default = 0, min = -1044479, max = 1044479, signed = true },
+      { address = 168, size = 2, count = 28, name = "indirect_address_{n}", access = "RW", area = "RAM", default = 224, default_step = 1, min = 64, max = 661 },
+    ]
+
+    [profiles.NAME]              # optional; without any, one profile named after the file
+    source = "..."
+    overrides = { punch = { min = 32 } }       # default / min / max per entry
+    extra_entries = [ ... ]                    # entries only this profile has
+    lock_writable = [24, 50]                   # [first, end) a WRITE may touch while Lock is 1
+    shutdown_clears = "torque_limit"           # or "torque_enable"
+
+    [physical]
+    source = "..."
+    gear_ratio = 353.5
+    weight_g = 57.2
+    resolution_deg = 0.088
+    position_range_deg = 360
+    operating_voltage_v = [6.5, 12.0]
+    recommended_voltage_v = 11.1
+    ratings = [ { voltage_v = 12.0, stall_torque_nm = 1.5, stall_current_a = 1.4, no_load_speed_rpm = 61 } ]
+
+Entry keys: ``address``, ``size`` (1, 2 or 4), ``name`` (snake_case, unique), ``access`` ("R" or "RW"),
+``area`` ("EEPROM" or "RAM"; EEPROM entries come before the first RAM one), ``default`` (absent: the
+e-manual gives none, "-", and 0 is used), ``min``/``max`` (absent: the full span of the size, signed or
+not), ``signed``, ``min_from``/``max_from`` (a register bounding this one at run time, "-" to negate),
+``count``/``first``/``default_step`` (a run of equal registers such as Indirect Address 1..28: ``{n}``
+in the name counts from ``first``, default 1), ``note`` (free text, for readers).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import sys
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from types import MappingProxyType
+from typing import Any
+
+from .registers import MAX_ENTRY_SIZE, Access, Area, Entry, Layout, Profile, compile_layout
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # Python 3.10: the same parser, from PyPI
+    import tomli as tomllib
+
+__all__ = ["Rating", "Physical", "ServoModel", "load_model_file", "model", "model_names", "MODELS_PACKAGE_DIR"]
+
+#: Where the shipped model files live (package data).
+MODELS_PACKAGE_DIR = "models"
+PROTOCOLS = ("1.0", "2.0")
+SHUTDOWN_CLEARS = ("torque_limit", "torque_enable")
+
+_MODEL_KEYS = {"name", "model_number", "firmware_version", "protocols", "source"}
+_TABLE_KEYS = {"size", "entries"}
+_ENTRY_KEYS = {"address", "size", "name", "access", "area", "default", "min", "max", "signed", "min_from", "max_from",
+               "count", "first", "default_step", "note"}
+_PROFILE_KEYS = {"source", "overrides", "extra_entries", "lock_writable", "shutdown_clears"}
+_OVERRIDE_KEYS = {"default": "default", "min": "minimum", "max": "maximum"}
+_PHYSICAL_KEYS = {"source", "gear_ratio", "weight_g", "resolution_deg", "position_range_deg", "operating_voltage_v",
+                  "recommended_voltage_v", "ratings"}
+_RATING_KEYS = {"voltage_v", "stall_torque_nm", "stall_current_a", "no_load_speed_rpm", "note"}
+
+
+@dataclass(frozen=True)
+class Rating:
+    """One data-sheet operating point: stall torque and no-load speed at a stated supply."""
+
+    voltage_v: float
+    stall_torque_nm: float
+    no_load_speed_rpm: float
+    stall_current_a: float | None = None
+
+    @property
+    def no_load_speed_rad_s(self) -> float:
+        """The no-load speed in SI units."""
+        return self.no_load_speed_rpm * 2.0 * math.pi / 60.0
+
+
+@dataclass(frozen=True)
+class Physical:
+    """Data-sheet physics of a model, each figure as the source states it."""
+
+    source: str
+    gear_ratio: float
+    ratings: tuple[Rating, ...]
+    operating_voltage_v: tuple[float, float]
+    recommended_voltage_v: float | None = None
+    weight_g: float | None = None
+    resolution_deg: float | None = None
+    position_range_deg: float | None = None
+
+    def rating_at(self, voltage_v: float | None = None) -> Rating:
+        """The rating at ``voltage_v``, or at the recommended supply, or the first one listed."""
+        want = self.recommended_voltage_v if voltage_v is None else voltage_v
+        for rating in self.ratings:
+            if want is not None and rating.voltage_v == want:
+                return rating
+        if voltage_v is not None:
+            raise ValueError(f"no rating at {voltage_v} V; the data sheet gives {[r.voltage_v for r in self.ratings]}")
+        return self.ratings[0]
+
+
+@dataclass(frozen=True)
+class ServoModel:
+    """One servo model, as its data file states it."""
+
+    #: The file's stem, the name a caller asks for ("ax-12a").
+    key: str
+    name: str
+    model_number: int
+    firmware_version: int | None
+    protocols: tuple[str, ...]
+    source: str
+    table_size: int
+    entries: tuple[Entry, ...]
+    profiles: Mapping[str, Profile]
+    physical: Physical
+    #: The file it came from, for messages.
+    path: str = ""
+    _layouts: dict[str, Layout] = field(default_factory=dict, compare=False, repr=False)
+
+    @property
+    def default_profile(self) -> str:
+        """The first profile in the file (the only one for most models)."""
+        return next(iter(self.profiles))
+
+    def layout(self, profile: str | None = None) -> Layout:
+        """The compiled table of ``profile`` (default: the first)."""
+        name = self.default_profile if profile is None else profile
+        if name not in self.profiles:
+            raise ValueError(f"unknown profile {name!r} of {self.name}; choose one of: {', '.join(self.profiles)}")
+        if name not in self._layouts:
+            self._layouts[name] = compile_layout(self.profiles[name], self.entries, self.table_size)
+        return self._layouts[name]
+
+
+# ------------------------------------------------------------------ checking helpers
+class _Where:
+    """Builds error messages that name the file and the field."""
+
+    def __init__(self, path: str) -> None:
+        self.path = path
+
+    def error(self, field_name: str, message: str) -> ValueError:
+        return ValueError(f"{self.path}: {field_name}: {message}")
+
+    def table(self, data: Any, field_name: str, known: set[str], required: set[str] = frozenset()) -> dict:
+        if not isinstance(data, dict):
+            raise self.error(field_name, f"must be a table, got {type(data).__name__}")
+        unknown = sorted(set(data) - known)
+        if unknown:
+            raise self.error(field_name, f"unknown key(s) {unknown}; known: {', '.join(sorted(known))}")
+        missing = sorted(required - set(data))
+        if missing:
+            raise self.error(field_name, f"missing key(s) {missing}")
+        return data
+
+    def integer(self, value: Any, field_name: str) -> int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise self.error(field_name, f"must be an integer, got {value!r}")
+        return value
+
+    def number(self, value: Any, field_name: str, positive: bool = True) -> float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise self.error(field_name, f"must be a finite number, got {value!r}")
+        if positive and value <= 0:
+            raise self.error(field_name, f"must be positive, got {value!r}")
+        return float(value)
+
+    def text(self, value: Any, field_name: str) -> str:
+        if not isinstance(value, str) or not value.strip():
+            raise self.error(field_name, f"must be a non-empty string, got {value!r}")
+        return value
+
+    def choice(self, value: Any, field_name: str, choices: tuple[str, ...]) -> str:
+        if value not in choices:
+            raise self.error(field_name, f"must be one of {', '.join(map(repr, choices))}, got {value!r}")
+        return value
+
+
+def _entries(where: _Where, raw: Any, field_name: str) -> tuple[Entry, ...]:
+    """Entries from a list of inline tables, runs (``count``) expanded."""
+    if not isinstance(raw, list):
+        raise where.error(field_name, f"must be an array of tables, got {type(raw).__name__}")
+    out: list[Entry] = []
+    for index, item in enumerate(raw):
+        label = f"{field_name}[{index}]"
+        item = where.table(item, label, _ENTRY_KEYS, {"address", "size", "name", "access", "area"})
+        name = where.text(item["name"], f"{label}.name")
+        label = f"{field_name}[{index}] ({name})"
+        address = where.integer(item["address"], f"{label}.address")
+        size = where.integer(item["size"], f"{label}.size")
+        if size not in (1, 2, MAX_ENTRY_SIZE) or address < 0:
+            raise where.error(f"{label}", f"size must be 1, 2 or 4 and the address >= 0, got size {size} at {address}")
+        access = Access(where.choice(item["access"], f"{label}.access", tuple(a.value for a in Access)))
+        area = Area(where.choice(item["area"], f"{label}.area", tuple(a.value for a in Area)))
+        signed = item.get("signed", False)
+        if not isinstance(signed, bool):
+            raise where.error(f"{label}.signed", f"must be true or false, got {signed!r}")
+        bits = 8 * size
+        low, high = (-(1 << (bits - 1)), (1 << (bits - 1)) - 1) if signed else (0, (1 << bits) - 1)
+        minimum = where.integer(item.get("min", low), f"{label}.min")
+        maximum = where.integer(item.get("max", high), f"{label}.max")
+        if not low <= minimum <= maximum <= high:
+            raise where.error(label, f"range {minimum}..{maximum} does not fit {size} byte(s) "
+                                     f"({'signed' if signed else 'unsigned'} {low}..{high}) or is empty")
+        default = where.integer(item.get("default", 0), f"{label}.default")
+        if not minimum <= default <= maximum:
+            what = "default" if "default" in item else "default (absent, so 0)"
+            raise where.error(f"{label}.default", f"{what} {default} is outside {minimum}..{maximum}")
+        bounds = {}
+        for key in ("min_from", "max_from"):
+            if key in item:
+                bounds[key] = where.text(item[key], f"{label}.{key}")
+        if "note" in item:
+            where.text(item["note"], f"{label}.note")
+        count = where.integer(item.get("count", 1), f"{label}.count")
+        first = where.integer(item.get("first", 1), f"{label}.first")
+        step = where.integer(item.get("default_step", 0), f"{label}.default_step")
+        if count < 1:
+            raise where.error(f"{label}.count", f"must be >= 1, got {count}")
+        if count > 1 and "{n}" not in name:
+            raise where.error(f"{label}.name", "a run (count > 1) needs {n} in its name")
+        if count == 1 and ("first" in item or "default_step" in item):
+            raise where.error(label, "first and default_step belong to a run (count > 1)")
+        for k in range(count):
+            value = default + k * step
+            if not minimum <= value <= maximum:
+                raise where.error(f"{label}.default_step", f"copy {first + k} has default {value}, outside {minimum}..{maximum}")
+            out.append(Entry(address + k * size, size, name.replace("{n}", str(first + k)), access, value, minimum,
+                             maximum, area, signed, bounds.get("min_from"), bounds.get("max_from")))
+    return tuple(out)
+
+
+def _check_bounds_names(where: _Where, entries: tuple[Entry, ...], field_name: str) -> None:
+    names = {e.name for e in entries}
+    for entry in entries:
+        for ref in (entry.minimum_from, entry.maximum_from):
+            if ref is not None and ref.lstrip("-") not in names:
+                raise where.error(f"{field_name} ({entry.name})", f"bound register {ref!r} is not in the table")
+
+
+def _profiles(where: _Where, raw: Any, key: str, base: tuple[Entry, ...], table_size: int) -> dict[str, Profile]:
+    names = {e.name for e in base}
+    eeprom = [e.end for e in base if e.area is Area.EEPROM]
+    ram = [e.address for e in base if e.area is Area.RAM]
+    default_lock = range(min(ram) if ram else (max(eeprom) if eeprom else 0), table_size)
+    if raw is None:
+        raw = {key: {"source": "the model's table as its file states it"}}
+    if not isinstance(raw, dict) or not raw:
+        raise where.error("profiles", "must be a table of one or more [profiles.NAME] tables")
+    out = {}
+    for name, spec in raw.items():
+        label = f"profiles.{name}"
+        spec = where.table(spec, label, _PROFILE_KEYS, {"source"})
+        overrides_raw = spec.get("overrides", {})
+        if not isinstance(overrides_raw, dict):
+            raise where.error(f"{label}.overrides", "must be a table of entry = { default/min/max = ... }")
+        overrides = {}
+        for entry_name, change in overrides_raw.items():
+            if entry_name not in names:
+                raise where.error(f"{label}.overrides.{entry_name}", "no such entry in [table]")
+            change = where.table(change, f"{label}.overrides.{entry_name}", set(_OVERRIDE_KEYS))
+            overrides[entry_name] = MappingProxyType(
+                {_OVERRIDE_KEYS[k]: where.integer(v, f"{label}.overrides.{entry_name}.{k}") for k, v in change.items()}
+            )
+        extra = _entries(where, spec.get("extra_entries", []), f"{label}.extra_entries")
+        lock = default_lock
+        if "lock_writable" in spec:
+            pair = spec["lock_writable"]
+            if not (isinstance(pair, list) and len(pair) == 2 and all(isinstance(v, int) and not isinstance(v, bool) for v in pair)
+                    and 0 <= pair[0] <= pair[1] <= table_size):
+                raise where.error(f"{label}.lock_writable", f"must be [first, end] within 0..{table_size}, got {pair!r}")
+            lock = range(pair[0], pair[1])
+        profile = Profile(
+            name=name,
+            source=where.text(spec["source"], f"{label}.source"),
+            lock_writable=lock,
+            overrides=MappingProxyType(overrides),
+            extra_entries=extra,
+            shutdown_clears=where.choice(spec.get("shutdown_clears", "torque_limit"), f"{label}.shutdown_clears",
+                                         SHUTDOWN_CLEARS),
+        )
+        try:
+            compile_layout(profile, base, table_size)
+        except ValueError as exc:
+            raise where.error(label, str(exc)) from None
+        out[name] = profile
+    return out
+
+
+def _physical(where: _Where, raw: Any) -> Physical:
+    raw = where.table(raw, "physical", _PHYSICAL_KEYS, {"source", "gear_ratio", "ratings", "operating_voltage_v"})
+    ratings_raw = raw["ratings"]
+    if not isinstance(ratings_raw, list) or not ratings_raw:
+        raise where.error("physical.ratings", "must be a non-empty array of { voltage_v, stall_torque_nm, no_load_speed_rpm }")
+    ratings = []
+    for index, item in enumerate(ratings_raw):
+        label = f"physical.ratings[{index}]"
+        item = where.table(item, label, _RATING_KEYS, {"voltage_v", "stall_torque_nm", "no_load_speed_rpm"})
+        current = item.get("stall_current_a")
+        ratings.append(Rating(
+            voltage_v=where.number(item["voltage_v"], f"{label}.voltage_v"),
+            stall_torque_nm=where.number(item["stall_torque_nm"], f"{label}.stall_torque_nm"),
+            no_load_speed_rpm=where.number(item["no_load_speed_rpm"], f"{label}.no_load_speed_rpm"),
+            stall_current_a=None if current is None else where.number(current, f"{label}.stall_current_a"),
+        ))
+    span = raw["operating_voltage_v"]
+    if not (isinstance(span, list) and len(span) == 2):
+        raise where.error("physical.operating_voltage_v", f"must be [low, high], got {span!r}")
+    low, high = (where.number(v, "physical.operating_voltage_v") for v in span)
+    if low > high:
+        raise where.error("physical.operating_voltage_v", f"low {low} above high {high}")
+    for rating in ratings:
+        if not low <= rating.voltage_v <= high:
+            raise where.error("physical.ratings", f"rating at {rating.voltage_v} V is outside the operating range {low}..{high} V")
+    optional = {k: where.number(raw[k], f"physical.{k}") for k in
+                ("recommended_voltage_v", "weight_g", "resolution_deg", "position_range_deg") if k in raw}
+    return Physical(source=where.text(raw["source"], "physical.source"), gear_ratio=where.number(raw["gear_ratio"], "physical.gear_ratio"),
+                    ratings=tuple(ratings), operating_voltage_v=(low, high), **optional)
+
+
+def parse_model(text: str, key: str, path: str) -> ServoModel:
+    """A model from the text of its file; ``ValueError`` naming ``path`` and the field on any mistake."""
+    where = _Where(path)
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ValueError(f"{path}: not valid TOML: {exc}") from None
+    where.table(data, "top level", {"model", "table", "profiles", "physical"}, {"model", "table", "physical"})
+    info = where.table(data["model"], "model", _MODEL_KEYS, {"name", "model_number", "protocols", "source"})
+    protocols = info["protocols"]
+    if not isinstance(protocols, list) or not protocols:
+        raise where.error("model.protocols", f"must be a non-empty list of {PROTOCOLS}, got {protocols!r}")
+    for value in protocols:
+        where.choice(value, "model.protocols", PROTOCOLS)
+    table = where.table(data["table"], "table", _TABLE_KEYS, _TABLE_KEYS)
+    table_size = where.integer(table["size"], "table.size")
+    if table_size < 1:
+        raise where.error("table.size", f"must be positive, got {table_size}")
+    entries = _entries(where, table["entries"], "table.entries")
+    _check_bounds_names(where, entries, "table.entries")
+    seen: dict[str, Entry] = {}
+    for entry in entries:
+        if entry.name in seen:
+            raise where.error("table.entries", f"name {entry.name!r} used twice (addresses {seen[entry.name].address} and {entry.address})")
+        seen[entry.name] = entry
+    model_number = where.integer(info["model_number"], "model.model_number")
+    if "model_number" not in seen or seen["model_number"].default != model_number:
+        raise where.error("model.model_number", f"{model_number} must equal the default of the table's model_number entry")
+    firmware = info.get("firmware_version")
+    if firmware is not None:
+        firmware = where.integer(firmware, "model.firmware_version")
+    profiles = _profiles(where, data.get("profiles"), key, entries, table_size)
+    return ServoModel(
+        key=key,
+        name=where.text(info["name"], "model.name"),
+        model_number=model_number,
+        firmware_version=firmware,
+        protocols=tuple(protocols),
+        source=where.text(info["source"], "model.source"),
+        table_size=table_size,
+        entries=entries,
+        profiles=MappingProxyType(profiles),
+        physical=_physical(where, data["physical"]),
+        path=path,
+    )
+
+
+def load_model_file(path: str | Path) -> ServoModel:
+    """A model from any file (a user's own model, or a test's broken one)."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{path}: not UTF-8 text: {exc}") from None
+    return parse_model(text, path.stem, str(path))
+
+
+def _shipped():
+    return resources.files(__package__).joinpath(MODELS_PACKAGE_DIR)
+
+
+@functools.cache
+def model_names() -> tuple[str, ...]:
+    """The shipped models' keys, sorted."""
+    return tuple(sorted(p.name[: -len(".toml")] for p in _shipped().iterdir() if p.name.endswith(".toml")))
+
+
+@functools.cache
+def model(key: str) -> ServoModel:
+    """A shipped model by key ("ax-12a", "xl430-w250", ...)."""
+    if key not in model_names():
+        raise ValueError(f"unknown servo model {key!r}; choose one of: {', '.join(model_names())}")
+    resource = _shipped().joinpath(f"{key}.toml")
+    return parse_model(resource.read_text(encoding="utf-8"), key, f"ax12emu/protocol/{MODELS_PACKAGE_DIR}/{key}.toml")
