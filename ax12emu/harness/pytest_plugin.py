@@ -37,11 +37,14 @@ def pytest_addoption(parser: pytest.Parser) -> None:
     group = parser.getgroup("ax12emu")
     group.addoption(
         "--ax12-web",
-        nargs="?",
-        const="127.0.0.1:0",
-        default=None,
+        action="store_true",
+        help="serve a live view of each ax12_bus and keep it up after the test until Ctrl-C",
+    )
+    group.addoption(
+        "--ax12-web-at",
+        default="127.0.0.1:0",
         metavar="HOST:PORT",
-        help="serve a live view of each ax12_bus (loopback, default a free port) and keep it up after the test until Ctrl-C",
+        help="where --ax12-web serves (loopback only; default a free port on 127.0.0.1)",
     )
 
 
@@ -91,12 +94,12 @@ def ax12_bus(request: pytest.FixtureRequest) -> Iterator[Any]:
     options_marker = request.node.get_closest_marker("ax12_bus_options")
     if options_marker is not None:
         options.update(options_marker.kwargs)
-    web = request.config.getoption("--ax12-web", None)
-    if web is not None:
-        options.setdefault("web", web)
+    web = request.config.getoption("--ax12-web", False)
+    if web:
+        options.setdefault("web", request.config.getoption("--ax12-web-at"))
     with VirtualBus(ids, **options) as bus:
         if bus.web_url is not None:
             _say(request.config, f"ax12emu live view of {request.node.nodeid}: {bus.web_url}")
         yield bus
-        if web is not None and bus.web_url is not None:
+        if web and bus.web_url is not None:
             _linger(request.config, bus.web_url)

@@ -22,6 +22,9 @@ from .sampler import Frame, Sampler
 
 __all__ = ["Monitor", "render"]
 
+#: Columns of a picture printed where there is no terminal.
+PLAIN_WIDTH = 160
+
 #: Columns of the servo table: heading, how to show one servo.
 COLUMNS: tuple[tuple[str, Any], ...] = (
     ("ID", lambda s: str(s["id"])),
@@ -64,25 +67,51 @@ def render(frame: Frame) -> Group:
 
 
 class Monitor:
-    """Redraws ``sampler``'s newest frame on ``stream`` (stderr by default) ``refresh_hz`` times a second."""
+    """Redraws ``sampler``'s newest frame on ``stream`` (stderr by default) ``refresh_hz`` times a second.
 
-    def __init__(self, sampler: Sampler, *, stream: IO[str] | None = None, refresh_hz: float = 5.0, force_terminal: bool | None = None) -> None:
+    On a terminal the picture is redrawn in place; where the stream is a file
+    or a pipe (a CI log) it is printed every ``plain_every_s`` seconds and
+    once more when the monitor closes, so a log is not flooded.
+    """
+
+    def __init__(
+        self,
+        sampler: Sampler,
+        *,
+        stream: IO[str] | None = None,
+        refresh_hz: float = 5.0,
+        plain_every_s: float = 10.0,
+        force_terminal: bool | None = None,
+        width: int | None = None,
+    ) -> None:
         self.sampler = sampler
-        self.console = Console(file=stream or sys.stderr, force_terminal=force_terminal)
-        self._every = max(1, round(1.0 / (refresh_hz * sampler.period_s)))
-        self._live = Live(console=self.console, auto_refresh=False, transient=False, redirect_stdout=False, redirect_stderr=False)
+        self.console = Console(file=stream or sys.stderr, force_terminal=force_terminal, width=width)
+        if not self.console.is_terminal and width is None:
+            self.console.width = PLAIN_WIDTH  # no terminal to fit: wide enough for every column
+        self._every = max(1, round((1.0 / refresh_hz if self.console.is_terminal else plain_every_s) / sampler.period_s))
+        self._live = Live(console=self.console, auto_refresh=False, redirect_stdout=False, redirect_stderr=False) if self.console.is_terminal else None
         self.drawn = 0
 
     def start(self) -> "Monitor":
-        self._live.start()
+        if self._live is not None:
+            self._live.start()
         self.sampler.subscribe(self._on_frame)
         return self
 
     def _on_frame(self, frame: Frame) -> None:
         if frame["seq"] % self._every == 0:
+            self._draw(frame)
+
+    def _draw(self, frame: Frame) -> None:
+        if self._live is not None:
             self._live.update(render(frame), refresh=True)
-            self.drawn += 1
+        else:
+            self.console.print(render(frame))
+        self.drawn += 1
 
     def close(self) -> None:
         self.sampler.unsubscribe(self._on_frame)
-        self._live.stop()
+        if self._live is not None:
+            self._live.stop()
+        elif self.sampler.latest is not None:
+            self._draw(self.sampler.latest)  # the last picture, for the log

@@ -60,8 +60,12 @@ MAX_BODY_BYTES = 16 * 1024
 MAX_MESSAGE_BYTES = 4 * 1024
 #: Frames queued per WebSocket client before it counts as not reading and is dropped.
 QUEUE_FRAMES = 8
+#: Kernel send buffer of a WebSocket connection (the system's default may grow to megabytes).
+SEND_BUFFER_BYTES = 64 * 1024
 #: Idle keep-alive connections close after this long.
 KEEPALIVE_S = 15.0
+#: How long ``/api/servos`` waits for the sampler's first frame before answering 503.
+FIRST_FRAME_WAIT_S = 2.0
 #: Newest log lines ``/api/log`` returns by default and at most.
 LOG_LINES = 200
 
@@ -245,6 +249,11 @@ class WebServer:
 
     async def _servos(self, request: web.Request) -> web.Response:
         snapshot = self._snapshot()
+        for _ in range(int(FIRST_FRAME_WAIT_S / 0.02)):  # just started: the first frame is a period away
+            if snapshot is not None:
+                break
+            await asyncio.sleep(0.02)
+            snapshot = self._snapshot()
         if snapshot is None:
             return _error(503, "no snapshot yet: the sampler has not read the bus")
         return web.json_response(snapshot)
@@ -292,6 +301,9 @@ class WebServer:
             return _error(503, f"at most {self.max_clients} live-view clients at once")
         ws = web.WebSocketResponse(max_msg_size=MAX_MESSAGE_BYTES, heartbeat=None)
         await ws.prepare(request)
+        sock = request.transport.get_extra_info("socket") if request.transport is not None else None
+        if sock is not None:  # a client that stops reading fills this, then its queue, then is dropped
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, SEND_BUFFER_BYTES)
         queue: asyncio.Queue[str] = asyncio.Queue(maxsize=QUEUE_FRAMES)
         self._clients[ws] = (queue, request.transport)
         hello = {"type": "hello", "log": list(self.sampler.log_lines)[-LOG_LINES:], "actions": list(ACTIONS)}

@@ -1,0 +1,142 @@
+"""The live page in a real headless Chromium (Debian's chromium driven by Playwright; nothing installed at run time)."""
+
+from __future__ import annotations
+
+import shutil
+import time
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("aiohttp")
+sync_api = pytest.importorskip("playwright.sync_api", reason="playwright is not installed (pip install 'ax12emu[test]')")
+
+from dynamixel_sdk import COMM_RX_TIMEOUT, COMM_SUCCESS  # noqa: E402
+from emu_testkit import sdk_port  # noqa: E402
+
+from ax12emu import VirtualBus  # noqa: E402
+
+#: The system's Chromium (apt-get install chromium); Playwright's own download is never used.
+CHROMIUM = Path("/usr/bin/chromium")
+#: Flags for a quiet, offline, throwaway browser.
+CHROMIUM_FLAGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
+
+
+@pytest.fixture(scope="module")
+def browser(tmp_path_factory):
+    if not CHROMIUM.exists() and shutil.which("chromium") is None:
+        pytest.skip("no Chromium at /usr/bin/chromium (apt-get install chromium)")
+    with sync_api.sync_playwright() as playwright:
+        context = playwright.chromium.launch_persistent_context(
+            str(tmp_path_factory.mktemp("chromium-profile")),  # a fresh --user-data-dir
+            executable_path=str(CHROMIUM if CHROMIUM.exists() else shutil.which("chromium")),
+            headless=True,
+            args=CHROMIUM_FLAGS,
+        )
+        try:
+            yield context
+        finally:
+            context.close()
+
+
+@pytest.fixture
+def page(browser):
+    page = browser.new_page()
+    errors: list[str] = []
+    page.on("pageerror", lambda error: errors.append(str(error)))
+    yield page
+    page.close()
+    assert not errors, f"the page's scripts failed: {errors}"
+
+
+def open_view(page, bus) -> None:
+    page.goto(bus.web_url)
+    page.wait_for_function("Number(document.body.dataset.frames) >= 0", timeout=5000)
+
+
+def test_a_card_for_every_servo(page):
+    with VirtualBus([1, 3, 10], transport="inprocess", web=True) as bus:
+        open_view(page, bus)
+        for servo_id in (1, 3, 10):
+            card = page.locator(f"#servo-{servo_id}")
+            card.wait_for(timeout=5000)
+            assert f"ID {servo_id}" in card.locator(".name").inner_text()
+            assert "AX-12 · protocol 1.0" in card.locator(".model").inner_text()
+        assert page.locator(".card").count() == 3
+
+
+def test_a_goal_written_through_the_sdk_moves_the_dial_and_the_plot_within_a_second(page):
+    with VirtualBus([1], transport="tcp", web=True) as bus:
+        open_view(page, bus)
+        page.wait_for_function("document.querySelector('#servo-1 .dial')?.dataset.present === '512'", timeout=5000)
+        dial_before = page.eval_on_selector("#servo-1 .dial", "canvas => canvas.toDataURL()")
+        with sdk_port(bus.port) as (port, ph):
+            assert ph.write1ByteTxRx(port, 1, 24, 1) == (COMM_SUCCESS, 0)  # Torque Enable
+            assert ph.write2ByteTxRx(port, 1, 30, 800) == (COMM_SUCCESS, 0)  # Goal Position
+            written = time.monotonic()
+        page.wait_for_function(
+            """() => {
+                const dial = document.querySelector('#servo-1 .dial');
+                const plot = document.querySelector('#servo-1 .plot[data-kind=position]');
+                const last = JSON.parse(plot.dataset.last || '{}');
+                return dial.dataset.goal === '800' && Number(dial.dataset.present) > 520 && last.goal === 800 && last.pos > 520;
+            }""",
+            timeout=1000,
+        )
+        assert time.monotonic() - written < 1.5  # the wait above allows 1 s; this bounds the whole round trip
+        assert page.eval_on_selector("#servo-1 .dial", "canvas => canvas.toDataURL()") != dial_before
+        assert "→ 800" in page.locator("#servo-1 .fields").inner_text()
+
+
+def test_a_fault_toggled_in_the_page_is_a_timeout_in_the_sdk(page):
+    with VirtualBus([1, 2], transport="tcp", web=True) as bus, sdk_port(bus.port) as (port, ph):
+        open_view(page, bus)
+        page.locator("#servo-1").wait_for(timeout=5000)
+        assert ph.ping(port, 1)[1] == COMM_SUCCESS
+        page.click("#servo-1 button[data-act=vanish]")
+        page.wait_for_function("document.getElementById('message').textContent === 'servo 1 vanished'", timeout=3000)
+        assert ph.ping(port, 1)[1] == COMM_RX_TIMEOUT
+        assert ph.ping(port, 2)[1] == COMM_SUCCESS
+        page.wait_for_function("document.querySelector('#servo-1 .faults').textContent.includes('vanished')", timeout=3000)
+        page.click("#servo-1 button[data-act=reappear]")
+        page.wait_for_function("document.getElementById('message').textContent === 'servo 1 back'", timeout=3000)
+        assert ph.ping(port, 1)[1] == COMM_SUCCESS
+        page.fill("#drop", "1")
+        page.click("#apply-reply-faults")
+        page.wait_for_function("document.getElementById('message').textContent.startsWith('reply faults: drop 1')", timeout=3000)
+        assert ph.ping(port, 2)[1] == COMM_RX_TIMEOUT
+        page.click("#clear-faults")
+        page.wait_for_function("document.getElementById('message').textContent === 'every fault lifted'", timeout=3000)
+        assert ph.ping(port, 2)[1] == COMM_SUCCESS
+        # Every change is in the packet log, beside the SDK's packets; the ID filter keeps servo 2's.
+        page.wait_for_function("document.getElementById('log').textContent.includes('servo 1 vanished')", timeout=3000)
+        page.fill("#filter-id", "2")
+        page.wait_for_function(
+            """() => { const rows = [...document.querySelectorAll('#log div')];
+                       return rows.length > 0 && rows.every(r => r.textContent.includes('id=2') || r.textContent.includes('ID 2')); }""",
+            timeout=3000,
+        )
+
+
+def test_a_bad_request_gets_a_clear_error_and_the_bus_keeps_running(page):
+    with VirtualBus([1], transport="tcp", web=True) as bus:
+        open_view(page, bus)
+        page.locator("#servo-1").wait_for(timeout=5000)
+        answer = page.evaluate(
+            """async () => { const r = await fetch('/api/control', {method: 'POST', body: '{"action": 12'});
+                             return [r.status, await r.json()]; }"""
+        )
+        assert answer[0] == 400 and "not JSON" in answer[1]["error"]
+        frames = int(page.evaluate("document.body.dataset.frames"))
+        page.wait_for_function(f"Number(document.body.dataset.frames) > {frames + 5}", timeout=2000)  # still streaming
+        with sdk_port(bus.port) as (port, ph):
+            assert ph.ping(port, 1)[1] == COMM_SUCCESS
