@@ -12,6 +12,7 @@ import argparse
 import sys
 from collections.abc import Callable
 
+from ax12emu.cli import models as cli_models
 from ax12emu.faults.config import FAULT_OPTIONS, FaultConfig
 from ax12emu.protocol.control_table import DEFAULT_PROFILE, PROFILES
 from ax12emu.protocol.ids import parse_ids
@@ -71,7 +72,7 @@ def fault_config(args: argparse.Namespace) -> FaultConfig:
 
 
 def add_commands(sub: argparse._SubParsersAction) -> None:
-    """The ``decode`` and ``conformance`` subcommands."""
+    """The ``decode``, ``conformance`` and ``models`` (:mod:`ax12emu.cli.models`) subcommands."""
     decode = sub.add_parser("decode", help="print a bus trace (or a raw byte capture) as decoded packets")
     decode.add_argument("file", metavar="FILE", help="a JSON-lines trace from serve --trace, or a binary capture")
     decode.add_argument("--raw", action="store_true", help="treat FILE as a raw capture even if it looks like JSON")
@@ -85,6 +86,8 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     check.add_argument("--destructive", action="store_true", help="also change ID, baud and RESET (all restored afterwards)")
     check.add_argument("--profile", choices=sorted(PROFILES), default=DEFAULT_PROFILE, help="expected control-table defaults")
     check.add_argument("--only", action="append", metavar="CHECK", help="run only this check (repeatable)")
+
+    cli_models.add_command(sub)
 
 
 def _decode(args: argparse.Namespace) -> int:
@@ -116,4 +119,6 @@ def _conformance(args: argparse.Namespace) -> int:
 
 
 #: Subcommand name -> runner.
-COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {"decode": _decode, "conformance": _conformance}
+COMMANDS: dict[str, Callable[[argparse.Namespace], int]] = {
+    "decode": _decode, "conformance": _conformance, "models": cli_models.run,
+}
