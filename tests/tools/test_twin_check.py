@@ -14,10 +14,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from emu_testkit import load_tool
 
 from ax12emu import VirtualBus
 from ax12emu.servo.model_factory import ModelChoice, build_model, parse_arm
-from emu_testkit import load_tool
 from firmware_model.diagnose.excitation import program
 from firmware_model.diagnose.trace import Trace, read_trace, write_trace
 from firmware_model.params import ServoEffects, ServoParams
