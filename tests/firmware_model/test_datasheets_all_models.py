@@ -14,9 +14,14 @@ ROBOTIS e-manual); :meth:`ServoParams.from_datasheet` turns them into motor cons
   the drive the loop needs at two lower speeds (the motor line is straight: drive = (c k w + t_c) / c V),
   extrapolated to full drive.
 
-Tolerance 5 %: the derivation inverts the same equations the model steps, so what is left is the
-step's discretisation, the Stribeck term near rest and the measuring grid (0.5 %); 5 % is also the
-rounding of the sheets' own figures (two significant digits: 1.4 N m is 1.35..1.45, +-3.6 %).
+Tolerance 5 %: the derivation inverts the same equations the model steps, so this checks that the
+simulated servo (controller, bridge, friction, stepping) delivers what the closed form promises; what
+is left is the step's discretisation, the Stribeck term near rest and the measuring grid (0.5 %); 5 %
+is also the rounding of the sheets' own figures (two significant digits: 1.4 N m is 1.35..1.45, +-3.6 %).
+
+The falsifiable part is the prediction: one parameter set, fitted at the recommended (or first)
+rating alone, against the sheet's other rated voltages (7 %).  No-load speeds follow everywhere;
+five stall torques do not, and are marked with their figures (``STALL_NOT_LINEAR``).
 """
 
 from __future__ import annotations
@@ -48,9 +53,9 @@ def _params(key: str, voltage_v: float | None = None) -> tuple[ServoParams, obje
     return params, rating
 
 
-def measured_stall_torque_nm(params: ServoParams, volts: float, datasheet_nm: float, make_commands) -> float:
-    """Smallest opposing torque (of 0.85 .. 1.15 x the sheet's, 0.5 % steps) that holds a fully driven shaft."""
-    loads = datasheet_nm * np.linspace(0.85, 1.15, 61)
+def measured_stall_torque_nm(params: ServoParams, volts: float, around_nm: float, make_commands) -> float:
+    """Smallest opposing torque (of 0.85 .. 1.15 x ``around_nm``, 0.5 % steps) that holds a fully driven shaft."""
+    loads = around_nm * np.linspace(0.85, 1.15, 61)
     servo = PhysicalModel(len(loads), params, initial_position_raw=100)
     servo.set_supply_voltage(volts)
     servo.set_external_torque(-loads)  # against the CCW move
@@ -92,3 +97,63 @@ def test_stall_torque_and_no_load_speed_match_the_data_sheet(key, volts, command
     speed, how = measured_no_load_speed_rad_s(params, volts, commands)
     assert stall == pytest.approx(rating.stall_torque_nm, rel=TOLERANCE), key
     assert speed == pytest.approx(rating.no_load_speed_rad_s, rel=TOLERANCE), (key, how)
+
+
+#: Where one parameter set cannot follow the sheet's stall torque to another voltage (measured miss in
+#: the reason).  The linear motor's stall torque is ``c V - t_s``; these sheets' figures are not on one
+#: such line (XL430-W250: 1.0, 1.4, 1.5 N m at 9, 11.1, 12 V is 0.111, 0.126, 0.125 N m/V), as a stall
+#: figure limited by the driver's current or measured warm would not be.
+STALL_NOT_LINEAR = {
+    ("xl330-m077", 3.7): "predicts 0.154 N m against 0.180 (-15 %): the sheet's stall torque grows slower than the supply",
+    ("xl330-m077", 6.0): "predicts 0.262 N m against 0.228 (+15 %): the sheet's stall torque grows slower than the supply",
+    ("xl330-m288", 3.7): "predicts 0.371 N m against 0.42 (-12 %)",
+    ("xl430-w250", 9.0): "predicts 1.114 N m against 1.0 (+11 %)",
+    ("xm430-w350", 14.8): "predicts 5.15 N m against 4.8 (+7.3 %)",
+}
+OTHER_VOLTAGES = [
+    (key, rating.voltage_v)
+    for key in model_names()
+    for rating in model(key).physical.ratings
+    if rating.voltage_v != model(key).physical.rating_at().voltage_v
+]
+OTHER_IDS = [f"{k}@{v}V" for k, v in OTHER_VOLTAGES]
+#: A prediction carries the sheets' rounding at two voltages (two significant digits each, up to
+#: +-3.6 % apiece) and the linear motor's own error.
+PREDICTION_TOLERANCE = 0.07
+
+
+@pytest.mark.parametrize(("key", "volts"), OTHER_VOLTAGES, ids=OTHER_IDS)
+def test_one_parameter_set_predicts_the_no_load_speed_at_the_other_rated_voltages(key, volts, commands):
+    """Fitted at the recommended (or first) rating only, the model's no-load speed at each other rated voltage
+    is within 7 % of the sheet (measured: within 3.4 % for every model)."""
+    params, _ = _params(key, None)
+    speed, how = measured_no_load_speed_rad_s(params, volts, commands)
+    assert speed == pytest.approx(model(key).physical.rating_at(volts).no_load_speed_rad_s, rel=PREDICTION_TOLERANCE), how
+
+
+@pytest.mark.parametrize(
+    ("key", "volts"),
+    [pytest.param(k, v, marks=pytest.mark.xfail(reason=STALL_NOT_LINEAR[(k, v)], strict=True))
+     if (k, v) in STALL_NOT_LINEAR else (k, v) for k, v in OTHER_VOLTAGES],
+    ids=OTHER_IDS,
+)
+def test_one_parameter_set_predicts_the_stall_torque_at_the_other_rated_voltages(key, volts, commands):
+    """Fitted at the recommended (or first) rating only, the stall torque at each other rated voltage is within
+    7 % of the sheet; the misses are listed in STALL_NOT_LINEAR with their figures."""
+    params, _ = _params(key, None)
+    stall = measured_stall_torque_nm(params, volts, params.stall_torque_nm(volts) - params.static_friction_nm, commands)
+    assert stall == pytest.approx(model(key).physical.rating_at(volts).stall_torque_nm, rel=PREDICTION_TOLERANCE)
+
+
+def test_from_datasheet_refuses_what_the_model_cannot_be():
+    """Exactly one of stall current and efficiency; a stall current that needs an efficiency above one is refused."""
+    common = dict(gear_ratio=100.0, min_supply_voltage_v=4.0, max_supply_voltage_v=6.0)
+    with pytest.raises(ValueError, match="exactly one"):
+        ServoParams.from_datasheet(0.2, 40.0, 5.0, **common)
+    with pytest.raises(ValueError, match="exactly one"):
+        ServoParams.from_datasheet(0.2, 40.0, 5.0, stall_current_a=1.5, gearbox_efficiency=0.7, **common)
+    with pytest.raises(ValueError, match="gearbox efficiency of 1.3"):
+        ServoParams.from_datasheet(0.215, 383 * 2 * np.pi / 60, 5.0, stall_current_a=1.47, **common)
+    params = ServoParams.from_datasheet(0.215, 383 * 2 * np.pi / 60, 5.0, gearbox_efficiency=0.7, **common)
+    assert params.gearbox_efficiency == 0.7 and params.stall_torque_nm(5.0) - params.static_friction_nm == pytest.approx(0.215)
+    assert params.top_speed_rad_s(5.0) == pytest.approx(383 * 2 * np.pi / 60)
