@@ -20,7 +20,13 @@ emulators in 0.2 s turns (the others stopped meanwhile), because this shared
 machine's speed drifts by tens of percent within a minute: measured one after
 the other, the same program scored anywhere from 64 % to 96 % of the bare rate.
 
-Usage: ``python tools/bench_protocol.py [--seconds 2] [--rounds 3]``
+``--web`` measures only what the live view costs the bus: one moving servo
+at Return Delay Time 0, served with and without ``--web`` while a WebSocket
+client (its own process, as a browser would be) streams the page's frames,
+interleaved the same way; goal: >= 90 % of the rate without, with >= 20
+frames/s reaching the client.
+
+Usage: ``python tools/bench_protocol.py [--seconds 2] [--rounds 3] [--web]``
 """
 
 from __future__ import annotations
@@ -132,7 +138,7 @@ def measure(path: str, seconds: float, *, baud: int = 1_000_000, setup=None) -> 
 
 
 def measure_interleaved(targets: dict[str, tuple[subprocess.Popen, Session]], seconds: float,
-                        slice_s: float = 0.2) -> dict[str, dict]:
+                        slice_s: float = 0.2, spans: dict | None = None) -> dict[str, dict]:
     """Each target ``seconds`` in all, in turns of ``slice_s``, the others stopped (SIGSTOP) meanwhile.
 
     Why: this machine's speed drifts by tens of percent within a minute, so
@@ -140,18 +146,22 @@ def measure_interleaved(targets: dict[str, tuple[subprocess.Popen, Session]], se
     alternating slices every one sees the same machine.  A stopped server uses
     no CPU; a resumed emulator catches its physics up first, which the untimed
     reads after resuming absorb (that burst is an artefact of the stop, not of
-    serving).
+    serving).  ``spans``, if given, gets each target's running turns as
+    (start, end) pairs on the monotonic clock.
     """
     processes = [process for process, _ in targets.values()]
     for process in processes:
         process.send_signal(signal.SIGSTOP)
     try:
         for _ in range(max(1, round(seconds / slice_s))):
-            for process, session in targets.values():
+            for name, (process, session) in targets.items():
                 process.send_signal(signal.SIGCONT)
+                begin_s = time.monotonic()
                 session.warm_up(50)
                 session.run(slice_s)
                 process.send_signal(signal.SIGSTOP)
+                if spans is not None:
+                    spans.setdefault(name, []).append((begin_s, time.monotonic()))
     finally:
         for process in processes:
             process.send_signal(signal.SIGCONT)
@@ -209,15 +219,81 @@ def measure_emulator(emulator: list[str], servos: int, rdt: int, seconds: float)
         stop(process)
 
 
+#: A live-view client in its own process (as a browser would be): reads the WebSocket and prints
+#: the monotonic arrival time of every frame.
+STREAM_CLIENT = textwrap.dedent(
+    """
+    import asyncio, sys, time
+    import aiohttp
+
+    async def main(url):
+        async with aiohttp.ClientSession() as session, session.ws_connect(url) as ws:
+            async for message in ws:
+                if message.data.startswith('{"type":"frame"'):
+                    print(time.monotonic(), flush=True)
+
+    asyncio.run(main(sys.argv[1]))
+    """
+)
+
+
+def start_web(command: list[str]) -> tuple[subprocess.Popen, str, str]:
+    """Start ``ax12emu serve --web``: the port (first line) and the page's URL (second line)."""
+    process, path = start(command)
+    return process, path, process.stdout.readline().strip()
+
+
+def measure_web_cost(emulator: list[str], seconds: float) -> None:
+    """RDT 0 reads of one moving servo, with and without the live view open and streaming, interleaved."""
+    processes: list[subprocess.Popen] = []
+    client = None
+    try:
+        plain, plain_path = start(emulator + ["--ids", "1"])
+        processes.append(plain)
+        web, web_path, url = start_web(emulator + ["--ids", "1", "--web", "127.0.0.1:0"])
+        processes.append(web)
+        client = subprocess.Popen([sys.executable, "-c", STREAM_CLIENT, url.replace("http://", "ws://") + "ws"],
+                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        setup = configure(0, [1], moving=True)
+        targets = {"plain": (plain, Session(plain_path, setup=setup)), "web": (web, Session(web_path, setup=setup))}
+        spans: dict[str, list[tuple[float, float]]] = {}
+        result = measure_interleaved(targets, seconds, spans=spans)
+    finally:
+        for process in processes:
+            stop(process)
+        if client is not None:
+            stop(client)
+    out, err = client.communicate()
+    arrivals = [float(line) for line in out.split()]
+    web_spans = spans.get("web", [])
+    streamed_s = sum(end - begin for begin, end in web_spans)
+    during = sum(any(begin <= t <= end for begin, end in web_spans) for t in arrivals)
+    if not arrivals:
+        print(f"the streaming client received no frames: {err.strip()[-300:]}")
+    frame_hz = during / streamed_s if streamed_s else 0.0
+    print(row("ax12emu, 1 servo moving, RDT 0", result["plain"]))
+    print(row("the same with --web, a client streaming", result["web"], result["plain"]["rate"]))
+    print(
+        f"live view: {frame_hz:.1f} frames/s reached the client while the emulator ran (goal >= 20); "
+        f"read rate with it {result['web']['rate'] / result['plain']['rate']:.1%} of without (goal >= 90 %)"
+    )
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=2.0, help="measuring time per configuration")
     parser.add_argument("--rounds", type=int, default=3,
                         help="the RDT 0 comparison runs --seconds x --rounds per server, in 0.2 s turns (default 3)")
+    parser.add_argument("--web", action="store_true",
+                        help="only the live view's cost: reads with and without --web and a streaming client, interleaved")
     args = parser.parse_args(argv)
     if args.rounds < 1 or not args.seconds > 0:
         parser.error("--rounds must be >= 1 and --seconds > 0")
     emulator = [sys.executable, "-m", "ax12emu", "serve"]
+    if args.web:
+        print(f"machine: {os.cpu_count()} cores, Python {sys.version.split()[0]}")
+        measure_web_cost(emulator, args.seconds * args.rounds)
+        return 0
     wire_1m = 1e6 / 160
     print(f"machine: {os.cpu_count()} cores, Python {sys.version.split()[0]}")
     print(f"{'reference: 1 Mbps wire limit (16 bytes/read)':<44} {wire_1m:9.0f}/s")
