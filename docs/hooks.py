@@ -32,6 +32,7 @@ from ax12emu.protocol.control_table import (
     Entry,
     layout,
 )
+from ax12emu.protocol.servo_models import model, model_names
 
 ROOT = Path(__file__).resolve().parent.parent
 #: Folder of generated figures in the repository, and where the site serves them.
@@ -268,9 +269,31 @@ def cli_markdown(parser: argparse.ArgumentParser | None = None) -> str:
 
 
 #: Marker comment -> the function whose Markdown replaces it.
+def servo_models_markdown() -> str:
+    """The shipped servo model files as a Markdown table: identity, table size, rated figures, source."""
+    lines = [
+        "| file | model | protocol | model number | table bytes (EEPROM) | stall torque | no-load speed | source |",
+        "| --- | --- | --- | --- | --- | --- | --- | --- |",
+    ]
+    for key in model_names():
+        servo = model(key)
+        lay = servo.layout()
+        ratings = servo.physical.ratings
+        torque = "; ".join(f"{r.stall_torque_nm:g} N m @ {r.voltage_v:g} V" for r in ratings)
+        speed = "; ".join(f"{r.no_load_speed_rpm:g} rpm @ {r.voltage_v:g} V" for r in ratings)
+        page = servo.source.split("https://", 1)[1].split()[0] if "https://" in servo.source else ""
+        source = f"[e-manual](https://{page})" if page else _cell(servo.source.split(":")[0])
+        lines.append(
+            f"| `ax12emu/protocol/models/{key}.toml` | {servo.name} | {'/'.join(servo.protocols)} | {servo.model_number} | "
+            f"{lay.table_size} ({lay.eeprom_end}) | {torque} | {speed} | {source} |"
+        )
+    return "\n".join(lines)
+
+
 MARKERS: dict[str, Callable[[], str]] = {
     "<!-- ax12emu:control-table -->": control_table_markdown,
     "<!-- ax12emu:cli -->": cli_markdown,
+    "<!-- ax12emu:servo-models -->": servo_models_markdown,
 }
 
 

@@ -184,3 +184,18 @@ def test_every_file_the_docs_cite_exists():
         f"{page.relative_to(ROOT)}: {path}" for page, path in cited if not _cited_file_exists(page, path, published)
     )
     assert missing == []
+
+
+def test_servo_models_table_lists_every_model_file():
+    """The protocol page asks for the models table, and it has one row per model file with its figures."""
+    from ax12emu.protocol.servo_models import model, model_names
+
+    assert "<!-- ax12emu:servo-models -->" in (DOCS / "protocol.md").read_text(encoding="utf-8")
+    rows = [line for line in hooks.servo_models_markdown().splitlines() if line.startswith("| `ax12emu/protocol/models/")]
+    assert len(rows) == len(model_names())
+    for key, row in zip(model_names(), rows):
+        servo = model(key)
+        assert f"models/{key}.toml" in row and f"| {servo.model_number} |" in row
+        rating = servo.physical.ratings[0]
+        assert f"{rating.stall_torque_nm:g} N m @ {rating.voltage_v:g} V" in row
+        assert (ROOT / "ax12emu" / "protocol" / "models" / f"{key}.toml").exists()
