@@ -68,12 +68,15 @@ ARM_LENGTH_M = 0.05
 STRIBECK_BREAKAWAY_S = 6.0
 #: A started server gets this long to print its port.
 SERVE_START_S = 20.0
-#: Niceness of the server and the recorder while they record.  A servo's controller is never descheduled; on a
-#: shared 2-core machine a process at the default priority is, for 10 ms and more at a time, and a command then
-#: takes effect that much after it was sent (the write's round trip: median 1 ms, 95th percentile 12 ms at a load
-#: average of 7), which the diagnosis would rightly call a latency.  Needs the privilege; without it the
-#: recording runs at the default priority and its key says so.
-RECORDING_NICENESS = -10
+#: How the server and the recorder are scheduled while they record.  A servo's controller is never descheduled;
+#: on a shared 2-core machine (load average 7-10 while other work runs) a process at the default priority is, for
+#: 10 ms and more at a time, even at niceness -10, and a command then takes effect that long after it was sent,
+#: which the diagnosis rightly calls a latency.  So the server runs round-robin real-time at the lowest priority
+#: for the recording's seconds (it sleeps between packets and physics steps, about a tenth of a core; the kernel
+#: keeps 5 % of each core for ordinary tasks whatever happens), and the recorder at niceness -10 (not real-time:
+#: dynamixel-sdk busy-waits for each reply, which at real-time priority would starve the server).  Where that is
+#: not permitted, niceness -10, else the default; the key records which.
+RECORDING_PRIORITY = ("SCHED_RR 1", "nice -10", "default")
 
 
 @dataclass(frozen=True)
@@ -274,13 +277,19 @@ def _stop(process: subprocess.Popen) -> None:
             stream.close()
 
 
-def _renice(pid: int, niceness: int) -> bool:
-    """Set ``pid``'s niceness (0: this process); False where not permitted."""
+def _prioritise(pid: int, realtime: bool) -> int:
+    """Schedule ``pid`` (0: this process) as :data:`RECORDING_PRIORITY` says; the index of what was permitted."""
     try:
-        os.setpriority(os.PRIO_PROCESS, pid, niceness)
+        if realtime:
+            os.sched_setscheduler(pid, os.SCHED_RR, os.sched_param(1))
+            return 0
+    except (OSError, AttributeError):
+        pass
+    try:
+        os.setpriority(os.PRIO_PROCESS, pid, -10)
+        return 1
     except OSError:
-        return False
-    return True
+        return 2
 
 
 def _params_toml(setup: Setup, base: dict[str, float], path: Path) -> None:
@@ -307,7 +316,8 @@ def record_live(knob: str, seed: int, duration_s: float = 10.0, rate_hz: float =
         process, port = _serve(["--params", str(params_path), *setup.serve_args])
         own = os.getpriority(os.PRIO_PROCESS, 0)
         try:
-            niceness = _renice(process.pid, RECORDING_NICENESS) and _renice(0, RECORDING_NICENESS)
+            priority = (RECORDING_PRIORITY[_prioritise(process.pid, True)],
+                        RECORDING_PRIORITY[_prioritise(0, False)])
             trace = record(port, 1, 1_000_000, duration, rate_hz, setup.breakaway_s, setup.writes)
         finally:
             os.setpriority(os.PRIO_PROCESS, 0, own)
@@ -319,7 +329,7 @@ def record_live(knob: str, seed: int, duration_s: float = 10.0, rate_hz: float =
     trace.comments[:] = [f"live recording through dynamixel-sdk from ax12emu serve, seed {seed}, tools/live_dataset.py"]
     key = {"knob": knob, "effect": spec.effect, "how": spec.how, "truth": setup.truth, "seed": seed,
            "duration_s": duration, "rate_hz": rate_hz, "base": base, "setup": asdict(setup),
-           "niceness": RECORDING_NICENESS if niceness else own}
+           "priority": {"server": priority[0], "recorder": priority[1]}}
     return trace, key
 
 

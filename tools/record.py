@@ -67,14 +67,19 @@ def parse_writes(items: list[str]) -> dict[str, int]:
     return out
 
 
+#: A set-up write is tried this often: on a loaded machine a reply now and then misses dynamixel-sdk's timeout.
+WRITE_ATTEMPTS = 3
+
+
 def _write(ph, port, servo_id: int, name: str, value: int) -> None:
     from dynamixel_sdk import COMM_SUCCESS
 
     entry = _TABLE[name]
-    if entry.size == 1:
-        result, error = ph.write1ByteTxRx(port, servo_id, entry.address, value)
-    else:
-        result, error = ph.write2ByteTxRx(port, servo_id, entry.address, value)
+    write = ph.write1ByteTxRx if entry.size == 1 else ph.write2ByteTxRx
+    for _ in range(WRITE_ATTEMPTS):
+        result, error = write(port, servo_id, entry.address, value)
+        if result == COMM_SUCCESS:
+            break
     if result != COMM_SUCCESS or error:
         raise RuntimeError(f"writing {name}={value} to servo {servo_id} failed: {ph.getTxRxResult(result)} "
                            f"{ph.getRxPacketError(error) if error else ''}".strip())
