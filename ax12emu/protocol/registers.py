@@ -88,14 +88,15 @@ class Profile:
     name: str
     #: Where the differences come from.
     source: str
-    #: Addresses a WRITE may touch while Lock is 1; any other gives a RANGE error.
-    lock_writable: range
     #: Per-entry replacements of ``default`` / ``minimum`` / ``maximum``.
     overrides: Mapping[str, Mapping[str, int]] = field(default_factory=dict)
     #: Entries only this profile has.
     extra_entries: tuple[Entry, ...] = ()
-    #: What Alarm Shutdown clears: "torque_limit" (set to 0) or "torque_enable".
-    shutdown_clears: str = "torque_limit"
+    #: Addresses a WRITE may touch while Lock is 1; any other gives a RANGE error (None: no Lock register).
+    lock_writable: range | None = None
+    #: What Alarm Shutdown clears: "torque_limit" (set to 0) or "torque_enable"; None where the file's
+    #: sources do not say.
+    shutdown_clears: str | None = None
 
 
 @dataclass(frozen=True)

@@ -26,8 +26,10 @@ The format (``models/ax-12a.toml`` is the worked example)::
     source = "..."
     overrides = { punch = { min = 32 } }       # default / min / max per entry
     extra_entries = [ ... ]                    # entries only this profile has
-    lock_writable = [24, 50]                   # [first, end) a WRITE may touch while Lock is 1
-    shutdown_clears = "torque_limit"           # or "torque_enable"
+    lock_writable = [24, 50]                   # [first, end) a WRITE may touch while Lock is 1 (tables
+                                               # with a lock register; default: the RAM area)
+    shutdown_clears = "torque_limit"           # or "torque_enable": what Alarm Shutdown clears, where
+                                               # the source says (absent: not stated)
 
     [physical]
     source = "..."
@@ -66,7 +68,7 @@ if sys.version_info >= (3, 11):
 else:  # Python 3.10: the same parser, from PyPI
     import tomli as tomllib
 
-__all__ = ["Rating", "Physical", "ServoModel", "load_model_file", "model", "model_names", "MODELS_PACKAGE_DIR"]
+__all__ = ["Rating", "Physical", "ServoModel", "parse_model", "load_model_file", "model", "model_names", "MODELS_PACKAGE_DIR"]
 
 #: Where the shipped model files live (package data).
 MODELS_PACKAGE_DIR = "models"
@@ -265,9 +267,9 @@ def _check_bounds_names(where: _Where, entries: tuple[Entry, ...], field_name: s
 
 def _profiles(where: _Where, raw: Any, key: str, base: tuple[Entry, ...], table_size: int) -> dict[str, Profile]:
     names = {e.name for e in base}
-    eeprom = [e.end for e in base if e.area is Area.EEPROM]
     ram = [e.address for e in base if e.area is Area.RAM]
-    default_lock = range(min(ram) if ram else (max(eeprom) if eeprom else 0), table_size)
+    # With a Lock register, by default the RAM area stays writable while Lock is set (the EEPROM freezes).
+    default_lock = range(min(ram) if ram else table_size, table_size) if "lock" in names else None
     if raw is None:
         raw = {key: {"source": "the model's table as its file states it"}}
     if not isinstance(raw, dict) or not raw:
@@ -289,6 +291,8 @@ def _profiles(where: _Where, raw: Any, key: str, base: tuple[Entry, ...], table_
             )
         extra = _entries(where, spec.get("extra_entries", []), f"{label}.extra_entries")
         lock = default_lock
+        if "lock_writable" in spec and "lock" not in names:
+            raise where.error(f"{label}.lock_writable", "the table has no lock register")
         if "lock_writable" in spec:
             pair = spec["lock_writable"]
             if not (isinstance(pair, list) and len(pair) == 2 and all(isinstance(v, int) and not isinstance(v, bool) for v in pair)
@@ -301,8 +305,8 @@ def _profiles(where: _Where, raw: Any, key: str, base: tuple[Entry, ...], table_
             lock_writable=lock,
             overrides=MappingProxyType(overrides),
             extra_entries=extra,
-            shutdown_clears=where.choice(spec.get("shutdown_clears", "torque_limit"), f"{label}.shutdown_clears",
-                                         SHUTDOWN_CLEARS),
+            shutdown_clears=(where.choice(spec["shutdown_clears"], f"{label}.shutdown_clears", SHUTDOWN_CLEARS)
+                             if "shutdown_clears" in spec else None),
         )
         try:
             compile_layout(profile, base, table_size)

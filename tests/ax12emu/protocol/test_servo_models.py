@@ -186,3 +186,15 @@ def test_model_number_must_match_the_table_and_profiles_are_checked(tmp_path):
         load_model_file(path)
     with pytest.raises(ValueError, match="unknown servo model"):
         model("ax-99")
+
+
+def test_lock_window_and_shutdown_only_where_the_table_and_sources_have_them():
+    """A Lock window needs a lock register; what Alarm Shutdown clears is None unless a profile states it."""
+    servo = parse_model(_minimal(), "t", "t.toml")
+    assert servo.layout().profile.lock_writable is None and servo.layout().profile.shutdown_clears is None
+    with pytest.raises(ValueError, match=r"profiles.p.lock_writable: the table has no lock register"):
+        parse_model(_minimal() + '[profiles.p]\nsource = "s"\nlock_writable = [4, 20]\n', "t", "bad.toml")
+    with pytest.raises(ValueError, match=r"profiles.p.shutdown_clears: must be one of"):
+        parse_model(_minimal() + '[profiles.p]\nsource = "s"\nshutdown_clears = "power"\n', "t", "bad.toml")
+    assert model("xl430-w250").layout().profile.shutdown_clears == "torque_enable"
+    assert model("ax-18a").layout().profile.shutdown_clears == "torque_limit"
