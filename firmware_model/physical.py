@@ -55,7 +55,7 @@ from .params import ServoParams
 from .protection import alarm_bits, overload_timer_step, thermal_step
 from .sensors import DelayLine, LatchHistory, held_speed_rad_s, registers
 from .setpoint import apply_dead_zone
-from .stepping import FusedNumpySteps, StepConstants, fused_scalar_steps, fusable, generic_steps
+from .stepping import FusedNumpySteps, StepConstants, fusable, fused_scalar_steps, generic_steps
 from .units import (
     DIRECTION_BIT,
     POSITION_MAX_RAW,
@@ -342,7 +342,8 @@ class PhysicalModel:
         c = self._sensing
         if self._xp is SCALAR:  # one servo: plain Python is several times cheaper than numpy here
             st = self._s
-            busy = (c.wheel_turning[0] if c.wheel[0] else abs(st.ref_vel) > 1e-9) if c is not None else False
+            busy = ((c.wheel_turning[0] if c.wheel[0] else abs(st.ref_vel) > 1e-9 or abs(c.goal_rad[0] - st.ref) > 1e-9)
+                    if c is not None else False)
             moving = int(c is not None and c.enabled[0] and (busy or abs(st.speed) > RAD_S_PER_SPEED_UNIT))
             return Sensed(present_position=np.array([_position_raw(st.angle)], dtype=np.int64),
                           moving=np.array([moving], dtype=np.int64), **slow)
@@ -352,12 +353,14 @@ class PhysicalModel:
         elif c.always_moving is not None:
             moving = c.always_moving
         else:
+            # Joint mode: the reference still travelling, or not yet at the goal (reversing
+            # toward a new goal, its velocity passes through 0 for a step mid-move).
             if not c.any_wheel:
-                busy = np.abs(st.ref_vel) > 1e-9
+                busy = (np.abs(st.ref_vel) > 1e-9) | (np.abs(c.goal_rad - st.ref) > 1e-9)
             elif c.all_wheel:
                 busy = c.wheel_turning
             else:
-                busy = np.where(c.wheel, c.wheel_turning, np.abs(st.ref_vel) > 1e-9)
+                busy = np.where(c.wheel, c.wheel_turning, (np.abs(st.ref_vel) > 1e-9) | (np.abs(c.goal_rad - st.ref) > 1e-9))
             busy = busy | (np.abs(st.speed) > RAD_S_PER_SPEED_UNIT)
             moving = (busy if c.all_enabled else c.enabled & busy).astype(np.int64)
         if c is not None and c.any_wheel:  # endless turns: some shaft is usually in the gap
@@ -441,7 +444,7 @@ class PhysicalModel:
         plan = SimpleNamespace(**{k: self._to_backend(v.astype(float)) for k, v in per_servo.items()})
         plan.enabled, plan.wheel = (bool(enabled[0]), bool(wheel[0])) if self._xp is SCALAR else (enabled, wheel)
         plan.sensing = SimpleNamespace(
-            enabled=enabled, wheel=wheel, wheel_turning=(speed_raw & 0x3FF) != 0,
+            enabled=enabled, wheel=wheel, wheel_turning=(speed_raw & 0x3FF) != 0, goal_rad=goal_raw * RAD_PER_POSITION_UNIT,
             temperature_limit=raw["temperature_limit"].copy(), min_voltage_limit=raw["min_voltage_limit"].copy(),
             max_voltage_limit=raw["max_voltage_limit"].copy(), any_wheel=bool(wheel.any()), all_wheel=bool(wheel.all()),
             all_enabled=bool(enabled.all()), always_moving=None,

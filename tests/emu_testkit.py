@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 
 from dynamixel_sdk import COMM_SUCCESS, PacketHandler, PortHandler
+
+from ax12emu.conformance.checks import EEPROM_WAIT_S_PER_BYTE
 
 #: How long a test's port waits for a status packet, at least.  dynamixel-sdk's own timeout is
 #: about 34 ms at 1 Mbps; a shared CI machine can hold the emulator up longer than that, and the
@@ -15,6 +18,16 @@ PATIENCE_MS = 250.0
 #: The same for the conformance suite's runs in tests (its 50 ms default suits hardware; a silent
 #: check waits this long, so each run takes about a second more).
 CONFORMANCE_TIMEOUT_S = 0.2
+
+
+def wait_eeprom(byte_count: int = 1) -> None:
+    """Leave the servos alone while they write ``byte_count`` EEPROM bytes, as a client of real ones must.
+
+    An AX-12 answers a write into its EEPROM area, then ignores packets for
+    about 6 ms per byte (``ServoOptions.eeprom_busy_s_per_byte``); this waits
+    the conformance suite's bound for hardware.
+    """
+    time.sleep(byte_count * EEPROM_WAIT_S_PER_BYTE)
 
 
 class PatientPortHandler(PortHandler):

@@ -45,6 +45,9 @@ from pathlib import Path
 
 from dynamixel_sdk import COMM_SUCCESS, PacketHandler, PortHandler
 
+#: Per byte written into the EEPROM area, how long to leave the servo alone (about 6 ms measured, 9 ms by the datasheet).
+EEPROM_WAIT_S = 0.009
+
 BARE_RESPONDER = textwrap.dedent(
     """
     import os, pty, select, sys, tty
@@ -174,8 +177,10 @@ def configure(rdt: int, ids: list[int], moving: bool, baud_value: int | None = N
     def setup(port: PortHandler, ph: PacketHandler) -> None:
         for servo_id in ids:
             ph.write1ByteTxRx(port, servo_id, 5, rdt)
+            time.sleep(EEPROM_WAIT_S)  # an AX-12 ignores packets while it writes its EEPROM
             if moving:
                 ph.write4ByteTxRx(port, servo_id, 6, 0)  # both angle limits 0: wheel mode
+                time.sleep(4 * EEPROM_WAIT_S)
                 ph.write1ByteTxRx(port, servo_id, 24, 1)
                 ph.write2ByteTxRx(port, servo_id, 32, 300 + servo_id)
         if baud_value is not None:

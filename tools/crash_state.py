@@ -18,6 +18,10 @@ After each kill the state file must:
 
 and the restarted servo answers at the ID the file gives, with registers equal to it.
 
+The server runs with ``--eeprom-busy-ms 0``: a real AX-12 ignores packets for
+a few milliseconds after each EEPROM write, so all but the first write of a
+pipelined burst would be dropped and little would be left to kill mid-save.
+
 Usage: ``python tools/crash_state.py [--iterations 100] [--seed N]``
 """
 
@@ -87,7 +91,8 @@ class Report:
 
 def _start(state_dir: Path) -> tuple[subprocess.Popen, str]:
     process = subprocess.Popen(
-        [sys.executable, "-m", "ax12emu", "serve", "--state-dir", str(state_dir), "--model", "kinematic"],
+        [sys.executable, "-m", "ax12emu", "serve", "--state-dir", str(state_dir), "--model", "kinematic",
+         "--eeprom-busy-ms", "0"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )
     ready, _, _ = select.select([process.stdout], [], [], 20)

@@ -32,6 +32,8 @@ from dataclasses import dataclass, field
 from dynamixel_sdk import COMM_SUCCESS, PacketHandler, PortHandler
 
 PRESENT_POSITION, GOAL_POSITION, MOVING, RETURN_DELAY, MODEL_NUMBER, TORQUE_ENABLE = 36, 30, 46, 5, 0, 24
+#: After a one-byte EEPROM write an AX-12 ignores packets for about 6 ms (9 ms by the ATMega8 datasheet).
+EEPROM_WAIT_S = 0.009
 RSS_LIMIT_KB = 5 * 1024
 
 
@@ -117,6 +119,8 @@ def soak(path: str, pid: int, seconds: float, servos: int, *, goal_period_s: flo
                 comm, error = ph.write1ByteTxRx(port, servo_id, address, value)
                 if comm != COMM_SUCCESS or error:
                     raise RuntimeError(f"writing {value} at {address} of ID {servo_id}: comm {comm}, error {error}")
+                if address == RETURN_DELAY:
+                    time.sleep(EEPROM_WAIT_S)  # in the EEPROM: the servo ignores packets while it writes it
         goals = {servo_id: 512 for servo_id in ids}
         started = clock()
         end = started + seconds

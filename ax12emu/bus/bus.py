@@ -7,7 +7,9 @@ the time they arrived and sends what it returns after each reply's delay.
 
 Hardware semantics kept: every servo sees every packet and acts on its own
 ID or the broadcast ID; a servo listening at a baud rate more than 3 % away
-from the line's hears only garbage and stays silent; two servos given the
+from the line's hears only garbage and stays silent; a servo writing its
+EEPROM ignores packets for a while after the write (``ServoOptions.eeprom_busy_s_per_byte``),
+timed by the bus's clock, so in virtual time too; two servos given the
 same ID both act and both answer (the server merges colliding replies); an ID
 written by a client moves the servo at once.  Not modelled here: bit timing
 and collisions on the wire (``server.py``), electrical faults.
@@ -113,6 +115,9 @@ class Bus:
         self.faults: Interceptor | None = None
         #: Replies to repeated READ / PING packets (see :mod:`ax12emu.bus.reply_cache`).
         self.reply_cache = ReplyCache()
+        #: The latest ``busy_until_s`` of any servo: until then a packet may meet a servo that
+        #: ignores it, so nothing is answered from or stored in the reply cache.
+        self._busy_until_s = float("-inf")
         self._closed = False
 
     # -- lookup ------------------------------------------------------------------------
@@ -170,12 +175,15 @@ class Bus:
         :mod:`ax12emu.bus.reply_cache`); physics is brought up first, as
         :meth:`dispatch` does.
         """
+        now_s = self.clock.now_s()
         if (self.faults is not None or len(data) < 6 or len(data) != data[3] + 4 or self.framer.buffered
-                or log.isEnabledFor(logging.DEBUG)):
+                or now_s < self._busy_until_s or log.isEnabledFor(logging.DEBUG)):
             return None
-        model, sim_time_s = self.plant.model, self.clock.now_s() - self.request_lag_s
-        if sim_time_s >= model.time_s + model.step_s:  # Plant.advance's own test, without the call
-            self.plant.advance(sim_time_s)
+        plant = self.plant
+        model, sim_time_s = plant.model, now_s - self.request_lag_s
+        # Plant.catch_up's own tests, without the call
+        if sim_time_s >= model.time_s + model.step_s or plant.write_unseen:
+            plant.catch_up(sim_time_s)
         return self.reply_cache.lookup(data if type(data) is bytes else bytes(data), line_bps, self._by_id)
 
     def answer(self, data: bytes, now_s: float | None = None, *, line_bps: float | None = None,
@@ -193,7 +201,8 @@ class Bus:
             if cached is not None:
                 return [cached]
             # Only a packet that stands alone is stored (see ReplyCache.store).
-            cache = self.faults is None and not self.framer.buffered and not log.isEnabledFor(logging.DEBUG)
+            cache = (self.faults is None and not self.framer.buffered and not log.isEnabledFor(logging.DEBUG)
+                     and self.clock.now_s() >= self._busy_until_s)
         packets = self.framer.feed(data, now_s)
         answers = [self.dispatch(packet, line_bps=line_bps) for packet in packets]
         if cache and len(packets) == 1 and not self.framer.buffered:
@@ -207,8 +216,14 @@ class Bus:
             log.debug("dropped a partial packet after %.0f ms of silence", self.framer.silence_timeout_s * 1e3)
 
     def dispatch(self, packet: InstructionPacket, *, line_bps: float | None = None) -> list[Reply]:
-        """Run one decoded packet on the servos it addresses; return their replies."""
-        self.plant.advance(self.clock.now_s() - self.request_lag_s)
+        """Run one decoded packet on the servos it addresses; return their replies.
+
+        Physics is brought to the present first and, after a packet that wrote
+        registers, one control step past it (``Plant.catch_up``): each request
+        sees the consequence of the writes before it, as on a real servo.
+        """
+        now_s = self.clock.now_s()
+        self.plant.catch_up(now_s - self.request_lag_s)
         faults = self.faults
         if faults is not None:
             faults.after_physics()
@@ -224,6 +239,11 @@ class Bus:
                 if debug:
                     log.debug("ID %d listens at %.0f bps, the host sends at %.0f: it hears garbage", servo.id, baud, line_bps)
                 continue
+            if servo.busy_until_s > now_s:
+                if debug:
+                    log.debug("ID %d is writing its EEPROM for %.1f ms more: it ignores the packet",
+                              servo.id, (servo.busy_until_s - now_s) * 1e3)
+                continue
             if faults is not None and not faults.admit(servo):
                 continue
             if packet.instruction in _CHANGES_TABLES:
@@ -236,13 +256,19 @@ class Bus:
                 replies.append(Reply(outcome.reply_id, outcome.reply, outcome.delay_s, baud))
                 if debug:
                     log.debug("tx id=%d %s after %.0f us", outcome.reply_id, describe_error(outcome.reply[4]), outcome.delay_s * 1e6)
+            if servo.eeprom_bytes_written:
+                busy_s = servo.eeprom_bytes_written * servo.options.eeprom_busy_s_per_byte
+                servo.eeprom_bytes_written = 0
+                if busy_s > 0.0:
+                    servo.busy_until_s = now_s + busy_s
+                    self._busy_until_s = max(self._busy_until_s, servo.busy_until_s)
             if servo.eeprom_dirty:
                 servo.eeprom_dirty = False
                 if self.state_store is not None:
                     self.state_store.save(self.slots[servo.index], servo.table)
         instruction = packet.instruction
-        if instruction in _CHANGES_TABLES and targets:
-            self.plant.tables_changed()
+        if instruction in _CHANGES_TABLES and targets and packet.checksum_ok:
+            self.plant.wrote()
             if instruction == Instruction.RESET:
                 self.plant.refresh()
             if faults is not None:

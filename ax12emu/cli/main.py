@@ -63,6 +63,13 @@ def _positive_float(text: str) -> float:
     return value
 
 
+def _eeprom_busy_ms(text: str) -> float:
+    value = _finite_float(text)
+    if not 0.0 <= value <= 1000.0:
+        raise argparse.ArgumentTypeError(f"must lie in 0..1000 ms, got {text}")
+    return value
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser for all subcommands."""
     parser = argparse.ArgumentParser(prog="ax12emu", description="A virtual Dynamixel AX-12+ bus (Protocol 1.0).")
@@ -124,6 +131,20 @@ def build_parser() -> argparse.ArgumentParser:
         default="old",
         help="RESET's status packet comes from the old ID (e-manual example, default) or the new ID 1",
     )
+    serve.add_argument(
+        "--goal-torque",
+        choices=("on", "unchanged"),
+        default="on",
+        help="writing Goal Position turns the torque on, as AX/MX users report (default), or leaves Torque Enable as it is",
+    )
+    serve.add_argument(
+        "--eeprom-busy-ms",
+        type=_eeprom_busy_ms,
+        default=6.0,
+        metavar="MS",
+        help="after a write into the EEPROM area a servo ignores packets this long per byte written "
+        "(default 6, as measured on an AX-12; 0: answer at once)",
+    )
     serve.add_argument("-v", "--verbose", action="store_true", help="log every packet, one line each")
     # --trace and fault flags on serve; decode and conformance commands (cli/hil.py)
     cli_hil.add_serve_flags(serve)
@@ -176,6 +197,8 @@ def _serve(args: argparse.Namespace) -> int:
         reply_on_checksum_error=args.checksum_error == "reply",
         reply_to_broadcast_ping=args.broadcast_ping == "reply",
         reset_reply_from_new_id=args.reset_reply_id == "new",
+        goal_position_enables_torque=args.goal_torque == "on",
+        eeprom_busy_s_per_byte=args.eeprom_busy_ms * 1e-3,
     )
     store = StateStore(args.state_dir) if args.state_dir else None
     model = build_model(

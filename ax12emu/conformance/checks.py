@@ -7,6 +7,10 @@ does and measures what the device did.  A check returns its measured figure
 with the reason, or returns a :class:`Note` where the sources allow more
 than one behaviour (the figure says which one this device shows).
 
+After every write into the EEPROM area a check waits before the next packet,
+as any client of a real AX-12 must: the servo ignores packets while it writes
+its EEPROM (:data:`EEPROM_WAIT_S_PER_BYTE`).
+
 Every check restores what it wrote (in ``finally``), so the non-destructive
 set leaves the device's table as it found it; ``destructive`` checks (ID,
 baud rate, RESET) also put things back, but a failure halfway may leave the
@@ -21,11 +25,11 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
-from ax12emu.protocol.control_table import TABLE_SIZE, Access, Area, layout
+from ax12emu.protocol.control_table import EEPROM_END, TABLE_SIZE, Access, Area, layout
 from ax12emu.protocol.describe import describe_error
 from ax12emu.protocol.packets import BROADCAST_ID, Instruction, StatusError, StatusPacket, encode_instruction
 
-from .link import Link
+from .link import Link, Response
 
 __all__ = ["Check", "CHECKS", "Context", "Failed", "Skipped", "Note", "DYNAMIC", "table_differences"]
 
@@ -33,6 +37,10 @@ __all__ = ["Check", "CHECKS", "Context", "Failed", "Skipped", "Note", "DYNAMIC",
 DYNAMIC = frozenset(
     {"present_position", "present_speed", "present_load", "present_voltage", "present_temperature", "moving"}
 )
+#: How long to leave a servo alone per byte written into its EEPROM: it answers the write,
+#: then ignores packets while it writes (xevelabs' USB2AX protocol notes: "up to 9 ms per
+#: byte based on the ATMega8 datasheet", measured about 6 +/- 1 ms), so the datasheet's bound.
+EEPROM_WAIT_S_PER_BYTE = 0.009
 #: Baud Rate register value used by the baud check and the host rate that matches it.
 _SLOW_BAUD_REGISTER, _SLOW_HOST_BPS = 34, 57600
 
@@ -93,7 +101,7 @@ class Context:
     # -- transactions ----------------------------------------------------------------
     def status(self, servo_id: int, instruction: int, params: bytes = b"", *, timeout_s: float | None = None) -> StatusPacket:
         """A transaction that must be answered by ``servo_id`` with a valid checksum."""
-        response = self.link.transact(encode_instruction(servo_id, instruction, params), timeout_s=timeout_s)
+        response = self.transact(encode_instruction(servo_id, instruction, params), timeout_s=timeout_s)
         name = Instruction(instruction).name if instruction in Instruction._value2member_map_ else f"{instruction:#04x}"
         expect(response.status is not None, f"no reply to {name} id={servo_id}")
         status = response.status
@@ -102,9 +110,20 @@ class Context:
         expect(status.id == servo_id, f"reply to {name} id={servo_id} came from id={status.id}")
         return status
 
+    def transact(self, packet: bytes, *, timeout_s: float | None = None) -> Response:
+        """``link.transact``, then, after a WRITE into the EEPROM area, the wait the servo needs."""
+        response = self.link.transact(packet, timeout_s=timeout_s)
+        eeprom_wait(packet)
+        return response
+
+    def send(self, packet: bytes) -> None:
+        """``link.send`` (no reply expected), then the EEPROM wait as :meth:`transact`."""
+        self.link.send(packet)
+        eeprom_wait(packet)
+
     def silent(self, packet: bytes) -> bool:
         """Send ``packet`` and report whether nothing came back within the timeout."""
-        return self.link.transact(packet).status is None
+        return self.transact(packet).status is None
 
     def read(self, servo_id: int, address: int, length: int) -> bytes:
         """READ that must succeed without error bits."""
@@ -142,6 +161,13 @@ class Context:
             expect(response.status is not None, f"PING id={servo_id} unanswered")
             rtts.append(response.rtt_s)
         return rtts
+
+
+def eeprom_wait(packet: bytes) -> None:
+    """After a WRITE whose data reaches the EEPROM area, wait while the servo writes it."""
+    if len(packet) > 6 and packet[4] == Instruction.WRITE and packet[5] < EEPROM_END:
+        written = min(len(packet) - 7, EEPROM_END - packet[5])
+        time.sleep(written * EEPROM_WAIT_S_PER_BYTE)
 
 
 #: Alarm bits may be set by a warm or loaded servo; instruction checks ignore them.
@@ -382,16 +408,15 @@ def check_status_return_level(ctx: Context) -> str:
     read_led = encode_instruction(servo, Instruction.READ, bytes((25, 1)))
     ping = encode_instruction(servo, Instruction.PING)
     try:
-        ctx.link.transact(encode_instruction(servo, Instruction.WRITE, bytes((16, 1))))
+        ctx.transact(encode_instruction(servo, Instruction.WRITE, bytes((16, 1))))
         expect(ctx.silent(write_led), "level 1 answered a WRITE")
         expect(not ctx.silent(read_led), "level 1 did not answer a READ")
         expect(not ctx.silent(ping), "level 1 did not answer PING")
-        ctx.link.transact(encode_instruction(servo, Instruction.WRITE, bytes((16, 0))))
+        ctx.transact(encode_instruction(servo, Instruction.WRITE, bytes((16, 0))))
         expect(ctx.silent(read_led), "level 0 answered a READ")
         expect(not ctx.silent(ping), "level 0 did not answer PING")
     finally:
-        ctx.link.send(encode_instruction(servo, Instruction.WRITE, bytes((16, 2))))
-        time.sleep(0.005)
+        ctx.send(encode_instruction(servo, Instruction.WRITE, bytes((16, 2))))
         if level != 2:
             ctx.put(servo, "status_return_level", level)
     return "0: PING only; 1: PING+READ; 2: all"

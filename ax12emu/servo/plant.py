@@ -55,6 +55,10 @@ class Plant:
         #: write-back; bytes written into a row directly (a packet) are followed by tables_changed.
         self._written: dict[str, object] = {}
         self._refreshes = 0
+        #: Client writes counted, the count the tables show the firmware's answer to, and the
+        #: model's time at the last write (see :meth:`catch_up`).
+        self._writes = self._writes_shown = 0
+        self._write_time_s = model.time_s
         for servo in servos:
             servo.table.on_set = self._on_set
         for name, (address, size) in {**self._commands, **self._sensed}.items():
@@ -84,12 +88,55 @@ class Plant:
         self._cached_commands = None
         self._written.clear()
 
+    def wrote(self) -> None:
+        """A client's packet may have written registers: the next request must see the firmware's answer.
+
+        Why: the AX-12 runs its control loop every 1 ms (the motor-control
+        interrupt, xevelabs' USB2AX protocol notes), and over USB a host's
+        next packet cannot arrive before it has run, so a client that writes
+        a goal and polls Moving always finds the move started.  The model
+        steps on its own grid, up to a step behind the clock (``Bus.request_lag_s``),
+        so without this the first poll could be answered from a step taken
+        before the write.
+        """
+        self.tables_changed()
+        self._writes += 1
+        self._write_time_s = self.model.time_s
+
+    @property
+    def write_unseen(self) -> bool:
+        """Whether the tables do not yet show a step taken after the last client write."""
+        return self._writes != self._writes_shown
+
+    def catch_up(self, sim_time_s: float) -> None:
+        """:meth:`advance` for a request: also at least one step past the last client write.
+
+        That step may end up to one step past ``sim_time_s`` (the clock): the
+        time the control loop had before the request could arrive.  Only the
+        first request after a write pays for it; if the serving loop's tick
+        already stepped after the write (its sensors not yet copied), only
+        the copying is left.
+        """
+        model = self.model
+        if sim_time_s >= model.time_s + model.step_s:
+            self.advance(sim_time_s)
+        if self._writes != self._writes_shown:
+            writes = self._writes
+            if model.time_s > self._write_time_s:
+                sensed = model.sense()
+            else:
+                sensed = model.advance(model.time_s + model.step_s, self.commands())
+            self._write_back(sensed)
+            self._writes_shown = writes
+
     def advance(self, sim_time_s: float) -> bool:
         """Advance the model to ``sim_time_s`` if a whole step is due; True if it moved."""
         model = self.model
         if sim_time_s < model.time_s + model.step_s:
             return False
+        writes = self._writes
         self._write_back(model.advance(sim_time_s, self.commands()))
+        self._writes_shown = writes
         return True
 
     def tick(self, sim_time_s: float) -> Iterator[None]:
@@ -106,6 +153,7 @@ class Plant:
         if not self._steps_to or sim_time_s < model.time_s + model.step_s:
             self.advance(sim_time_s)  # without step_to (it is optional), the whole step at once
             return
+        writes = self._writes
         model.step_to(sim_time_s, self.commands())  # type: ignore[attr-defined]
         stepped_to_s = model.time_s
         yield
@@ -116,6 +164,7 @@ class Plant:
         # changing the model, e.g. turning a shaft by hand): their values are newer.
         if model.time_s == stepped_to_s and self._refreshes == refreshes:
             self._write_back(sensed)
+            self._writes_shown = writes  # writes that came between the pieces stay unseen
 
     def refresh(self) -> None:
         """Copy the model's present sensed values into the tables without advancing."""

@@ -22,7 +22,11 @@ the 2006 AX-12 User's Manual):
 * the status packet is built before the write takes effect on ID, baud and
   return delay (reverse-engineered AX-12 timing notes, xevelabs: "sent after
   everything has been checked but applied after"), so a servo whose ID is
-  changed answers from its old ID and then answers to the new one.
+  changed answers from its old ID and then answers to the new one;
+* a write touching Goal Position turns the torque on, and a write into the
+  EEPROM area leaves the servo deaf for a while after its answer (both
+  optional, with their sources: :class:`ServoOptions`; the deafness is the
+  bus's to keep, against its clock).
 """
 
 from __future__ import annotations
@@ -100,6 +104,10 @@ def _apply_write(servo: VirtualServo, address: int, data: bytes) -> StatusError:
             return error
     if address < EEPROM_END:
         servo.eeprom_dirty = True
+        servo.eeprom_bytes_written += min(len(data), EEPROM_END - address)
+    goal = table.layout.by_name["goal_position"]
+    if servo.options.goal_position_enables_torque and address < goal.end and address + len(data) > goal.address:
+        candidate[table.layout.by_name["torque_enable"].address] = 1
     table.row[:] = candidate
     return StatusError.NONE
 

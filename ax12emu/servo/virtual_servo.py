@@ -38,10 +38,29 @@ class ServoOptions:
     #: RESET's status packet comes from the ID the packet was sent to (e-manual
     #: example: RESET to ID 0 answered by ID 0); True: from the new ID 1.
     reset_reply_from_new_id: bool = False
+    #: Writing Goal Position turns the torque on (Torque Enable becomes 1).  The
+    #: e-manual's Torque Enable and Goal Position entries say nothing of it, but
+    #: users and maintainers of AX/MX client libraries report it: pypot's author
+    #: (Luos-io/Examples PR #17, "the goal position should only be set when the
+    #: compliance is turned off, otherwise it will turn the motor back stiff"),
+    #: poppy-docs issue #36 (after setting a goal position the motor "is no longer
+    #: compliant") and pypot issue #121 (a goal sent to compliant motors makes them
+    #: twitch until the library turns torque off again).  False: torque stays off.
+    goal_position_enables_torque: bool = True
+    #: Seconds the servo ignores every packet (stays silent, acts on nothing) per
+    #: byte written into the EEPROM area, counted from the write.  xevelabs' USB2AX
+    #: protocol notes (https://www.xevelabs.com/doku.php?id=product:usb2ax:dynamixel_protocol_notes,
+    #: "Timing"): a write to EEPROM is answered as usual, "but then the servo will not
+    #: answer to another command before many milliseconds (up to 9 ms per byte based
+    #: on the ATMega8 datasheet, though experimental verification put it at around
+    #: 6 +/-1 ms per byte)".  0: answer at once.
+    eeprom_busy_s_per_byte: float = 0.006
 
     def __post_init__(self) -> None:
         if self.profile not in PROFILES:
             raise ValueError(f"unknown profile {self.profile!r}; choose one of: {', '.join(PROFILES)}")
+        if not 0.0 <= self.eeprom_busy_s_per_byte <= 1.0:  # also refuses NaN
+            raise ValueError(f"eeprom_busy_s_per_byte must lie in 0..1 s, got {self.eeprom_busy_s_per_byte!r}")
 
 
 class VirtualServo:
@@ -64,6 +83,11 @@ class VirtualServo:
         self.registered_write: tuple[int, bytes] | None = None
         #: Set when a write changed the EEPROM area; the bus persists and clears it.
         self.eeprom_dirty = False
+        #: Bytes written into the EEPROM area by the packet being handled; the bus turns
+        #: them into :attr:`busy_until_s` (see ``ServoOptions.eeprom_busy_s_per_byte``) and clears them.
+        self.eeprom_bytes_written = 0
+        #: Bus-clock time until which the servo is writing its EEPROM and ignores packets.
+        self.busy_until_s = float("-inf")
 
     @classmethod
     def fresh(cls, servo_id: int, options: ServoOptions, *, index: int, row: np.ndarray | None = None) -> "VirtualServo":

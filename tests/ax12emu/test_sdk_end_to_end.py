@@ -16,7 +16,7 @@ from dynamixel_sdk import (
     COMM_SUCCESS,
     GroupSyncWrite,
 )
-from emu_testkit import ok, sdk_port
+from emu_testkit import ok, sdk_port, wait_eeprom
 
 from ax12emu.protocol.control_table import layout
 from ax12emu.protocol.packets import StatusError
@@ -146,6 +146,7 @@ def test_reset_restores_factory_defaults_and_answers_from_old_id(bus):
     with sdk_port(bus.port) as (port, ph):
         ph.write1ByteTxRx(port, 1, 3, 7)  # move servo 1 out of the way first
         assert ph.write1ByteTxRx(port, 5, 5, 10) == (COMM_SUCCESS, 0)
+        wait_eeprom()
         assert ph.factoryReset(port, 5) == (COMM_SUCCESS, 0)
         _, comm, _ = ph.ping(port, 5)
         assert comm == COMM_RX_TIMEOUT
@@ -167,6 +168,7 @@ def test_error_bits_for_angle_limit_range_and_instruction(bus):
     """Goal outside the angle limits, an out-of-range value, a read-only write and BULK_READ set their bits."""
     with sdk_port(bus.port) as (port, ph):
         assert ph.write2ByteTxRx(port, 1, 8, 600) == (COMM_SUCCESS, 0)  # CCW limit 600
+        wait_eeprom(2)
         comm, error = ph.write2ByteTxRx(port, 1, 30, 700)
         assert comm == COMM_SUCCESS and error == StatusError.ANGLE_LIMIT
         assert ok(ph.read2ByteTxRx(port, 1, 30)) != 700, "a rejected write changes nothing"
@@ -239,8 +241,10 @@ def test_return_delay_time_is_honoured(bus):
     with sdk_port(bus.port) as (port, ph):
         for _ in range(5):  # alternating blocks: a spell of load weighs on both settings alike
             ph.write1ByteTxRx(port, 1, 5, 0)
+            wait_eeprom()
             fast = min(fast, fastest_ping_s(port, ph))
             ph.write1ByteTxRx(port, 1, 5, 250)
+            wait_eeprom()
             slow = min(slow, fastest_ping_s(port, ph))
     # No round trip is shorter than the delay; and the fastest ones differ by about the delay
     # (it runs from the packet's arrival, so the emulator's own processing hides inside it).
@@ -268,6 +272,7 @@ def test_state_dir_persists_id_and_limits_over_restart(emulator, tmp_path):
     first = emulator("--ids", "1", "--state-dir", str(state))
     with sdk_port(first.port) as (port, ph):
         assert ph.write2ByteTxRx(port, 1, 8, 800) == (COMM_SUCCESS, 0)
+        wait_eeprom(2)
         assert ph.write1ByteTxRx(port, 1, 3, 4) == (COMM_SUCCESS, 0)
     assert first.stop() == 0
     second = emulator("--ids", "1", "--state-dir", str(state))
@@ -299,6 +304,42 @@ def test_moving_servo_reaches_goal(bus):
         final = ok(ph.read2ByteTxRx(port, 1, 36))
         assert abs(final - 800) <= 4 and start < 700, (start, final)
         assert ok(ph.read1ByteTxRx(port, 1, 46)) == 0
+
+
+def test_moving_reads_1_on_the_first_read_after_a_goal(bus):
+    """Write a goal, then poll Moving at once: the first read already says 1, every time.
+
+    A real servo's 1 ms control loop has run before a host's next packet can
+    arrive over USB, so "write the goal, poll Moving until 0" must not end at
+    once.  Alternating between two goals far apart (beyond the compliance
+    margin), twenty times, with no pause between the write and the read.
+    """
+    with sdk_port(bus.port) as (port, ph):
+        assert ph.write1ByteTxRx(port, 1, 24, 1) == (COMM_SUCCESS, 0)
+        first_reads = []
+        for k in range(20):
+            assert ph.write2ByteTxRx(port, 1, 30, 300 if k % 2 else 700) == (COMM_SUCCESS, 0)
+            first_reads.append(ok(ph.read1ByteTxRx(port, 1, 46)))
+        assert first_reads == [1] * 20
+
+
+@pytest.mark.parametrize("flags", [(), ("--goal-torque", "unchanged", "--eeprom-busy-ms", "0")], ids=["default", "off"])
+def test_firmware_quirks_through_the_flags(emulator, flags):
+    """By default a goal turns torque on and an EEPROM write leaves the servo deaf a while; the flags turn both off.
+
+    The deaf time is set long here (300 ms per byte) so that the PING just
+    after the write cannot miss it on a loaded machine; the default is 6 ms.
+    """
+    default = not flags
+    served = emulator("--ids", "1", *(flags or ("--eeprom-busy-ms", "300")))
+    with sdk_port(served.port) as (port, ph):
+        assert ph.write2ByteTxRx(port, 1, 30, 600) == (COMM_SUCCESS, 0)
+        assert ok(ph.read1ByteTxRx(port, 1, 24)) == (1 if default else 0)
+        assert ph.write1ByteTxRx(port, 1, 5, 0) == (COMM_SUCCESS, 0)  # Return Delay Time: EEPROM
+        _, comm, _ = ph.ping(port, 1)
+        assert comm == (COMM_RX_TIMEOUT if default else COMM_SUCCESS)
+        time.sleep(0.35)
+        assert ok(ph.ping(port, 1)) == 12
 
 
 def test_verbose_logs_every_packet_with_timestamps(emulator):

@@ -11,6 +11,9 @@
 #   ids=LIST          servo IDs, e.g. 1,2,5 or 1-18 (default 1)
 #   profile=NAME      control-table profile (ax12a, ax12-2006)
 #   virtual_time=0|1  physics in virtual time (it then stands still)
+#   goal_torque=on|unchanged  writing Goal Position turns the torque on (default) or not
+#   eeprom_busy_ms=MS  a servo ignores packets MS per byte after writing its EEPROM (default 6, 0 with
+#                     virtual_time=1, where time stands still and a busy servo would never answer again)
 #   trace=FILE        record every byte as JSON lines (ax12emu decode FILE)
 #   params=FILE       servo parameters as TOML, effects included (e.g. firmware_model.diagnose's params.toml)
 #   drop, corrupt, delay, delay_s, fault_ids, seed, vanish, duplicate, alarm, stall:
@@ -44,12 +47,13 @@ from ax12emu.tracing.trace import TraceWriter
 __all__ = ["Serial", "UrlError", "EXPECTED"]
 
 EXPECTED = (
-    'expected "ax12emu://[NAME][?ids=LIST&profile=NAME&virtual_time=0|1&trace=FILE&params=FILE&seed=N&drop=F&...'
+    'expected "ax12emu://[NAME][?ids=LIST&profile=NAME&virtual_time=0|1&goal_torque=on|unchanged'
+    '&eeprom_busy_ms=MS&trace=FILE&params=FILE&seed=N&drop=F&...'
     '&logging={debug|info|warning|error}]"'
 )
 LOGGER_LEVELS = {"debug": logging.DEBUG, "info": logging.INFO, "warning": logging.WARNING, "error": logging.ERROR}
 #: Options of a private bus besides the fault ones.
-BUS_OPTIONS = ("ids", "profile", "virtual_time", "trace", "params")
+BUS_OPTIONS = ("ids", "profile", "virtual_time", "goal_torque", "eeprom_busy_ms", "trace", "params")
 
 
 class UrlError(SerialException, ValueError):
@@ -130,11 +134,21 @@ class Serial(SerialBase):
             virtual = options.pop("virtual_time", ["0"])[-1]
             if virtual not in ("0", "1"):
                 raise ValueError(f"virtual_time must be 0 or 1, got {virtual!r}")
+            goal_torque = options.pop("goal_torque", ["on"])[-1]
+            if goal_torque not in ("on", "unchanged"):
+                raise ValueError(f"goal_torque must be on or unchanged, got {goal_torque!r}")
+            busy_text = options.pop("eeprom_busy_ms", ["0" if virtual == "1" else "6"])[-1]
+            try:
+                busy_ms = float(busy_text)
+            except ValueError:
+                raise ValueError(f"eeprom_busy_ms must be a number of milliseconds, got {busy_text!r}") from None
+            servo_options = ServoOptions(profile=profile, goal_position_enables_torque=goal_torque == "on",
+                                         eeprom_busy_s_per_byte=busy_ms * 1e-3)
             trace_path = options.pop("trace", [None])[-1]
             params_path = options.pop("params", [None])[-1]
             model = build_model(ModelChoice(params_path=params_path), len(ids)) if params_path else None
             faults = FaultConfig.from_options(options)
-            bus = Bus(ids, model=model, options=ServoOptions(profile=profile), clock=VirtualClock() if virtual == "1" else WallClock())
+            bus = Bus(ids, model=model, options=servo_options, clock=VirtualClock() if virtual == "1" else WallClock())
         except ValueError as exc:
             raise UrlError(f"{EXPECTED}: {exc}") from None
         if faults.active:

@@ -12,6 +12,9 @@ from ax12emu.protocol.packets import BROADCAST_ID, encode_instruction, encode_st
 from ax12emu.servo.virtual_servo import ServoOptions
 from firmware_model import KinematicModel
 
+#: Long enough for a servo to write a few EEPROM bytes, during which it ignores packets.
+EEPROM_WRITE_S = 0.05
+
 
 def ping(servo_id):
     return encode_instruction(servo_id, 0x01)
@@ -46,6 +49,7 @@ def test_duplicate_ids_both_answer_after_an_id_change():
     """Giving servo 2 the ID 1 makes both act on packets to ID 1, as two real servos would."""
     bus = Bus([1, 2], clock=VirtualClock())
     bus.receive(encode_instruction(2, 0x03, bytes([3, 1])))
+    bus.clock.advance(EEPROM_WRITE_S)
     assert bus.ids == [1, 1]
     assert len(bus.receive(ping(1))) == 2
     with pytest.raises(ValueError, match="duplicate"):
@@ -84,6 +88,7 @@ def test_state_store_survives_and_rejects_corruption(tmp_path):
     store = StateStore(tmp_path)
     bus = Bus([3], clock=VirtualClock(), state_store=store)
     bus.receive(encode_instruction(3, 0x03, bytes([8, 0x20, 0x03])))
+    bus.clock.advance(EEPROM_WRITE_S)
     bus.receive(encode_instruction(3, 0x03, bytes([3, 11])))
     again = Bus([3], clock=VirtualClock(), state_store=store)
     assert again.ids == [11] and again.servo(11).table.get("ccw_angle_limit") == 800

@@ -15,6 +15,8 @@ from firmware_model import KinematicModel
 
 READ_POSITION = encode_instruction(1, 0x02, bytes([36, 2]))
 READ_ID_1 = encode_instruction(1, 0x02, bytes([3, 1]))
+#: Long enough for a servo to write an EEPROM byte, during which it ignores packets.
+EEPROM_WRITE_S = 0.05
 
 
 def _bus(ids=(1,)) -> Bus:
@@ -74,8 +76,10 @@ def test_an_id_change_moves_the_answers():
     bus = _bus((1, 2))
     assert bus.receive(READ_ID_1)
     bus.receive(encode_instruction(1, 0x03, bytes([3, 7])))  # ID 1 -> 7
+    bus.clock.advance(EEPROM_WRITE_S)
     assert bus.receive(READ_ID_1) == []
     bus.receive(encode_instruction(2, 0x03, bytes([3, 1])))  # ID 2 -> 1: another servo answers as 1
+    bus.clock.advance(EEPROM_WRITE_S)
     assert _data(bus.receive(READ_ID_1)) == [encode_status(1, 0, b"\x01")]
 
 
@@ -141,4 +145,5 @@ def test_a_second_servo_taking_the_id_answers_too():
     bus = _bus((1, 2))
     assert len(bus.receive(READ_ID_1)) == 1
     bus.receive(encode_instruction(2, 0x03, bytes([3, 1])))
+    bus.clock.advance(EEPROM_WRITE_S)
     assert len(bus.receive(READ_ID_1)) == 2

@@ -22,6 +22,9 @@ def run(*args: str) -> subprocess.CompletedProcess:
         (["serve", "--tcp", "0.0.0.0:0"], "--allow-remote"),
         (["serve", "--time-scale", "-2"], "positive"),
         (["serve", "--profile", "ax18"], "invalid choice"),
+        (["serve", "--goal-torque", "maybe"], "invalid choice"),
+        (["serve", "--eeprom-busy-ms", "-1"], "0..1000 ms"),
+        (["serve", "--eeprom-busy-ms", "nan"], "finite"),
         (["serve", "--link", "/tmp/x", "--tcp", "127.0.0.1:0"], "not allowed with|not to --tcp"),
         (["bogus"], "invalid choice"),
     ],
@@ -56,6 +59,7 @@ def test_parse_args_defaults():
     """Defaults: ID 1 on a pty, e-manual profile, real time."""
     args = parse_args(["serve"])
     assert args.ids == [1] and not args.tcp and args.profile == "ax12a" and args.time_scale == 1.0
+    assert args.goal_torque == "on" and args.eeprom_busy_ms == 6.0
 
 
 @pytest.mark.parametrize(

@@ -50,6 +50,9 @@ def test_host_baud_must_match():
         ("ax12emu://?ids=1-x", "not an ID"),
         ("ax12emu://?drop=3", "drop"),
         ("ax12emu://?virtual_time=yes", "virtual_time"),
+        ("ax12emu://?goal_torque=maybe", "goal_torque"),
+        ("ax12emu://?eeprom_busy_ms=soon", "eeprom_busy_ms"),
+        ("ax12emu://?eeprom_busy_ms=-1", "eeprom_busy_s_per_byte"),
         ("ax12emu://?logging=loud", "logging"),
     ],
 )
@@ -79,3 +82,27 @@ def test_faults_in_the_url():
     with serial.serial_for_url("ax12emu://?ids=1&drop=1&seed=3", baudrate=1_000_000, timeout=0.05) as link:
         link.write(PING)
         assert link.read(6) == b""
+
+
+def _write(link, address: int, *data: int) -> bytes:
+    link.write(encode_instruction(1, 0x03, bytes([address, *data])))
+    return link.read(6)
+
+
+def test_firmware_quirks_in_the_url():
+    """goal_torque and eeprom_busy_ms reach the servos: defaults on, and each can be turned off."""
+    with serial.serial_for_url("ax12emu://?ids=1&eeprom_busy_ms=500", baudrate=1_000_000, timeout=0.1) as link:
+        assert _write(link, 30, 0x00, 0x02) == encode_status(1, 0)  # Goal Position
+        link.write(encode_instruction(1, 0x02, bytes([24, 1])))
+        assert link.read(7) == encode_status(1, 0, b"\x01")  # torque turned on
+        assert _write(link, 5, 0) == encode_status(1, 0)  # Return Delay Time: EEPROM
+        link.write(PING)
+        assert link.read(6) == b""  # writing its EEPROM for 500 ms: deaf
+    url = "ax12emu://?ids=1&goal_torque=unchanged&eeprom_busy_ms=0"
+    with serial.serial_for_url(url, baudrate=1_000_000, timeout=0.1) as link:
+        assert _write(link, 30, 0x00, 0x02) == encode_status(1, 0)
+        link.write(encode_instruction(1, 0x02, bytes([24, 1])))
+        assert link.read(7) == encode_status(1, 0, b"\x00")  # torque left off
+        assert _write(link, 5, 0) == encode_status(1, 0)
+        link.write(PING)
+        assert link.read(6) == encode_status(1, 0)  # answers at once

@@ -8,6 +8,7 @@ import time
 
 import pytest
 import serial
+from emu_testkit import wait_eeprom
 
 from ax12emu.bus import Bus, Reply
 from ax12emu.bus.clock import WallClock
@@ -62,6 +63,7 @@ def test_pace_takes_wire_time(emulator):
     with _open(served.port) as link:
         link.write(encode_instruction(1, 0x03, bytes([4, 34])))
         assert link.read(6) == encode_status(1, 0)  # heard at 1 Mbps before the host switches
+        wait_eeprom()  # Baud Rate is in the EEPROM: the servo ignores packets while it writes it
         link.baudrate = 57600
         link.reset_input_buffer()
         start = time.perf_counter()
@@ -80,6 +82,7 @@ def test_pace_collision_garbles_both(emulator):
     with _open(served.port) as link:
         link.write(encode_instruction(1, 0x03, bytes([4, 254])))  # 7,843 bps: 1.3 ms per byte
         assert link.read(6) == encode_status(1, 0)  # heard at 1 Mbps before the host switches
+        wait_eeprom()
         link.baudrate = 7843
         link.reset_input_buffer()
         link.write(PING)
