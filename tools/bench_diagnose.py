@@ -19,25 +19,46 @@ returns, commands a few ms after their rows and not recorded: ``synthetic.make_t
 whose traits the base fit must absorb without naming anything; ``delay`` is then not offered, so
 its row counts what is named instead.
 
+``--recorded N`` adds N traces recorded LIVE through dynamixel-sdk from a running ``ax12emu serve``,
+each with one effect hidden by a public knob (server options, register writes, a parameter file, or a
+transform of the recording afterwards: tools/live_dataset.py maps each knob to the effect it should
+produce), and ``--recorded-clean M`` (default N) clean ones.  They carry what a user's recording
+carries (real-time jitter, an unknown hold phase, a command's own latency) and record when each
+command was sent.  Their right-first-name and false-name rates are printed apart from the synthetic
+ones, with the seconds each recording and each diagnosis took.  Recordings run one at a time before
+any diagnosis starts (two at once, or a diagnosis beside one, would disturb the timing on 2 cores);
+``--recorded-dir DIR`` keeps them and reuses those already there.  ``--seeds 0 --clean 0 --cogging
+0`` leaves only the recorded set.
+
 Usage: ``python tools/bench_diagnose.py [--seeds 5] [--clean 20] [--cogging 5] [--duration 20] [--rate 100]
-[--jobs 2] [--live] [--effects LIST]``
+[--jobs 2] [--live] [--effects LIST] [--recorded N] [--recorded-clean M] [--recorded-duration 10]
+[--recorded-dir DIR]``
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
+import tempfile
 import time
 from multiprocessing import Pool
 from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import live_dataset  # noqa: E402
 
 from firmware_model.diagnose.effects import LIBRARY  # noqa: E402
 from firmware_model.diagnose.search import diagnose  # noqa: E402
 from firmware_model.diagnose.synthetic import draw_effect, make_trace  # noqa: E402
+from firmware_model.diagnose.trace import read_trace, write_trace  # noqa: E402
+
+#: Seeds of the recorded set: hidden-effect recordings from the first, clean ones from the second.
+RECORDED_SEEDS = (3000, 4000)
 
 
 def one(job: tuple[str, int, float, float, bool]) -> tuple:
@@ -53,6 +74,77 @@ def one(job: tuple[str, int, float, float, bool]) -> tuple:
             d.gaps_after["present_position"]["rms"], d.unexplained, d.confident)
 
 
+def record_set(args: argparse.Namespace, folder: Path) -> list[Path]:
+    """Record the live set one at a time (or reuse recordings in ``folder``); return the trace paths."""
+    knobs = [k for k in live_dataset.KNOBS if k != "none" and live_dataset.servable(k)]
+    skipped = [k for k in live_dataset.KNOBS if k != "none" and k not in knobs]
+    if skipped:
+        print(f"not servable by this checkout's model, left out: {', '.join(skipped)}")
+    plan = [(knobs[i % len(knobs)], RECORDED_SEEDS[0] + i) for i in range(args.recorded)]
+    plan += [("none", RECORDED_SEEDS[1] + i) for i in range(args.recorded_clean)]
+    paths = []
+    for knob, seed in plan:
+        path = folder / f"{knob}-{seed}.csv"
+        key_path = path.with_suffix(".json")
+        if path.exists() and key_path.exists():
+            print(f"{knob:>20} seed {seed:>4}: reusing {path}", flush=True)
+        else:
+            t0 = time.perf_counter()
+            trace, key = live_dataset.record_live(knob, seed, args.recorded_duration, args.rate)
+            key["record_s"] = time.perf_counter() - t0
+            write_trace(trace, path)
+            key_path.write_text(json.dumps(key, indent=2), encoding="utf-8")
+            print(f"{knob:>20} seed {seed:>4}: recorded {len(trace)} rows in {key['record_s']:.1f} s", flush=True)
+        paths.append(path)
+    return paths
+
+
+def one_recorded(path: Path) -> tuple:
+    """Diagnose one recording: (knob, expected effect, seed, named, seconds, gap before, after, unexplained, record s)."""
+    key = json.loads(path.with_suffix(".json").read_text(encoding="utf-8"))
+    trace = read_trace(path)
+    t0 = time.perf_counter()
+    d = diagnose(trace, progress=lambda m: None)
+    sec = time.perf_counter() - t0
+    return (key["knob"], key["effect"], key["seed"], d.named, sec, d.gaps_before["present_position"]["rms"],
+            d.gaps_after["present_position"]["rms"], d.unexplained, key.get("record_s", float("nan")))
+
+
+def run_recorded(args: argparse.Namespace, folder: Path) -> None:
+    """Record the live set, diagnose it, print its rates apart from the synthetic ones."""
+    paths = record_set(args, folder)
+    results = []
+    with Pool(args.jobs) as pool:
+        for r in pool.imap_unordered(one_recorded, paths):
+            results.append(r)
+            print(f"{r[0]:>20} seed {r[2]:>4} ({r[1] or 'clean'}): named {r[3] or '-'}"
+                  f"{'  UNEXPLAINED' if r[7] else ''}  {r[4]:.1f} s  pos gap {r[5]:.2f} -> {r[6]:.2f}", flush=True)
+    hidden = [r for r in results if r[1]]
+    clean = [r for r in results if not r[1]]
+    print(f"\nlive recordings through dynamixel-sdk from ax12emu serve ({args.recorded_duration:g} s each, "
+          f"{args.rate:g} Hz; tools/live_dataset.py)")
+    print(f"{'knob':>20} {'hides':>20}  right/all  first named instead")
+    for knob in dict.fromkeys(r[0] for r in sorted(hidden)):
+        rows = [r for r in hidden if r[0] == knob]
+        right = sum(r[3][:1] == [r[1]] for r in rows)
+        wrong = [r[3][0] if r[3] else "-" for r in rows if r[3][:1] != [r[1]]]
+        print(f"{knob:>20} {rows[0][1]:>20}  {right:>5}/{len(rows):<3}  {', '.join(wrong)}")
+    right = sum(r[3][:1] == [r[1]] for r in hidden)
+    if hidden:
+        print(f"right first name on live recordings: {right}/{len(hidden)} = {100 * right / len(hidden):.1f} % "
+              "(goal >= 95 %)")
+    if clean:
+        named = [r[3] for r in clean if r[3]]
+        print(f"false names on clean live recordings: {len(named)}/{len(clean)} {named or ''} (goal <= 1 in 20); "
+              f"'unexplained' {sum(bool(r[7]) for r in clean)}/{len(clean)}")
+    diag = np.array([r[4] for r in results])
+    rec = np.array([r[8] for r in results if r[8] == r[8]])
+    if len(rec):
+        print(f"seconds per recording (server start included): median {np.median(rec):.1f}, max {rec.max():.1f}")
+    if len(diag):
+        print(f"seconds per diagnosis ({args.jobs} at once): median {np.median(diag):.1f}, max {diag.max():.1f}")
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the sweep and print the table."""
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -64,11 +156,37 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--jobs", type=int, default=1)
     p.add_argument("--live", action="store_true", help="record like a real-time client (see above)")
     p.add_argument("--effects", metavar="LIST", help="hide only these effects (default: every library effect)")
+    p.add_argument("--recorded", type=int, default=0, metavar="N",
+                   help="live recordings with a hidden effect, through dynamixel-sdk from ax12emu serve (default 0)")
+    p.add_argument("--recorded-clean", type=int, metavar="M", help="clean live recordings (default: N)")
+    p.add_argument("--recorded-duration", type=float, default=10.0, help="seconds of each recording's excitation "
+                   "(default 10; Stribeck friction's adds a 6 s breakaway block)")
+    p.add_argument("--recorded-dir", metavar="DIR", help="keep the recordings here and reuse those already there")
     args = p.parse_args(argv)
+    if args.recorded_clean is None:
+        args.recorded_clean = args.recorded
+    if min(args.seeds, args.clean, args.cogging, args.recorded, args.recorded_clean) < 0 or args.jobs < 1:
+        p.error("counts must be >= 0 and --jobs >= 1")
+    if not args.recorded_duration > 0 or not 0 < args.rate <= 1000:
+        p.error("--recorded-duration must be positive and --rate in (0, 1000]")
+    if args.recorded or args.recorded_clean:  # first, so no diagnosis runs beside a recording
+        if args.recorded_dir:
+            Path(args.recorded_dir).mkdir(parents=True, exist_ok=True)
+            run_recorded(args, Path(args.recorded_dir))
+        else:
+            with tempfile.TemporaryDirectory(prefix="bench_recorded_") as tmp:
+                run_recorded(args, Path(tmp))
     hide = args.effects.split(",") if args.effects else list(LIBRARY)
     jobs = [(e, s, args.duration, args.rate, args.live) for e in hide for s in range(args.seeds)]
     jobs += [("none", 1000 + s, args.duration, args.rate, args.live) for s in range(args.clean)]
     jobs += [("cogging", 2000 + s, args.duration, args.rate, args.live) for s in range(args.cogging)]
+    if jobs:
+        run_synthetic(args, jobs)
+    return 0
+
+
+def run_synthetic(args: argparse.Namespace, jobs: list[tuple]) -> None:
+    """Diagnose the synthetic traces and print the confusion table and rates."""
     labels = list(LIBRARY) + ["none"]
     rows = labels + (["cogging"] if args.cogging else [])
     with Pool(args.jobs) as pool:
@@ -110,7 +228,6 @@ def main(argv: list[str] | None = None) -> int:
     if shrink:
         print(f"position RMS gap shrink, effect traces: median {100 * np.median(shrink):.0f} %, "
               f">= 70 % in {sum(x >= 0.7 for x in shrink)}/{len(shrink)}")
-    return 0
 
 
 if __name__ == "__main__":

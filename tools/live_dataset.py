@@ -181,6 +181,11 @@ def _hold(rng):
     return Setup(params={"sample_hold_s": hold}, truth={"hold_s": hold})
 
 
+def _served_delay(rng):
+    latency = _uniform(rng, "delay", "delay_s")
+    return Setup(effects={"sensing_delay_s": latency}, truth={"delay_s": latency})
+
+
 def _backlash(rng):
     play = _uniform(rng, "backlash", "backlash_rad")
     return Setup(effects={"backlash_rad": play}, truth={"backlash_rad": play})
@@ -195,6 +200,8 @@ KNOBS: dict[str, Knob] = {
     "compliance_margin": Knob("compliance_deadband", "CW/CCW Compliance Margin written through the SDK (4-9)",
                               _margin),
     "delay": Knob("delay", "readings stamped 10-50 ms late, afterwards (commands keep their send times)", _delay),
+    "served_delay": Knob("delay", "--params [effects] sensing_delay_s 10-50 ms (the served model reads the shaft "
+                         "that long ago)", _served_delay),
     "sensor": Knob("sensor_offset_gain", "Present Position offset 3-10 units and gain 1 +- 1-4 %, afterwards",
                    _sensor),
     "friction": Knob("coulomb_friction", "--params: sliding and breakaway friction 0.08-0.3 N m higher", _coulomb),
