@@ -9,6 +9,17 @@ for the constants and their derivation):
   inductance is neglected, as in the report's figure 3.3, because its time
   constant is far below a step).  Current ``i = (drive V - k w) / R``, torque
   at the output ``eta k i``.  With torque off the bridge is open: ``i = 0``.
+* Bridge decay (:func:`bridge_current_a`): the current flows only in the
+  direction the bridge drives.  While the shaft turns faster than the duty
+  would hold it (the back-EMF above ``drive V``, as when the compliance slope
+  lowers the duty near the goal), the current that would brake it has to
+  return through the switches that are off, and the freewheeling diodes block
+  it: the motor coasts, and brakes only once the drive reverses.  A real
+  AX-12A at full speed keeps its speed into the slope and overshoots by about
+  4 % of a 500-unit step, more with more inertia (``tools/real_ax12a.py``);
+  a bridge that shorted the winding (synchronous, "slow decay") would stop
+  it within a few units.  ``ServoParams.bridge_braking_fraction`` blends the
+  two: 0 coasts (the default), 1 brakes with the full back-EMF current.
 * Friction: static ``t_s`` at rest; sliding ``sign(w) (t_c + (t_s - t_c)
   exp(-(w / v_s)**2)) + b w`` (Coulomb, Stribeck, viscous).
 * Load: the reflected rotor inertia plus the load's, an external torque (set
@@ -42,7 +53,7 @@ from dataclasses import dataclass
 
 from .units import POSITION_RANGE_RAD
 
-__all__ = ["GRAVITY_M_S2", "ARM_HORIZONTAL_RAD", "motor_current_a", "arm_gravity_torque_nm", "DryFriction", "shaft_speed_step"]
+__all__ = ["GRAVITY_M_S2", "ARM_HORIZONTAL_RAD", "motor_current_a", "bridge_current_a", "arm_gravity_torque_nm", "DryFriction", "shaft_speed_step"]
 
 #: Standard gravity.
 GRAVITY_M_S2 = 9.80665
@@ -53,6 +64,20 @@ ARM_HORIZONTAL_RAD = float(POSITION_RANGE_RAD * 512.0 / 1023.0)
 def motor_current_a(drive, supply_v, speed_rad_s, torque_constant: float, resistance_ohm: float):
     """Winding current from the averaged PWM voltage and the back-EMF."""
     return (drive * supply_v - torque_constant * speed_rad_s) / resistance_ohm
+
+
+def bridge_current_a(current_a, drive, braking_fraction: float):
+    """The share of ``current_a`` the H-bridge passes at ``drive`` (see the module docstring).
+
+    Current in the drive's direction flows; current against it (braking, or any
+    current at zero drive) is scaled by ``braking_fraction``: 0 blocks it (the
+    motor coasts), 1 passes it all.  Works on floats and on numpy arrays alike
+    (``current * drive > 0`` is a bool, multiplied as 0 or 1).
+    """
+    passes = current_a * drive > 0
+    if braking_fraction == 0.0:
+        return current_a * passes
+    return current_a * (braking_fraction + (1.0 - braking_fraction) * passes)
 
 
 def arm_gravity_torque_nm(xp, angle_rad, weight_moment_nm):

@@ -51,7 +51,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from .controller import PidGains, compliance_drive, pid_drive, symmetric_compliance_drive
-from .motor import ARM_HORIZONTAL_RAD, DryFriction, arm_gravity_torque_nm, shaft_speed_step
+from .motor import ARM_HORIZONTAL_RAD, DryFriction, arm_gravity_torque_nm, bridge_current_a, shaft_speed_step
 from .params import ServoParams
 from .setpoint import setpoint_velocity
 from .units import RAD_PER_POSITION_UNIT
@@ -82,6 +82,8 @@ class StepConstants:
     wheel_gain_s_rad: float
     pid: bool
     gains: PidGains
+    #: Share of the braking current the H-bridge passes (:func:`~firmware_model.motor.bridge_current_a`; 1: all).
+    bridge_braking: float = 1.0
 
     @classmethod
     def from_params(cls, p: ServoParams, step_s: float, controller: str, gains: PidGains) -> "StepConstants":
@@ -101,6 +103,7 @@ class StepConstants:
             friction=DryFriction.per_step(p.static_friction_nm, p.coulomb_friction_nm, p.stribeck_velocity_rad_s, dt_j),
             viscous_keep=1.0 - p.viscous_friction_nm_s_rad * dt_j if p.viscous_friction_nm_s_rad else None,
             wheel_gain_s_rad=p.wheel_speed_gain_s_rad, pid=controller == "pid", gains=gains,
+            bridge_braking=p.bridge_braking_fraction,
         )
 
 
@@ -126,6 +129,7 @@ def generic_steps(xp, plan: SimpleNamespace, k: StepConstants, s: SimpleNamespac
     """
     a, dt, unit, inv_unit = k.accel_rad_s2, k.step_s, k.unit_rad, k.inv_unit
     k_r, eta_k_dv, friction, keep = k.k_over_r, k.eta_k_dv, k.friction, k.viscous_keep
+    bridge_braking = k.bridge_braking
     pid, gains, symmetric = k.pid, k.gains, plan.symmetric
     any_joint, any_wheel, any_disabled = plan.any_joint, plan.any_wheel, plan.any_disabled
     mixed = any_joint and any_wheel
@@ -179,6 +183,8 @@ def generic_steps(xp, plan: SimpleNamespace, k: StepConstants, s: SimpleNamespac
             current = (drive * volts_r - k_r * speed) * en
         else:
             current = drive * volts_r - k_r * speed
+        if bridge_braking != 1.0:  # the bridge passes current against the drive only in part (or not at all)
+            current = bridge_current_a(current, drive, bridge_braking)
         applied_dv = current * eta_k_dv
         if any_ext:
             applied_dv = applied_dv + ext_dv
@@ -201,6 +207,8 @@ def fused_scalar_steps(plan: SimpleNamespace, k: StepConstants, s: SimpleNamespa
     adt = a * dt
     q, two_a, half_adt, inv_dt = 0.25 * adt * adt, 2.0 * a, 0.5 * adt, 1.0 / dt
     k_r, eta_k_dv, keep = k.k_over_r, k.eta_k_dv, k.viscous_keep
+    bridge = k.bridge_braking  # not "braking": that name is the setpoint's braking speed below
+    coast, against = bridge == 0.0, 1.0 - bridge
     f = k.friction
     tc, dts, strib = f.coulomb_dv_rad_s, f.static_dv_rad_s - f.coulomb_dv_rad_s, f.stribeck_coef_s2_rad2
     goal, max_speed, enabled, en, volts_r = plan.goal_rad, plan.max_speed, plan.enabled, plan.en, plan.volts_r
@@ -234,6 +242,10 @@ def fused_scalar_steps(plan: SimpleNamespace, k: StepConstants, s: SimpleNamespa
         current = drive * volts_r - k_r * speed
         if not enabled:
             current = current * en
+        if coast:  # motor.bridge_current_a
+            current = current * (current * drive > 0)
+        elif bridge != 1.0:
+            current = current * (bridge + against * (current * drive > 0))
         applied = current * eta_k_dv
         if ext_dv:
             applied = applied + ext_dv
@@ -277,10 +289,14 @@ class FusedNumpySteps:
             eta_k_dv=full(k.eta_k_dv), strib=full(f.stribeck_coef_s2_rad2),
             dts=full(f.static_dv_rad_s - f.coulomb_dv_rad_s), tc=full(f.coulomb_dv_rad_s),
             keep=None if k.viscous_keep is None else full(k.viscous_keep),
+            bridge_against=full(1.0 - k.bridge_braking),
             arm_at=full(ARM_HORIZONTAL_RAD), kv=full(k.wheel_gain_s_rad), inv_unit2=np.full((2, n), k.inv_unit),
             kr_vr=np.stack([full(k.k_over_r), np.asarray(plan.volts_r, dtype=float)]),
         )
         self.plan = plan
+        #: The bridge's share of braking current (motor.bridge_current_a): None passes it all, ``c.zero`` none.
+        self.bridge_share = (None if k.bridge_braking == 1.0 else self.c.zero if k.bridge_braking == 0.0
+                             else full(k.bridge_braking))
         #: Every servo in wheel mode (fusable() allows no mix): a speed loop instead of setpoint and compliance.
         self.wheel = plan.any_wheel
         self.neg_limit = -plan.limit
@@ -403,6 +419,7 @@ class FusedNumpySteps:
                                                                    c.dt2, c.zero)
         kr_vr, eta_k_dv, strib, dts, tc, keep, inv_unit2 = c.kr_vr, c.eta_k_dv, c.strib, c.dts, c.tc, c.keep, c.inv_unit2
         disabled, ext_dv, neg_weight_dv, free, wheel = self.disabled, self.ext_dv, self.neg_weight_dv, self.free, self.wheel
+        bridge_share = self.bridge_share
         if count > len(self.heat_rows) - 1:
             self._grow_heat(count)
         heat_rows = self.heat_rows
@@ -493,6 +510,13 @@ class FusedNumpySteps:
             sub(drive_product, emf_product, cur)
             if disabled is not None:
                 mul(cur, en, cur)
+            if bridge_share is not None:  # motor.bridge_current_a: (current * drive > 0) as 0.0 / 1.0
+                mul(cur, drive, t)
+                heaviside(t, zero, t)
+                if bridge_share is not c.zero:
+                    mul(t, c.bridge_against, t)
+                    add(bridge_share, t, t)
+                mul(cur, t, cur)
             mul(cur, eta_k_dv, z)
             if ext_dv is not None:
                 add(z, ext_dv, z)

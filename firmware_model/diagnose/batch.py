@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..controller import compliance_plan, symmetric_compliance_drive
-from ..motor import DryFriction, arm_gravity_torque_nm, shaft_speed_step
+from ..motor import DryFriction, arm_gravity_torque_nm, bridge_current_a, shaft_speed_step
 from ..params import ServoParams
 from ..setpoint import apply_dead_zone, setpoint_velocity
 from ..units import RAD_PER_POSITION_UNIT, RAD_S_PER_SPEED_UNIT
@@ -122,6 +122,7 @@ def simulate(schedule: Schedule, params: ServoParams, knobs: dict[str, np.ndarra
     eta_k_dv = eta_k * dt_j  # as StepConstants.eta_k_dv
     friction = DryFriction.per_step(ts, tc, vs, dt_j)
     keep = 1.0 - b * dt_j if b else None
+    braking = p.bridge_braking_fraction
     half_play = kn["backlash_rad"] / 2.0
     any_play = bool(np.any(half_play != 0))
     weight = kn["arm_weight_nm"]
@@ -173,7 +174,10 @@ def simulate(schedule: Schedule, params: ServoParams, knobs: dict[str, np.ndarra
         out = np.minimum(np.maximum(out, angle - half_play), angle + half_play) if any_play else angle
         error = ref * inv_unit - np.rint(out * inv_unit)
         drive, _ = symmetric_compliance_drive(np, error, margin, gain, punch, limit)
-        applied_dv = (drive * volts_r - k_r * speed) * eta_k_dv
+        current = drive * volts_r - k_r * speed
+        if braking != 1.0:  # as generic_steps: the H-bridge's share of braking current
+            current = bridge_current_a(current, drive, braking)
+        applied_dv = current * eta_k_dv
         if any_ext:
             applied_dv = applied_dv + ext_dv
         if any_arm:

@@ -57,17 +57,20 @@ def test_peak_acceleration_with_camera(commands):
     assert peak == pytest.approx(200.0, rel=0.15)
 
 
-def _cruise_speed(volts: float, setting: int, make_commands) -> float:
+def _cruise_speed(volts: float, setting: int, make_commands, at_s: float = 0.35) -> float:
     model = PhysicalModel(1, initial_position_raw=50)
     model.set_supply_voltage(volts)
-    model.advance(0.35, make_commands(goal_position=1000, moving_speed=setting))
+    model.advance(at_s, make_commands(goal_position=1000, moving_speed=setting))
     return float(model.speed_rad_s[0])
 
 
 @pytest.mark.parametrize("setting", [50, 200, 400, 600])
 def test_moving_speed_below_top_speed_is_obeyed(setting, commands):
-    """Moving Speed N cruises at N x 0.111 rpm (e-manual) when that is reachable at 9.6 V, +-2 %."""
-    assert _cruise_speed(9.6, setting, commands) == pytest.approx(setting * RAD_S_PER_SPEED_UNIT, rel=0.02)
+    """Moving Speed N cruises at N x 0.111 rpm (e-manual) when that is reachable at 9.6 V, +-2 %.
+
+    Read at 0.6 s: the shaft first lags the reference by more than the compliance slope (full drive), and at
+    600 (97 % of the top speed) it takes about 0.45 s to catch up."""
+    assert _cruise_speed(9.6, setting, commands, at_s=0.6) == pytest.approx(setting * RAD_S_PER_SPEED_UNIT, rel=0.02)
 
 
 @pytest.mark.parametrize("volts", [7.0, 9.6, 12.0])
@@ -86,12 +89,13 @@ def test_report_speed_at_setting_785_is_the_top_speed_at_12_volts(commands):
 
 
 def test_step_overshoots_then_settles(commands):
-    """Report fig. 2.5/4.3: a full-speed step overshoots; here 60 deg at 9.6 V: 1 to 5 % beyond, then within 3 units."""
-    model = PhysicalModel(1)
-    goal = 512 + SIXTY_DEG_UNITS
-    positions = [model.advance(i * 1e-3, commands(goal_position=goal)).present_position[0] for i in range(1, 801)]
-    overshoot = max(positions) - goal
-    assert 0.01 * SIXTY_DEG_UNITS <= overshoot <= 0.05 * SIXTY_DEG_UNITS
+    """A full-speed step overshoots (report fig. 2.5/4.3, unquantified), by as much as a real AX-12A's: 0 -> 500 at
+    9.6 V peaks 19-21 units past the settled reading (Wizard recordings, real-ax12a README), here 15-25; then it
+    settles within 3 units of the goal."""
+    model = PhysicalModel(1, initial_position_raw=1)
+    goal = 500
+    positions = [model.advance(i * 1e-3, commands(goal_position=goal)).present_position[0] for i in range(1, 1501)]
+    assert 15 <= max(positions) - positions[-1] <= 25
     assert abs(positions[-1] - goal) <= 3
 
 

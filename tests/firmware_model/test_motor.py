@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from firmware_model.backend import NUMPY
-from firmware_model.motor import ARM_HORIZONTAL_RAD, DryFriction, arm_gravity_torque_nm, motor_current_a, shaft_speed_step
+from firmware_model.motor import (ARM_HORIZONTAL_RAD, DryFriction, arm_gravity_torque_nm, bridge_current_a, motor_current_a,
+                                  shaft_speed_step)
 from firmware_model.params import ServoParams
 
 P = ServoParams()
@@ -68,3 +69,34 @@ def test_arm_gravity_convention():
     moment = 0.1 * 9.80665 * 0.1
     assert arm_gravity_torque_nm(NUMPY, np.array([ARM_HORIZONTAL_RAD]), moment)[0] == pytest.approx(-moment)
     assert arm_gravity_torque_nm(NUMPY, np.array([ARM_HORIZONTAL_RAD + np.pi / 2]), moment)[0] == pytest.approx(0.0, abs=1e-12)
+
+
+def test_bridge_passes_current_only_with_the_drive_when_coasting():
+    """Fraction 0: current in the drive's direction flows, current against it (and any at zero drive) is blocked."""
+    current = np.array([0.5, -0.5, -0.4, 0.3, -0.2])
+    drive = np.array([0.8, -0.8, 0.1, -0.1, 0.0])
+    assert np.array_equal(bridge_current_a(current, drive, 0.0), [0.5, -0.5, 0.0, 0.0, 0.0])
+    assert [bridge_current_a(float(i), float(u), 0.0) for i, u in zip(current, drive)] == [0.5, -0.5, 0.0, 0.0, 0.0]
+
+
+@pytest.mark.parametrize("fraction", [1.0, 0.5])
+def test_bridge_fraction_scales_only_the_braking_current(fraction):
+    """Fraction 1 is a bridge that shorts the winding (everything flows); 0.5 passes half the braking current."""
+    current, drive = np.array([0.5, -0.4, -0.2]), np.array([0.8, 0.1, 0.0])
+    assert np.allclose(bridge_current_a(current, drive, fraction), [0.5, -0.4 * fraction, -0.2 * fraction])
+
+
+def test_coasting_motor_keeps_its_speed_where_a_shorted_one_brakes():
+    """At zero drive and 6 rad/s: the back-EMF current of a shorted winding stops the shaft within ~0.1 s; coasting,
+    only dry friction slows it (about 0.1 N m over 4.4e-3 kg m^2: under 25 rad/s^2)."""
+    k, r, eta = P.torque_constant_nm_a, P.winding_resistance_ohm, P.gearbox_efficiency
+    finals = {}
+    for fraction in (0.0, 1.0):
+        angle, speed = np.zeros(1), np.array([6.0])
+        for _ in range(100):
+            current = bridge_current_a(motor_current_a(0.0, 9.6, speed, k, r), 0.0, fraction)
+            angle, speed = _step(angle, speed, eta * k * current)
+        finals[fraction] = speed[0]
+    assert finals[1.0] < 0.5
+    assert 6.0 - 0.1 * 25 < finals[0.0] < 6.0
+

@@ -131,8 +131,8 @@ def test_constructor_rejects_bad_arguments():
 
 def test_viscous_friction_too_strong_for_the_step_is_refused():
     """b dt / J >= 1 would turn the shaft round each step; below it, a shorter step makes it usable."""
-    strong = dataclasses.replace(ServoParams(), viscous_friction_nm_s_rad=5.0)  # J / dt is 3.4 at 1 ms
-    with pytest.raises(ValueError, match="viscous friction 5.0 .* below inertia / step = 3.4"):
+    strong = dataclasses.replace(ServoParams(), viscous_friction_nm_s_rad=5.0)  # J / dt is 4.379 at 1 ms
+    with pytest.raises(ValueError, match="viscous friction 5.0 .* below inertia / step = 4.379"):
         PhysicalModel(1, params=strong)
     PhysicalModel(1, params=strong, step_s=0.5e-3)
 

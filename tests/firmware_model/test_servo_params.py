@@ -37,6 +37,8 @@ def test_derived_constants_are_physical():
         ({"winding_resistance_ohm": float("nan")}, "winding_resistance_ohm"),
         ({"supply_voltage_v": 14.0}, "supply_voltage_v"),
         ({"sample_hold_s": 0.0}, "sample_hold_s"),
+        ({"bridge_braking_fraction": 1.5}, "bridge_braking_fraction"),
+        ({"bridge_braking_fraction": -0.1}, "bridge_braking_fraction"),
     ],
 )
 def test_invalid_values_name_the_field(change, field):

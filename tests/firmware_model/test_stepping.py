@@ -48,7 +48,10 @@ def _scenario(n: int, make_commands, wheel: bool) -> list[tuple[float, object]]:
 PARAMS = {"data sheet": ServoParams(), "viscous": dataclasses.replace(ServoParams(), viscous_friction_nm_s_rad=0.02),
           "plan-data effects": dataclasses.replace(ServoParams(), effects=ServoEffects(  # an arm light enough to hold
               drive_ceiling_fraction=0.6, extra_compliance_margin_units=2.0, arm_weight_moment_nm=0.02,
-              position_offset_units=-3.0, position_gain=1.02))}
+              position_offset_units=-3.0, position_gain=1.02)),
+          # The H-bridge: the default coasts against the drive; one that shorts the winding, and a blend.
+          "braking bridge": dataclasses.replace(ServoParams(), bridge_braking_fraction=1.0),
+          "half-braking bridge": dataclasses.replace(ServoParams(), bridge_braking_fraction=0.5)}
 
 
 def _same_bits(a: np.ndarray, b: np.ndarray) -> bool:
