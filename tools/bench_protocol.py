@@ -242,6 +242,12 @@ STREAM_CLIENT = textwrap.dedent(
 )
 
 
+def cpu_s(pid: int) -> float:
+    """CPU seconds (user + system) a process has used so far (Linux /proc)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
 def start_web(command: list[str]) -> tuple[subprocess.Popen, str, str]:
     """Start ``ax12emu serve --web``: the port (first line) and the page's URL (second line)."""
     process, path = start(command)
@@ -262,7 +268,9 @@ def measure_web_cost(emulator: list[str], seconds: float) -> None:
         setup = configure(0, [1], moving=True)
         targets = {"plain": (plain, Session(plain_path, setup=setup)), "web": (web, Session(web_path, setup=setup))}
         spans: dict[str, list[tuple[float, float]]] = {}
+        cpu_before = {name: cpu_s(process.pid) for name, (process, _) in targets.items()}
         result = measure_interleaved(targets, seconds, spans=spans)
+        cpu = {name: cpu_s(process.pid) - cpu_before[name] for name, (process, _) in targets.items()}
     finally:
         for process in processes:
             stop(process)
@@ -278,9 +286,15 @@ def measure_web_cost(emulator: list[str], seconds: float) -> None:
     frame_hz = during / streamed_s if streamed_s else 0.0
     print(row("ax12emu, 1 servo moving, RDT 0", result["plain"]))
     print(row("the same with --web, a client streaming", result["web"], result["plain"]["rate"]))
+    running = {name: sum(end - begin for begin, end in spans.get(name, [])) for name in cpu}
     print(
         f"live view: {frame_hz:.1f} frames/s reached the client while the emulator ran (goal >= 20); "
         f"read rate with it {result['web']['rate'] / result['plain']['rate']:.1%} of without (goal >= 90 %)"
+    )
+    print(
+        "emulator CPU per second of its turns (both serving the same reads): "
+        + ", ".join(f"{name} {cpu[name] / running[name]:.2f} s/s" for name in cpu)
+        + " (the difference is the live view's own work)"
     )
 
 
