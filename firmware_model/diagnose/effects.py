@@ -81,8 +81,9 @@ class Effect:
     #: Function evaluations of each fit, as a multiple of the search's default (a rough surface needs more).
     effort: int = 1
     #: Recording nuisances (:data:`.nuisance.PROFILERS`) whose best value depends on this effect's values: the
-    #: search re-fits them at each of its grid points (a hold period screened at the base fit's phase would look
-    #: wrong only because the phase belongs to another period).
+    #: search re-fits them at each of its grid points and holds them through the fit from that point (a hold
+    #: period screened at the base fit's phase would look wrong only because the phase belongs to another
+    #: period; a latency shifts the hold's latches, so the base fit's phase has absorbed it).
     nuisances: tuple[str, ...] = ()
     #: Only offered on traces that record when commands were sent (``command_t``): without them the effect is
     #: indistinguishable from when the commands took effect, which the base fit estimates (:mod:`.nuisance`).
@@ -142,7 +143,8 @@ LIBRARY: dict[str, Effect] = {e.name: e for e in (
         "Latency between the shaft and the reading (or equivalently the command): ADC, firmware loop, bus.",
         "Residual proportional to speed, antisymmetric across each move, zero at rest; all channels shifted in time.",
         (Param("delay_s", 0.0, -0.01, 0.15, (0.005, 0.01, 0.02, 0.03, 0.05, 0.08), 0.002, (0.01, 0.05)),),
-        lambda v, k: {"delay_s": v["delay_s"]}, ("delay_s",), sensing=True, needs_command_times=True),
+        lambda v, k: {"delay_s": v["delay_s"]}, ("delay_s",), sensing=True, needs_command_times=True,
+        nuisances=("hold_phase",)),
     Effect(
         "sample_hold",
         "Present Speed / Load are latched at another period than the model's 0.1 s (the firmware's own timer).",

@@ -174,11 +174,13 @@ class _Search:
         self.chosen: dict[str, dict[str, float]] = {}
         self.nuisance = Nuisance(onsets_fitted=not self.ev.schedule.onsets_known)
 
-    def knobs(self, base: dict[str, float], chosen: dict[str, dict[str, float]]) -> dict[str, float]:
-        """Simulator knobs for base values, the recording's nuisance and chosen effects."""
+    def knobs(self, base: dict[str, float], chosen: dict[str, dict[str, float]],
+              nuisance: dict[str, float] | None = None) -> dict[str, float]:
+        """Simulator knobs for base values, the recording's nuisance (``nuisance`` overrides it) and chosen effects."""
         k = dict(self.ev.null)
         k.update(base)
         k.update(self.nuisance.knobs())
+        k.update(nuisance or {})
         return apply_effects(k, chosen)
 
     def fit_nuisance(self) -> None:
@@ -195,8 +197,11 @@ class _Search:
         return s, h, effective_count(z[self.ev.train])
 
     # ------------------------------------------------------------------ one least-squares fit
-    def fit(self, effect: Effect, start: dict[str, float], lock: Lockstep):
+    def fit(self, effect: Effect, start: dict[str, float], lock: Lockstep, nuisance: dict[str, float] | None = None):
         """Fit ``effect`` plus the base and the smooth accepted effects, from ``start``.
+
+        ``nuisance``: the recording's traits as re-fitted at ``start`` (for an
+        effect with ``nuisances``), held through the fit.
 
         The accepted effects are re-fitted too (their columns cost little in a
         batched simulation), so a new effect is not accepted merely to patch an
@@ -243,7 +248,7 @@ class _Search:
                 reqs = []
                 for pt in pts:
                     _, b, chosen = split(pt)
-                    reqs.append(self.knobs(b, chosen))
+                    reqs.append(self.knobs(b, chosen, nuisance))
                 z = self.ev.whiten(lock.submit(reqs))
                 r0 = z[0][train].ravel()
                 jac = np.stack([(z[j + 1][train].ravel() - r0) / hs[j] for j in range(len(x))], axis=1)
@@ -282,13 +287,17 @@ class _Search:
         ev = self.ev
         s0, h0, _ = self.score(current_z)
         grid_reqs, owners = [], []
+        profiled: dict[tuple, dict[str, float]] = {}  # (effect, grid point) -> its re-fitted recording traits
         for name in remaining:
             e = LIBRARY[name]
             for combo in itertools.product(*(p.grid for p in e.params)):
                 vals = dict(zip([p.name for p in e.params], combo))
                 req = self.knobs(self.base, {**self.chosen, name: vals})
+                prof: dict[str, float] = {}
                 for nuisance in e.nuisances:  # re-fitted for this grid point (sensing only: no new simulation)
-                    req.update(PROFILERS[nuisance](ev, req))
+                    prof.update(PROFILERS[nuisance](ev, req))
+                req.update(prof)
+                profiled[(name, combo)] = prof
                 grid_reqs.append(req)
                 owners.append((name, vals))
         self.progress(f"round {round_no}: screening {len(remaining)} effects on {len(grid_reqs)} grid points")
@@ -310,7 +319,7 @@ class _Search:
         # (all fits share each batched simulation, so extra starts cost columns, not passes)
         starts = [(n, vals) for n in smooth
                   for vals, _ in sorted(best[n][3], key=lambda e: e[1])[:LIBRARY[n].starts]]
-        jobs = [lambda n=n, v=v: self.fit(LIBRARY[n], v, lock) for n, v in starts]
+        jobs = [lambda n=n, v=v: self.fit(LIBRARY[n], v, lock, profiled[(n, tuple(v.values()))]) for n, v in starts]
         if round_no == 1:  # the shared base parameters alone, in the same batches
             jobs.append(lambda: self.fit(_BASE_ONLY, {}, lock))
         all_fits = lock.map(jobs)
