@@ -310,23 +310,29 @@ class WebServer:
         await ws.send_str(json.dumps(hello, separators=(",", ":")))
         writer = asyncio.ensure_future(self._write(ws, queue))
         try:
-            async for message in ws:
-                if message.type != WSMsgType.TEXT:
-                    if message.type == WSMsgType.ERROR:
-                        break
-                    await ws.send_str(json.dumps({"type": "error", "error": "send control messages as JSON text"}))
-                    continue
-                try:
-                    parsed = json.loads(message.data)
-                except ValueError as exc:
-                    await ws.send_str(json.dumps({"type": "error", "error": f"not JSON: {exc}"}))
-                    continue
-                status, body = await self._apply(parsed)
-                await ws.send_str(json.dumps({"type": "reply", "status": status, **body}))
+            await self._serve_messages(ws)
+        except ConnectionError:  # dropped (aborted) or gone
+            pass
         finally:
             writer.cancel()
             self._clients.pop(ws, None)
         return ws
+
+    async def _serve_messages(self, ws: web.WebSocketResponse) -> None:
+        """Controls sent as WebSocket text messages, each answered with a reply or an error."""
+        async for message in ws:
+            if message.type != WSMsgType.TEXT:
+                if message.type == WSMsgType.ERROR:
+                    return
+                await ws.send_str(json.dumps({"type": "error", "error": "send control messages as JSON text"}))
+                continue
+            try:
+                parsed = json.loads(message.data)
+            except ValueError as exc:
+                await ws.send_str(json.dumps({"type": "error", "error": f"not JSON: {exc}"}))
+                continue
+            status, body = await self._apply(parsed)
+            await ws.send_str(json.dumps({"type": "reply", "status": status, **body}))
 
     async def _write(self, ws: web.WebSocketResponse, queue: asyncio.Queue[str]) -> None:
         try:

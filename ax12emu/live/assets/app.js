@@ -3,6 +3,7 @@
 
 const HISTORY_S = 60;          // the longest plot window kept
 const LOG_KEEP = 400;          // lines kept in the page's log
+const LOG_REDRAW_MS = 200;     // how often the log is redrawn when it changed
 const cards = new Map();       // servo slot -> {el, dial, plots, fields, history}
 let logLines = [];
 let knownIns = new Set();
@@ -182,8 +183,13 @@ function addLog(lines) {
     }
   }
   if (logLines.length > LOG_KEEP) logLines = logLines.slice(-LOG_KEEP);
-  if (!$("log-hold").checked) renderLog();
+  logDirty = true;
 }
+
+// The log is redrawn a few times a second, not per frame: rebuilding hundreds of rows 25 times a
+// second would cost the machine (and so, on a small one, the bus) more than the rest of the page.
+let logDirty = false;
+setInterval(() => { if (logDirty && !$("log-hold").checked) { logDirty = false; renderLog(); } }, LOG_REDRAW_MS);
 
 function renderLog() {
   const idText = $("filter-id").value.trim();
