@@ -26,7 +26,11 @@ client (its own process, as a browser would be) streams the page's frames,
 interleaved the same way; goal: >= 90 % of the rate without, with >= 20
 frames/s reaching the client.
 
-Usage: ``python tools/bench_protocol.py [--seconds 2] [--rounds 3] [--web]``
+``--web chromium`` opens the page itself in headless Chromium instead (the
+page draws every frame, as a tester's browser would; on a two-core machine its
+drawing competes with the bus for the processor).
+
+Usage: ``python tools/bench_protocol.py [--seconds 2] [--rounds 3] [--web [socket|chromium]]``
 """
 
 from __future__ import annotations
@@ -242,6 +246,32 @@ STREAM_CLIENT = textwrap.dedent(
 )
 
 
+#: The same with the page itself open in headless Chromium (Debian's, never a download): the page
+#: draws every frame, as a tester's browser would.  It stops when its stdin closes, so the
+#: browser is shut down by Playwright rather than orphaned.
+CHROMIUM_CLIENT = textwrap.dedent(
+    """
+    import sys, threading, time, tempfile
+    from playwright.sync_api import sync_playwright
+
+    done = threading.Event()
+    threading.Thread(target=lambda: (sys.stdin.read(), done.set()), daemon=True).start()
+    flags = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+             "--disable-background-networking", "--disable-component-update", "--disable-sync"]
+    with tempfile.TemporaryDirectory() as profile, sync_playwright() as playwright:
+        context = playwright.chromium.launch_persistent_context(profile, executable_path="/usr/bin/chromium",
+                                                                headless=True, args=flags)
+        page = context.new_page()
+        page.on("websocket", lambda ws: ws.on("framereceived", lambda payload: print(time.monotonic(), flush=True)
+                                              if str(payload).startswith('{"type":"frame"') else None))
+        page.goto(sys.argv[1].replace("ws://", "http://").removesuffix("ws"))
+        while not done.is_set():
+            page.wait_for_timeout(100)
+        context.close()
+    """
+)
+
+
 def cpu_s(pid: int) -> float:
     """CPU seconds (user + system) a process has used so far (Linux /proc)."""
     fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
@@ -254,8 +284,11 @@ def start_web(command: list[str]) -> tuple[subprocess.Popen, str, str]:
     return process, path, process.stdout.readline().strip()
 
 
-def measure_web_cost(emulator: list[str], seconds: float) -> None:
-    """RDT 0 reads of one moving servo, with and without the live view open and streaming, interleaved."""
+def measure_web_cost(emulator: list[str], seconds: float, client_kind: str = "socket") -> None:
+    """RDT 0 reads of one moving servo, with and without the live view open and streaming, interleaved.
+
+    ``client_kind``: "socket" (a WebSocket client) or "chromium" (the page in headless Chromium).
+    """
     processes: list[subprocess.Popen] = []
     client = None
     try:
@@ -263,8 +296,10 @@ def measure_web_cost(emulator: list[str], seconds: float) -> None:
         processes.append(plain)
         web, web_path, url = start_web(emulator + ["--ids", "1", "--web", "127.0.0.1:0"])
         processes.append(web)
-        client = subprocess.Popen([sys.executable, "-c", STREAM_CLIENT, url.replace("http://", "ws://") + "ws"],
-                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        script = CHROMIUM_CLIENT if client_kind == "chromium" else STREAM_CLIENT
+        client = subprocess.Popen([sys.executable, "-c", script, url.replace("http://", "ws://") + "ws"],
+                                  stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        time.sleep(3.0 if client_kind == "chromium" else 0.5)  # the client connects before the timing starts
         setup = configure(0, [1], moving=True)
         targets = {"plain": (plain, Session(plain_path, setup=setup)), "web": (web, Session(web_path, setup=setup))}
         spans: dict[str, list[tuple[float, float]]] = {}
@@ -272,10 +307,15 @@ def measure_web_cost(emulator: list[str], seconds: float) -> None:
         result = measure_interleaved(targets, seconds, spans=spans)
         cpu = {name: cpu_s(process.pid) - cpu_before[name] for name, (process, _) in targets.items()}
     finally:
+        if client is not None:
+            client.stdin.close()  # the Chromium client closes its browser and ends
+            client.stdin = None  # (communicate() below must not flush it)
+            try:
+                client.wait(20)
+            except subprocess.TimeoutExpired:
+                stop(client)
         for process in processes:
             stop(process)
-        if client is not None:
-            stop(client)
     out, err = client.communicate()
     arrivals = [float(line) for line in out.split()]
     web_spans = spans.get("web", [])
@@ -285,7 +325,8 @@ def measure_web_cost(emulator: list[str], seconds: float) -> None:
         print(f"the streaming client received no frames: {err.strip()[-300:]}")
     frame_hz = during / streamed_s if streamed_s else 0.0
     print(row("ax12emu, 1 servo moving, RDT 0", result["plain"]))
-    print(row("the same with --web, a client streaming", result["web"], result["plain"]["rate"]))
+    what = "the page open in Chromium" if client_kind == "chromium" else "a WebSocket client streaming"
+    print(row(f"the same with --web, {what}", result["web"], result["plain"]["rate"]))
     running = {name: sum(end - begin for begin, end in spans.get(name, [])) for name in cpu}
     print(
         f"live view: {frame_hz:.1f} frames/s reached the client while the emulator ran (goal >= 20); "
@@ -303,15 +344,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seconds", type=float, default=2.0, help="measuring time per configuration")
     parser.add_argument("--rounds", type=int, default=3,
                         help="the RDT 0 comparison runs --seconds x --rounds per server, in 0.2 s turns (default 3)")
-    parser.add_argument("--web", action="store_true",
-                        help="only the live view's cost: reads with and without --web and a streaming client, interleaved")
+    parser.add_argument("--web", nargs="?", const="socket", choices=("socket", "chromium"),
+                        help="only the live view's cost: reads with and without --web and a streaming client "
+                             "(a WebSocket client, or the page in headless Chromium), interleaved")
     args = parser.parse_args(argv)
     if args.rounds < 1 or not args.seconds > 0:
         parser.error("--rounds must be >= 1 and --seconds > 0")
     emulator = [sys.executable, "-m", "ax12emu", "serve"]
     if args.web:
         print(f"machine: {os.cpu_count()} cores, Python {sys.version.split()[0]}")
-        measure_web_cost(emulator, args.seconds * args.rounds)
+        measure_web_cost(emulator, args.seconds * args.rounds, args.web)
         return 0
     wire_1m = 1e6 / 160
     print(f"machine: {os.cpu_count()} cores, Python {sys.version.split()[0]}")
