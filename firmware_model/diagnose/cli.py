@@ -30,7 +30,7 @@ from pathlib import Path
 
 from ..params import ServoParams
 from .effects import LIBRARY
-from .nuisance import first_movement_onset, locate_onset
+from .nuisance import first_movement_onset, first_movement_row, locate_onset
 from .output import verdict_json, verdict_text, write_outputs
 from .search import Diagnosis, diagnose
 from .trace import Trace, TraceFormatError, read_trace
@@ -42,6 +42,8 @@ __all__ = ["parse_args", "main", "load_input", "Input", "DEFAULT_GOAL", "DEFAULT
 DEFAULT_GOAL = 500
 #: Supply assumed for a Wizard export: the AX-12A's recommended 12 V (its 3-cell LiPo / bench supply).
 DEFAULT_VOLTAGE_V = 12.0
+#: A located goal write this close before the first moved reading is reported as pinned there.
+PINNED_S = 0.002
 #: The options that supply what a Wizard export does not record (dest names).
 _WIZARD_OPTIONS = ("goal", "initial_goal", "onset", "moving_speed", "voltage")
 
@@ -144,6 +146,13 @@ def _wizard_input(ex: WizardExport, args: argparse.Namespace, params: ServoParam
             assumed.append(f"written at an unrecorded time, estimated {onset:.3f} s from the first movement and "
                            "re-fitted with the model (not an effect)")
             facts["onset_s"], facts["onset_source"] = onset, "estimated"
+            probe = build(0.0)
+            moved_s = float(probe.t[first_movement_row(probe)])
+            facts["first_movement_s"] = moved_s
+            if onset >= moved_s - PINNED_S:
+                notes.append(f"the goal write is pinned just before the first reading that shows movement "
+                             f"({moved_s:.3f} s): the model would fit it later, i.e. it starts moving later after a "
+                             "write than this servo did")
     else:
         trace = build(0.0)
     if "moving_speed" not in ex.values:

@@ -55,6 +55,7 @@ def test_wizard_export_end_to_end(tmp_path):
     report = (tmp_path / "o" / "report.md").read_text()
     assert "## Input and assumptions" in report and "assumed: goal 500 written once" in report
     assert "12.0 V — override with --goal" in report and "1 garbled, 1 time back" in report
+    assert "pinned" not in report  # the model's own response: the write needs no pinning before the movement
 
 
 def test_overrides_are_used_and_reported(tmp_path):
@@ -105,5 +106,6 @@ def test_real_export_runs(tmp_path):
     assert r.returncode == 0, r.stderr
     v = json.loads(r.stdout)
     assert v["input"]["rows_read"] == 205 and v["input"]["onset_source"] == "estimated"
+    assert v["input"]["first_movement_s"] == pytest.approx(1.936)
     assert 1.85 < v["input"]["onset_s"] < 1.936  # before the first reading that shows movement
     assert np.isfinite(v["gap_rms_after"]["present_position"])
