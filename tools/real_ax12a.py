@@ -1,0 +1,294 @@
+#!/usr/bin/env python3
+"""The physical model against real AX-12A step responses (DYNAMIXEL Wizard 2 exports).
+
+Why it exists: the model was built from a data sheet and a 2008 report; these
+are the only recordings of real servos it can be held to.  Each file is one
+full-speed step of Goal Position from about 0 to about 500, unloaded or with
+a bar of known inertia on the horn (``../shared/reference/real-ax12a/``, see
+its README).  The tool prints, per recording, the overshoot (peak minus the
+final reading), the dip after the peak (final minus the lowest reading after
+it) and the RMS position error, for the real servo, the model before the
+bridge-decay change, the default model, and a *twin*: the default model with
+the two things these files leave unknown fitted on the unloaded recording
+(the supply voltage, which the files do not record, and the inertia of rotor
+and gears).  The twin then *predicts* the loaded recordings with only the
+bar's inertia added; that is the test of a mechanism (one that fits only the
+file it was fitted on is wrong).  The same fit is run with a bridge that
+brakes (shorts the winding) to show it cannot do the same.
+
+What the files do not record, and what is assumed (override with flags):
+Goal Position (``--goal``, default 500: every servo settles at 498-500),
+Moving Speed 0 (full speed), the e-manual's default compliance (margin 1,
+slope 32, punch 32) and when the goal was written.  The last is a nuisance,
+not a knob: the command onset is scanned in 1 ms steps over the 250 ms before
+the first movement and the best one is used (for every model alike).
+The Wizard stamps rows on a ~16 ms clock tick while the servo is read about
+every 19 ms, so a row's time is late by up to a tick; that puts a floor of
+about 3 units under any RMS during the move.  ``tick RMS`` allows for it
+(the distance to the model's range over the tick after the stamp) and is
+what tells mechanisms apart.
+
+Usage::
+
+    python tools/real_ax12a.py [--data DIR] [--goal 500] [--plot tools/figures/real_ax12a.png]
+
+Exit status 2 with a message if the data folder is missing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from firmware_model.diagnose.wizard import read_wizard  # noqa: E402
+from firmware_model.interface import Commands  # noqa: E402
+from firmware_model.params import ServoParams  # noqa: E402
+from firmware_model.physical import PhysicalModel  # noqa: E402
+
+#: Where the recordings live, relative to the repository (never copied into it).
+DEFAULT_DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "reference" / "real-ax12a"
+
+
+@dataclass(frozen=True)
+class Recording:
+    """One recording and what its README says about it."""
+
+    file: str
+    servo: str
+    #: Bar inertia on the horn, kg m**2 (J = m (h**2 + b**2) / 12, pivoted at its centre).
+    load_kg_m2: float
+    #: Overshoot and dip as the README lists them (raw units), for reference.
+    readme_overshoot: int
+    readme_dip: int
+
+
+#: The recordings and their loads (README of the data folder).  The AX-18A has another motor: shown, not modelled.
+RECORDINGS = (
+    Recording("AX12A_NOLOAD_1.csv", "AX-12A", 0.0, 19, 3),
+    Recording("AX12A_LOAD3_1.csv", "AX-12A", 7.27e-4, 23, 3),
+    Recording("AX12A_LOAD2_1.csv", "AX-12A", 1.019e-3, 24, 3),
+    Recording("AX18A_NOLOAD_1.csv", "AX-18A", 0.0, 2, 0),
+)
+#: The recording the twin is fitted on.
+FIT_ON = "AX12A_NOLOAD_1.csv"
+#: The model before the bridge-decay change: a bridge that shorts the winding, rotor inertia 3.265e-3.
+BEFORE = dataclasses.replace(ServoParams(), bridge_braking_fraction=1.0, rotor_inertia_reflected_kg_m2=3.265e-3)
+#: The twin's knobs: supply (V; the files do not record it) and rotor + gear inertia (times the default).
+SUPPLY_GRID_V = np.round(np.arange(8.0, 11.01, 0.25), 2)
+INERTIA_SCALE_GRID = np.round(np.arange(0.8, 2.61, 0.1), 2)
+#: Rows further than this before the first movement, or after it, are not compared (ms).
+WINDOW_BEFORE_MS, WINDOW_AFTER_MS = 150.0, 1000.0
+#: The command onset is searched this far before the first movement (ms), 1 ms apart.
+ONSET_SEARCH_MS = 250
+#: The Wizard's timestamp tick (ms): a row was read at its stamp or up to this much later.
+TICK_MS = 16
+#: A row counts as moved when it is this many units from the first reading.
+MOVED_UNITS = 2
+#: Settled value: the median of the readings from this long after the first movement on (ms).
+SETTLED_AFTER_MS = 1000.0
+
+
+@dataclass
+class Measured:
+    t_ms: np.ndarray
+    pos: np.ndarray
+
+    @property
+    def first_move_ms(self) -> float:
+        moved = np.abs(self.pos - self.pos[0]) >= MOVED_UNITS
+        if not moved.any():
+            raise ValueError("the recording never moves")
+        return float(self.t_ms[np.argmax(moved)])
+
+
+def load(path: Path) -> Measured:
+    ex = read_wizard(path)
+    if "present_position" not in ex.values:
+        raise ValueError(f"{path}: no Present Position column")
+    return Measured(ex.t_s * 1000.0, ex.values["present_position"].astype(float))
+
+
+def _commands(goal: int) -> Commands:
+    full = lambda v: np.full(1, v, dtype=np.int64)  # noqa: E731
+    return Commands(
+        torque_enable=full(1), goal_position=full(goal), moving_speed=full(0), torque_limit=full(1023),
+        cw_angle_limit=full(0), ccw_angle_limit=full(1023), cw_compliance_margin=full(1), ccw_compliance_margin=full(1),
+        cw_compliance_slope=full(32), ccw_compliance_slope=full(32), punch=full(32), temperature_limit=full(70),
+        min_voltage_limit=full(60), max_voltage_limit=full(140),
+    )
+
+
+def simulate(params: ServoParams, start: int, goal: int, duration_ms: int) -> np.ndarray:
+    """Present Position every ms from the command (index 0) on, at the params' supply."""
+    model = PhysicalModel(1, params=params, initial_position_raw=start)
+    cmds = _commands(goal)
+    out = np.empty(duration_ms + 1)
+    out[0] = start
+    for i in range(1, duration_ms + 1):
+        out[i] = model.advance(i * 1e-3, cmds).present_position[0]
+    return out
+
+
+def features(values: np.ndarray, times_ms: np.ndarray, settle_from_ms: float) -> tuple[float, float, float]:
+    """(overshoot, dip, final): peak minus final, final minus the lowest reading after the peak, final."""
+    final = float(np.median(values[times_ms >= settle_from_ms]))
+    peak_at = int(np.argmax(values))
+    return float(values[peak_at] - final), float(final - values[peak_at:].min()), final
+
+
+def align(sim: np.ndarray, rec: Measured) -> dict:
+    """Best command onset for ``sim`` against ``rec``: plain RMS and tick RMS there (rows near the move)."""
+    first = rec.first_move_ms
+    w = (rec.t_ms >= first - WINDOW_BEFORE_MS) & (rec.t_ms <= first + WINDOW_AFTER_MS)
+    t, p = rec.t_ms[w], rec.pos[w]
+    onsets = first - np.arange(ONSET_SEARCH_MS + 1, dtype=float)
+    idx = np.clip(np.rint(t[None, :] - onsets[:, None]).astype(int), 0, len(sim) - 1)
+    err = sim[idx] - p[None, :]
+    rms = np.sqrt(np.mean(err * err, axis=1))
+    # Tick RMS: the row was read somewhere in [stamp, stamp + tick): distance to the model's range there.
+    padded = np.concatenate([sim, np.full(TICK_MS, sim[-1])])
+    windows = np.lib.stride_tricks.sliding_window_view(padded, TICK_MS)
+    lo, hi = windows.min(axis=1), windows.max(axis=1)
+    gap = np.maximum(0.0, np.maximum(lo[idx] - p[None, :], p[None, :] - hi[idx]))
+    tick_rms = np.sqrt(np.mean(gap * gap, axis=1))
+    best = int(np.argmin(rms))
+    return {"rms": float(rms[best]), "tick_rms": float(tick_rms[best]), "onset_ms": float(onsets[best])}
+
+
+def evaluate(params: ServoParams, rec: Measured, goal: int) -> dict:
+    """Replay ``rec``'s step with ``params``: features of the model's own trajectory and the fit to the rows."""
+    duration = int(min(rec.t_ms[-1] - rec.first_move_ms + ONSET_SEARCH_MS + 50, 4000))
+    sim = simulate(params, int(rec.pos[0]), goal, duration)
+    t_sim = np.arange(len(sim), dtype=float)
+    moved = np.abs(sim - sim[0]) >= MOVED_UNITS
+    model_first = float(np.argmax(moved)) if moved.any() else 0.0
+    over, dip, final = features(sim, t_sim, model_first + SETTLED_AFTER_MS)
+    return {"overshoot": over, "dip": dip, "final": final, "sim": sim, **align(sim, rec)}
+
+
+def real_features(rec: Measured) -> dict:
+    over, dip, final = features(rec.pos, rec.t_ms, rec.first_move_ms + SETTLED_AFTER_MS)
+    return {"overshoot": over, "dip": dip, "final": final}
+
+
+def with_supply(params: ServoParams, volts: float, inertia_scale: float = 1.0, extra_kg_m2: float = 0.0) -> ServoParams:
+    return dataclasses.replace(params, supply_voltage_v=float(volts),
+                               rotor_inertia_reflected_kg_m2=params.rotor_inertia_reflected_kg_m2 * inertia_scale,
+                               load_inertia_kg_m2=params.load_inertia_kg_m2 + extra_kg_m2)
+
+
+def fit_twin(base: ServoParams, rec: Measured, goal: int) -> tuple[ServoParams, float, float, dict]:
+    """Supply and inertia scale minimising the RMS at the best onset (grid); returns (params, volts, scale, result)."""
+    best = None
+    for volts in SUPPLY_GRID_V:
+        for scale in INERTIA_SCALE_GRID:
+            params = with_supply(base, volts, scale)
+            result = evaluate(params, rec, goal)
+            if best is None or result["rms"] < best[3]["rms"]:
+                best = (params, float(volts), float(scale), result)
+    return best
+
+
+def _row(name: str, r: dict, real: dict | None = None) -> str:
+    text = f"  {name:<34} overshoot {r['overshoot']:5.1f}  dip {r['dip']:4.1f}  final {r['final']:6.1f}"
+    if "rms" in r:
+        text += f"  RMS {r['rms']:5.2f}  tick RMS {r['tick_rms']:5.2f}"
+    if real is not None:
+        text += f"   (vs real: {r['overshoot'] - real['overshoot']:+.0f} / {r['dip'] - real['dip']:+.0f})"
+    return text
+
+
+def run(data: Path, goal: int, plot: Path | None) -> int:
+    recs = {r.file: load(data / r.file) for r in RECORDINGS if (data / r.file).exists()}
+    if FIT_ON not in recs:
+        print(f"real_ax12a: {data / FIT_ON} not found (the recordings live in ../shared/reference/real-ax12a)",
+              file=sys.stderr)
+        return 2
+    default = ServoParams()
+    print(f"Assumed: goal {goal}, Moving Speed 0, compliance margin 1 / slope 32 / punch 32; command onset scanned "
+          f"over the {ONSET_SEARCH_MS} ms before the first movement.  Default supply {default.supply_voltage_v} V.")
+    twins = {}
+    for label, braking in (("twin", default.bridge_braking_fraction), ("braking-bridge twin", 1.0)):
+        base = dataclasses.replace(default, bridge_braking_fraction=braking)
+        params, volts, scale, _ = fit_twin(base, recs[FIT_ON], goal)
+        twins[label] = params
+        print(f"{label}: bridge braking fraction {braking:g}, fitted on {FIT_ON}: supply {volts:.2f} V, rotor and gear "
+              f"inertia x{scale:.1f} ({params.rotor_inertia_reflected_kg_m2:.3g} kg m^2)")
+    curves = {}
+    for r in RECORDINGS:
+        if r.file not in recs:
+            print(f"{r.file}: not found, skipped")
+            continue
+        rec = recs[r.file]
+        real = real_features(rec)
+        print(f"\n{r.file} ({r.servo}, bar J {r.load_kg_m2:.3g} kg m^2; README: overshoot {r.readme_overshoot}, "
+              f"dip {r.readme_dip})")
+        print(_row("real", real))
+        if r.servo != "AX-12A":
+            print("  (another motor: not modelled)")
+            continue
+        rows = {"before (shorting bridge, old J)": with_supply(BEFORE, BEFORE.supply_voltage_v, 1.0, r.load_kg_m2),
+                "default": with_supply(default, default.supply_voltage_v, 1.0, r.load_kg_m2)}
+        rows.update({name + (" (fitted here)" if r.file == FIT_ON else " (predicted)"):
+                     dataclasses.replace(p, load_inertia_kg_m2=p.load_inertia_kg_m2 + r.load_kg_m2)
+                     for name, p in twins.items()})
+        curves[r.file] = (rec, {})
+        for name, params in rows.items():
+            result = evaluate(params, rec, goal)
+            curves[r.file][1][name] = result
+            print(_row(name, result, real))
+    if plot is not None:
+        _plot(curves, plot)
+        print(f"\nwrote {plot}")
+    return 0
+
+
+def _plot(curves: dict, out: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(len(curves), 1, figsize=(8, 3.2 * len(curves)), squeeze=False)
+    for ax, (name, (rec, results)) in zip(axes[:, 0], curves.items()):
+        first = rec.first_move_ms
+        shown = (rec.t_ms >= first - 60) & (rec.t_ms <= first + 700)
+        ax.plot(rec.t_ms[shown] - first, rec.pos[shown], "ko", ms=3, label="real (Wizard rows)")
+        for label, r in results.items():
+            if label.startswith("braking"):
+                continue
+            t = np.arange(len(r["sim"])) + r["onset_ms"] - first
+            keep = (t >= -60) & (t <= 700)
+            ax.plot(t[keep], r["sim"][keep], lw=1.2, label=f"{label}: over {r['overshoot']:.0f}, dip {r['dip']:.0f}")
+        ax.set_title(name)
+        ax.set_xlabel("ms from the first movement")
+        ax.set_ylabel("Present Position")
+        ax.set_ylim(380, 535)  # the end of the move, where the mechanisms differ
+        ax.set_xlim(250, 700)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, loc="lower right")
+    fig.tight_layout()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=110)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--data", type=Path, default=DEFAULT_DATA, help="folder with the Wizard exports")
+    ap.add_argument("--goal", type=int, default=500, help="the Goal Position the step went to (not recorded)")
+    ap.add_argument("--plot", type=Path, default=None, help="write a figure (needs matplotlib)")
+    args = ap.parse_args(argv)
+    if not 0 <= args.goal <= 1023:
+        ap.error(f"--goal must be 0..1023, got {args.goal}")
+    return run(args.data, args.goal, args.plot)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
