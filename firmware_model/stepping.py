@@ -1,7 +1,7 @@
 """The fixed-step loop between two events: one generic loop, and fused kernels for the usual case.
 
 Why it exists: behind a live bus the model must run far ahead of the wall
-clock (issue 3: 100x real time for one servo, 20x for 253, one core).  The
+clock (goals: 100x real time for one servo, 20x for 253, one core; tools/bench_physics.py).  The
 generic loop composes the one-job step functions (:mod:`.setpoint`,
 :mod:`.controller`, :mod:`.motor`) and runs every configuration; it is the
 reference.  It costs about 50 numpy calls per step, each about a

@@ -1,4 +1,4 @@
-"""The model-discrepancy workflow (issue 4): measured trace in, named missing effects and better parameters out.
+"""The model-discrepancy workflow: measured trace in, named missing effects and better parameters out.
 
 Why it is a subpackage apart: it does I/O (CSV traces, report files, plots,
 TOML) and uses scipy; the model modules of :mod:`firmware_model` stay pure

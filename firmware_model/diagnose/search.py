@@ -74,7 +74,7 @@ __all__ = ["Candidate", "Diagnosis", "diagnose", "BIC_MARGIN", "UNEXPLAINED_RMS"
 
 log = logging.getLogger(__name__)
 
-#: BIC must improve by more than this (issue 4).
+#: BIC must improve by more than this (the usual "strong evidence" threshold).
 BIC_MARGIN = 10.0
 #: Whitened residual RMS (in channel sd) above which a channel counts as unexplained.
 UNEXPLAINED_RMS = 2.5
