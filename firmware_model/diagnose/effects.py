@@ -42,8 +42,8 @@ so their ranges start where they are not (measured on 10 s traces, seeds
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 __all__ = ["Param", "Effect", "LIBRARY", "BASE_PARAMS", "apply_effects"]
 

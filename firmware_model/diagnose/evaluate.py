@@ -11,7 +11,7 @@ fitting three candidates costs about what fitting one does.
 from __future__ import annotations
 
 import threading
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 

@@ -33,8 +33,8 @@ stamps, which the robust cost treats as noise.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 

@@ -135,7 +135,7 @@ class WizardExport:
 def is_wizard_export(path: str | Path) -> bool:
     """Whether the file starts like a Wizard graph export (its first field is ``DYNAMIXEL Graph``)."""
     try:
-        with open(path, "r", encoding="utf-8-sig", errors="replace") as f:
+        with open(path, encoding="utf-8-sig", errors="replace") as f:
             first = f.readline()
     except OSError:
         return False

@@ -4,8 +4,14 @@ import numpy as np
 import pytest
 
 from firmware_model.backend import NUMPY
-from firmware_model.motor import (ARM_HORIZONTAL_RAD, DryFriction, arm_gravity_torque_nm, bridge_current_a, motor_current_a,
-                                  shaft_speed_step)
+from firmware_model.motor import (
+    ARM_HORIZONTAL_RAD,
+    DryFriction,
+    arm_gravity_torque_nm,
+    bridge_current_a,
+    motor_current_a,
+    shaft_speed_step,
+)
 from firmware_model.params import ServoParams
 
 P = ServoParams()

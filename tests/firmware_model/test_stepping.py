@@ -11,9 +11,10 @@ import dataclasses
 
 import numpy as np
 import pytest
+
+from firmware_model import stepping
 from firmware_model.params import ServoEffects, ServoParams
 from firmware_model.physical import PhysicalModel
-from firmware_model import stepping
 from firmware_model.stepping import FusedNumpySteps, fused_scalar_steps, generic_steps
 
 LOADS = {
@@ -154,8 +155,8 @@ def test_fused_kernel_equals_the_generic_loop_through_wraps_while_cruising(comma
 
 def test_cruise_safe_distance_keeps_every_speed_limit_exactly():
     """From the safe distance on, the setpoint's own arithmetic asks for exactly the limit, for every Moving Speed."""
-    from firmware_model.stepping import StepConstants, _cruise_safe_distance
     from firmware_model.controller import PidGains
+    from firmware_model.stepping import StepConstants, _cruise_safe_distance
     from firmware_model.units import RAD_S_PER_SPEED_UNIT
 
     n = 1023
