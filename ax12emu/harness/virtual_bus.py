@@ -27,12 +27,11 @@ import threading
 from collections.abc import Callable, Iterable
 from typing import Any
 
-import numpy as np
-
 from ax12emu.bus.bus import Bus
 from ax12emu.bus.clock import VirtualClock, WallClock
 from ax12emu.faults.config import FaultConfig
 from ax12emu.faults.injection import Faults
+from ax12emu.live.controls import ServedControls
 from ax12emu.servo.model_factory import ModelChoice, build_model
 from ax12emu.servo.virtual_servo import ServoOptions
 from ax12emu.tracing.trace import TraceWriter
@@ -142,7 +141,8 @@ class VirtualBus:
         self._server: Any = None
         self._link: InProcessLink | None = None
         self._thread: threading.Thread | None = None
-        self._torque_nm = np.zeros(len(self.bus.slots))
+        #: The control methods shared with the live view of ``ax12emu serve`` (one body for both).
+        self._controls = ServedControls(self.call, servos=len(self.bus.slots), seed=seed)
         self._closed = False
         self._started = False
 
@@ -256,9 +256,7 @@ class VirtualBus:
         return fn(self.bus)
 
     def _faults(self, bus: Bus) -> Faults:
-        if bus.faults is None:
-            bus.faults = Faults(bus, seed=self.seed)
-        return bus.faults
+        return self._controls.faults_of(bus)
 
     @property
     def faults(self) -> Any:
@@ -328,18 +326,12 @@ class VirtualBus:
 
     def set_temperature(self, servo_id: int, celsius: float | None) -> None:
         """Pin Present Temperature (above Temperature Limit: Overheating); None releases it."""
-        self.call(lambda bus: self._faults(bus).hold(bus.slots[bus.servo(servo_id).index], "present_temperature", None if celsius is None else round(celsius)))
+        self._controls.set_temperature(servo_id, celsius)
 
     def set_voltage(self, servo_id: int, volts: float | None) -> None:
         """Pin Present Voltage (outside the voltage limits: Input Voltage error); None releases it."""
-        self.call(lambda bus: self._faults(bus).hold(bus.slots[bus.servo(servo_id).index], "present_voltage", None if volts is None else round(volts * 10)))
+        self._controls.set_voltage(servo_id, volts)
 
     def set_external_torque(self, servo_id: int, torque_nm: float) -> None:
         """A torque on the output shaft (N m, positive CCW), through the model's ``set_external_torque``."""
-
-        def _set(bus: Bus) -> None:
-            self._torque_nm[bus.servo(servo_id).index] = torque_nm
-            bus.model.set_external_torque(self._torque_nm.copy())
-            bus.plant.tables_changed()
-
-        self.call(_set)
+        self._controls.set_external_torque(servo_id, torque_nm)

@@ -44,14 +44,19 @@ MAX_FRAME_BYTES = 4 + 255
 DEFAULT_SILENCE_TIMEOUT_S = 0.020
 
 
-class Framer:
-    """Feed bytes, get :class:`InstructionPacket` objects; never raises on input."""
+class FrameBuffer:
+    """What every framer keeps between feeds: the bytes of a partial frame, dropped after silence.
 
-    def __init__(self, *, silence_timeout_s: float = DEFAULT_SILENCE_TIMEOUT_S, max_length: int = 255) -> None:
+    Shared by the Protocol 1.0 :class:`Framer` and the Protocol 2.0 ``Framer2``; each
+    subclass hunts for its own header and lengths in ``_buf``.
+    """
+
+    def __init__(self, *, silence_timeout_s: float, max_length: int, length_span: tuple[int, int]) -> None:
         if silence_timeout_s <= 0:
             raise ValueError(f"silence_timeout_s must be positive, got {silence_timeout_s}")
-        if not 2 <= max_length <= 255:
-            raise ValueError(f"max_length must be 2..255, got {max_length}")
+        low, high = length_span
+        if not low <= max_length <= high:
+            raise ValueError(f"max_length must be {low}..{high}, got {max_length}")
         self.silence_timeout_s = silence_timeout_s
         self.max_length = max_length
         self._buf = bytearray()
@@ -82,6 +87,13 @@ class Framer:
             self.reset()
             return True
         return False
+
+
+class Framer(FrameBuffer):
+    """Feed bytes, get :class:`InstructionPacket` objects; never raises on input."""
+
+    def __init__(self, *, silence_timeout_s: float = DEFAULT_SILENCE_TIMEOUT_S, max_length: int = 255) -> None:
+        super().__init__(silence_timeout_s=silence_timeout_s, max_length=max_length, length_span=(2, 255))
 
     def feed(self, data: bytes | bytearray, now_s: float | None = None) -> list[InstructionPacket]:
         """Add bytes received at ``now_s`` (None: ignore timing); return the packets completed."""

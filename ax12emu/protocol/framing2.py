@@ -58,6 +58,7 @@ unparsed rest of the chunk being fed.
 
 from __future__ import annotations
 
+from .framing import FrameBuffer
 from .packets2 import (
     HEADER2,
     MIN_INSTRUCTION_LENGTH,
@@ -95,44 +96,12 @@ def _header_prefix_kept(buf: bytearray) -> int:
     return 0
 
 
-class Framer2:
+class Framer2(FrameBuffer):
     """Feed bytes, get :class:`InstructionPacket2` and :class:`StatusPacket2`; never raises on input."""
 
     def __init__(self, *, silence_timeout_s: float = DEFAULT_SILENCE_TIMEOUT_S, max_length: int = DEFAULT_MAX_LENGTH) -> None:
-        if silence_timeout_s <= 0:
-            raise ValueError(f"silence_timeout_s must be positive, got {silence_timeout_s}")
-        if not MIN_STATUS_LENGTH <= max_length <= 0xFFFF:
-            raise ValueError(f"max_length must be {MIN_STATUS_LENGTH}..65535, got {max_length}")
-        self.silence_timeout_s = silence_timeout_s
-        self.max_length = max_length
-        self._buf = bytearray()
-        self._last_byte_s: float | None = None
-        #: Bytes thrown away while hunting for a frame, and frames dropped on silence.
-        self.discarded_bytes = 0
-        self.dropped_partials = 0
-
-    @property
-    def buffered(self) -> int:
-        """Bytes held waiting for the rest of a frame."""
-        return len(self._buf)
-
-    def reset(self) -> None:
-        """Forget any partial frame (e.g. after a line break or collision)."""
-        self.discarded_bytes += len(self._buf)
-        self._buf.clear()
-
-    def expire(self, now_s: float | None) -> bool:
-        """Drop a partial frame that has seen no byte for the silence timeout; True if dropped."""
-        if (
-            now_s is not None
-            and self._buf
-            and self._last_byte_s is not None
-            and now_s - self._last_byte_s > self.silence_timeout_s
-        ):
-            self.dropped_partials += 1
-            self.reset()
-            return True
-        return False
+        super().__init__(silence_timeout_s=silence_timeout_s, max_length=max_length,
+                         length_span=(MIN_STATUS_LENGTH, 0xFFFF))
 
     def feed(self, data: bytes | bytearray, now_s: float | None = None) -> list[InstructionPacket2 | StatusPacket2]:
         """Add bytes received at ``now_s`` (None: ignore timing); return the packets completed."""

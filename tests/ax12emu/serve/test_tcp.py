@@ -7,6 +7,7 @@ import time
 
 import pytest
 import serial
+from emu_testkit import UrlPortHandler
 
 from ax12emu.protocol.packets import encode_instruction, encode_status
 
@@ -43,32 +44,12 @@ def test_second_client_refused_and_reconnect_after_mid_packet_drop(emulator):
         assert link.read(6) == encode_status(1, 0)
 
 
-class UrlPortHandler:
-    """The README's PortHandler subclass, built here from dynamixel-sdk's own class."""
-
-    @staticmethod
-    def make(url: str):
-        from dynamixel_sdk import PortHandler
-
-        class _UrlPortHandler(PortHandler):
-            def setupPort(self, cflag_baud):
-                if self.is_open:
-                    self.closePort()
-                self.ser = serial.serial_for_url(self.port_name, baudrate=self.baudrate, timeout=0)
-                self.is_open = True
-                self.ser.reset_input_buffer()
-                self.tx_time_per_byte = (1000.0 / self.baudrate) * 10.0
-                return True
-
-        return _UrlPortHandler(url)
-
-
 def test_dynamixel_sdk_over_tcp_with_url_port_handler(emulator):
     """dynamixel-sdk drives the TCP bus through the README's three-line PortHandler subclass."""
     from dynamixel_sdk import COMM_SUCCESS, PacketHandler
 
     served = emulator("--tcp", "127.0.0.1:0", "--ids", "3")
-    port = UrlPortHandler.make(served.port)
+    port = UrlPortHandler(served.port)  # the docs' PortHandler subclass (emu_testkit)
     assert port.openPort()
     try:
         ph = PacketHandler(1.0)
