@@ -3,9 +3,6 @@
 from __future__ import annotations
 
 import os
-import select
-import signal
-import subprocess
 import sys
 import threading
 import time
@@ -14,49 +11,19 @@ from dataclasses import dataclass
 
 import pytest
 
+from ax12emu.harness.served import ServedProcess, start_served
+
 # Test modules import their shared helpers (emu_testkit) from this folder.
 sys.path.insert(0, os.path.dirname(__file__))
 
 
-@dataclass
-class Served:
-    """A running emulator process and the port it printed."""
-
-    process: subprocess.Popen
-    port: str
-
-    def stop(self, sig: int = signal.SIGTERM, timeout_s: float = 10.0) -> int:
-        """Signal the process and wait for it; kill it if it does not exit."""
-        if self.process.poll() is None:
-            os.kill(self.process.pid, sig)
-            try:
-                self.process.wait(timeout_s)
-            except subprocess.TimeoutExpired:
-                os.kill(self.process.pid, signal.SIGKILL)
-                self.process.wait(timeout_s)
-        return self.process.returncode
+#: A running emulator process and the port it printed (stopped by its own pid).
+Served = ServedProcess
 
 
 def start_emulator(*args: str, timeout_s: float = 20.0) -> Served:
     """Start ``python -m ax12emu serve ARGS`` and wait for the port line on stdout."""
-    process = subprocess.Popen(
-        [sys.executable, "-m", "ax12emu", "serve", *args],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        ready, _, _ = select.select([process.stdout], [], [], 0.1)
-        if ready:
-            line = process.stdout.readline().strip()
-            if line:
-                return Served(process, line)
-        if process.poll() is not None:
-            break
-    process.kill()
-    _, err = process.communicate(timeout=5)
-    raise RuntimeError(f"emulator did not start: {err.strip()}")
+    return start_served(args, timeout_s=timeout_s)
 
 
 def _open_fds() -> set[int]:
@@ -176,7 +143,4 @@ def emulator() -> Iterator[Callable[..., Served]]:
 
     yield _start
     for served in started:
-        served.stop()
-        for stream in (served.process.stdout, served.process.stderr):
-            if stream:
-                stream.close()
+        served.close()

@@ -37,12 +37,8 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import select
-import signal
-import subprocess
 import sys
 import tempfile
-import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
@@ -55,6 +51,7 @@ sys.path.insert(0, str(ROOT))
 
 from record import record  # noqa: E402
 
+from ax12emu.harness.served import start_served  # noqa: E402
 from firmware_model.diagnose.effects import LIBRARY  # noqa: E402
 from firmware_model.diagnose.trace import Trace, write_trace  # noqa: E402
 from firmware_model.params import ServoParams  # noqa: E402
@@ -254,36 +251,6 @@ def offset_gain(trace: Trace, offset_units: float, gain: float) -> Trace:
 
 
 # ---------------------------------------------------------------------- serving and recording
-def _serve(args: list[str]) -> tuple[subprocess.Popen, str]:
-    # Served from this checkout (cwd), so the recording's model is the code the diagnosis runs.
-    process = subprocess.Popen([sys.executable, "-m", "ax12emu", "serve", "--ids", "1", *args], cwd=ROOT,
-                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    deadline = time.monotonic() + SERVE_START_S
-    while time.monotonic() < deadline:
-        ready, _, _ = select.select([process.stdout], [], [], 0.1)
-        if ready:
-            line = process.stdout.readline().strip()
-            if line:
-                return process, line
-        if process.poll() is not None:
-            break
-    _stop(process)
-    raise RuntimeError(f"ax12emu serve {' '.join(args)} did not start: {process.stderr.read().strip()}")
-
-
-def _stop(process: subprocess.Popen) -> None:
-    if process.poll() is None:
-        os.kill(process.pid, signal.SIGTERM)
-        try:
-            process.wait(10)
-        except subprocess.TimeoutExpired:
-            os.kill(process.pid, signal.SIGKILL)
-            process.wait(10)
-    for stream in (process.stdout, process.stderr):
-        if stream:
-            stream.close()
-
-
 def _prioritise(pid: int, realtime: bool) -> int:
     """Schedule ``pid`` (0: this process) as :data:`RECORDING_PRIORITY` says; the index of what was permitted."""
     try:
@@ -320,15 +287,17 @@ def record_live(knob: str, seed: int, duration_s: float = 10.0, rate_hz: float =
     with tempfile.TemporaryDirectory(prefix="live_dataset_") as tmp:
         params_path = Path(tmp) / "params.toml"
         _params_toml(setup, base, params_path)
-        process, port = _serve(["--params", str(params_path), *setup.serve_args])
+        # Served from this checkout (cwd), so the recording's model is the code the diagnosis runs.
+        served = start_served(["--ids", "1", "--params", str(params_path), *setup.serve_args], cwd=ROOT,
+                              timeout_s=SERVE_START_S)
         own = os.getpriority(os.PRIO_PROCESS, 0)
         try:
-            priority = (RECORDING_PRIORITY[_prioritise(process.pid, True)],
+            priority = (RECORDING_PRIORITY[_prioritise(served.process.pid, True)],
                         RECORDING_PRIORITY[_prioritise(0, False)])
-            trace = record(port, 1, 1_000_000, duration, rate_hz, setup.breakaway_s, setup.writes)
+            trace = record(served.port, 1, 1_000_000, duration, rate_hz, setup.breakaway_s, setup.writes)
         finally:
             os.setpriority(os.PRIO_PROCESS, 0, own)
-            _stop(process)
+            served.close()
     if setup.shift_s:
         trace = shift_readings(trace, setup.shift_s)
     if setup.offset_units or setup.gain != 1.0:

@@ -27,11 +27,8 @@ from __future__ import annotations
 
 import argparse
 import json
-import select
-import signal
 import subprocess
 import sys
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -41,6 +38,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from ax12emu.harness.served import start_served  # noqa: E402
 from firmware_model.diagnose.trace import Trace, read_trace, write_trace  # noqa: E402
 
 #: The hidden effect when none is given: an arm whose weight moment (0.34 N m) is a quarter of the stall torque.
@@ -150,49 +148,17 @@ def run_loop(record: Recorder, hidden_args: list[str], writes: dict[str, int], o
 
 
 # ---------------------------------------------------------------------------------- live recording
-def serve(args: list[str], timeout_s: float = 20.0) -> tuple[subprocess.Popen, str]:
-    """Start ``python -m ax12emu serve --ids 1 ARGS``; return the process and its port (its first stdout line)."""
-    process = subprocess.Popen([sys.executable, "-m", "ax12emu", "serve", "--ids", "1", *args], cwd=ROOT,
-                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        ready, _, _ = select.select([process.stdout], [], [], 0.1)
-        if ready:
-            line = process.stdout.readline().strip()
-            if line:
-                return process, line
-        if process.poll() is not None:
-            break
-    process.kill()
-    _, err = process.communicate(timeout=5)
-    raise RuntimeError(f"ax12emu serve {' '.join(args)} did not start: {err.strip()}")
-
-
-def stop(process: subprocess.Popen) -> None:
-    """Stop a served emulator started by :func:`serve` (by its pid)."""
-    if process.poll() is None:
-        process.send_signal(signal.SIGINT)
-        try:
-            process.wait(timeout=5)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait(timeout=5)
-    for stream in (process.stdout, process.stderr):
-        if stream:
-            stream.close()
-
-
 def live_recorder(duration_s: float, rate_hz: float, breakaway_s: float) -> Recorder:
     """Serve, record through dynamixel-sdk in real time (tools/record.py), stop; the trace is also written."""
     sys.path.insert(0, str(ROOT / "tools"))
     from record import record as sdk_record
 
     def _record(serve_args: list[str], writes: dict[str, int], path: Path) -> Trace:
-        process, port = serve(serve_args)
+        served = start_served(["--ids", "1", *serve_args], cwd=ROOT)
         try:
-            trace = sdk_record(port, 1, 1_000_000, duration_s, rate_hz, breakaway_s, writes)
+            trace = sdk_record(served.port, 1, 1_000_000, duration_s, rate_hz, breakaway_s, writes)
         finally:
-            stop(process)
+            served.close()
         write_trace(trace, path)
         return read_trace(path)  # as the diagnosis reads it
 
