@@ -78,7 +78,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     decode.add_argument("--raw", action="store_true", help="treat FILE as a raw capture even if it looks like JSON")
     decode.add_argument("--profile", choices=sorted(PROFILES), default=DEFAULT_PROFILE, help="register names of this profile")
 
-    check = sub.add_parser("conformance", help="run the Protocol 1.0 checks against any port (emulator or servo)")
+    check = sub.add_parser("conformance", help="run the Protocol 1.0 (or 2.0) checks against any port (emulator or servo)")
     check.add_argument("port", metavar="PORT", help="device path or pyserial URL (socket://HOST:PORT, ax12emu://...)")
     check.add_argument("--ids", type=_typed(_ids), default=[1], metavar="LIST", help="IDs on the bus to check (default 1)")
     check.add_argument("--baud", type=int, default=1_000_000, help="host bit rate (default 1000000)")
@@ -86,6 +86,8 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     check.add_argument("--destructive", action="store_true", help="also change ID, baud and RESET (all restored afterwards)")
     check.add_argument("--profile", choices=sorted(PROFILES), default=DEFAULT_PROFILE, help="expected control-table defaults")
     check.add_argument("--only", action="append", metavar="CHECK", help="run only this check (repeatable)")
+    check.add_argument("--protocol", choices=("1.0", "2.0"), default="1.0",
+                       help="1.0 (AX/MX) or 2.0 (X series; the table comes from the model number each servo pings)")
 
     cli_models.add_command(sub)
 
@@ -111,8 +113,9 @@ def _conformance(args: argparse.Namespace) -> int:
         destructive=args.destructive,
         profile=args.profile,
         only=args.only,
+        protocol=args.protocol,
     )
-    print(f"{args.port}, IDs {','.join(map(str, args.ids))}")
+    print(f"{args.port}, IDs {','.join(map(str, args.ids))}, Protocol {args.protocol}")
     print(report.table())
     sys.stdout.flush()
     return 0 if report.passed else 1

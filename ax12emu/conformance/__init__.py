@@ -1,4 +1,4 @@
-"""The Protocol 1.0 conformance suite, as a library: ``run(port, ids)`` -> a report.
+"""The conformance suites, as a library: ``run(port, ids)`` -> a report (``protocol="2.0"``: the X series').
 
 Why it exists: one suite judges the emulator and real servos alike, so a
 user with hardware finds where they differ in one command
@@ -6,7 +6,9 @@ user with hardware finds where they differ in one command
 same checks over a pty, TCP and in process.  The suite reads every table
 before the first check and after the last, and reports any register that
 changed as the last check ("table unchanged"): the non-destructive set must
-leave the device as it found it.
+leave the device as it found it.  The Protocol 2.0 suite (:mod:`.checks2`)
+first pings every ID and takes its control table from the model file its
+model number names.
 """
 
 from __future__ import annotations
@@ -18,11 +20,15 @@ from dataclasses import dataclass
 from ax12emu.protocol.control_table import DEFAULT_PROFILE
 
 from .checks import CHECKS, Check, Context, Failed, Note, Skipped, table_differences
-from .link import Link, open_port
+from .checks2 import CHECKS2, Context2, table_differences2
+from .link import Link, Link2, open_port
 
-__all__ = ["run", "run_on_link", "Report", "Result", "PASS", "FAIL", "SKIP", "NOTE", "CHECKS", "Check"]
+__all__ = ["run", "run_on_link", "Report", "Result", "PASS", "FAIL", "SKIP", "NOTE", "CHECKS", "CHECKS2", "Check",
+           "PROTOCOLS"]
 
 PASS, FAIL, SKIP, NOTE = "pass", "FAIL", "skip", "note"
+#: The protocols a suite exists for.
+PROTOCOLS = ("1.0", "2.0")
 
 
 @dataclass(frozen=True)
@@ -63,7 +69,7 @@ class Report:
         return "\n".join(lines)
 
 
-def _run_one(check: Check, ctx: Context) -> Result:
+def _run_one(check: Check, ctx: Context | Context2) -> Result:
     start = time.perf_counter()
     try:
         figure = check.run(ctx)
@@ -86,22 +92,28 @@ def run_on_link(
     only: Sequence[str] | None = None,
     port_name: str = "",
 ) -> Report:
-    """Run the checks over an open :class:`Link`."""
-    ctx = Context(link, list(ids), profile=profile, destructive=destructive)
+    """Run the checks over an open :class:`Link` (a :class:`Link2` runs the Protocol 2.0 suite)."""
+    ctx: Context | Context2
+    if isinstance(link, Link2):
+        ctx, checks, unchanged = Context2(link, list(ids), destructive=destructive), CHECKS2, _unchanged2
+    else:
+        ctx, checks, unchanged = Context(link, list(ids), profile=profile, destructive=destructive), CHECKS, _unchanged
     results: list[Result] = []
     try:
+        if isinstance(ctx, Context2):
+            ctx.identify()
         for servo_id in ctx.ids:
             ctx.before[servo_id] = ctx.table(servo_id)
-    except Failed as exc:
+    except (Failed, OSError) as exc:
         return Report(port_name, tuple(ids), destructive, (Result("read tables", FAIL, str(exc), 0.0),))
-    for check in CHECKS:
+    for check in checks:
         if only is not None and check.name not in only:
             continue
         if check.destructive and not destructive:
             results.append(Result(check.name, SKIP, "destructive: needs --destructive", 0.0))
             continue
         results.append(_run_one(check, ctx))
-    results.append(_run_one(Check("table unchanged", _unchanged), ctx))
+    results.append(_run_one(Check("table unchanged", unchanged), ctx))
     return Report(port_name, tuple(ids), destructive, tuple(results))
 
 
@@ -114,6 +126,16 @@ def _unchanged(ctx: Context) -> str:
     return f"{len(ctx.before)} table(s) read before and after: identical"
 
 
+def _unchanged2(ctx: Context2) -> str:
+    differ = []
+    for servo_id, before in ctx.before.items():
+        layout = ctx.layout(servo_id)
+        differ += [f"ID {servo_id}: {d}" for d in table_differences2(before, ctx.table(servo_id), layout)]
+    if differ:
+        raise Failed("; ".join(differ))
+    return f"{len(ctx.before)} table(s) read before and after: identical (registers the firmware sets excepted)"
+
+
 def run(
     port: str,
     ids: Sequence[int] = (1,),
@@ -123,11 +145,14 @@ def run(
     destructive: bool = False,
     profile: str = DEFAULT_PROFILE,
     only: Sequence[str] | None = None,
+    protocol: str = "1.0",
 ) -> Report:
-    """Open ``port`` (a device path or a pyserial URL), run the suite, close the port."""
+    """Open ``port`` (a device path or a pyserial URL), run the ``protocol`` suite, close the port."""
     if not ids:
         raise ValueError("conformance needs at least one ID")
-    link = Link(open_port(port, baud), timeout_s=timeout_s)
+    if protocol not in PROTOCOLS:
+        raise ValueError(f"protocol must be one of {', '.join(PROTOCOLS)}, got {protocol!r}")
+    link = (Link2 if protocol == "2.0" else Link)(open_port(port, baud), timeout_s=timeout_s)
     try:
         return run_on_link(link, ids, destructive=destructive, profile=profile, only=only, port_name=port)
     finally:

@@ -1,8 +1,10 @@
-"""The host side of the conformance suite: send a packet, time its status packet.
+"""The host side of the conformance suites: send a packet, time its status packet.
 
-Why it exists: the suite must run against any Protocol 1.0 port (a pty
-path, ``socket://``, ``ax12emu://``, a real USB2Dynamixel) with nothing but
-pyserial, and measure round trips itself.  Reads block on the port with a
+Why it exists: the suites must run against any port (a pty path,
+``socket://``, ``ax12emu://``, a real USB2Dynamixel or U2D2) with nothing but
+pyserial, and measure round trips themselves.  :class:`Link` speaks Protocol
+1.0, :class:`Link2` Protocol 2.0; they differ only in the framer that cuts
+the received bytes into packets.  Reads block on the port with a
 short timeout rather than spinning, so a bus served by a thread of the same
 process is never starved of the GIL.  Every well-formed packet sent is kept
 in :attr:`Link.sent`, so a trace can be checked against it.
@@ -17,9 +19,11 @@ from typing import NamedTuple
 import serial
 
 from ax12emu.protocol.framing import Framer
+from ax12emu.protocol.framing2 import Framer2
 from ax12emu.protocol.packets import StatusPacket
+from ax12emu.protocol.packets2 import InstructionPacket2, StatusPacket2
 
-__all__ = ["Link", "Response", "open_port"]
+__all__ = ["Link", "Link2", "Response", "Response2", "open_port"]
 
 #: How long one blocking read may wait before the deadline is checked again.
 _POLL_S = 0.002
@@ -29,6 +33,13 @@ class Response(NamedTuple):
     """A status packet (None: silence until the timeout) and the round trip it took."""
 
     status: StatusPacket | None
+    rtt_s: float
+
+
+class Response2(NamedTuple):
+    """A Protocol 2.0 status packet (None: silence until the timeout) and the round trip it took."""
+
+    status: StatusPacket2 | None
     rtt_s: float
 
 
@@ -55,8 +66,20 @@ class Link:
         #: Every packet sent with :meth:`transact` or :meth:`send`, in order.
         self.sent: list[bytes] = []
         # Bytes after a status packet stay here for the next receive (two replies in one read).
-        self._framer = Framer()
+        self._framer = self._new_framer()
         self._ready: list = []
+
+    def _new_framer(self) -> Framer | Framer2:
+        return Framer()
+
+    def _is_echo(self, packet, echo: bytes) -> bool:
+        # Protocol 1.0 status and instruction packets share one frame: only the echo itself is skipped.
+        return bool(echo) and packet.encode() == echo
+
+    def _status(self, packet, rtt_s: float) -> Response | Response2:
+        if packet is None:
+            return Response(None, rtt_s)
+        return Response(StatusPacket(packet.id, packet.instruction, bytes(packet.params), packet.checksum_ok), rtt_s)
 
     @property
     def baud(self) -> int:
@@ -93,20 +116,16 @@ class Link:
         """Wait for the next status packet."""
         start = time.perf_counter() if start is None else start
         deadline = start + (self.timeout_s if timeout_s is None else timeout_s)
-        skip_echo = bool(echo)
         while True:
             while self._ready:
                 packet = self._ready.pop(0)
-                if skip_echo and packet.encode() == echo:
-                    skip_echo = False
+                if self._is_echo(packet, echo):
+                    echo = b""
                     continue
-                return Response(
-                    StatusPacket(packet.id, packet.instruction, bytes(packet.params), packet.checksum_ok),
-                    time.perf_counter() - start,
-                )
+                return self._status(packet, time.perf_counter() - start)
             now = time.perf_counter()
             if now >= deadline:
-                return Response(None, now - start)
+                return self._status(None, now - start)
             data = self.port.read(max(1, self.port.in_waiting))
             if data:
                 self._ready.extend(self._framer.feed(data))
@@ -122,3 +141,21 @@ class Link:
     def close(self) -> None:
         """Close the port."""
         self.port.close()
+
+
+class Link2(Link):
+    """The same host speaking Protocol 2.0: :meth:`transact` and :meth:`receive` give :class:`Response2`.
+
+    A 2.0 framer yields instruction packets too (a half-duplex adapter echoes
+    what the host sent, and a servo never sends one), so every instruction
+    packet received is skipped, not only the echo of the last one sent.
+    """
+
+    def _new_framer(self) -> Framer2:
+        return Framer2()
+
+    def _is_echo(self, packet, echo: bytes) -> bool:
+        return isinstance(packet, InstructionPacket2)
+
+    def _status(self, packet, rtt_s: float) -> Response2:
+        return Response2(packet, rtt_s)

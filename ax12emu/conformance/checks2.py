@@ -1,0 +1,745 @@
+"""The Protocol 2.0 conformance checks (X series), one small function each, in a table.
+
+Why it exists: as :mod:`.checks` does for Protocol 1.0, one suite judges the
+emulator and a real X-series servo alike.  Every check states, in its
+docstring, what the ROBOTIS e-manual says and where; the check measures what
+the device did.  The sources, by the shorthand the docstrings use:
+
+* [P2] "DYNAMIXEL Protocol 2.0", https://emanual.robotis.com/docs/en/dxl/protocol2/
+  (github ROBOTIS-GIT/emanual docs/en/dxl/protocol2.md @ 01179568a085cfc99bdad6e880e43fa871bd318a):
+  packet layout, the error numbers ("Status Packet > Error"), each instruction's parameters and
+  examples, and the NOTE under "Packet ID": a broadcast READ or WRITE gets no status packet.
+* [CT] the X-series control table pages, e.g. https://emanual.robotis.com/docs/en/dxl/x/xl430-w250/
+  and the texts they include (ROBOTIS-GIT/emanual ``_includes/en/dxl/x/``): "Area (EEPROM, RAM)"
+  ("Data in the EEPROM Area can only be modified if Torque Enable(64) is set to '0'",
+  control_table.md @ add0d1dabec2202f8ae9848b7eda8e98f9a44b0f), Status Return Level
+  (status_return_level.md @ 048ec0de57bc856b9f127ef854243fb44c86d428), Return Delay Time
+  (return_delay_time.md @ 827c5753c0247ee10a3aacee0497d2c89f1f9e7c), Registered Instruction
+  (registered_instruction.md @ b1b86dc0c7cfe4d798f319538556c5b793d3dc32), Min/Max Position Limit
+  (position_limit.md @ f9dea50c62a09efd77bc81a90fb8646f3a0c4596).
+
+The device's control table comes from the model file whose model number its
+Ping reports (``ax12emu/protocol/models/*.toml``), so the suite knows each
+register's address, size, range and area without being told the model.
+
+"Byte-exact": a status packet is accepted only if its CRC matches the bytes
+received and its ID, error byte and parameters are the expected ones.  The
+framer cuts the frame by its LENGTH field and the CRC covers the header,
+LENGTH and every byte after, so these together fix every byte of the reply;
+the figure shows the bytes.  The Alert bit (bit 7 of the error byte, a latched
+hardware error) is reported, never judged: a warm or loaded servo may set it.
+
+No waits after EEPROM writes: the e-manual gives X-series servos no busy time,
+and lerobot writes Homing Offset, Min and Max Position Limit to real XL430 and
+XL330 servos back to back, each answered (lerobot
+src/lerobot/motors/dynamixel/dynamixel.py, ``write_calibration``).
+
+Every check restores what it wrote (in ``finally``); the suite reads each
+table before the first check and after the last and reports any writable
+register that changed.  Checks that need torque off (EEPROM writes) skip
+when torque is on rather than turn it off under a load.
+"""
+
+from __future__ import annotations
+
+import statistics
+import time
+from dataclasses import dataclass, field
+
+from ax12emu.protocol.describe2 import describe_error2
+from ax12emu.protocol.packets2 import (
+    ALERT_BIT,
+    BROADCAST_ID,
+    ERROR_NUMBER_MASK,
+    MAX_ID2,
+    ErrorNumber,
+    Instruction2,
+    StatusPacket2,
+    encode_instruction2,
+    encode_status2,
+)
+from ax12emu.protocol.registers import Access, Area, Entry, Layout
+from ax12emu.protocol.servo_models import ServoModel, model, model_names
+
+from .checks import Check, Note, Skipped, expect
+from .link import Link2, Response2
+
+__all__ = ["CHECKS2", "Context2", "model_for_number", "table_differences2"]
+
+#: [CT] Operating Mode(11): 3 is Position Control Mode, the only mode where the position limits apply.
+POSITION_MODE = 3
+#: [CT] Operating Modes in which torque on holds a position (position, extended, current-based position):
+#: the EEPROM-lock check turns torque on only in these, with Goal Position at the present position.
+HOLDING_MODES = frozenset({3, 4, 5})
+#: dynamixel-sdk's Protocol 2.0 broadcastPing waits (14 * 253 bytes of air time) + 3 ms * 253 + 16 ms
+#: (protocol2_packet_handler.py, ``broadcastPing``): the longest a full bus takes to answer in turn.
+BROADCAST_PING_SLOT_S = 0.003
+#: An instruction the e-manual's table does not define ([P2] "Instruction"): none is 0x50.
+UNDEFINED_INSTRUCTION = 0x50
+#: The largest READ the suite sends while reading a table (a run of adjacent registers).
+_TABLE_READ_MAX = 128
+
+
+def model_for_number(number: int) -> ServoModel | None:
+    """The shipped Protocol 2.0 model file whose model number is ``number``."""
+    for key in model_names():
+        candidate = model(key)
+        if candidate.model_number == number and "2.0" in candidate.protocols:
+            return candidate
+    return None
+
+
+def _reads_back(entry: Entry) -> bool:
+    """Registers the suite compares before and after: all but what the firmware changes by itself."""
+    return not (entry.area is Area.RAM and entry.access is Access.R)
+
+
+def table_differences2(before: bytes, after: bytes, layout: Layout) -> list[str]:
+    """Host-writable and identity registers that differ between two table images, as "name a->b"."""
+    out = []
+    for entry in layout.entries:
+        if not _reads_back(entry):
+            continue
+        a, b = entry.value_in(before), entry.value_in(after)
+        if a != b:
+            out.append(f"{entry.name} {a}->{b}")
+    return out
+
+
+def _runs(layout: Layout) -> list[tuple[int, int]]:
+    """(address, length) of READs covering every register, never crossing an undefined address."""
+    runs: list[tuple[int, int]] = []
+    for entry in layout.entries:
+        if runs and runs[-1][0] + runs[-1][1] == entry.address and runs[-1][1] + entry.size <= _TABLE_READ_MAX:
+            runs[-1] = (runs[-1][0], runs[-1][1] + entry.size)
+        else:
+            runs.append((entry.address, entry.size))
+    return runs
+
+
+def _hex(data: bytes) -> str:
+    return data.hex(" ")
+
+
+def _ms(seconds: float) -> str:
+    return f"{seconds * 1e3:.2f} ms"
+
+
+@dataclass
+class Context2:
+    """What the checks share: the link, the IDs, each ID's model (from its Ping) and first table image."""
+
+    link: Link2
+    ids: list[int]
+    destructive: bool = False
+    #: Model file of each ID, found from the model number its Ping reported.
+    models: dict[int, ServoModel] = field(default_factory=dict)
+    #: Table image of each ID read before the first check.
+    before: dict[int, bytes] = field(default_factory=dict)
+
+    @property
+    def target(self) -> int:
+        """The servo most checks work on."""
+        return self.ids[0]
+
+    def free_id(self) -> int:
+        """An ID no servo under test has (counting down from 252)."""
+        return next(i for i in range(MAX_ID2, -1, -1) if i not in self.ids)
+
+    def layout(self, servo_id: int) -> Layout:
+        """The control table of ``servo_id``'s model."""
+        return self.models[servo_id].layout()
+
+    def entry(self, servo_id: int, name: str) -> Entry:
+        """A register of ``servo_id``'s table; skips the check where the model has none."""
+        entry = self.layout(servo_id).by_name.get(name)
+        if entry is None:
+            raise Skipped(f"{self.models[servo_id].name} has no {name}")
+        return entry
+
+    # -- setup -----------------------------------------------------------------------------
+    def identify(self) -> None:
+        """Ping every ID and load the model file its model number names; :class:`Failed` if none fits."""
+        for servo_id in self.ids:
+            status = self.status(servo_id, Instruction2.PING)
+            expect(len(status.params) == 3, f"Ping id={servo_id} carried {len(status.params)} parameter bytes, not 3")
+            number = int.from_bytes(status.params[:2], "little")
+            found = model_for_number(number)
+            expect(found is not None, f"ID {servo_id}: model number {number} has no Protocol 2.0 model file")
+            assert found is not None
+            self.models[servo_id] = found
+
+    def table(self, servo_id: int) -> bytes:
+        """The whole control table, read register run by register run (undefined addresses left 0)."""
+        layout = self.layout(servo_id)
+        image = bytearray(layout.table_size)
+        for address, length in _runs(layout):
+            image[address : address + length] = self.read(servo_id, address, length)
+        return bytes(image)
+
+    # -- transactions ------------------------------------------------------------------------
+    def transact(self, packet: bytes, *, timeout_s: float | None = None) -> Response2:
+        """``link.transact``."""
+        return self.link.transact(packet, timeout_s=timeout_s)
+
+    def silent(self, packet: bytes) -> bool:
+        """Send ``packet`` and report whether nothing came back within the timeout."""
+        return self.transact(packet).status is None
+
+    def status(self, servo_id: int, instruction: int, params: bytes = b"", *, timeout_s: float | None = None) -> StatusPacket2:
+        """A transaction that must be answered by ``servo_id`` with a matching CRC."""
+        response = self.transact(encode_instruction2(servo_id, instruction, params), timeout_s=timeout_s)
+        name = Instruction2(instruction).name if instruction in Instruction2._value2member_map_ else f"{instruction:#04x}"
+        expect(response.status is not None, f"no reply to {name} id={servo_id}")
+        status = response.status
+        assert status is not None
+        expect(status.crc_ok, f"reply to {name} id={servo_id} has a bad CRC")
+        expect(status.id == servo_id, f"reply to {name} id={servo_id} came from id={status.id}")
+        return status
+
+    def read(self, servo_id: int, address: int, length: int) -> bytes:
+        """READ that must succeed: no error number, exactly ``length`` bytes."""
+        status = self.status(servo_id, Instruction2.READ, _u16(address) + _u16(length))
+        expect(not status.error & ERROR_NUMBER_MASK, f"READ {address}+{length} id={servo_id}: {describe_error2(status.error)}")
+        expect(len(status.params) == length, f"READ {address}+{length} id={servo_id} returned {len(status.params)} bytes")
+        return bytes(status.params)
+
+    def get(self, servo_id: int, name: str) -> int:
+        """A register by name (signed where the table says so)."""
+        entry = self.entry(servo_id, name)
+        return entry.value_in(bytes(entry.address) + self.read(servo_id, entry.address, entry.size))
+
+    def write(self, servo_id: int, address: int, data: bytes) -> StatusPacket2:
+        """WRITE ``data`` at ``address``; the status packet, whatever its error."""
+        return self.status(servo_id, Instruction2.WRITE, _u16(address) + data)
+
+    def put(self, servo_id: int, name: str, value: int) -> int:
+        """WRITE a register by name; returns the reply's error number (Alert masked)."""
+        entry = self.entry(servo_id, name)
+        return self.write(servo_id, entry.address, entry.to_bytes(value)).error & ERROR_NUMBER_MASK
+
+    def must_put(self, servo_id: int, name: str, value: int) -> None:
+        """WRITE that must succeed."""
+        error = self.put(servo_id, name, value)
+        expect(not error, f"WRITE {name}={value} id={servo_id}: {describe_error2(error)}")
+
+    def torque_on(self, servo_id: int) -> bool:
+        """Torque Enable(64) is 1."""
+        return bool(self.get(servo_id, "torque_enable"))
+
+    def ping_rtts(self, servo_id: int, count: int) -> list[float]:
+        """Round trips of ``count`` Pings."""
+        packet = encode_instruction2(servo_id, Instruction2.PING)
+        rtts = []
+        for _ in range(count):
+            response = self.link.transact(packet)
+            expect(response.status is not None, f"Ping id={servo_id} unanswered")
+            rtts.append(response.rtt_s)
+        return rtts
+
+
+def _u16(value: int) -> bytes:
+    return value.to_bytes(2, "little")
+
+
+def exact(status: StatusPacket2, servo_id: int, number: int, params: bytes = b"") -> str:
+    """Check a status packet byte for byte against ``number`` and ``params``; its bytes as the figure."""
+    expected = encode_status2(servo_id, number | (status.error & ALERT_BIT), params)
+    got = status.encode()
+    expect(
+        status.crc_ok and got == expected,
+        f"expected {_hex(expected)} ({describe_error2(number)}), got {_hex(got)} ({describe_error2(status.error)})",
+    )
+    return _hex(got)
+
+
+def error_reply(ctx: Context2, servo_id: int, instruction: int, params: bytes, number: ErrorNumber, what: str) -> str:
+    """Send one instruction that must be answered with error ``number`` and no parameters."""
+    status = ctx.status(servo_id, instruction, params)
+    expect(status.error & ERROR_NUMBER_MASK == number,
+           f"{what}: {describe_error2(status.error)}, expected {number.name}")
+    exact(status, servo_id, number)
+    return f"{what}: {number.name}"
+
+
+# -- identity and framing -------------------------------------------------------------------
+def check_ping(ctx: Context2) -> str:
+    """[P2] "Ping": every ID answers with Model Number (LSB, MSB) and Firmware Version, error 0,
+    the same Model Number and Firmware Version its control table holds (addresses 0 and 6)."""
+    figures = []
+    for servo_id in ctx.ids:
+        status = ctx.status(servo_id, Instruction2.PING)
+        number = int.from_bytes(status.params[:2], "little")
+        exact(status, servo_id, ErrorNumber.NONE, status.params)
+        table = ctx.read(servo_id, 0, 7)
+        expect(int.from_bytes(table[:2], "little") == number, f"ID {servo_id}: Model Number {table[:2].hex()} in the table, {number} in Ping")
+        expect(table[6] == status.params[2], f"ID {servo_id}: Firmware Version {table[6]} in the table, {status.params[2]} in Ping")
+        figures.append(f"{servo_id}: {ctx.models[servo_id].name} ({number}) fw {status.params[2]}")
+    rtts = ctx.ping_rtts(ctx.target, 5)
+    return "; ".join(figures) + f"; median {_ms(statistics.median(rtts))}"
+
+
+def check_absent_id(ctx: Context2) -> str:
+    """[P2] "Packet ID": only the addressed device processes a packet; an ID nobody has gets silence."""
+    free = ctx.free_id()
+    expect(ctx.silent(encode_instruction2(free, Instruction2.PING)), f"ID {free} answered")
+    return f"ID {free} silent for {_ms(ctx.link.timeout_s)}"
+
+
+def check_split_packet(ctx: Context2) -> str:
+    """[P2] "Processing Order of Reception": a packet is found by its header and LENGTH, however the
+    bytes arrive; a Ping sent one byte at a time, 0.5 ms apart, is answered."""
+    packet = encode_instruction2(ctx.target, Instruction2.PING)
+    start = time.perf_counter()
+    ctx.link.flush_input()
+    for byte in packet[:-1]:
+        ctx.link.write_raw(bytes((byte,)))
+        time.sleep(0.0005)
+    ctx.link.sent.append(packet)
+    ctx.link.write_raw(packet[-1:])
+    response = ctx.link.receive(start=time.perf_counter())
+    expect(response.status is not None and response.status.id == ctx.target, "no reply to a Ping sent byte by byte")
+    return f"{len(packet)} bytes over {_ms(time.perf_counter() - start)}"
+
+
+def check_resync(ctx: Context2) -> str:
+    """[P2] "Processing Order of Reception": the receiver searches for the header FF FF FD (ignoring
+    stuffed FF FF FD FD); garbage, a truncated packet and then a pause do not stop the next Ping."""
+    ctx.link.write_raw(bytes(range(0, 0xFE, 7)) + b"\xff\xff\xfd\xfd\xff\xff\xfd\x00" + bytes((ctx.target,)) + b"\x07\x00\x02")
+    time.sleep(0.1)
+    ctx.status(ctx.target, Instruction2.PING)
+    return "Ping answered after garbage + a truncated READ (100 ms pause)"
+
+
+def check_byte_stuffing(ctx: Context2) -> str:
+    """[P2] "Processing Order of Transmission/Reception": parameters holding FF FF FD are sent stuffed
+    (FF FF FD FD) and unstuffed by the receiver.  A WRITE of Indirect Address 1..2 whose bytes are
+    FF FF FD .. is out of range, so the reply is Data Range, proving the packet was unstuffed and
+    understood rather than dropped; nothing changes."""
+    entry = ctx.entry(ctx.target, "indirect_address_1")
+    before = ctx.read(ctx.target, entry.address, 4)
+    packet = encode_instruction2(ctx.target, Instruction2.WRITE, _u16(entry.address) + b"\xff\xff\xfd\x00")
+    expect(b"\xff\xff\xfd\xfd" in packet, "the encoder did not stuff")
+    response = ctx.transact(packet)
+    expect(response.status is not None, "no reply to a stuffed WRITE")
+    status = response.status
+    assert status is not None
+    expect(status.error & ERROR_NUMBER_MASK == ErrorNumber.DATA_RANGE,
+           f"stuffed WRITE of 0xFFFF to Indirect Address 1: {describe_error2(status.error)}, expected DATA_RANGE")
+    expect(ctx.read(ctx.target, entry.address, 4) == before, "the rejected write changed Indirect Address 1..2")
+    return "stuffed WRITE answered DATA_RANGE, nothing changed"
+
+
+def check_crc(ctx: Context2) -> "str | Note":
+    """[P2] "Processing Order of Reception": the CRC is checked before anything else, so a packet whose
+    CRC does not match is not executed; the error table defines CRC Error (3) for it.  Silence is
+    a Note: the e-manual does not say a corrupt packet is answered."""
+    led = ctx.get(ctx.target, "led")
+    entry = ctx.entry(ctx.target, "led")
+    bad = bytearray(encode_instruction2(ctx.target, Instruction2.WRITE, _u16(entry.address) + bytes((1 - led,))))
+    bad[-1] ^= 0xFF
+    response = ctx.link.transact(bytes(bad))
+    try:
+        expect(ctx.get(ctx.target, "led") == led, "a WRITE with a bad CRC was executed")
+    finally:
+        ctx.put(ctx.target, "led", led)
+    if response.status is None:
+        return Note("not executed; no reply")
+    status = response.status
+    expect(status.error & ERROR_NUMBER_MASK == ErrorNumber.CRC, f"reply to a bad CRC: {describe_error2(status.error)}")
+    return "not executed; " + exact(status, ctx.target, ErrorNumber.CRC) + " (CRC)"
+
+
+# -- read and write -------------------------------------------------------------------------
+def check_read_sizes(ctx: Context2) -> str:
+    """[P2] "Read": the status carries exactly the bytes asked for, LENGTH = 4 + X.  1 byte: ID(7) is
+    the servo's ID; 2 bytes: Model Number(0) is the Ping's; 4 bytes: Max Position Limit(48)."""
+    figures = []
+    for servo_id in ctx.ids:
+        for name in ("id", "model_number", "max_position_limit"):
+            entry = ctx.entry(servo_id, name)
+            status = ctx.status(servo_id, Instruction2.READ, _u16(entry.address) + _u16(entry.size))
+            expect(len(status.params) == entry.size, f"READ {name} id={servo_id}: {len(status.params)} bytes, not {entry.size}")
+            exact(status, servo_id, ErrorNumber.NONE, status.params)
+        expect(ctx.get(servo_id, "id") == servo_id, f"ID {servo_id}: ID register reads {ctx.get(servo_id, 'id')}")
+        expect(ctx.get(servo_id, "model_number") == ctx.models[servo_id].model_number, f"ID {servo_id}: Model Number differs")
+        figures.append(str(servo_id))
+    return f"1, 2 and 4 bytes on IDs {','.join(figures)}"
+
+
+def check_write_sizes(ctx: Context2) -> str:
+    """[P2] "Write": the status is FF FF FD 00 ID 04 00 55 00 CRC (the example's, for ID 1: ... A1 0C)
+    and the value reads back.  1 byte: LED(65); 2 bytes: Indirect Address 1(168); 4 bytes: Profile
+    Acceleration(108).  None moves the servo; all restored."""
+    servo = ctx.target
+    saved = {name: ctx.get(servo, name) for name in ("led", "indirect_address_1", "profile_acceleration")}
+    new = {
+        "led": 1 - saved["led"],
+        "indirect_address_1": saved["indirect_address_1"] + 1 if saved["indirect_address_1"] < 600 else 64,
+        "profile_acceleration": saved["profile_acceleration"] + 1 if saved["profile_acceleration"] < 30000 else 0,
+    }
+    figure = ""
+    try:
+        for name, value in new.items():
+            entry = ctx.entry(servo, name)
+            figure = exact(ctx.write(servo, entry.address, entry.to_bytes(value)), servo, ErrorNumber.NONE)
+            expect(ctx.get(servo, name) == value, f"{name} reads {ctx.get(servo, name)} after writing {value}")
+    finally:
+        for name, value in saved.items():
+            ctx.put(servo, name, value)
+    return f"led, indirect_address_1, profile_acceleration written and read back; status {figure}"
+
+
+def check_data_length(ctx: Context2) -> str:
+    """[P2] error 0x05 Data Length: "Attempt to write Data that is shorter than the data length of the
+    corresponding Address (ex: ... only use 2 bytes of a item that has been defined as 4 bytes)".
+    2 bytes to Profile Acceleration(108, 4 bytes); nothing changes."""
+    entry = ctx.entry(ctx.target, "profile_acceleration")
+    before = ctx.get(ctx.target, "profile_acceleration")
+    figure = error_reply(ctx, ctx.target, Instruction2.WRITE, _u16(entry.address) + _u16((before + 1) & 0xFFFF),
+                         ErrorNumber.DATA_LENGTH, "2 bytes to a 4-byte register")
+    expect(ctx.get(ctx.target, "profile_acceleration") == before, "the rejected write changed Profile Acceleration")
+    return figure
+
+
+def check_data_range(ctx: Context2) -> str:
+    """[P2] error 0x04 Data Range: "Data to be written ... is outside the range of the minimum/maximum
+    value".  [CT] ranges: LED(65) 0 ~ 1, Indirect Address 1(168) 64 ~ 661 (the table's last address).
+    LED = 2 and Indirect Address 1 = 63; nothing changes."""
+    servo = ctx.target
+    figures = []
+    for name, bad in (("led", 2), ("indirect_address_1", ctx.entry(servo, "indirect_address_1").minimum - 1)):
+        entry = ctx.entry(servo, name)
+        before = ctx.get(servo, name)
+        figures.append(error_reply(ctx, servo, Instruction2.WRITE, _u16(entry.address) + entry.to_bytes(bad),
+                                   ErrorNumber.DATA_RANGE, f"{name}={bad}"))
+        expect(ctx.get(servo, name) == before, f"the rejected write changed {name}")
+    return "; ".join(figures)
+
+
+def check_access(ctx: Context2) -> str:
+    """[P2] error 0x07 Access: "Attempt to write a value in an Address that is Read Only or has not been
+    defined; attempt to read a value in an Address that ... has not been defined".  A WRITE to Model
+    Number(0, R), a WRITE to the first undefined address, a READ past the table's last address."""
+    servo = ctx.target
+    layout = ctx.layout(servo)
+    figures = [error_reply(ctx, servo, Instruction2.WRITE, _u16(0) + _u16(ctx.models[servo].model_number + 1),
+                           ErrorNumber.ACCESS, "write Model Number")]
+    gap = next(a for a in range(layout.table_size) if layout.owner[a] < 0)
+    figures.append(error_reply(ctx, servo, Instruction2.WRITE, _u16(gap) + b"\x00", ErrorNumber.ACCESS, f"write undefined @{gap}"))
+    figures.append(error_reply(ctx, servo, Instruction2.READ, _u16(layout.table_size) + _u16(1), ErrorNumber.ACCESS,
+                               f"read @{layout.table_size} (past the table)"))
+    expect(ctx.get(servo, "model_number") == ctx.models[servo].model_number, "the rejected write changed Model Number")
+    return "; ".join(figures)
+
+
+def check_eeprom_locked(ctx: Context2) -> str:
+    """[P2] error 0x07 Access: "Attempt to write a value in the ROM domain while in a state of Torque
+    Enable (ROM Lock)"; [CT] Torque Enable(64): "Setting [it] to '1' will enable output Torque and all
+    Data in the EEPROM area will be locked".  With torque on, a WRITE of Return Delay Time(9) with its
+    own value is refused with Access.  If torque is off, it is turned on only in a holding mode
+    ([CT] Operating Mode 3, 4, 5), after Goal Position is set to Present Position (no movement), and
+    both are restored."""
+    servo = ctx.target
+    was_on = ctx.torque_on(servo)
+    goal = None
+    try:
+        if not was_on:
+            mode = ctx.get(servo, "operating_mode")
+            if mode not in HOLDING_MODES:
+                raise Skipped(f"torque off in Operating Mode {mode}: turning it on could move the servo")
+            goal = ctx.get(servo, "goal_position")
+            present = ctx.get(servo, "present_position")
+            if ctx.put(servo, "goal_position", present):
+                raise Skipped(f"Present Position {present} is not a valid Goal Position here")
+            ctx.must_put(servo, "torque_enable", 1)
+        delay = ctx.get(servo, "return_delay_time")
+        entry = ctx.entry(servo, "return_delay_time")
+        figure = error_reply(ctx, servo, Instruction2.WRITE, _u16(entry.address) + bytes((delay,)), ErrorNumber.ACCESS,
+                             "EEPROM write with torque on")
+    finally:
+        if not was_on and goal is not None:
+            ctx.put(servo, "torque_enable", 0)
+            ctx.put(servo, "goal_position", goal)
+    return figure + ("" if was_on else " (torque turned on holding the present position, then off)")
+
+
+def check_data_limit(ctx: Context2) -> "str | Note":
+    """[P2] error 0x06 Data Limit: "Data to be written ... is outside of the Limit value"; [CT] Goal
+    Position(116) ranges "Min Position Limit(52) ~ Max Position Limit(48)" in Position Control Mode
+    (position_limit.md).  Goal Position = Max Position Limit + 1 (the limit lowered to 4094 for the
+    check if it is at 4095, an EEPROM write: torque must be off) is refused and not taken.  Data
+    Range instead is a Note: the page prints the limits in its Range column."""
+    servo = ctx.target
+    if ctx.get(servo, "operating_mode") != POSITION_MODE:
+        raise Skipped("not in Position Control Mode, where the limits apply")
+    limit = ctx.get(servo, "max_position_limit")
+    lowered = limit >= ctx.entry(servo, "max_position_limit").maximum
+    if lowered and ctx.torque_on(servo):
+        raise Skipped("torque is on and Max Position Limit is 4095: lowering it is an EEPROM write")
+    goal = ctx.get(servo, "goal_position")
+    try:
+        if lowered:
+            ctx.must_put(servo, "max_position_limit", limit - 1)
+        beyond = (limit - 1 if lowered else limit) + 1
+        target = ctx.entry(servo, "goal_position")
+        status = ctx.write(servo, target.address, target.to_bytes(beyond))
+        number = status.error & ERROR_NUMBER_MASK
+        expect(ctx.get(servo, "goal_position") == goal, f"Goal Position {beyond} beyond the limit was taken ({describe_error2(number)})")
+    finally:
+        if lowered:
+            ctx.put(servo, "max_position_limit", limit)
+    if number == ErrorNumber.DATA_RANGE:
+        return Note(f"goal {beyond} > Max Position Limit {beyond - 1}: DATA_RANGE, not taken")
+    expect(number == ErrorNumber.DATA_LIMIT, f"goal {beyond} > Max Position Limit {beyond - 1}: {describe_error2(number)}")
+    exact(status, servo, ErrorNumber.DATA_LIMIT)
+    return f"goal {beyond} > Max Position Limit {beyond - 1}: DATA_LIMIT, not taken"
+
+
+def check_instruction_error(ctx: Context2) -> str:
+    """[P2] error 0x02 Instruction: "Undefined Instruction has been used; Action has been used without
+    Reg Write".  Instruction 0x50 (not in the table), then ACTION with Registered Instruction(69) 0."""
+    servo = ctx.target
+    figures = [error_reply(ctx, servo, UNDEFINED_INSTRUCTION, b"", ErrorNumber.INSTRUCTION, f"instruction {UNDEFINED_INSTRUCTION:#04x}")]
+    if ctx.get(servo, "registered_instruction"):
+        raise Skipped("a Reg Write is pending on the device")
+    figures.append(error_reply(ctx, servo, Instruction2.ACTION, b"", ErrorNumber.INSTRUCTION, "bare ACTION"))
+    return "; ".join(figures)
+
+
+def check_reg_write_action(ctx: Context2) -> str:
+    """[P2] "Reg Write": registers the write and sets Registered Instruction(69) to 1; "Action": executes
+    it and sets Registered Instruction to 0 ([CT] registered_instruction.md).  Both answered with the
+    example's empty status."""
+    servo = ctx.target
+    led = ctx.get(servo, "led")
+    entry = ctx.entry(servo, "led")
+    try:
+        exact(ctx.status(servo, Instruction2.REG_WRITE, _u16(entry.address) + bytes((1 - led,))), servo, ErrorNumber.NONE)
+        expect(ctx.get(servo, "registered_instruction") == 1, "Registered Instruction is not 1 after REG_WRITE")
+        expect(ctx.get(servo, "led") == led, "REG_WRITE took effect before ACTION")
+        exact(ctx.status(servo, Instruction2.ACTION), servo, ErrorNumber.NONE)
+        expect(ctx.get(servo, "led") == 1 - led, "ACTION did not apply the registered write")
+        expect(ctx.get(servo, "registered_instruction") == 0, "Registered Instruction still 1 after ACTION")
+    finally:
+        ctx.put(servo, "led", led)
+    return "registered 0->1->0, LED applied on ACTION"
+
+
+# -- several servos ---------------------------------------------------------------------------
+def _replies(ctx: Context2, count: int, timeout_s: float | None = None) -> list[StatusPacket2]:
+    out = []
+    for _ in range(count):
+        response = ctx.link.receive(timeout_s)
+        if response.status is None:
+            break
+        out.append(response.status)
+    return out
+
+
+def check_sync_read(ctx: Context2) -> str:
+    """[P2] "Sync Read" (0x82, ID 0xFE): each listed device answers with its own status packet; the
+    example's two answer in the listed order.  IDs listed in reverse; each answers with its ID(7)
+    byte, byte-exact, in that order."""
+    order = list(reversed(ctx.ids))
+    entry = ctx.entry(ctx.target, "id")
+    ctx.link.send(encode_instruction2(BROADCAST_ID, Instruction2.SYNC_READ, _u16(entry.address) + _u16(1) + bytes(order)))
+    replies = _replies(ctx, len(order))
+    expect([r.id for r in replies] == order, f"answers from {[r.id for r in replies]}, listed {order}")
+    for reply in replies:
+        exact(reply, reply.id, ErrorNumber.NONE, bytes((reply.id,)))
+    return f"listed {order}, answered in that order"
+
+
+def check_sync_write(ctx: Context2) -> str:
+    """[P2] "Sync Write" (0x83, ID 0xFE): writes each listed device; nobody answers (a broadcast WRITE)."""
+    entry = ctx.entry(ctx.target, "led")
+    leds = {i: ctx.get(i, "led") for i in ctx.ids}
+    body = _u16(entry.address) + _u16(1) + b"".join(bytes((i, 1 - leds[i])) for i in ctx.ids)
+    try:
+        expect(ctx.silent(encode_instruction2(BROADCAST_ID, Instruction2.SYNC_WRITE, body)), "SYNC_WRITE was answered")
+        for servo_id in ctx.ids:
+            expect(ctx.get(servo_id, "led") == 1 - leds[servo_id], f"ID {servo_id} not written")
+    finally:
+        for servo_id, led in leds.items():
+            ctx.put(servo_id, "led", led)
+    return f"{len(ctx.ids)} servo(s) written, silent"
+
+
+_BULK_REGISTERS = ("id", "model_number", "max_position_limit")
+
+
+def check_bulk_read(ctx: Context2) -> str:
+    """[P2] "Bulk Read" (0x92, ID 0xFE): different address and length per device, each answers with its
+    own status packet in the listed order (the example: ID 1 then ID 2).  ID(7, 1 byte), Model
+    Number(0, 2) and Max Position Limit(48, 4) in turn, IDs listed in reverse."""
+    order = list(reversed(ctx.ids))
+    asked = {i: ctx.entry(i, _BULK_REGISTERS[n % len(_BULK_REGISTERS)]) for n, i in enumerate(order)}
+    expected = {i: ctx.read(i, e.address, e.size) for i, e in asked.items()}
+    body = b"".join(bytes((i,)) + _u16(e.address) + _u16(e.size) for i, e in asked.items())
+    ctx.link.send(encode_instruction2(BROADCAST_ID, Instruction2.BULK_READ, body))
+    replies = _replies(ctx, len(order))
+    expect([r.id for r in replies] == order, f"answers from {[r.id for r in replies]}, listed {order}")
+    for reply in replies:
+        exact(reply, reply.id, ErrorNumber.NONE, expected[reply.id])
+    return ", ".join(f"{i}: {asked[i].name}" for i in order) + ", in order"
+
+
+def check_bulk_write(ctx: Context2) -> str:
+    """[P2] "Bulk Write" (0x93, ID 0xFE): a different address and length per device; nobody answers.
+    LED(65, 1 byte) and Indirect Address 1(168, 2 bytes) in turn; restored."""
+    plan = {}
+    for n, servo_id in enumerate(ctx.ids):
+        name = ("led", "indirect_address_1")[n % 2]
+        old = ctx.get(servo_id, name)
+        plan[servo_id] = (name, old, (1 - old) if name == "led" else (old + 1 if old < 600 else 64))
+    body = b"".join(
+        bytes((i,)) + _u16(ctx.entry(i, name).address) + _u16(ctx.entry(i, name).size) + ctx.entry(i, name).to_bytes(new)
+        for i, (name, _, new) in plan.items()
+    )
+    try:
+        expect(ctx.silent(encode_instruction2(BROADCAST_ID, Instruction2.BULK_WRITE, body)), "BULK_WRITE was answered")
+        for servo_id, (name, _, new) in plan.items():
+            expect(ctx.get(servo_id, name) == new, f"ID {servo_id}: {name} not written")
+    finally:
+        for servo_id, (name, old, _) in plan.items():
+            ctx.put(servo_id, name, old)
+    return ", ".join(f"{i}: {name}" for i, (name, _, _) in plan.items()) + ", silent"
+
+
+def check_broadcast_ping(ctx: Context2) -> str:
+    """[P2] "Ping": "When the Packet ID field is 0xFE (Broadcast ID): All devices send their Status Packet
+    according to their arranged order" (Example 2: ID 1, then ID 2); Ping is answered whatever the
+    Status Return Level.  Every ID under test answers, byte-exact, in ascending ID order."""
+    wait_s = ctx.link.timeout_s + BROADCAST_PING_SLOT_S * (max(ctx.ids) + 1)
+    start = time.perf_counter()
+    ctx.link.send(encode_instruction2(BROADCAST_ID, Instruction2.PING))
+    replies: list[StatusPacket2] = []
+    last_s = 0.0
+    while True:
+        response = ctx.link.receive(wait_s)
+        if response.status is None:
+            break
+        replies.append(response.status)
+        last_s = time.perf_counter() - start
+    seen = [r.id for r in replies]
+    expect(set(ctx.ids) <= set(seen), f"answers from {seen}, expected {sorted(ctx.ids)}")
+    expect(seen == sorted(seen), f"answers in the order {seen}, not ascending")
+    for reply in replies:
+        expect(reply.crc_ok, f"ID {reply.id}: bad CRC")
+        if reply.id in ctx.models:
+            expect(int.from_bytes(reply.params[:2], "little") == ctx.models[reply.id].model_number, f"ID {reply.id}: model number")
+            exact(reply, reply.id, ErrorNumber.NONE, reply.params)
+    return f"answers from {seen}, the last {_ms(last_s)} after the Ping"
+
+
+def check_broadcast_read_write(ctx: Context2) -> str:
+    """[P2] "Packet ID" NOTE: with the Broadcast ID "Status Packet will not be returned for READ and WRITE
+    Instructions"; [P2] "Packet ID": 0xFE "makes all connected devices execute the Instruction
+    Packet".  A broadcast WRITE of LED sets every servo, silently; a broadcast READ is not answered."""
+    entry = ctx.entry(ctx.target, "led")
+    leds = {i: ctx.get(i, "led") for i in ctx.ids}
+    try:
+        expect(ctx.silent(encode_instruction2(BROADCAST_ID, Instruction2.WRITE, _u16(entry.address) + b"\x01")),
+               "broadcast WRITE answered")
+        for servo_id in ctx.ids:
+            expect(ctx.get(servo_id, "led") == 1, f"ID {servo_id} not written by the broadcast WRITE")
+    finally:
+        for servo_id, led in leds.items():
+            ctx.put(servo_id, "led", led)
+    expect(ctx.silent(encode_instruction2(BROADCAST_ID, Instruction2.READ, _u16(entry.address) + _u16(1))),
+           "broadcast READ answered")
+    return "WRITE executed by all, silent; READ silent"
+
+
+def check_status_return_level(ctx: Context2) -> str:
+    """[CT] Status Return Level(68): 0 answers PING only, 1 PING and READ, 2 all instructions.  At 1 a
+    WRITE is executed but silent; at 0 a READ is silent too.  Restored with a WRITE that, at level 0,
+    gets no reply, then read back."""
+    servo = ctx.target
+    level = ctx.get(servo, "status_return_level")
+    srl = ctx.entry(servo, "status_return_level")
+    led = ctx.entry(servo, "led")
+    value = ctx.get(servo, "led")
+    write_led = encode_instruction2(servo, Instruction2.WRITE, _u16(led.address) + bytes((value,)))
+    read_led = encode_instruction2(servo, Instruction2.READ, _u16(led.address) + _u16(1))
+    ping = encode_instruction2(servo, Instruction2.PING)
+    try:
+        ctx.link.transact(encode_instruction2(servo, Instruction2.WRITE, _u16(srl.address) + b"\x01"))
+        expect(ctx.silent(write_led), "level 1 answered a WRITE")
+        expect(not ctx.silent(read_led), "level 1 did not answer a READ")
+        expect(not ctx.silent(ping), "level 1 did not answer PING")
+        ctx.link.transact(encode_instruction2(servo, Instruction2.WRITE, _u16(srl.address) + b"\x00"))
+        expect(ctx.silent(read_led), "level 0 answered a READ")
+        expect(ctx.silent(write_led), "level 0 answered a WRITE")
+        expect(not ctx.silent(ping), "level 0 did not answer PING")
+    finally:
+        ctx.link.send(encode_instruction2(servo, Instruction2.WRITE, _u16(srl.address) + bytes((level,))))
+        time.sleep(0.005)
+    expect(ctx.get(servo, "status_return_level") == level, "Status Return Level not restored")
+    return "0: PING only; 1: PING+READ; 2: all"
+
+
+def check_return_delay(ctx: Context2) -> str:
+    """[CT] Return Delay Time(9): the status packet is returned after the set time, 2 us per unit,
+    0 ~ 254 (default 250 = 500 us).  The fastest Ping round trip at 250 minus the fastest at 0 is at
+    least 0.6 x 500 us (a busy host only adds time).  An EEPROM register: skipped with torque on."""
+    servo = ctx.target
+    if ctx.torque_on(servo):
+        raise Skipped("torque is on: Return Delay Time is in the EEPROM area")
+    original = ctx.get(servo, "return_delay_time")
+    slow = original if original >= 100 else 250
+    count = 30
+    try:
+        ctx.must_put(servo, "return_delay_time", slow)
+        slow_rtt = min(ctx.ping_rtts(servo, count))
+        ctx.must_put(servo, "return_delay_time", 0)
+        fast_rtt = min(ctx.ping_rtts(servo, count))
+    finally:
+        ctx.put(servo, "return_delay_time", original)
+    expected = slow * 2e-6
+    measured = slow_rtt - fast_rtt
+    figure = f"{slow} ({expected * 1e6:.0f} us): {_ms(slow_rtt)}; 0: {_ms(fast_rtt)} (fastest of {count}); difference {measured * 1e6:.0f} us"
+    expect(measured >= 0.6 * expected, figure)
+    return figure
+
+
+def check_defaults(ctx: Context2) -> "str | Note":
+    """[CT] "Initial Value" column: registers at the model file's factory defaults (ID and what the
+    firmware or a user's configuration sets excepted); differences are a Note, not a failure."""
+    servo = ctx.target
+    layout = ctx.layout(servo)
+    ignore = {"id", "firmware_version", "model_information", "goal_position", "goal_velocity", "goal_pwm", "goal_current"}
+    differ = [d for d in table_differences2(layout.defaults, ctx.before[servo], layout) if d.split()[0] not in ignore]
+    if differ:
+        return Note("differs: " + ", ".join(differ))
+    return "all at defaults"
+
+
+CHECKS2: tuple[Check, ...] = (
+    Check("ping", check_ping),
+    Check("absent ID is silent", check_absent_id),
+    Check("defaults", check_defaults),
+    Check("packet split into bytes", check_split_packet),
+    Check("resync after garbage", check_resync),
+    Check("byte stuffing", check_byte_stuffing),
+    Check("bad CRC not executed", check_crc),
+    Check("read 1, 2 and 4 bytes", check_read_sizes),
+    Check("write 1, 2 and 4 bytes", check_write_sizes),
+    Check("data length error", check_data_length),
+    Check("data range error", check_data_range),
+    Check("access error", check_access),
+    Check("EEPROM locked by torque", check_eeprom_locked),
+    Check("data limit error", check_data_limit),
+    Check("instruction error", check_instruction_error),
+    Check("REG_WRITE + ACTION", check_reg_write_action),
+    Check("SYNC_READ", check_sync_read),
+    Check("SYNC_WRITE", check_sync_write),
+    Check("BULK_READ", check_bulk_read),
+    Check("BULK_WRITE", check_bulk_write),
+    Check("broadcast PING", check_broadcast_ping),
+    Check("broadcast READ/WRITE", check_broadcast_read_write),
+    Check("status return levels", check_status_return_level),
+    Check("return delay", check_return_delay),
+)
+

@@ -1,0 +1,51 @@
+"""The Protocol 2.0 suite's own parts: the model a ping names, the READs that cover a table, the report on a 1.0 bus."""
+
+from __future__ import annotations
+
+import pytest
+from emu_testkit import CONFORMANCE_TIMEOUT_S
+
+from ax12emu import conformance
+from ax12emu.conformance.checks2 import _runs, model_for_number, table_differences2
+from ax12emu.protocol.servo_models import model, model_names
+
+
+def test_model_number_names_the_protocol_2_model_file():
+    """XL430-W250 pings 1060 and XL330-M288 1200 (their e-manual tables); the AX-12's 12 is a 1.0 model."""
+    assert model_for_number(1060).key == "xl430-w250"
+    assert model_for_number(1200).key == "xl330-m288"
+    assert model_for_number(12) is None
+
+
+@pytest.mark.parametrize("key", [k for k in model_names() if "2.0" in model(k).protocols])
+def test_table_reads_cover_every_register_and_no_undefined_address(key):
+    """The suite reads a table in runs of adjacent registers: all of them, nothing undefined, at most 128 bytes each."""
+    layout = model(key).layout()
+    covered = set()
+    for address, length in _runs(layout):
+        assert 0 < length <= 128
+        span = range(address, address + length)
+        assert all(layout.owner[a] >= 0 for a in span), f"{key}: READ {address}+{length} crosses an undefined address"
+        covered.update(span)
+    assert covered == {a for e in layout.entries for a in range(e.address, e.end)}
+
+
+def test_table_differences_skip_what_the_firmware_sets():
+    """A changed Present Position is not a difference; a changed LED or Homing Offset (signed) is."""
+    layout = model("xl430-w250").layout()
+    before = bytearray(layout.defaults)
+    after = bytearray(before)
+    by_name = layout.by_name
+    after[by_name["present_position"].address] = 7
+    after[by_name["led"].address] = 1
+    homing = by_name["homing_offset"]
+    after[homing.address : homing.end] = homing.to_bytes(-5)
+    assert table_differences2(bytes(before), bytes(after), layout) == ["homing_offset 0->-5", "led 0->1"]
+
+
+def test_protocol_2_suite_on_a_protocol_1_bus_fails_at_the_first_ping():
+    """An AX-12 bus does not answer a 2.0 Ping: the report says so and runs nothing else."""
+    report = conformance.run("ax12emu://?ids=1", [1], protocol="2.0", timeout_s=CONFORMANCE_TIMEOUT_S)
+    assert not report.passed
+    assert [r.name for r in report.results] == ["read tables"]
+    assert "no reply to PING id=1" in report.results[0].figure
