@@ -106,6 +106,9 @@ class XSensed:
     present_input_voltage: int = 0
     present_temperature: int = 0
     hardware_error_status: int = 0
+    #: Torque Enable (64) as the firmware holds it: cleared by a Shutdown error (only REBOOT lets it
+    #: back on), set by a goal write with Drive Mode bit 3 (torque on by goal update).
+    torque_enable: int = 0
 
     @classmethod
     def field_names(cls) -> tuple[str, ...]:

@@ -1,0 +1,584 @@
+"""The firmware of one ROBOTIS X-series servo: operating modes, profile, PID, protection, over its physics.
+
+Why this shape: the protocol side hands over raw register values (:class:`.interface.XCommands`) and
+reads raw registers back (:class:`.interface.XSensed`); everything the real firmware does between
+them lives here, in the e-manual's own units, so a register written on the bus means what it means
+on a real servo.  The motor, gearbox and load are :mod:`.physics`; this module decides the PWM duty
+at each 1 ms control step and watches the protections.
+
+Sources (ROBOTIS e-manual, X-series control tables, https://emanual.robotis.com/docs/en/dxl/x/xm430-w350/,
+.../xl430-w250/, .../xl330-m288/; texts in github.com/ROBOTIS-GIT/emanual, _includes/dxl and _includes/en/dxl):
+
+* "Position PID Gain(80, 82, 84), Feedforward 1st/2nd Gains(88, 90)": KPP = P/128, KPI = I/65536,
+  KPD = D/16, KFF1 = FF1/4, KFF2 = FF2/4, "the constant in each equation includes sampling time";
+  PID and feed-forward act on Position Trajectory and Velocity Trajectory and give the PWM, limited
+  by Goal PWM(100).  The e-manual gives no internal units: we take the error in pulses, its sum and
+  difference per 1 ms sample, and the feed-forward on the trajectory's pulses per sample (and per
+  sample squared), which make the default gains a stiff, damped servo.
+* "Velocity PI Gain(76, 78)": KVP = P/128, KVI = I/65536 on the velocity error in 0.229 rpm units,
+  output PWM limited by Goal PWM; "Ka is an anti-windup gain": we stop integrating while saturated.
+* Current-based Position Control Mode: the same PID gives a target current, limited by Goal
+  Current(102); a current controller turns it into PWM.  The e-manual gives no current-loop gains;
+  ours integrates the current error into the duty at half the winding's V/R, settling in a few samples.
+* "Goal PWM(100)": in PWM mode it drives the motor directly; in the other modes it limits the PWM;
+  it cannot exceed PWM Limit(36).  A real servo sets Goal PWM to PWM Limit (and Goal Current to
+  Current Limit) at boot: the control table side hands those values in.
+* "Drive Mode(10)": bit 0 reverse, bit 2 time-based profile, bit 3 torque on by goal update ("If the
+  value of Torque Enable(64) is '0' and the command is given, the Torque Enable(64) switches to '1'
+  and perform the command"; XL330/XC330 from firmware V46, X430 from V45).  The e-manual says reverse
+  inverts Goal and Present Position on the X430/X330 and also velocity, current and PWM on others;
+  here it mirrors the whole shaft frame, so every signed register of a reversed servo agrees.
+  "the sign of Homing Offset value will not be reversed".
+* "Homing Offset(20)": Present Position = Actual Position + Homing Offset; in Position Control Mode
+  values outside -1024..1024 are ignored.
+* "Present Position(132)": a continuous 4-byte count, reset to within one turn (0..4095, plus Homing
+  Offset) when the mode changes to Position Control Mode, when torque is turned on in it, on reboot.
+* "Min/Max Position Limit(48, 52)": used in Position Control Mode only; the goal is held inside them.
+* "Profile Velocity(112)": cannot exceed Velocity Limit(44); "Goal Velocity(104)": within +-Velocity Limit.
+* "Moving(122)": 1 while |Present Velocity| > Moving Threshold(24), and always while a profile runs
+  after a Goal Position write.  "Moving Status(123)": 0x01 in position, 0x02 profile ongoing, 0x08
+  following error, 0x30 profile type; in-position and following error only in the position modes.
+  The e-manual gives no window for either: ours are :data:`IN_POSITION_PULSES` and
+  :data:`FOLLOWING_ERROR_PULSES`.
+* "Shutdown(63)" / "Hardware Error Status(70)": an error selected by Shutdown clears Torque Enable
+  (output 0 %), and only REBOOT lets torque on again.  Shutdown selects what is detected ("when
+  0x05 is defined as Shutdown, DYNAMIXEL can detect both Input Voltage Error and Overheating
+  Error"), so an error not selected is not reported.  Overload "detects persistent load that exceeds
+  maximum output"; the e-manual gives no time, ours is ``overload_time_s``.  Overheating: a
+  first-order thermal model heated by the winding's I^2 R (:class:`ThermalParams`).
+
+Units in names: ``_pulses`` (0.088 deg), ``_pulses_s``, ``_a``, ``_v``, ``_s``, ``_c``; raw register
+values are plain ints named after their register.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from .interface import (
+    HW_ERROR_INPUT_VOLTAGE,
+    HW_ERROR_OVERHEATING,
+    HW_ERROR_OVERLOAD,
+    OperatingMode,
+    XCommands,
+    XSensed,
+)
+from .physics import XPhysics, XPhysicsParams
+from .profile import (
+    ACCEL_UNIT_PULSES_S2,
+    PROFILE_STEP,
+    PROFILE_TRAPEZOIDAL,
+    VELOCITY_UNIT_PULSES_S,
+    Profile,
+    plan_time_based,
+    plan_velocity_based,
+)
+
+__all__ = [
+    "PWM_FULL_SCALE",
+    "PULSES_PER_REV",
+    "IN_POSITION_PULSES",
+    "FOLLOWING_ERROR_PULSES",
+    "ThermalParams",
+    "XFirmware",
+    "build_x_servo",
+]
+
+#: Goal/Present PWM at 100 % duty (e-manual "PWM Limit(36)": 885 = 100 %, 0.113 % per unit).
+PWM_FULL_SCALE = 885
+#: Encoder pulses per output turn (e-manual: 0.088 deg per unit, 0..4095 per turn).
+PULSES_PER_REV = 4096
+PULSE_RAD = 2.0 * math.pi / PULSES_PER_REV
+#: Distance from the goal within which Moving Status reports In-Position once the profile ended (ours).
+IN_POSITION_PULSES = 10
+#: Distance from Position Trajectory beyond which Moving Status reports a following error (ours: 1/8 turn).
+FOLLOWING_ERROR_PULSES = 512
+#: Extended and current-based position modes' Goal Position range (e-manual "Goal Position(116)": +-256 rev).
+EXTENDED_GOAL_LIMIT = 1_048_575
+#: Position Control Mode accepts Homing Offset only within this range (e-manual "Homing Offset(20)").
+POSITION_MODE_HOMING_LIMIT = 1024
+
+_POSITION_MODES = (OperatingMode.POSITION, OperatingMode.EXTENDED_POSITION, OperatingMode.CURRENT_BASED_POSITION)
+_RAD_S_TO_VELOCITY_UNITS = 1.0 / (PULSE_RAD * VELOCITY_UNIT_PULSES_S)
+_INT32_MIN = -(2**31)
+_INT32_SPAN = 2**32
+
+
+def _int32(value: float) -> int:
+    """A register value as the 4-byte signed integer the control table holds (wraps like the firmware's counter)."""
+    return (int(round(value)) - _INT32_MIN) % _INT32_SPAN + _INT32_MIN
+
+
+@dataclass(frozen=True)
+class ThermalParams:
+    """A first-order thermal model of the servo: ``C dT/dt = I^2 R - (T - T_ambient) / R_th``, ``C = tau / R_th``.
+
+    Why first order: the firmware only compares Present Temperature with Temperature Limit; one time
+    constant reproduces "holding a stall for tens of seconds overheats" without claiming more.  The
+    defaults are our estimates (ROBOTIS publishes no thermal data): 20 K/W to ambient and a 300 s
+    time constant, so a stall at 12 V (about 27 W in an XM430) reaches 80 C in about half a minute
+    while a servo holding 0.5 A warms by a few degrees.
+    """
+
+    ambient_c: float = 25.0
+    thermal_resistance_k_w: float = 20.0
+    time_constant_s: float = 300.0
+
+
+class XFirmware:
+    """One X-series servo's firmware over its :class:`.physics.XPhysics`; implements :class:`.interface.XServoModel`.
+
+    ``current_unit_a`` is Goal/Present Current's unit (1 mA on the XL330/XC330, 2.69 mA on the XM430)
+    or ``None`` for a model without current sensing (the XL430), which reports Present Load (0.1 % of
+    ``load_full_scale_a``) in Present Current's place and has no current modes.
+    """
+
+    def __init__(
+        self,
+        physics: XPhysics,
+        *,
+        current_unit_a: float | None,
+        load_full_scale_a: float = 1.0,
+        step_s: float = 0.001,
+        thermal: ThermalParams | None = None,
+        overload_time_s: float = 1.0,
+    ) -> None:
+        self.physics = physics
+        self.step_s = step_s
+        self.time_s = 0.0
+        self.resistance_ohm = physics.params.resistance_ohm
+        self.current_unit_a = current_unit_a
+        self.load_full_scale_a = load_full_scale_a
+        self.thermal = thermal or ThermalParams()
+        self.overload_time_s = overload_time_s
+        self.temperature_c = self.thermal.ambient_c
+        self._thermal_capacity_j_k = self.thermal.time_constant_s / self.thermal.thermal_resistance_k_w
+        self._cmd = XCommands()
+        self._reset_firmware()
+
+    # ------------------------------------------------------------------ state
+
+    def _reset_firmware(self) -> None:
+        """Power-on / REBOOT state: torque off, errors cleared, position counted within one turn."""
+        self._torque_on = False
+        self._last_torque_cmd = 0
+        self._hw_error = 0
+        self._overload_elapsed_s = 0.0
+        self._duty = 0.0
+        self._reset_control()
+        self._turn_base_pulses = 0.0
+        self._reset_turns()
+        self._hold_here()
+
+    def _reset_control(self) -> None:
+        self._integral = 0.0
+        self._prev_error = 0.0
+        self._velocity_integral = 0.0
+        self._current_correction = 0.0
+
+    def _sign(self) -> float:
+        """Drive Mode bit 0: the reverse mode mirrors the shaft frame."""
+        return -1.0 if self._cmd.drive_mode & 0x01 else 1.0
+
+    def _homing_offset(self) -> int:
+        offset = self._cmd.homing_offset
+        if self._cmd.operating_mode == OperatingMode.POSITION and abs(offset) > POSITION_MODE_HOMING_LIMIT:
+            return 0
+        return offset
+
+    def _present_pulses(self) -> float:
+        """Present Position before rounding: the shaft in the firmware's frame, less the whole turns dropped, plus Homing Offset."""
+        return self._sign() * self.physics.angle_rad / PULSE_RAD - self._turn_base_pulses + self._homing_offset()
+
+    def _reset_turns(self) -> None:
+        """Present Position reset to within one turn (e-manual "Present Position(132)" note)."""
+        shaft = self._sign() * self.physics.angle_rad / PULSE_RAD
+        self._turn_base_pulses = math.floor(shaft / PULSES_PER_REV) * PULSES_PER_REV
+
+    def _hold_here(self) -> None:
+        """No profile: the trajectory at the present position, at rest."""
+        self._profile: Profile | None = None
+        self._profile_start_s = self.time_s
+        self._profile_kind = PROFILE_STEP
+        self._traj_pulses = self._present_pulses()
+        self._traj_velocity_pulses_s = 0.0
+        self._traj_accel_pulses_s2 = 0.0
+        self._goal_velocity_pulses_s = 0.0
+        self._velocity_accel_pulses_s2 = math.inf
+
+    def _profile_running(self) -> bool:
+        return self._profile is not None and self.time_s - self._profile_start_s < self._profile.end_s
+
+    # ------------------------------------------------------------------ commands
+
+    def command(self, commands: XCommands, *, goal_written: bool = False) -> None:
+        """Take the registers as they now are; mode, torque and goal changes take effect at ``time_s``.
+
+        Torque Enable acts on its changes (0 -> 1 turns torque on unless a Shutdown error is latched),
+        so a register the protocol side has not yet brought in line after a shutdown or a torque-on
+        by goal update does not undo them; :attr:`.XSensed.torque_enable` is the firmware's value.
+        """
+        old = self._cmd
+        self._cmd = commands
+        if (commands.drive_mode ^ old.drive_mode) & 0x01:
+            self._reset_turns()  # a mirrored frame counts its turns afresh
+            self._hold_here()
+        if commands.operating_mode != old.operating_mode:
+            if commands.operating_mode == OperatingMode.POSITION:
+                self._reset_turns()
+            self._reset_control()
+            self._hold_here()
+        elif commands.homing_offset != old.homing_offset and not self._profile_running():
+            self._hold_here()
+        torque_cmd = 1 if commands.torque_enable else 0
+        if torque_cmd != self._last_torque_cmd:
+            self._last_torque_cmd = torque_cmd
+            if torque_cmd:
+                self._torque_on_now()
+                return
+            self._torque_on = False
+        if goal_written:
+            if self._torque_on:
+                self._start_profile()
+            elif commands.drive_mode & 0x08:
+                self._torque_on_now()  # Drive Mode bit 3: torque on by goal update
+
+    def _torque_on_now(self) -> None:
+        if self._hw_error:
+            return  # after a Shutdown only REBOOT lets torque on again
+        self._torque_on = True
+        if self._cmd.operating_mode == OperatingMode.POSITION:
+            self._reset_turns()
+        self._reset_control()
+        self._hold_here()
+        self._start_profile()
+
+    def _goal_pulses(self) -> float:
+        cmd = self._cmd
+        goal = cmd.goal_position
+        if cmd.operating_mode == OperatingMode.POSITION:
+            return float(min(max(goal, cmd.min_position_limit), cmd.max_position_limit))
+        return float(min(max(goal, -EXTENDED_GOAL_LIMIT), EXTENDED_GOAL_LIMIT))
+
+    def _start_profile(self) -> None:
+        """A goal was written (or torque came on): plan from the trajectory's present state (velocity override)."""
+        cmd = self._cmd
+        time_based = bool(cmd.drive_mode & 0x04)
+        if cmd.operating_mode == OperatingMode.VELOCITY:
+            self._start_velocity_ramp(time_based)
+            return
+        if cmd.operating_mode not in _POSITION_MODES:
+            return
+        if self._profile_running():
+            start, v0 = self._traj_pulses, self._traj_velocity_pulses_s
+        else:
+            start, v0 = self._present_pulses(), 0.0
+        goal = self._goal_pulses()
+        if time_based:
+            profile = plan_time_based(start, v0, goal, cmd.profile_velocity, cmd.profile_acceleration)
+        else:
+            velocity = cmd.profile_velocity
+            if 0 < cmd.velocity_limit < velocity:
+                velocity = cmd.velocity_limit  # "Profile Velocity(112) cannot exceed Velocity Limit(44)"
+            profile = plan_velocity_based(start, v0, goal, velocity, cmd.profile_acceleration)
+        self._profile = profile
+        self._profile_start_s = self.time_s
+        self._profile_kind = profile.kind
+        self._traj_pulses, self._traj_velocity_pulses_s, self._traj_accel_pulses_s2 = profile.at(0.0)
+
+    def _start_velocity_ramp(self, time_based: bool) -> None:
+        """Velocity mode: Velocity Trajectory ramps to Goal Velocity at Profile Acceleration.
+
+        e-manual "What is the Profile": velocity mode uses only Profile Acceleration; velocity-based
+        t1 = 64 * Goal Velocity / Profile Acceleration (ms), time-based t1 = Profile Acceleration (ms).
+        """
+        cmd = self._cmd
+        goal = cmd.goal_velocity
+        if cmd.velocity_limit > 0:
+            goal = min(max(goal, -cmd.velocity_limit), cmd.velocity_limit)
+        self._goal_velocity_pulses_s = goal * VELOCITY_UNIT_PULSES_S
+        if cmd.profile_acceleration <= 0:
+            self._velocity_accel_pulses_s2 = math.inf
+            self._profile_kind = PROFILE_STEP
+        elif time_based:
+            change = abs(self._goal_velocity_pulses_s - self._traj_velocity_pulses_s)
+            self._velocity_accel_pulses_s2 = max(change, 1e-9) / (cmd.profile_acceleration / 1000.0)
+            self._profile_kind = PROFILE_TRAPEZOIDAL
+        else:
+            self._velocity_accel_pulses_s2 = cmd.profile_acceleration * ACCEL_UNIT_PULSES_S2
+            self._profile_kind = PROFILE_TRAPEZOIDAL
+
+    # ------------------------------------------------------------------ stepping
+
+    def step_to(self, to_time_s: float) -> None:
+        """Run whole control steps up to ``to_time_s``; a servo provably at rest skips its physics steps."""
+        step_s = self.step_s
+        n = int((to_time_s - self.time_s) / step_s + 1e-9)
+        if n <= 0:
+            return
+        if self._at_rest():
+            self._cool(n * step_s)
+            self.time_s += n * step_s
+            self._check_voltage()
+            return
+        for _ in range(n):
+            self._step_once()
+
+    def _at_rest(self) -> bool:
+        """Torque off, shaft still, nothing pushing it, current zero: a step would change nothing but the temperature."""
+        physics = self.physics
+        return (
+            not self._torque_on
+            and physics.velocity_rad_s == 0.0
+            and physics.current_a == 0.0
+            and physics.external_torque_nm() == 0.0
+        )
+
+    def _cool(self, dt_s: float) -> None:
+        ambient = self.thermal.ambient_c
+        self.temperature_c = ambient + (self.temperature_c - ambient) * math.exp(-dt_s / self.thermal.time_constant_s)
+
+    def _step_once(self) -> None:
+        cmd = self._cmd
+        physics = self.physics
+        step_s = self.step_s
+        self.time_s += step_s
+        saturated = False
+        if self._torque_on:
+            sign = self._sign()
+            mode = cmd.operating_mode
+            pwm_limit = min(cmd.pwm_limit, PWM_FULL_SCALE)
+            if mode != OperatingMode.PWM:
+                pwm_limit = min(abs(cmd.goal_pwm), pwm_limit)  # "Goal PWM ... is used to limit PWM value"
+            if mode in _POSITION_MODES:
+                if self._profile is not None:
+                    self._traj_pulses, self._traj_velocity_pulses_s, self._traj_accel_pulses_s2 = self._profile.at(
+                        self.time_s - self._profile_start_s
+                    )
+                demand = self._position_pid()
+                if mode == OperatingMode.CURRENT_BASED_POSITION:
+                    limit_units = min(abs(cmd.goal_current), cmd.current_limit)
+                    pwm, saturated = self._current_loop(min(max(demand, -limit_units), limit_units), pwm_limit, sign)
+                else:
+                    saturated = abs(demand) >= pwm_limit
+                    pwm = min(max(demand, -pwm_limit), pwm_limit)
+            elif mode == OperatingMode.VELOCITY:
+                pwm, saturated = self._velocity_pi(pwm_limit, sign)
+            elif mode == OperatingMode.CURRENT:
+                limit_units = cmd.current_limit
+                pwm, saturated = self._current_loop(min(max(cmd.goal_current, -limit_units), limit_units), pwm_limit, sign)
+            else:  # PWM mode: Goal PWM straight to the inverter, within PWM Limit
+                pwm = float(min(max(cmd.goal_pwm, -pwm_limit), pwm_limit))
+                saturated = abs(pwm) >= PWM_FULL_SCALE
+            self._duty = pwm / PWM_FULL_SCALE
+            physics.step(sign * self._duty, step_s, driven=True)
+        else:
+            self._duty = 0.0
+            physics.step(0.0, step_s, driven=False)
+            self._traj_pulses = self._present_pulses()
+            self._traj_velocity_pulses_s = 0.0
+        self._protect(saturated, step_s)
+
+    def _position_pid(self) -> float:
+        """PID plus feed-forward on the trajectory: PWM units (or current units in current-based position), unclipped."""
+        cmd = self._cmd
+        error = self._traj_pulses - self._present_pulses()
+        difference = error - self._prev_error
+        self._prev_error = error
+        step_s = self.step_s
+        output = cmd.position_p_gain / 128.0 * error + cmd.position_d_gain / 16.0 * difference
+        if cmd.feedforward_1st_gain:
+            output += cmd.feedforward_1st_gain / 4.0 * self._traj_velocity_pulses_s * step_s
+        if cmd.feedforward_2nd_gain:
+            output += cmd.feedforward_2nd_gain / 4.0 * self._traj_accel_pulses_s2 * step_s * step_s
+        if cmd.position_i_gain:
+            ki = cmd.position_i_gain / 65536.0
+            integral = self._integral + error
+            limit = max(cmd.current_limit, 1) if cmd.operating_mode == OperatingMode.CURRENT_BASED_POSITION else PWM_FULL_SCALE
+            if abs(output + ki * integral) < limit or integral * error < 0:
+                self._integral = integral  # anti-windup: no further integration while saturated
+            output += ki * self._integral
+        return output
+
+    def _velocity_pi(self, pwm_limit: float, sign: float) -> tuple[float, bool]:
+        """Velocity mode: ramp Velocity Trajectory toward the goal, then PI on the velocity error in 0.229 rpm units."""
+        cmd = self._cmd
+        goal = self._goal_velocity_pulses_s
+        v = self._traj_velocity_pulses_s
+        max_change = self._velocity_accel_pulses_s2 * self.step_s
+        if abs(goal - v) <= max_change:
+            v = goal
+        else:
+            v += max_change if goal > v else -max_change
+        self._traj_velocity_pulses_s = v
+        self._traj_pulses += v * self.step_s
+        error_units = v / VELOCITY_UNIT_PULSES_S - sign * self.physics.velocity_rad_s * _RAD_S_TO_VELOCITY_UNITS
+        kp = cmd.velocity_p_gain / 128.0
+        ki = cmd.velocity_i_gain / 65536.0
+        integral = self._velocity_integral + error_units
+        demand = kp * error_units + ki * integral
+        saturated = abs(demand) >= pwm_limit
+        if not saturated or demand * error_units < 0:
+            self._velocity_integral = integral  # anti-windup: no further integration into the limit
+        return min(max(demand, -pwm_limit), pwm_limit), saturated
+
+    def _current_loop(self, target_units: float, pwm_limit: float, sign: float) -> tuple[float, bool]:
+        """Current controller: the duty that drives the target current through the winding, corrected by an integral.
+
+        The winding's current follows the duty within a step (``i = (duty V - k_e w) / R``), so the
+        duty is fed forward from the target and the back-EMF, and the integral (half the winding's
+        V/R per sample, halving the error every millisecond without overshoot) takes up the rest.
+        """
+        physics = self.physics
+        target_a = target_units * (self.current_unit_a or 0.0)
+        supply_v = max(physics.supply_v, 0.1)
+        per_amp = self.resistance_ohm / supply_v
+        correction = self._current_correction + 0.5 * (target_a - sign * physics.current_a) * per_amp
+        back_emf_v = sign * physics.velocity_rad_s * physics.params.back_emf_v_s_rad
+        duty = target_a * per_amp + back_emf_v / supply_v + correction
+        limit = pwm_limit / PWM_FULL_SCALE
+        saturated = abs(duty) >= limit
+        if not saturated:
+            self._current_correction = correction  # anti-windup: the correction holds while the duty is at its limit
+        return min(max(duty, -limit), limit) * PWM_FULL_SCALE, saturated
+
+    # ------------------------------------------------------------------ protection
+
+    def _protect(self, saturated: bool, dt_s: float) -> None:
+        physics = self.physics
+        current_a = physics.current_a
+        thermal = self.thermal
+        power_w = current_a * current_a * self.resistance_ohm
+        self.temperature_c += (
+            dt_s * (power_w - (self.temperature_c - thermal.ambient_c) / thermal.thermal_resistance_k_w) / self._thermal_capacity_j_k
+        )
+        detected = 0
+        if self.temperature_c > self._cmd.temperature_limit:
+            detected |= HW_ERROR_OVERHEATING
+        # Overload: the output held at its limit while the motor draws at least half of what that duty
+        # would draw at stall, i.e. a load, not speed, keeps it at the limit.
+        stall_a = abs(self._duty) * physics.supply_v / self.resistance_ohm
+        if saturated and stall_a > 0.0 and abs(current_a) >= 0.5 * stall_a:
+            self._overload_elapsed_s += dt_s
+            if self._overload_elapsed_s >= self.overload_time_s:
+                detected |= HW_ERROR_OVERLOAD
+        else:
+            self._overload_elapsed_s = 0.0
+        if detected:
+            self._latch(detected)
+        self._check_voltage()
+
+    def _check_voltage(self) -> None:
+        cmd = self._cmd
+        tenths_v = round(self.physics.supply_v * 10.0)
+        if tenths_v < cmd.min_voltage_limit or tenths_v > cmd.max_voltage_limit:
+            self._latch(HW_ERROR_INPUT_VOLTAGE)
+
+    def _latch(self, detected: int) -> None:
+        detected &= self._cmd.shutdown
+        if detected:
+            self._hw_error |= detected
+            self._torque_on = False
+
+    # ------------------------------------------------------------------ sensing
+
+    def sense(self) -> XSensed:
+        """The registers the firmware writes back, in register units, at ``time_s``."""
+        cmd = self._cmd
+        sign = self._sign()
+        physics = self.physics
+        present = self._present_pulses()
+        present_velocity = int(round(sign * physics.velocity_rad_s * _RAD_S_TO_VELOCITY_UNITS))
+        current_a = sign * physics.current_a
+        if self.current_unit_a:
+            present_current = int(round(current_a / self.current_unit_a))
+        else:
+            present_current = min(max(int(round(1000.0 * current_a / self.load_full_scale_a)), -1000), 1000)
+        position_mode = cmd.operating_mode in _POSITION_MODES
+        profile_on = self._torque_on and position_mode and self._profile_running()
+        status = self._profile_kind
+        if profile_on:
+            status |= 0x02
+        if position_mode and self._torque_on:
+            if not profile_on and abs(self._goal_pulses() - present) <= IN_POSITION_PULSES:
+                status |= 0x01
+            if abs(self._traj_pulses - present) > FOLLOWING_ERROR_PULSES:
+                status |= 0x08
+        return XSensed(
+            present_position=_int32(present),
+            present_velocity=present_velocity,
+            present_current=present_current,
+            present_pwm=int(round(self._duty * PWM_FULL_SCALE)),
+            velocity_trajectory=int(round(self._traj_velocity_pulses_s / VELOCITY_UNIT_PULSES_S)),
+            position_trajectory=_int32(self._traj_pulses),
+            moving=1 if profile_on or abs(present_velocity) > cmd.moving_threshold else 0,
+            moving_status=status,
+            present_input_voltage=int(round(physics.supply_v * 10.0)),
+            present_temperature=int(round(self.temperature_c)),
+            hardware_error_status=self._hw_error,
+            torque_enable=1 if self._torque_on else 0,
+        )
+
+    # ------------------------------------------------------------------ instructions and the world
+
+    def reboot(self) -> None:
+        """REBOOT: errors cleared, torque off, Present Position within one turn again; the shaft and its heat stay."""
+        self._reset_firmware()
+
+    def clear_multi_turn(self) -> None:
+        """CLEAR 0x01: drop Present Position's whole turns, keeping the angle within one turn.
+
+        The trajectory moves by the same turns and a running profile ends, so a holding servo keeps
+        the same shaft angle instead of driving back over the cleared turns.
+        """
+        before = self._turn_base_pulses
+        self._reset_turns()
+        self._traj_pulses -= self._turn_base_pulses - before
+        self._profile = None
+        self._traj_velocity_pulses_s = 0.0
+        self._traj_accel_pulses_s2 = 0.0
+
+    def set_external_torque(self, torque_nm: float) -> None:
+        """A torque on the output shaft (N·m, positive = counter-clockwise), passed to the physics."""
+        self.physics.set_external_torque(torque_nm)
+
+    def set_supply_v(self, supply_v: float) -> None:
+        """The bus supply voltage (V): the motor's drive and Present Input Voltage follow it."""
+        self.physics.supply_v = float(supply_v)
+
+    def set_load(self, *, inertia_kg_m2: float = 0.0, gravity_torque_nm: float = 0.0, gravity_zero_rad: float = 0.0) -> None:
+        """What is on the horn (an inertia, a pendulum), passed to the physics."""
+        self.physics.set_load(inertia_kg_m2=inertia_kg_m2, gravity_torque_nm=gravity_torque_nm, gravity_zero_rad=gravity_zero_rad)
+
+
+def build_x_servo(
+    *,
+    gear_ratio: float,
+    ratings: Sequence[tuple[float, float, float, float]],
+    current_unit_a: float | None,
+    supply_v: float = 12.0,
+    angle_rad: float = 0.0,
+    step_s: float = 0.001,
+    thermal: ThermalParams | None = None,
+    overload_time_s: float = 1.0,
+) -> XFirmware:
+    """One X-series servo from its data-sheet numbers: :class:`XFirmware` over :class:`.physics.XPhysics`.
+
+    ``ratings``: the data sheet's ``(voltage_v, stall_torque_nm, stall_current_a, no_load_speed_rpm)``
+    rows (as in the model files); ``current_unit_a``: Goal/Present Current's unit in amperes (0.001
+    on the XL330/XC330, 0.00269 on the XM430) or ``None`` on a model without current sensing (the
+    XL430: Present Load in 0.1 % of the sheet's stall current at the rating nearest ``supply_v``).
+    """
+    params = XPhysicsParams.from_datasheet(gear_ratio=gear_ratio, ratings=ratings)
+    physics = XPhysics(params, supply_v=supply_v, angle_rad=angle_rad)
+    nearest = min(ratings, key=lambda rating: abs(rating[0] - supply_v))
+    return XFirmware(
+        physics,
+        current_unit_a=current_unit_a,
+        load_full_scale_a=nearest[2],
+        step_s=step_s,
+        thermal=thermal,
+        overload_time_s=overload_time_s,
+    )

@@ -1,0 +1,365 @@
+"""The X-series firmware model against the e-manual's behaviour, in virtual time.
+
+Data-sheet inputs are the e-manual's figures (https://emanual.robotis.com/docs/en/dxl/x/xm430-w350/,
+.../xl430-w250/, .../xl330-m288/: gear ratio, stall torque and current, no-load speed per voltage) and
+the control tables' initial gains; everything checked is measured from the model's registers.
+"""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from firmware_model.xseries.firmware import PULSES_PER_REV, ThermalParams, XFirmware, build_x_servo
+from firmware_model.xseries.interface import (
+    HW_ERROR_INPUT_VOLTAGE,
+    HW_ERROR_OVERHEATING,
+    HW_ERROR_OVERLOAD,
+    OperatingMode,
+    XCommands,
+)
+from firmware_model.xseries.profile import VELOCITY_UNIT_PULSES_S
+
+# (gear ratio, ratings (V, stall N m, stall A, no-load rpm), current unit A or None, rated V, control-table initial values)
+MODELS = {
+    "XM430-W350": (
+        353.5,
+        [(11.1, 3.8, 2.1, 43), (12.0, 4.1, 2.3, 46), (14.8, 4.8, 2.7, 57)],
+        0.00269,
+        12.0,
+        dict(position_p_gain=800, position_d_gain=0, velocity_p_gain=100, velocity_i_gain=1920, current_limit=1193,
+             velocity_limit=200, max_voltage_limit=160, min_voltage_limit=95, shutdown=52),
+    ),
+    "XL430-W250": (
+        258.5,
+        [(9.0, 1.0, 1.0, 47), (11.1, 1.4, 1.3, 57), (12.0, 1.5, 1.4, 61)],
+        None,
+        11.1,
+        dict(position_p_gain=640, position_d_gain=4000, velocity_p_gain=100, velocity_i_gain=1000, current_limit=0,
+             velocity_limit=265, max_voltage_limit=140, min_voltage_limit=60, shutdown=52),
+    ),
+    "XL330-M288": (
+        288.4,
+        [(3.7, 0.42, 1.11, 76), (5.0, 0.52, 1.47, 103), (6.0, 0.60, 1.74, 123)],
+        0.001,
+        5.0,
+        dict(position_p_gain=400, position_d_gain=0, velocity_p_gain=180, velocity_i_gain=1600, current_limit=1750,
+             velocity_limit=445, max_voltage_limit=70, min_voltage_limit=35, shutdown=53),
+    ),
+}
+
+
+def make(model: str = "XM430-W350", *, supply_v: float | None = None, **registers) -> tuple[XFirmware, XCommands]:
+    """A servo of ``model`` at its rated voltage with its initial control table, torque on, holding where it is."""
+    gear, ratings, unit, rated_v, table = MODELS[model]
+    kwargs = {k: registers.pop(k) for k in ("thermal", "overload_time_s") if k in registers}
+    servo = build_x_servo(gear_ratio=gear, ratings=ratings, current_unit_a=unit, supply_v=supply_v or rated_v, **kwargs)
+    commands = XCommands(**{"goal_pwm": 885, "goal_current": table["current_limit"], **table, **registers})
+    servo.command(commands)
+    if commands.torque_enable:
+        servo.command(commands)
+    return servo, commands
+
+
+def write(servo: XFirmware, commands: XCommands, **registers) -> None:
+    for name, value in registers.items():
+        setattr(commands, name, value)
+    goal = any(name.startswith("goal_") for name in registers)
+    servo.command(XCommands(**vars(commands)), goal_written=goal)
+
+
+def run(servo: XFirmware, duration_s: float):
+    """Step ``duration_s`` millisecond by millisecond; the registers after each step."""
+    out = []
+    t0 = servo.time_s
+    for k in range(1, int(round(duration_s / servo.step_s)) + 1):
+        servo.step_to(t0 + k * servo.step_s)
+        out.append(servo.sense())
+    return out
+
+
+# ---------------------------------------------------------------------------- profiles
+
+
+def test_trapezoid_profile_timing_matches_the_emanual_formulas():
+    servo, cmd = make(torque_enable=1, profile_velocity=100, profile_acceleration=20)
+    start = servo.sense().present_position
+    write(servo, cmd, goal_position=start + 2048)
+    t1_ms = 64 * 100 / 20  # e-manual: t1 = 64 * Profile Velocity / Profile Acceleration
+    t3_ms = t1_ms + 64 * 2048 / 100  # t2 = 64 * dPos / Profile Velocity, t3 = t1 + t2
+    trace = run(servo, 2.0)
+    velocity = [s.velocity_trajectory for s in trace]
+    reached_v = next(i + 1 for i, v in enumerate(velocity) if v >= 100)
+    assert abs(reached_v - t1_ms) <= 3
+    done = next(i + 1 for i, s in enumerate(trace) if not s.moving_status & 0x02)  # profile over
+    assert abs(done - t3_ms) <= 3
+    assert trace[done].position_trajectory == start + 2048
+    assert all(s.moving_status & 0x30 == 0x30 for s in trace)  # trapezoidal
+    assert all(s.moving_status & 0x02 for s in trace[: int(t3_ms) - 3])  # profile ongoing
+    assert all(s.moving for s in trace[: int(t3_ms) - 3])
+    assert not trace[-1].moving_status & 0x02
+
+
+def test_short_move_is_triangular_and_zero_acceleration_rectangular():
+    servo, cmd = make(torque_enable=1, profile_velocity=100, profile_acceleration=20)
+    start = servo.sense().present_position
+    # V_PRFL_TRI = sqrt(A * dPos) = sqrt(20 * 200) = 63 < 100: triangular, peak 63 units at t3 / 2.
+    write(servo, cmd, goal_position=start + 200)
+    trace = run(servo, 1.0)
+    assert trace[0].moving_status & 0x30 == 0x20
+    peak = max(s.velocity_trajectory for s in trace)
+    assert abs(peak - math.sqrt(20 * 200)) <= 1.5
+    done = next(i + 1 for i, s in enumerate(trace) if not s.moving_status & 0x02)
+    assert abs(done - 2 * 64 * math.sqrt(200 / 20)) <= 3  # t3 = 2 * t1 with t1 = 64 * V_TRI / A
+    write(servo, cmd, profile_acceleration=0, goal_position=start)
+    trace = run(servo, 0.5)
+    assert trace[0].moving_status & 0x30 == 0x10
+    assert trace[0].velocity_trajectory == -100  # rectangular: the speed jumps to Profile Velocity
+
+
+def test_time_based_profile_reaches_the_goal_at_the_given_time():
+    servo, cmd = make(torque_enable=1, drive_mode=0x04, profile_velocity=1500, profile_acceleration=300)
+    start = servo.sense().present_position
+    write(servo, cmd, goal_position=start + 1500)
+    trace = run(servo, 1.8)
+    done = next(i + 1 for i, s in enumerate(trace) if not s.moving_status & 0x02)
+    assert abs(done - 1500) <= 2
+    assert trace[done].position_trajectory == start + 1500
+    assert trace[1400].position_trajectory < start + 1500 - 10
+    assert abs(trace[-1].present_position - (start + 1500)) <= 5
+
+
+def test_velocity_override_keeps_the_trajectory_velocity_continuous():
+    servo, cmd = make(torque_enable=1, profile_velocity=150, profile_acceleration=30)
+    start = servo.sense().present_position
+    write(servo, cmd, goal_position=start + 4000)
+    before = run(servo, 0.6)[-1].velocity_trajectory
+    write(servo, cmd, goal_position=start + 500)  # a new goal behind: brake, turn, come back
+    after = run(servo, 0.002)[0].velocity_trajectory
+    assert before > 100 and abs(after - before) <= 2
+    trace = run(servo, 5.0)
+    assert abs(trace[-1].present_position - (start + 500)) <= 5
+
+
+# ---------------------------------------------------------------------------- control loops
+
+
+@pytest.mark.parametrize("model", MODELS)
+def test_position_mode_settles_within_a_few_pulses_at_default_gains(model):
+    servo, cmd = make(model, torque_enable=1)
+    start = servo.sense().present_position
+    write(servo, cmd, goal_position=start + 1024)
+    trace = run(servo, 2.0)
+    assert all(abs(s.present_position - (start + 1024)) <= 4 for s in trace[-200:])
+    assert trace[-1].moving_status & 0x01  # in position
+    assert trace[-1].moving == 0
+
+
+@pytest.mark.parametrize("model", MODELS)
+def test_velocity_mode_reaches_goal_velocity(model):
+    servo, cmd = make(model, torque_enable=1, operating_mode=OperatingMode.VELOCITY, profile_acceleration=50)
+    write(servo, cmd, goal_velocity=-120)
+    trace = run(servo, 1.5)
+    # e-manual: t1 = 64 * Goal Velocity / Profile Acceleration = 154 ms to reach the goal on the trajectory.
+    assert abs(next(i + 1 for i, s in enumerate(trace) if s.velocity_trajectory == -120) - 64 * 120 / 50) <= 3
+    assert all(abs(s.present_velocity + 120) <= 3 for s in trace[-300:])
+    assert trace[-1].moving == 1
+
+
+@pytest.mark.parametrize(("model", "voltage_v", "rpm"), [("XL430-W250", 11.1, 57), ("XL330-M288", 5.0, 103)])
+def test_no_load_speed_of_the_data_sheet_in_velocity_mode(model, voltage_v, rpm):
+    servo, cmd = make(model, supply_v=voltage_v, torque_enable=1, operating_mode=OperatingMode.VELOCITY, velocity_limit=1023)
+    write(servo, cmd, goal_velocity=1023)
+    trace = run(servo, 1.5)
+    speed_rpm = trace[-1].present_velocity * 0.229
+    assert trace[-1].present_pwm == 885
+    assert speed_rpm == pytest.approx(rpm, rel=0.10)
+
+
+def _hold_shaft(servo: XFirmware, duration_s: float, stiffness_nm_rad: float = 200.0, damping_nm_s_rad: float = 2.0):
+    """A stiff hand on the horn: a spring to the starting angle; returns its torque at the end (N m)."""
+    anchor = servo.physics.angle_rad
+    torque = 0.0
+    for _ in range(int(round(duration_s / servo.step_s))):
+        p = servo.physics
+        torque = -stiffness_nm_rad * (p.angle_rad - anchor) - damping_nm_s_rad * p.velocity_rad_s
+        servo.set_external_torque(torque)
+        servo.step_to(servo.time_s + servo.step_s)
+    return torque
+
+
+def test_current_mode_on_a_held_shaft_gives_torque_proportional_to_current():
+    torques = []
+    for goal_ma in (300, 600):
+        servo, cmd = make("XL330-M288", torque_enable=1, operating_mode=OperatingMode.CURRENT)
+        write(servo, cmd, goal_current=goal_ma)
+        held_nm = -_hold_shaft(servo, 0.5)
+        assert servo.sense().present_current == pytest.approx(goal_ma, abs=5)
+        torques.append(held_nm)
+        kt = servo.physics.params.torque_constant_nm_a
+        # The hand holds the motor's torque, less what the gears' dry friction takes (at most Coulomb).
+        assert held_nm == pytest.approx(kt * goal_ma / 1000.0, abs=servo.physics.params.coulomb_friction_nm * 1.01)
+    assert torques[1] / torques[0] == pytest.approx(2.0, rel=0.1)
+
+
+def test_current_based_position_limits_the_current_to_goal_current():
+    servo, cmd = make("XL330-M288", torque_enable=1, operating_mode=OperatingMode.CURRENT_BASED_POSITION, goal_current=200)
+    write(servo, cmd, goal_position=servo.sense().present_position + 2000)
+    held_nm = _hold_shaft(servo, 0.5)  # far from its goal, the PID asks for far more than 200 mA
+    assert servo.sense().present_current == pytest.approx(200, abs=5)
+    kt = servo.physics.params.torque_constant_nm_a
+    assert -held_nm == pytest.approx(kt * 0.2, abs=servo.physics.params.coulomb_friction_nm * 1.01)
+
+
+def test_pwm_limit_caps_the_duty_in_pwm_and_position_modes():
+    servo, cmd = make(torque_enable=1, operating_mode=OperatingMode.PWM, pwm_limit=300)
+    write(servo, cmd, goal_pwm=885)
+    trace = run(servo, 1.0)
+    assert max(abs(s.present_pwm) for s in trace) == 300
+    full, fcmd = make(torque_enable=1, operating_mode=OperatingMode.PWM)
+    write(full, fcmd, goal_pwm=885)
+    full_speed = run(full, 1.0)[-1].present_velocity
+    assert trace[-1].present_velocity < 0.4 * full_speed
+    servo, cmd = make(torque_enable=1, pwm_limit=200)
+    write(servo, cmd, goal_position=servo.sense().present_position + 2000)
+    assert max(abs(s.present_pwm) for s in run(servo, 1.0)) == 200
+
+
+# ---------------------------------------------------------------------------- position registers
+
+
+def test_homing_offset_shifts_present_position():
+    servo, cmd = make(operating_mode=OperatingMode.EXTENDED_POSITION)
+    plain = servo.sense().present_position
+    write(servo, cmd, homing_offset=5000)
+    assert servo.sense().present_position == plain + 5000
+    write(servo, cmd, operating_mode=OperatingMode.POSITION, homing_offset=700)
+    assert servo.sense().present_position == plain + 700
+    write(servo, cmd, homing_offset=2000)  # outside -1024..1024: ignored in Position Control Mode
+    assert servo.sense().present_position == plain
+
+
+def test_extended_position_mode_counts_turns_and_clear_drops_them():
+    servo, cmd = make(torque_enable=1, operating_mode=OperatingMode.EXTENDED_POSITION, profile_velocity=200, profile_acceleration=100)
+    goal = 3 * PULSES_PER_REV + 100
+    write(servo, cmd, goal_position=goal)
+    trace = run(servo, 6.0)
+    assert abs(trace[-1].present_position - goal) <= 4
+    assert servo.physics.angle_rad == pytest.approx(goal * 2 * math.pi / 4096, abs=0.01)
+    servo.clear_multi_turn()
+    after = run(servo, 0.5)[-1].present_position
+    assert abs(after - 100) <= 4  # the angle within one turn, and the shaft held where it was
+    assert servo.physics.angle_rad == pytest.approx(goal * 2 * math.pi / 4096, abs=0.01)
+
+
+def test_position_mode_resets_to_one_turn_at_torque_on_and_clamps_goal_to_limits():
+    servo, cmd = make(operating_mode=OperatingMode.EXTENDED_POSITION, torque_enable=1)
+    write(servo, cmd, goal_position=2 * PULSES_PER_REV + 1000)
+    run(servo, 5.0)
+    write(servo, cmd, torque_enable=0)
+    write(servo, cmd, operating_mode=OperatingMode.POSITION, max_position_limit=3000, min_position_limit=500)
+    assert abs(servo.sense().present_position - 1000) <= 4
+    write(servo, cmd, torque_enable=1)
+    write(servo, cmd, goal_position=4000)  # beyond Max Position Limit: held at it
+    trace = run(servo, 2.0)
+    assert abs(trace[-1].present_position - 3000) <= 4
+
+
+def test_reverse_drive_mode_mirrors_the_shaft():
+    servo, cmd = make(torque_enable=1, drive_mode=0x01)
+    start = servo.sense().present_position
+    angle0 = servo.physics.angle_rad
+    write(servo, cmd, goal_position=start + 1000)
+    trace = run(servo, 2.0)
+    assert abs(trace[-1].present_position - (start + 1000)) <= 4
+    assert servo.physics.angle_rad - angle0 == pytest.approx(-1000 * 2 * math.pi / 4096, abs=0.01)
+
+
+def test_torque_on_by_goal_update():
+    servo, cmd = make(drive_mode=0x08)
+    assert servo.sense().torque_enable == 0
+    write(servo, cmd, goal_position=servo.sense().present_position + 500)
+    assert servo.sense().torque_enable == 1
+    plain, pcmd = make()
+    write(plain, pcmd, goal_position=plain.sense().present_position + 500)
+    assert plain.sense().torque_enable == 0
+    assert run(plain, 0.5)[-1].present_position == plain.sense().present_position
+
+
+# ---------------------------------------------------------------------------- protection
+
+
+def test_overload_shuts_down_and_reboot_clears_it():
+    servo, cmd = make(torque_enable=1, overload_time_s=1.0)
+    start = servo.sense().present_position
+    write(servo, cmd, goal_position=start + 1000)
+    servo.set_external_torque(-6.0)  # beyond the XM430-W350's 4.1 N m stall torque at 12 V
+    trace = run(servo, 2.0)
+    first = next(i for i, s in enumerate(trace) if s.hardware_error_status)
+    assert 0.9 <= (first + 1) / 1000 <= 1.3
+    assert trace[-1].hardware_error_status == HW_ERROR_OVERLOAD
+    assert trace[-1].torque_enable == 0 and trace[-1].present_pwm == 0
+    write(servo, cmd, torque_enable=0)
+    write(servo, cmd, torque_enable=1)  # refused until REBOOT
+    assert servo.sense().torque_enable == 0
+    servo.set_external_torque(0.0)
+    servo.reboot()
+    assert servo.sense().hardware_error_status == 0 and servo.sense().torque_enable == 0
+    write(servo, cmd, torque_enable=0)
+    write(servo, cmd, torque_enable=1)
+    assert servo.sense().torque_enable == 1
+
+
+def test_overload_not_selected_by_shutdown_is_not_reported():
+    servo, cmd = make(torque_enable=1, shutdown=0x04, overload_time_s=0.5)
+    write(servo, cmd, goal_position=servo.sense().present_position + 1000)
+    servo.set_external_torque(-6.0)
+    trace = run(servo, 1.5)
+    assert trace[-1].hardware_error_status == 0 and trace[-1].torque_enable == 1
+
+
+def test_overheating_from_winding_loss_shuts_down():
+    servo, cmd = make("XL330-M288", torque_enable=1, operating_mode=OperatingMode.CURRENT,
+                      thermal=ThermalParams(time_constant_s=20.0), temperature_limit=70)
+    write(servo, cmd, goal_current=1200)
+    hot = None
+    for k in range(60):
+        _hold_shaft(servo, 0.5)
+        s = servo.sense()
+        if s.hardware_error_status:
+            hot = (k + 1) * 0.5
+            break
+    assert hot is not None and s.hardware_error_status == HW_ERROR_OVERHEATING
+    assert s.present_temperature >= 70 and s.torque_enable == 0
+    cooled = servo.temperature_c
+    servo.step_to(servo.time_s + 60.0)  # torque off and at rest: cools in one skipped stretch
+    assert servo.temperature_c < cooled - 20
+
+
+def test_input_voltage_outside_limits():
+    servo, cmd = make(torque_enable=1, shutdown=52 | HW_ERROR_INPUT_VOLTAGE)
+    assert servo.sense().present_input_voltage == 120
+    servo.set_supply_v(16.5)
+    run(servo, 0.01)
+    s = servo.sense()
+    assert s.hardware_error_status == HW_ERROR_INPUT_VOLTAGE and s.torque_enable == 0
+    quiet, qcmd = make(torque_enable=1)  # the default Shutdown (52) does not select it
+    quiet.set_supply_v(16.5)
+    run(quiet, 0.01)
+    assert quiet.sense().hardware_error_status == 0
+
+
+# ---------------------------------------------------------------------------- cost
+
+
+def test_a_servo_at_rest_with_torque_off_skips_its_steps_and_one_pushed_moves():
+    servo, cmd = make()
+    angle = servo.physics.angle_rad
+    servo.step_to(100.0)
+    assert servo.time_s == pytest.approx(100.0) and servo.physics.angle_rad == angle
+    servo.set_external_torque(0.5)
+    servo.step_to(100.5)
+    assert servo.physics.angle_rad > angle + 0.1
+    assert servo.sense().present_velocity > 0
+    assert VELOCITY_UNIT_PULSES_S == pytest.approx(0.229 * 4096 / 60)
