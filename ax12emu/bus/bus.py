@@ -140,6 +140,11 @@ class Bus:
         """Present IDs, in slot order."""
         return [servo.id for servo in self.servos]
 
+    @property
+    def physics_step_s(self) -> float:
+        """The model's control step: the serving loop's physics tick lands on its grid."""
+        return self.plant.model.step_s
+
     # -- time --------------------------------------------------------------------------
     def advance(self) -> bool:
         """Bring the physics up to the clock's present time; True if a step was taken."""

@@ -11,6 +11,7 @@ The format (``models/ax-12a.toml`` is the worked example)::
     name = "XL430-W250"          # as ROBOTIS writes it
     model_number = 1060          # must equal the table's model_number default
     firmware_version = 45        # optional: the value the emulated servo reports
+    baud_rates_bps = [9600, 57600, 115200, 1000000]  # optional: bit rate per Baud Rate register value
     protocols = ["2.0"]          # "1.0" and/or "2.0": the protocol this table is for
     source = "..."               # e-manual page and the emanual repository commit
 
@@ -40,6 +41,7 @@ The format (``models/ax-12a.toml`` is the worked example)::
     operating_voltage_v = [6.5, 12.0]
     recommended_voltage_v = 11.1
     ratings = [ { voltage_v = 12.0, stall_torque_nm = 1.5, stall_current_a = 1.4, no_load_speed_rpm = 61 } ]
+    current_unit_ma = 2.69       # optional: Goal/Present Current's unit, where the table has them
 
 Entry keys: ``address``, ``size`` (1, 2 or 4), ``name`` (snake_case, unique), ``access`` ("R" or "RW"),
 ``area`` ("EEPROM" or "RAM"; EEPROM entries come before the first RAM one), ``default`` (absent: the
@@ -75,14 +77,14 @@ MODELS_PACKAGE_DIR = "models"
 PROTOCOLS = ("1.0", "2.0")
 SHUTDOWN_CLEARS = ("torque_limit", "torque_enable")
 
-_MODEL_KEYS = {"name", "model_number", "firmware_version", "protocols", "source"}
+_MODEL_KEYS = {"name", "model_number", "firmware_version", "protocols", "source", "baud_rates_bps"}
 _TABLE_KEYS = {"size", "entries"}
 _ENTRY_KEYS = {"address", "size", "name", "access", "area", "default", "min", "max", "signed", "min_from", "max_from",
                "count", "first", "default_step", "note"}
 _PROFILE_KEYS = {"source", "overrides", "extra_entries", "lock_writable", "shutdown_clears"}
 _OVERRIDE_KEYS = {"default": "default", "min": "minimum", "max": "maximum"}
 _PHYSICAL_KEYS = {"source", "gear_ratio", "weight_g", "resolution_deg", "position_range_deg", "operating_voltage_v",
-                  "recommended_voltage_v", "ratings"}
+                  "recommended_voltage_v", "ratings", "current_unit_ma"}
 _RATING_KEYS = {"voltage_v", "stall_torque_nm", "stall_current_a", "no_load_speed_rpm", "note"}
 
 
@@ -113,6 +115,8 @@ class Physical:
     weight_g: float | None = None
     resolution_deg: float | None = None
     position_range_deg: float | None = None
+    #: Goal/Present Current's unit, mA (X series with current sensing); None where the table has no current.
+    current_unit_ma: float | None = None
 
     def rating_at(self, voltage_v: float | None = None) -> Rating:
         """The rating at ``voltage_v``, or at the recommended supply, or the first one listed."""
@@ -142,6 +146,9 @@ class ServoModel:
     physical: Physical
     #: The file it came from, for messages.
     path: str = ""
+    #: Bit rate for each Baud Rate register value (index = value); empty where the file gives none
+    #: (the Protocol 1.0 models compute theirs: 2 Mbps / (value + 1)).
+    baud_rates_bps: tuple[int, ...] = ()
     _layouts: dict[str, Layout] = field(default_factory=dict, compare=False, repr=False)
 
     @property
@@ -342,9 +349,23 @@ def _physical(where: _Where, raw: Any) -> Physical:
         if not low <= rating.voltage_v <= high:
             raise where.error("physical.ratings", f"rating at {rating.voltage_v} V is outside the operating range {low}..{high} V")
     optional = {k: where.number(raw[k], f"physical.{k}") for k in
-                ("recommended_voltage_v", "weight_g", "resolution_deg", "position_range_deg") if k in raw}
+                ("recommended_voltage_v", "weight_g", "resolution_deg", "position_range_deg", "current_unit_ma") if k in raw}
     return Physical(source=where.text(raw["source"], "physical.source"), gear_ratio=where.number(raw["gear_ratio"], "physical.gear_ratio"),
                     ratings=tuple(ratings), operating_voltage_v=(low, high), **optional)
+
+
+def _baud_rates(where: _Where, raw: Any, register: Entry | None) -> tuple[int, ...]:
+    """The bit rate of each Baud Rate register value; every value the register accepts must have one."""
+    if raw is None:
+        return ()
+    if not isinstance(raw, list) or not raw:
+        raise where.error("model.baud_rates_bps", f"must be a non-empty list of bit rates, got {raw!r}")
+    rates = tuple(where.integer(v, "model.baud_rates_bps") for v in raw)
+    if any(rate <= 0 for rate in rates):
+        raise where.error("model.baud_rates_bps", f"bit rates must be positive, got {list(rates)}")
+    if register is not None and register.maximum >= len(rates):
+        raise where.error("model.baud_rates_bps", f"{len(rates)} rates, but baud_rate accepts values up to {register.maximum}")
+    return rates
 
 
 def parse_model(text: str, key: str, path: str) -> ServoModel:
@@ -379,6 +400,7 @@ def parse_model(text: str, key: str, path: str) -> ServoModel:
     if firmware is not None:
         firmware = where.integer(firmware, "model.firmware_version")
     profiles = _profiles(where, data.get("profiles"), key, entries, table_size)
+    bauds = _baud_rates(where, info.get("baud_rates_bps"), seen.get("baud_rate"))
     return ServoModel(
         key=key,
         name=where.text(info["name"], "model.name"),
@@ -391,6 +413,7 @@ def parse_model(text: str, key: str, path: str) -> ServoModel:
         profiles=MappingProxyType(profiles),
         physical=_physical(where, data["physical"]),
         path=path,
+        baud_rates_bps=bauds,
     )
 
 

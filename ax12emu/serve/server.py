@@ -288,7 +288,7 @@ class BusServer:
         scale = self._time_scale
         if scale is None:  # virtual time: the clock moves only when a test moves it
             return max(self._next_physics + self.physics_period_s, now)
-        step_s = self.bus.plant.model.step_s
+        step_s = self.bus.physics_step_s
         steps = max(1, round(self.physics_period_s * scale / step_s))  # one at real time, more when faster
         sim_now_s = self.bus.clock.now_s()
         wall_s = time.monotonic()  # read second: the tick may come a hair late, never early

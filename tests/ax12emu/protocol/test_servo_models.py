@@ -198,3 +198,25 @@ def test_lock_window_and_shutdown_only_where_the_table_and_sources_have_them():
         parse_model(_minimal() + '[profiles.p]\nsource = "s"\nshutdown_clears = "power"\n', "t", "bad.toml")
     assert model("xl430-w250").layout().profile.shutdown_clears == "torque_enable"
     assert model("ax-18a").layout().profile.shutdown_clears == "torque_limit"
+
+
+@pytest.mark.parametrize(
+    ("header", "message"),
+    [
+        ("baud_rates_bps = []", r"model.baud_rates_bps: must be a non-empty list"),
+        ("baud_rates_bps = [9600, 0]", r"model.baud_rates_bps: bit rates must be positive"),
+        ("baud_rates_bps = [9600, 57600]", r"2 rates, but baud_rate accepts values up to 3"),
+    ],
+)
+def test_baud_rates_cover_every_baud_rate_value(header, message):
+    extra = '{ address = 4, size = 1, name = "baud_rate", access = "RW", area = "EEPROM", min = 0, max = 3 },'
+    with pytest.raises(ValueError, match=message):
+        parse_model(_minimal(extra=extra, header=header), "t", "bad.toml")
+
+
+def test_protocol_2_models_give_baud_rates_and_current_units():
+    """Every Protocol 2.0 X-series file maps each Baud Rate value to bits per second; current units where sensed."""
+    xl430, xm430 = model("xl430-w250"), model("xm430-w350")
+    assert xl430.baud_rates_bps[1] == 57600 and xl430.baud_rates_bps[3] == 1_000_000
+    assert (xl430.physical.current_unit_ma, xm430.physical.current_unit_ma) == (None, 2.69)
+    assert model("ax-12a").baud_rates_bps == ()

@@ -1,0 +1,295 @@
+"""A half-duplex bus of Protocol 2.0 servos (the X series): bytes in, timed status packets out.
+
+Why it exists: Protocol 2.0 servos share the wire differently from Protocol 1.0 ones, so the
+bus that owns them decides more than who hears a packet: which servo answers when, in one
+order, for the instructions several servos answer.  It offers the serving loop
+(:class:`ax12emu.serve.BusServer`) what :class:`ax12emu.bus.Bus` offers, so the same loop, pty
+and TCP transports serve it, and it does no I/O.
+
+Who answers, and when (ROBOTIS e-manual, "DYNAMIXEL Protocol 2.0"; times from the end of the
+instruction, byte times at each servo's baud, 10 bits a byte):
+
+* an instruction to one ID: that servo, Return Delay Time after (2 us units), as on Protocol 1.0;
+* broadcast Ping: "All devices send their Status Packet according to their arranged order".
+  The e-manual gives no times.  Each servo answers in the slot of its ID: the servo with ID n
+  starts ``RDT + n * (its Ping status time + RDT)`` after the instruction, so consecutive IDs from
+  0 follow each other back to back.  A slot per ID rather than "after the previous answer" because
+  a lone servo with a high ID answers late on real hardware (Dynamixel2Arduino issue 106: at
+  2 Mbps a lone ID 5 needed a longer timeout than IDs 1 and 2), and dynamixel-sdk's broadcastPing
+  and Dynamixel2Arduino's wait grow with the highest ID (3 ms per ID), not with the servo count;
+* Sync Read and Bulk Read: the listed servos answer one at a time in list order, each Return
+  Delay Time after the previous servo's status packet ended (each hears the one before it);
+* Fast Sync Read and Fast Bulk Read: one status packet with ID 0xFE that the listed servos build
+  together (``packets2.fast_status_pieces``): the first sends the header and its share Return
+  Delay Time after the instruction, each next one its share right after the previous share ended;
+* a servo listed in a Sync/Bulk/Fast read that is absent or silent (another baud, Status Return
+  Level 0) breaks the chain: the servos listed after it wait for a status that never comes and stay
+  silent.  The e-manual does not say what they do; a client sees a timeout or a short packet,
+  as it would from a broken chain of real servos;
+* Read to the broadcast ID: not executed ("Status Packet will not be returned for READ and WRITE
+  Instructions"); Write, Reg Write, Action, Factory Reset, Reboot, Clear and Backup to the broadcast
+  ID: executed by every servo, answered by none; Sync/Bulk instructions are executed only when sent
+  to the broadcast ID ("Packet ID field : 0xFE"), and ignored otherwise;
+* status packets on the wire (another servo's answer) are heard and ignored.
+
+Time: before any request the firmware models are brought to the present (and one control step
+past a client's write), as the Protocol 1.0 bus does with ``Plant.catch_up``; the Bus Watchdog of
+each servo measures the silence since the last instruction packet it heard.
+
+Not modelled: faults injection, the reply cache, persisted EEPROM state, the live view (the
+Protocol 1.0 bus has them), a servo's busy time after a write to its EEPROM, and the time a
+rebooting servo is deaf.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Iterable, Iterator, Sequence
+
+from ax12emu.protocol.framing2 import Framer2
+from ax12emu.protocol.packets import BROADCAST_ID
+from ax12emu.protocol.packets2 import (
+    MAX_ID2,
+    FastStatusPart,
+    Instruction2,
+    InstructionPacket2,
+    StatusPacket2,
+    encode_status2,
+    fast_status_pieces,
+)
+from ax12emu.protocol.params2 import INSTRUCTION_SPECS, Broadcast, BulkRead, SyncRead, parse_params
+from ax12emu.protocol.servo_models import ServoModel
+from ax12emu.servo.plant2 import Plant2
+from ax12emu.servo.request_handler2 import answers, handle2, listed_read, status_byte
+from ax12emu.servo.servo2 import Servo2, Servo2Options
+from firmware_model.xseries.interface import XServoModel
+
+from .bus import BAUD_TOLERANCE
+from .clock import VirtualClock, WallClock
+from .reply import BITS_PER_BYTE, Reply
+
+__all__ = ["Bus2", "FirmwareFactory"]
+
+log = logging.getLogger(__name__)
+
+#: Builds one servo's firmware model from its model file (``spec``) and its index on the bus.
+FirmwareFactory = Callable[[ServoModel, int], XServoModel]
+
+_EXECUTED_SILENTLY = frozenset({Broadcast.SILENT, Broadcast.EACH_ANSWERS})
+_LISTED_READS = frozenset({Broadcast.REQUIRED_EACH_ANSWERS, Broadcast.REQUIRED_COMBINED_ANSWER})
+_REQUIRED_BROADCAST = _LISTED_READS | {Broadcast.REQUIRED_SILENT}
+
+
+class Bus2:
+    """Protocol 2.0 servos on one wire, each with its own model file and firmware model."""
+
+    def __init__(
+        self,
+        servos: Iterable[tuple[int, ServoModel]],
+        firmware: FirmwareFactory,
+        *,
+        clock: WallClock | VirtualClock | None = None,
+        options: Servo2Options = Servo2Options(),
+        framer: Framer2 | None = None,
+    ) -> None:
+        slots = list(servos)
+        if not slots:
+            raise ValueError("a bus needs at least one servo")
+        ids = [servo_id for servo_id, _ in slots]
+        if len(set(ids)) != len(ids):
+            raise ValueError(f"duplicate IDs in {ids}")
+        for servo_id in ids:
+            if not 0 <= servo_id <= MAX_ID2:
+                raise ValueError(f"ID {servo_id} is outside 0..{MAX_ID2} (Protocol 2.0)")
+        self.slots = ids
+        self.clock = clock if clock is not None else WallClock()
+        self.framer = framer if framer is not None else Framer2()
+        self.servos: list[Servo2] = []
+        for index, (servo_id, spec) in enumerate(slots):
+            model = firmware(spec, index)
+            self.servos.append(Servo2(spec, lambda servo, m=model: Plant2(m, servo.table),
+                                      servo_id=servo_id, index=index, options=options))
+        self._by_id: dict[int, list[Servo2]] = {}
+        self.reindex()
+        #: How far behind the clock physics may be when a packet is served (see ``Bus.request_lag_s``).
+        self.request_lag_s = 0.0
+        #: No fault injection on this bus (the serving loop and harness test for None).
+        self.faults = None
+        self._closed = False
+
+    # -- lookup ------------------------------------------------------------------------
+    def reindex(self) -> None:
+        """Look servos up by the IDs in their tables again."""
+        by_id: dict[int, list[Servo2]] = {}
+        for servo in self.servos:
+            by_id.setdefault(servo.id, []).append(servo)
+        self._by_id = by_id
+
+    def servo(self, servo_id: int) -> Servo2:
+        """The (first) servo answering to ``servo_id`` now."""
+        try:
+            return self._by_id[servo_id][0]
+        except KeyError:
+            raise KeyError(f"no servo with ID {servo_id} on the bus (IDs now: {sorted(self._by_id)})") from None
+
+    @property
+    def ids(self) -> list[int]:
+        return [servo.id for servo in self.servos]
+
+    @property
+    def physics_step_s(self) -> float:
+        """The shortest control step of the servos' firmware models."""
+        return min(servo.plant.firmware.step_s for servo in self.servos)
+
+    # -- time --------------------------------------------------------------------------
+    def _sim_time_s(self) -> float:
+        return self.clock.now_s() - self.request_lag_s
+
+    def catch_up(self, sim_time_s: float) -> None:
+        """Every servo's firmware brought to ``sim_time_s`` (and past a client's write); watchdogs checked."""
+        for servo in self.servos:
+            if servo.plant.due(sim_time_s):
+                servo.plant.catch_up(sim_time_s)
+            servo.check_watchdog(sim_time_s)
+
+    def advance(self) -> bool:
+        """Bring the physics up to the clock's present time; True if a servo stepped."""
+        sim_time_s = self.clock.now_s()
+        due = any(servo.plant.due(sim_time_s) for servo in self.servos)
+        self.catch_up(sim_time_s)
+        return due
+
+    def advance_in_pieces(self) -> Iterator[None]:
+        """:meth:`advance` one servo piece at a time, for a serving loop to interleave with packets."""
+        sim_time_s = self.clock.now_s()
+        for servo in self.servos:
+            yield from servo.plant.tick(sim_time_s)
+            servo.check_watchdog(sim_time_s)
+
+    # -- bytes in, replies out ---------------------------------------------------------
+    def receive(self, data: bytes, now_s: float | None = None, *, line_bps: float | None = None) -> list[Reply]:
+        """Feed bytes that arrived at wall time ``now_s``; return the replies they cause."""
+        return [reply for replies in self.answer(data, now_s, line_bps=line_bps) for reply in replies]
+
+    def cached_replies(self, data: bytes, line_bps: float | None = None) -> Sequence[Reply] | None:
+        """No reply cache on this bus: always None (every packet is decoded)."""
+        return None
+
+    def answer(self, data: bytes, now_s: float | None = None, *, line_bps: float | None = None,
+               cache: bool = True, looked_up: bool = False) -> list[Sequence[Reply]]:
+        """Feed bytes; return the replies to each packet they completed, one sequence per packet."""
+        return [self.dispatch(packet, line_bps=line_bps) for packet in self.framer.feed(data, now_s)]
+
+    def expire(self, now_s: float) -> None:
+        """Let the framer drop a partial packet after silence."""
+        self.framer.expire(now_s)
+
+    def _hears(self, servo: Servo2, line_bps: float | None) -> bool:
+        baud = servo.baud_bps
+        return line_bps is None or abs(line_bps - baud) <= BAUD_TOLERANCE * baud
+
+    def dispatch(self, packet: InstructionPacket2 | StatusPacket2, *, line_bps: float | None = None) -> list[Reply]:
+        """Run one decoded packet on the servos it reaches; return their replies, timed."""
+        if isinstance(packet, StatusPacket2):
+            return []  # another device's answer: every servo hears it, none acts
+        now_s = self._sim_time_s()
+        self.catch_up(now_s)
+        broadcast = packet.id == BROADCAST_ID
+        targets = [s for s in (self.servos if broadcast else self._by_id.get(packet.id, ()))
+                   if self._hears(s, line_bps)]
+        if log.isEnabledFor(logging.DEBUG):
+            log.debug("rx id=%d inst=%#04x params=%s -> IDs %s", packet.id, packet.instruction, packet.params.hex(" "),
+                      [s.id for s in targets])
+        for servo in targets:
+            servo.heard(now_s)
+        spec = INSTRUCTION_SPECS.get(packet.instruction)
+        kind = spec.broadcast if spec is not None else None
+        if not packet.crc_ok or not broadcast:
+            replies = [] if kind in _REQUIRED_BROADCAST and packet.crc_ok else self._each_own(packet, targets)
+        elif kind in _LISTED_READS:
+            replies = self._listed(packet, line_bps)
+        elif packet.instruction == Instruction2.PING:
+            replies = self._broadcast_ping(packet, targets)
+        elif kind in _EXECUTED_SILENTLY or kind is Broadcast.REQUIRED_SILENT:
+            for servo in targets:
+                handle2(servo, packet)
+            replies = []
+        else:
+            replies = []  # Read to the broadcast ID, or an undefined instruction: not executed
+        if packet.crc_ok and kind not in _LISTED_READS and packet.instruction != Instruction2.PING:
+            self.reindex()
+        return replies
+
+    def _each_own(self, packet: InstructionPacket2, targets: list[Servo2]) -> list[Reply]:
+        if packet.id == BROADCAST_ID:
+            return []  # a corrupt broadcast: nobody may answer it
+        replies = []
+        for servo in targets:
+            outcome = handle2(servo, packet)
+            if outcome.reply is not None:
+                replies.append(Reply(outcome.reply_id, outcome.reply, outcome.delay_s, servo.baud_bps))
+        return replies
+
+    def _broadcast_ping(self, packet: InstructionPacket2, targets: list[Servo2]) -> list[Reply]:
+        replies = []
+        for servo in sorted(targets, key=lambda s: s.id):
+            outcome = handle2(servo, packet._replace(id=servo.id))
+            if outcome.reply is None:
+                continue
+            delay_s = servo.return_delay_s
+            slot_s = len(outcome.reply) * BITS_PER_BYTE / servo.baud_bps + delay_s
+            replies.append(Reply(servo.id, outcome.reply, delay_s + servo.id * slot_s, servo.baud_bps))
+        return replies
+
+    def _listed(self, packet: InstructionPacket2, line_bps: float | None) -> list[Reply]:
+        """Sync/Bulk Read and their fast forms: the listed servos answer in list order (see the module docstring)."""
+        params = parse_params(packet.instruction, packet.params)
+        if isinstance(params, SyncRead):
+            reads = [(servo_id, params.address, params.length) for servo_id in params.ids]
+        elif isinstance(params, BulkRead):
+            reads = list(params.reads)
+        else:
+            return []  # malformed: no listed servo can tell it is listed
+        fast = INSTRUCTION_SPECS[packet.instruction].broadcast is Broadcast.REQUIRED_COMBINED_ANSWER
+        answered: list[tuple[Servo2, int, bytes]] = []
+        for servo_id, address, length in reads:
+            found = self._by_id.get(servo_id)
+            servo = found[0] if found else None
+            if servo is None or not self._hears(servo, line_bps) or not answers(servo, packet.instruction):
+                break
+            error, data = listed_read(servo, address, length)
+            answered.append((servo, error, data))
+        if not answered:
+            return []
+        replies: list[Reply] = []
+        if fast:
+            parts = [FastStatusPart(servo_id, 0, bytes(length)) for servo_id, _, length in reads]
+            for k, (servo, error, data) in enumerate(answered):
+                parts[k] = FastStatusPart(servo.id, status_byte(servo, error), data)
+            pieces = fast_status_pieces(parts)[: len(answered)]
+            at_s = answered[0][0].return_delay_s
+            for (servo, _, _), piece in zip(answered, pieces):
+                replies.append(Reply(BROADCAST_ID, piece, at_s, servo.baud_bps))
+                at_s += len(piece) * BITS_PER_BYTE / servo.baud_bps
+            return replies
+        at_s = 0.0
+        for servo, error, data in answered:
+            status = encode_status2(servo.id, status_byte(servo, error), data)
+            at_s += servo.return_delay_s
+            replies.append(Reply(servo.id, status, at_s, servo.baud_bps))
+            at_s += len(status) * BITS_PER_BYTE / servo.baud_bps
+        return replies
+
+    # -- life cycle --------------------------------------------------------------------
+    def save_state(self) -> None:
+        """Nothing persists on this bus yet (see the module docstring)."""
+
+    def close(self) -> None:
+        """Safe to call more than once."""
+        self._closed = True
+
+    def __enter__(self) -> "Bus2":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

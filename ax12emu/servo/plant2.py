@@ -1,0 +1,135 @@
+"""The adapter between one X-series control table and its firmware model: commands out, sensed values in.
+
+Why it exists: as :mod:`ax12emu.servo.plant` does for the AX-12, it is the one place that knows
+both the table's registers and the model's seam (:mod:`firmware_model.xseries.interface`), so
+neither imports the other.  A Protocol 2.0 bus may mix models with different tables, so there is
+one plant per servo, and registers are matched by name: a model's table without a register
+(the XL430 has no Goal Current) leaves that command at its default.
+
+What it adds to the seam, from the e-manual (X series, "Bus Watchdog(98)"):
+:meth:`hold` stops the servo as the Bus Watchdog does ("the DYNAMIXEL will stop"): the model is
+commanded to hold its present position at zero velocity, PWM and current, whatever the Goal
+registers say, until :meth:`release` (the next goal a client writes after the error is cleared).
+Shutdown is the firmware's: it reports Torque Enable among the sensed registers.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+from firmware_model.xseries.interface import XCommands, XSensed, XServoModel
+
+from .table2 import Table2
+
+__all__ = ["Plant2", "SENSED_REGISTERS"]
+
+#: Where each sensed value goes: the first of these registers the table has (the XL430's
+#: register 126 is Present Load, the current-sensing models' Present Current).
+SENSED_REGISTERS: dict[str, tuple[str, ...]] = {
+    name: (name,) for name in XSensed.field_names()
+}
+SENSED_REGISTERS["present_current"] = ("present_current", "present_load")
+
+
+class Plant2:
+    """Runs ``firmware`` behind ``table``; brought to a time by the bus before each request."""
+
+    def __init__(self, firmware: XServoModel, table: Table2) -> None:
+        self.firmware = firmware
+        self.table = table
+        by_name = table.layout.by_name
+        self._commands = [(name, by_name[name]) for name in XCommands.field_names() if name in by_name]
+        self._sensed = []
+        for field, candidates in SENSED_REGISTERS.items():
+            present = [by_name[name] for name in candidates if name in by_name]
+            if present:
+                self._sensed.append((field, present[0]))
+        #: Goals the firmware holds instead of the table's (Bus Watchdog stop), or None.
+        self._held: dict[str, int] | None = None
+        #: A client changed the commands since the tables last showed a step (see :meth:`catch_up`).
+        self._write_unseen = False
+        self.command()
+        self.write_back()
+
+    @property
+    def held(self) -> bool:
+        return self._held is not None
+
+    def commands(self) -> XCommands:
+        """The command registers as the firmware takes them (held goals in place of the table's)."""
+        row = self.table.row
+        values = {name: entry.value_in(row) for name, entry in self._commands}
+        if self._held is not None:
+            values.update(self._held)
+        return XCommands(**values)
+
+    def command(self, *, goal_written: bool = False) -> None:
+        """Hand the model the table's commands now; the next request sees a step taken after them."""
+        self.firmware.command(self.commands(), goal_written=goal_written)
+        self._write_unseen = True
+
+    def hold(self) -> None:
+        """Stop where the shaft is (Bus Watchdog): zero velocity, PWM and current, goal = present position."""
+        present = self.table.get("present_position") if self.table.has("present_position") else 0
+        self._held = {"goal_velocity": 0, "goal_pwm": 0, "goal_current": 0, "goal_position": present}
+        self.command(goal_written=True)
+
+    def release(self) -> None:
+        """Take the table's goals again (called with a goal write, which then commands the model)."""
+        self._held = None
+
+    # -- time ----------------------------------------------------------------------------
+    def due(self, sim_time_s: float) -> bool:
+        """Whether a whole step is due by ``sim_time_s`` or a client's write is not yet shown."""
+        model = self.firmware
+        return self._write_unseen or sim_time_s >= model.time_s + model.step_s
+
+    def catch_up(self, sim_time_s: float) -> None:
+        """Step to ``sim_time_s``, and at least one step past a client's write, then copy the sensed registers.
+
+        Why one step past a write: as on the AX-12 (``Plant.wrote``), the firmware's control loop
+        runs before a host's next packet can arrive, so a client that writes a goal and then reads
+        Moving finds the move started.
+        """
+        model = self.firmware
+        stepped = False
+        if sim_time_s >= model.time_s + model.step_s:
+            model.step_to(sim_time_s)
+            stepped = True
+        if self._write_unseen and not stepped:
+            model.step_to(model.time_s + model.step_s)
+            stepped = True
+        self._write_unseen = False
+        if stepped:
+            self.write_back()
+
+    def tick(self, sim_time_s: float) -> Iterator[None]:
+        """:meth:`catch_up` in two pieces (step, then the copy), for a serving loop to interleave with packets."""
+        model = self.firmware
+        if sim_time_s < model.time_s + model.step_s:
+            return
+        model.step_to(sim_time_s)
+        yield
+        self._write_unseen = False
+        self.write_back()
+
+    def write_back(self) -> None:
+        """Copy what the firmware senses into the table (Torque Enable too, which Shutdown clears)."""
+        sensed = self.firmware.sense()
+        table = self.table
+        for field, entry in self._sensed:
+            table.set(entry.name, getattr(sensed, field))
+
+    # -- instructions that reach the firmware ---------------------------------------------
+    def reboot(self) -> None:
+        """REBOOT: the model restarts; the table's RAM area returns to its defaults."""
+        self.firmware.reboot()
+        self.table.ram_defaults()
+        self._held = None
+        self.write_back()
+        self.command()
+
+    def clear_multi_turn(self) -> None:
+        """CLEAR option 0x01: the model drops Present Position's turn count."""
+        self.firmware.clear_multi_turn()
+        self.write_back()

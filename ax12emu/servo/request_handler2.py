@@ -1,0 +1,264 @@
+"""What a Protocol 2.0 servo does with one instruction, and what it answers.
+
+Why it exists: the policy of Protocol 2.0 (which error number, what is written, who answers)
+lives here in one place, one small handler per instruction in a table keyed by instruction code;
+the bus decides who hears a packet and when each answer goes out.  Wire errors are values
+(:class:`~ax12emu.protocol.packets2.ErrorNumber`); nothing here raises on bad input.
+
+Policy, with sources (ROBOTIS e-manual, "DYNAMIXEL Protocol 2.0"; X series "Status Return Level(68)"):
+
+* the status error byte is this instruction's error number, with bit 7 (Alert) set while Hardware
+  Error Status is non-zero ("Status Packet > Error");
+* Status Return Level 0 answers PING only, 1 PING and the read instructions (Read, Sync Read,
+  Bulk Read and their fast forms: the e-manual says "READ Instruction"; a Sync Read that nobody
+  answered would be useless), 2 everything; PING is answered "regardless of the Status Return Level";
+* a packet to this ID whose CRC does not match: CRC Error (3) (see :class:`Servo2Options`);
+* an undefined instruction, or Action with nothing registered: Instruction Error (2);
+* parameters whose structure is wrong (a Read without its 4 bytes, a Clear without its fixed
+  bytes, a Factory Reset option not in the table): Result Fail (1), "Failed to process the sent
+  Instruction Packet" -- the e-manual names no error for them;
+* Write, Reg Write, Sync Write and Bulk Write: the table's checks (:mod:`ax12emu.servo.table2`),
+  Access, Data Length, Data Range, Data Limit, all or nothing;
+* Clear while moving: Result Fail ("Clear (0x10)"); Control Table Backup store with the torque
+  on: Result Fail; restore with nothing stored: Result Fail;
+* Factory Reset 0xFF sent to the broadcast ID is not executed (X series FW42 and later);
+* the status packet is built before the instruction takes effect on ID, baud, Return Delay Time
+  and Status Return Level: a servo whose ID changes answers from its old ID, and Factory Reset and
+  Reboot answer before they reset (the e-manual's examples answer from ID 1 after both);
+* a READ that fails still carries the bytes asked for, zero: dynamixel-sdk indexes the data of
+  an erroring reply, and a short one would crash the client instead of reporting the error.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from typing import NamedTuple
+
+from ax12emu.protocol.packets import BROADCAST_ID
+from ax12emu.protocol.packets2 import (
+    ALERT_BIT,
+    ErrorNumber,
+    Instruction2,
+    InstructionPacket2,
+    Malformed,
+    encode_status2,
+)
+from ax12emu.protocol.params2 import (
+    BackupOption,
+    BulkWrite,
+    Clear,
+    ControlTableBackup,
+    FactoryReset,
+    FactoryResetOption,
+    Params,
+    Read,
+    SyncWrite,
+    Write,
+    parse_params,
+)
+
+from .servo2 import Servo2
+
+__all__ = ["HANDLERS", "READ_INSTRUCTIONS", "Outcome2", "answers", "handle2", "listed_read", "status_byte"]
+
+#: Instructions Status Return Level 1 answers besides PING.
+READ_INSTRUCTIONS = frozenset(int(i) for i in (Instruction2.READ, Instruction2.SYNC_READ, Instruction2.BULK_READ,
+                                               Instruction2.FAST_SYNC_READ, Instruction2.FAST_BULK_READ))
+#: Registers Factory Reset keeps, per option ("Factory Reset (0x06) > Parameters").
+FACTORY_RESET_KEEPS: Mapping[FactoryResetOption, tuple[str, ...]] = {
+    FactoryResetOption.ALL: (),
+    FactoryResetOption.ALL_EXCEPT_ID: ("id",),
+    FactoryResetOption.ALL_EXCEPT_ID_AND_BAUD_RATE: ("id", "baud_rate"),
+}
+
+
+class Outcome2(NamedTuple):
+    """What one servo does in answer to one packet."""
+
+    #: The encoded status packet, or None for silence.
+    reply: bytes | None
+    #: The ID the reply carries (the ID at reception).
+    reply_id: int
+    #: Return Delay Time at reception, seconds.
+    delay_s: float
+    #: This instruction's error number (also in the reply, when there is one).
+    error: int = ErrorNumber.NONE
+    #: The reply's parameters (a read's data), for replies the bus assembles itself.
+    data: bytes = b""
+
+
+Handler = Callable[[Servo2, Params], tuple[int, bytes]]
+
+
+def status_byte(servo: Servo2, error: int) -> int:
+    """The status packet's error byte: the error number and the Alert bit."""
+    return error | (ALERT_BIT if servo.alert else 0)
+
+
+def listed_read(servo: Servo2, address: int, length: int) -> tuple[int, bytes]:
+    """One servo's share of a Read, Sync Read or Bulk Read: the error number and ``length`` bytes."""
+    data, error = servo.table.read(address, length)
+    return error, data
+
+
+def _ping(servo: Servo2, params: Params) -> tuple[int, bytes]:
+    table = servo.table
+    return ErrorNumber.NONE, table.get("model_number").to_bytes(2, "little") + bytes((table.get("firmware_version"),))
+
+
+def _read(servo: Servo2, params: Read) -> tuple[int, bytes]:
+    return listed_read(servo, params.address, params.length)
+
+
+def _write(servo: Servo2, params: Write) -> tuple[int, bytes]:
+    return servo.write(params.address, params.data), b""
+
+
+def _reg_write(servo: Servo2, params: Write) -> tuple[int, bytes]:
+    check = servo.table.check_write(params.address, params.data)
+    if check.error:
+        return check.error, b""
+    servo.registered_write = (params.address, params.data)
+    if servo.table.has("registered_instruction"):
+        servo.table.set("registered_instruction", 1)
+    return ErrorNumber.NONE, b""
+
+
+def _action(servo: Servo2, params: Params) -> tuple[int, bytes]:
+    if servo.registered_write is None:
+        return ErrorNumber.INSTRUCTION, b""
+    address, data = servo.registered_write
+    servo.registered_write = None
+    if servo.table.has("registered_instruction"):
+        servo.table.set("registered_instruction", 0)
+    return servo.write(address, data), b""
+
+
+def _factory_reset(servo: Servo2, params: FactoryReset) -> tuple[int, bytes]:
+    return ErrorNumber.NONE, b""  # done after the reply is built: see AFTER_REPLY
+
+
+def _reboot(servo: Servo2, params: Params) -> tuple[int, bytes]:
+    return ErrorNumber.NONE, b""  # done after the reply is built: see AFTER_REPLY
+
+
+def _clear(servo: Servo2, params: Clear) -> tuple[int, bytes]:
+    if servo.table.has("moving") and servo.table.get("moving"):
+        return ErrorNumber.RESULT_FAIL, b""
+    servo.plant.clear_multi_turn()
+    return ErrorNumber.NONE, b""
+
+
+def _backup(servo: Servo2, params: ControlTableBackup) -> tuple[int, bytes]:
+    table = servo.table
+    if params.option is BackupOption.STORE:
+        if table.torque_on:
+            return ErrorNumber.RESULT_FAIL, b""
+        servo.backup = bytes(table.row)
+        if table.has("backup_ready"):
+            table.set("backup_ready", 1)
+        return ErrorNumber.NONE, b""
+    if servo.backup is None:
+        return ErrorNumber.RESULT_FAIL, b""
+    return ErrorNumber.NONE, b""  # the restore and its reboot follow the reply: see AFTER_REPLY
+
+
+def _sync_write(servo: Servo2, params: SyncWrite) -> tuple[int, bytes]:
+    for servo_id, data in params.writes:
+        if servo_id == servo.id:
+            return servo.write(params.address, data), b""
+    return ErrorNumber.NONE, b""
+
+
+def _bulk_write(servo: Servo2, params: BulkWrite) -> tuple[int, bytes]:
+    own = servo.id
+    error = ErrorNumber.NONE
+    for servo_id, address, data in params.writes:
+        if servo_id == own:
+            error = servo.write(address, data) or error
+    return error, b""
+
+
+#: One handler per instruction a servo executes on its own; the listed reads are the bus's
+#: (it orders the answers), built from :func:`listed_read`.
+HANDLERS: Mapping[int, Handler] = {
+    Instruction2.PING: _ping,
+    Instruction2.READ: _read,
+    Instruction2.WRITE: _write,
+    Instruction2.REG_WRITE: _reg_write,
+    Instruction2.ACTION: _action,
+    Instruction2.FACTORY_RESET: _factory_reset,
+    Instruction2.REBOOT: _reboot,
+    Instruction2.CLEAR: _clear,
+    Instruction2.CONTROL_TABLE_BACKUP: _backup,
+    Instruction2.SYNC_WRITE: _sync_write,
+    Instruction2.BULK_WRITE: _bulk_write,
+}
+
+
+def _restore(servo: Servo2, params: ControlTableBackup) -> None:
+    if params.option is BackupOption.RESTORE and servo.backup is not None:
+        end = servo.table.layout.eeprom_end
+        servo.table.row[:end] = servo.backup[:end]
+        servo.eeprom_dirty = True
+        servo.reboot()
+
+
+#: What takes effect only once the reply is built (it changes the ID, baud or the whole table).
+AFTER_REPLY: Mapping[int, Callable[[Servo2, Params], None]] = {
+    Instruction2.FACTORY_RESET: lambda servo, params: servo.factory_reset(FACTORY_RESET_KEEPS[params.option]),
+    Instruction2.REBOOT: lambda servo, params: servo.reboot(),
+    Instruction2.CONTROL_TABLE_BACKUP: _restore,
+}
+
+
+def answers(servo: Servo2, instruction: int) -> bool:
+    """Whether Status Return Level lets ``servo`` answer ``instruction`` (before errors)."""
+    if instruction == Instruction2.PING:
+        return True
+    level = servo.status_return_level
+    return level >= 2 or (level == 1 and instruction in READ_INSTRUCTIONS)
+
+
+def _read_length(packet: InstructionPacket2) -> int:
+    """Bytes a READ asked for, so an erroring reply still carries them."""
+    if packet.instruction == Instruction2.READ and len(packet.params) == 4:
+        return packet.params[2] | (packet.params[3] << 8)
+    return 0
+
+
+def handle2(servo: Servo2, packet: InstructionPacket2) -> Outcome2:
+    """Execute ``packet`` (addressed to ``servo`` or broadcast) and build the servo's own answer.
+
+    Broadcast packets are executed here but answered by nobody (the bus calls this only for
+    instructions a broadcast executes silently); the listed reads are the bus's.
+    """
+    reply_id = servo.id
+    delay_s = servo.return_delay_s
+    instruction = packet.instruction
+    talks = packet.id != BROADCAST_ID and answers(servo, instruction)
+    if not packet.crc_ok:
+        error, data = ErrorNumber.CRC, bytes(_read_length(packet))
+        talks = talks and servo.options.reply_on_crc_error
+    else:
+        params = parse_params(instruction, packet.params)
+        handler = HANDLERS.get(instruction)
+        if handler is None:
+            error, data = ErrorNumber.INSTRUCTION, bytes(_read_length(packet))
+        elif isinstance(params, Malformed):
+            error, data = ErrorNumber.RESULT_FAIL, bytes(_read_length(packet))
+        elif (packet.id == BROADCAST_ID and instruction == Instruction2.FACTORY_RESET
+              and params.option is FactoryResetOption.ALL):
+            return Outcome2(None, reply_id, delay_s, ErrorNumber.NONE)
+        else:
+            error, data = handler(servo, params)
+            if error and instruction == Instruction2.READ:
+                data = data.ljust(_read_length(packet), b"\x00")
+            reply = encode_status2(reply_id, status_byte(servo, error), data) if talks else None
+            after = AFTER_REPLY.get(instruction)
+            if after is not None and not error:
+                after(servo, params)
+            return Outcome2(reply, reply_id, delay_s, error, data)
+    reply = encode_status2(reply_id, status_byte(servo, error), data) if talks else None
+    return Outcome2(reply, reply_id, delay_s, error, data)
+

@@ -1,0 +1,179 @@
+"""One Protocol 2.0 servo's firmware state: its model's table, the registered write, the Bus Watchdog.
+
+Why it exists: the Protocol 2.0 request handler and bus need what an X-series firmware keeps
+between packets (ID, baud, Return Delay Time and Status Return Level read from its table, a Reg
+Write waiting for Action, when it last heard an instruction, the stopped state of a Bus Watchdog
+Error) and one place that writes the table with the firmware's side effects.  The model is data:
+its table layout, model number, firmware version and baud rates come from its file
+(:mod:`ax12emu.protocol.servo_models`); nothing here names a model.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ax12emu.protocol.packets2 import ErrorNumber
+from ax12emu.protocol.registers import Area
+from ax12emu.protocol.servo_models import ServoModel
+
+from .plant2 import Plant2
+from .table2 import Table2
+
+__all__ = ["GOAL_REGISTERS", "Servo2", "Servo2Options", "WATCHDOG_ERROR", "WATCHDOG_UNIT_S"]
+
+#: The Goal registers ("Goal Value": e-manual, X series, "Bus Watchdog(98)"); writing one starts a new profile.
+GOAL_REGISTERS = frozenset({"goal_pwm", "goal_current", "goal_velocity", "goal_position"})
+#: Bus Watchdog(98) reads -1 during a Bus Watchdog Error (stored as the byte 0xFF).
+WATCHDOG_ERROR = 0xFF
+#: Bus Watchdog(98)'s unit: 20 ms.
+WATCHDOG_UNIT_S = 0.020
+#: Goal registers a booting X-series firmware sets to the limit that bounds them (e-manual, X series,
+#: "Goal PWM(100)" and "Goal Current(102)" take PWM Limit and Current Limit at power-up; without it a
+#: default Goal PWM of 0 would allow no output at all).
+BOOT_GOALS = {"goal_pwm": "pwm_limit", "goal_current": "current_limit"}
+#: Realtime Tick(120) counts milliseconds from 0 to 32767 and wraps (e-manual, "Realtime Tick(120)").
+REALTIME_TICK_PERIOD = 32768
+
+
+@dataclass(frozen=True)
+class Servo2Options:
+    """Behaviours where the e-manual is silent; defaults follow the documented reading."""
+
+    #: A packet to this servo's ID with a wrong CRC is answered with CRC Error (3): the e-manual
+    #: defines the error ("CRC of the sent Packet does not match"), so it is meant to be reported.
+    #: False: silent.
+    reply_on_crc_error: bool = True
+
+
+class Servo2:
+    """Firmware-side state of one Protocol 2.0 servo on the bus."""
+
+    def __init__(self, spec: ServoModel, plant_factory, *, servo_id: int, index: int,
+                 options: Servo2Options = Servo2Options(), profile: str | None = None) -> None:
+        if "2.0" not in spec.protocols:
+            raise ValueError(f"{spec.name} speaks Protocol {'/'.join(spec.protocols)}, not 2.0")
+        if not spec.baud_rates_bps:
+            raise ValueError(f"{spec.path}: a Protocol 2.0 model needs model.baud_rates_bps")
+        self.spec = spec
+        self.options = options
+        self.index = index
+        self.table = Table2(spec.layout(profile))
+        by_name = self.table.layout.by_name
+        self._id_at = by_name["id"].address
+        self._baud_at = by_name["baud_rate"].address
+        self._return_delay_at = by_name["return_delay_time"].address
+        self._level_at = by_name["status_return_level"].address
+        self._eeprom_end = self.table.layout.eeprom_end
+        self.table.set("id", servo_id)
+        if spec.firmware_version is not None and self.table.has("firmware_version"):
+            self.table.set("firmware_version", spec.firmware_version)
+        #: The REG_WRITE waiting for ACTION: (address, data), or None.
+        self.registered_write: tuple[int, bytes] | None = None
+        #: Bus-clock time of the last instruction packet this servo heard (Bus Watchdog).
+        self.last_instruction_s: float | None = None
+        #: Set when a write changed the EEPROM area.
+        self.eeprom_dirty = False
+        #: The backup area of Control Table Backup (0x20): the table's bytes, or None.
+        self.backup: bytes | None = None
+        self.plant: Plant2 = plant_factory(self)
+        self.power_on()
+
+    # -- what the bus reads per packet ----------------------------------------------------
+    @property
+    def id(self) -> int:
+        return self.table.row[self._id_at]
+
+    @property
+    def baud_bps(self) -> float:
+        return float(self.spec.baud_rates_bps[self.table.row[self._baud_at]])
+
+    @property
+    def return_delay_s(self) -> float:
+        """Return Delay Time(9): 2 us per unit (e-manual, X series)."""
+        return self.table.row[self._return_delay_at] * 2e-6
+
+    @property
+    def status_return_level(self) -> int:
+        return self.table.row[self._level_at]
+
+    @property
+    def alert(self) -> bool:
+        """The status packets' Alert bit: set while Hardware Error Status(70) is non-zero."""
+        return self.table.has("hardware_error_status") and self.table.get("hardware_error_status") != 0
+
+    # -- firmware events ------------------------------------------------------------------
+    def power_on(self) -> None:
+        """Power-up and reboot: Goal PWM/Current at their limits, Goal Position at Present Position, nothing registered.
+
+        Why: a servo that boots holds where it is when the torque is turned on; clients that
+        turn the torque off and on again see it move to the old Goal Position (reported by
+        pollen-robotics/reachy_mini issue 1136), so only boot sets the goal, never Torque Enable.
+        """
+        table = self.table
+        for goal, limit in BOOT_GOALS.items():
+            if table.has(goal) and table.has(limit):
+                table.set(goal, table.get(limit))
+        if table.has("goal_position") and table.has("present_position"):
+            entry = table.layout.by_name["goal_position"]
+            table.set("goal_position", max(entry.minimum, min(entry.maximum, table.get("present_position"))))
+        self.registered_write = None
+        if table.has("registered_instruction"):
+            table.set("registered_instruction", 0)
+        self.plant.command()
+
+    def heard(self, now_s: float) -> None:
+        """An instruction packet reached this servo at ``now_s`` (bus clock): the Bus Watchdog's interval restarts."""
+        self.check_watchdog(now_s)
+        self.last_instruction_s = now_s
+        if self.table.has("realtime_tick"):
+            self.table.set("realtime_tick", int(now_s * 1000.0) % REALTIME_TICK_PERIOD)
+
+    def check_watchdog(self, now_s: float) -> None:
+        """Bus Watchdog(98): with the torque on, a silence longer than its value x 20 ms stops the servo.
+
+        e-manual (X series, "Bus Watchdog(98)"): "If the measured communication interval (time)
+        is larger than the set value of Bus Watchdog(98), the DYNAMIXEL will stop. Bus Watchdog(98)
+        will be changed to '-1'", and the Goal registers become read-only until it is written 0.
+        """
+        table = self.table
+        if not table.has("bus_watchdog") or self.last_instruction_s is None:
+            return
+        value = table.get("bus_watchdog")
+        if not 1 <= value < WATCHDOG_ERROR or not table.torque_on:
+            return
+        if now_s - self.last_instruction_s > value * WATCHDOG_UNIT_S:
+            table.set("bus_watchdog", WATCHDOG_ERROR)
+            self.plant.hold()
+
+    @property
+    def watchdog_error(self) -> bool:
+        return self.table.has("bus_watchdog") and self.table.get("bus_watchdog") == WATCHDOG_ERROR
+
+    def write(self, address: int, data: bytes) -> int:
+        """A client's write, all or nothing, with the firmware's side effects; returns the error number."""
+        table = self.table
+        check = table.check_write(address, data, refused=GOAL_REGISTERS if self.watchdog_error else frozenset())
+        if check.error:
+            return check.error
+        table.apply(check)
+        names = {entry.name for entry in check.entries}
+        goal_written = bool(names & GOAL_REGISTERS)
+        if goal_written and self.plant.held and not self.watchdog_error:
+            self.plant.release()
+        if any(entry.area is Area.EEPROM for entry in check.entries):
+            self.eeprom_dirty = True
+        self.plant.command(goal_written=goal_written)
+        return ErrorNumber.NONE
+
+    def factory_reset(self, keep: tuple[str, ...]) -> None:
+        """FACTORY_RESET: every register to its default except ``keep``; the sensed registers stay the model's."""
+        self.table.factory_defaults(keep)
+        self.plant.release()
+        self.plant.write_back()
+        self.eeprom_dirty = True
+        self.power_on()
+
+    def reboot(self) -> None:
+        """REBOOT: the firmware restarts with the EEPROM area kept (the plant clears the RAM area)."""
+        self.plant.reboot()
+        self.power_on()

@@ -1,0 +1,185 @@
+"""A Protocol 2.0 control table for any model's layout: reads, validated all-or-nothing writes, indirect addresses.
+
+Why it exists: the X series' tables (``ax12emu/protocol/models/x*.toml``) differ from the AX-12's
+in size (hundreds of bytes, 4-byte signed registers), in their error numbers (Protocol 2.0 names
+*why* a write failed) and in two mechanisms: the EEPROM area is locked while the torque is on, and
+Indirect Data n stands for the byte whose address Indirect Address n holds.  Every rule is read
+from the layout's entries (access, area, size, range, ``min_from``/``max_from``); the only names
+this module knows are the registers whose meaning the e-manual gives the firmware (Torque Enable,
+the indirect pairs).  :class:`ax12emu.protocol.control_table.ControlTable` stays the AX-12's
+(its numpy rows serve the 1.0 bus's batched physics).
+
+Write checks, in order (e-manual, "DYNAMIXEL Protocol 2.0" > "Status Packet" > "Error"):
+
+* Access Error (7): a byte past the table, an undefined address, a read-only register, or an
+  EEPROM register while Torque Enable is 1 ("Attempt to write a value in the ROM domain while in
+  a state of Torque Enable (ROM Lock)");
+* Data Length Error (5): a register written in part ("when you attempt to only use 2 bytes of a
+  item that has been defined as 4 bytes"); written through indirect data, the same rule holds for
+  the bytes the indirect addresses reach;
+* Data Range Error (4): a value outside the register's minimum/maximum;
+* Data Limit Error (6): a value outside the registers that bound it at run time (``min_from`` /
+  ``max_from``: Goal Position within Min/Max Position Limit, Goal PWM within +-PWM Limit ...),
+  judged on the table as it would be after the write, so limits and goal written together agree.
+
+Reads: any address inside the table may be read (undefined bytes read 0, so a client can read a
+block spanning gaps, as ROBOTIS' own tools read whole tables); a read reaching past the table is an
+Access Error.  The e-manual's "Attempt to read a value in an Address that ... has not been
+defined" is taken to mean addresses the table does not have at all.
+"""
+
+from __future__ import annotations
+
+from ax12emu.protocol.packets2 import ErrorNumber
+from ax12emu.protocol.registers import Access, Area, Entry, Layout
+
+__all__ = ["Table2", "WriteCheck"]
+
+_INDIRECT_DATA = "indirect_data_"
+_INDIRECT_ADDRESS = "indirect_address_"
+
+
+class WriteCheck:
+    """The outcome of checking a write: the bytes to store (by address) or the error number."""
+
+    __slots__ = ("error", "changes", "entries")
+
+    def __init__(self, error: int, changes: dict[int, int] | None = None, entries: tuple[Entry, ...] = ()) -> None:
+        self.error = error
+        #: Address -> byte for every byte the write stores (indirect data already resolved).
+        self.changes = changes or {}
+        #: The registers the write changes, in address order.
+        self.entries = entries
+
+
+class Table2:
+    """One servo's Protocol 2.0 control table: ``row`` holds its bytes; rules come from ``layout``."""
+
+    def __init__(self, layout: Layout) -> None:
+        self.layout = layout
+        self.row = bytearray(layout.defaults)
+        self.size = layout.table_size
+        by_name = layout.by_name
+        self._torque_enable = by_name["torque_enable"].address
+        #: Indirect Data byte address -> address of the Indirect Address register naming its target.
+        self._indirect: dict[int, int] = {}
+        for entry in layout.entries:
+            if entry.name.startswith(_INDIRECT_DATA):
+                partner = by_name.get(_INDIRECT_ADDRESS + entry.name[len(_INDIRECT_DATA):])
+                if partner is None or entry.size != 1:
+                    raise ValueError(f"{entry.name} needs a 1-byte register and an {_INDIRECT_ADDRESS}n partner")
+                self._indirect[entry.address] = partner.address
+
+    # -- firmware side: by name, no checks -----------------------------------------------
+    def get(self, name: str) -> int:
+        """Value of the named register (signed where the entry is)."""
+        return self.layout.by_name[name].value_in(self.row)
+
+    def set(self, name: str, value: int) -> None:
+        """Set a register as the firmware does (no access or range check)."""
+        entry = self.layout.by_name[name]
+        self.row[entry.address : entry.end] = entry.to_bytes(value)
+
+    def has(self, name: str) -> bool:
+        """Whether this model's table has the register."""
+        return name in self.layout.by_name
+
+    def factory_defaults(self, keep: tuple[str, ...] = ()) -> None:
+        """Every register to its default, except those named in ``keep``."""
+        kept = {name: self.get(name) for name in keep}
+        self.row[:] = self.layout.defaults
+        for name, value in kept.items():
+            self.set(name, value)
+
+    def ram_defaults(self) -> None:
+        """The RAM area back to its defaults (a reboot: the EEPROM area stays)."""
+        start = self.layout.eeprom_end
+        self.row[start:] = self.layout.defaults[start:]
+
+    @property
+    def torque_on(self) -> bool:
+        return bool(self.row[self._torque_enable])
+
+    # -- bus side ---------------------------------------------------------------------------
+    def _target(self, address: int) -> int:
+        """The address a byte stands for: Indirect Data n's is Indirect Address n's value."""
+        holder = self._indirect.get(address)
+        if holder is None:
+            return address
+        return self.row[holder] | (self.row[holder + 1] << 8)
+
+    def read(self, address: int, length: int) -> tuple[bytes, int]:
+        """``length`` bytes from ``address`` and the error number; past the table, Access Error and zeros.
+
+        Always ``length`` bytes: dynamixel-sdk indexes the data of an erroring
+        reply, so a short one would crash the client instead of reporting the error.
+        """
+        if address + length > self.size:
+            return bytes(length), ErrorNumber.ACCESS
+        if not self._indirect:
+            return bytes(self.row[address : address + length]), ErrorNumber.NONE
+        row = self.row
+        out = bytearray(row[address : address + length])
+        for offset in range(length):
+            target = self._target(address + offset)
+            if target != address + offset:
+                out[offset] = row[target] if target < self.size else 0
+        return bytes(out), ErrorNumber.NONE
+
+    def check_write(self, address: int, data: bytes, *, refused: frozenset[str] = frozenset()) -> WriteCheck:
+        """Judge a WRITE of ``data`` at ``address`` without applying it (see the module docstring).
+
+        ``refused``: registers whose writes are refused with Data Range Error now (the
+        Goal registers during a Bus Watchdog Error, the firmware's state, not the table's).
+        """
+        if not data or address + len(data) > self.size:
+            return WriteCheck(ErrorNumber.ACCESS)
+        layout, row = self.layout, self.row
+        changes: dict[int, int] = {}
+        for offset, byte in enumerate(data):
+            changes[self._target(address + offset)] = byte
+        touched: list[Entry] = []
+        torque_on = self.torque_on
+        for target in sorted(changes):
+            index = int(layout.owner[target]) if target < self.size else -1
+            if index < 0:
+                return WriteCheck(ErrorNumber.ACCESS)
+            entry = layout.entries[index]
+            if entry.access is not Access.RW or (entry.area is Area.EEPROM and torque_on):
+                return WriteCheck(ErrorNumber.ACCESS)
+            if not touched or touched[-1] is not entry:
+                touched.append(entry)
+        for entry in touched:
+            if any(a not in changes for a in range(entry.address, entry.end)):
+                return WriteCheck(ErrorNumber.DATA_LENGTH)
+        candidate = bytearray(row)
+        for target, byte in changes.items():
+            candidate[target] = byte
+        for entry in touched:
+            if entry.name in refused:
+                return WriteCheck(ErrorNumber.DATA_RANGE)
+            if not entry.minimum <= entry.value_in(candidate) <= entry.maximum:
+                return WriteCheck(ErrorNumber.DATA_RANGE)
+        for entry in touched:
+            if not self._within_limits(entry, candidate):
+                return WriteCheck(ErrorNumber.DATA_LIMIT)
+        return WriteCheck(ErrorNumber.NONE, changes, tuple(touched))
+
+    def _bound(self, ref: str, image: bytearray) -> int:
+        negate = ref.startswith("-")
+        value = self.layout.by_name[ref.lstrip("-")].value_in(image)
+        return -value if negate else value
+
+    def _within_limits(self, entry: Entry, image: bytearray) -> bool:
+        value = entry.value_in(image)
+        if entry.minimum_from is not None and value < self._bound(entry.minimum_from, image):
+            return False
+        if entry.maximum_from is not None and value > self._bound(entry.maximum_from, image):
+            return False
+        return True
+
+    def apply(self, check: WriteCheck) -> None:
+        """Store a write :meth:`check_write` accepted."""
+        row = self.row
+        for target, byte in check.changes.items():
+            row[target] = byte

@@ -1,0 +1,366 @@
+"""The Protocol 2.0 bus, byte for byte: the e-manual's example packets and answers, every error, who answers when.
+
+Servos here stand on a recording firmware model (``x2_testkit``): what is checked is what the
+protocol side answers and what it hands the model, not motion.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+from protocol2_vectors import EMANUAL_PACKETS
+from x2_testkit import RecordingFirmware, recording_bus
+
+from ax12emu.bus.bus2 import Bus2
+from ax12emu.bus.clock import VirtualClock
+from ax12emu.bus.reply import BITS_PER_BYTE
+from ax12emu.protocol.packets2 import (
+    ErrorNumber,
+    Instruction2,
+    decode_packet2,
+    encode_instruction2,
+    encode_status2,
+)
+from ax12emu.protocol.servo_models import model
+
+EMPTY_OK = bytes.fromhex(EMANUAL_PACKETS["empty status"])
+
+
+def h(name: str) -> bytes:
+    return bytes.fromhex(EMANUAL_PACKETS[name])
+
+
+def u32(value: int) -> bytes:
+    return (value & 0xFFFFFFFF).to_bytes(4, "little")
+
+
+def send(bus, packet_id, instruction, params=b""):
+    return bus.receive(encode_instruction2(packet_id, instruction, params))
+
+
+def status(bus, packet_id, instruction, params=b""):
+    """The one status packet a request gets, decoded."""
+    replies = send(bus, packet_id, instruction, params)
+    assert len(replies) == 1, replies
+    return decode_packet2(replies[0].data)
+
+
+@pytest.fixture
+def xm():
+    """IDs 1..7 of XM430-W350s (the e-manual's examples use an XM430) and their recording models."""
+    return recording_bus(ids=range(1, 8), key="xm430-w350")
+
+
+def set_sensed(firmware, **values):
+    firmware.sensed = dataclasses.replace(firmware.sensed, **values)
+
+
+def refresh(bus):
+    """Sensed values changed on the stand-in: the tables show them after the next step."""
+    bus.clock.advance(0.002)
+    bus.advance()
+
+
+# -- the e-manual's examples ---------------------------------------------------------------
+def test_read_example_byte_for_byte(xm):
+    bus, firmware = xm
+    set_sensed(firmware[0], present_position=166)
+    refresh(bus)
+    replies = bus.receive(h("Read (0x02)"))
+    assert [r.data for r in replies] == [h("Read status")]
+    assert replies[0].delay_s == pytest.approx(250 * 2e-6)  # Return Delay Time 250 (default) x 2 us
+
+
+def test_write_reg_write_action_factory_reset_reboot_clear_examples(xm):
+    bus, firmware = xm
+    for name in ("Write (0x03)", "Reg Write (0x04)", "Action (0x05)", "Clear (0x10)", "Factory Reset (0x06)", "Reboot (0x08)"):
+        assert [r.data for r in bus.receive(h(name))] == [EMPTY_OK], name
+    assert firmware[0].reboots == 1 and firmware[0].clears == 1
+
+
+def test_write_example_sets_goal_position_and_starts_a_profile(xm):
+    bus, firmware = xm
+    bus.receive(h("Write (0x03)"))
+    assert bus.servo(1).table.get("goal_position") == 512
+    commands, goal_written = firmware[0].commands[-1]
+    assert commands.goal_position == 512 and goal_written
+
+
+def test_reg_write_waits_for_action(xm):
+    bus, firmware = xm
+    table = bus.servo(1).table
+    bus.receive(h("Reg Write (0x04)"))
+    assert table.get("goal_velocity") == 0 and table.get("registered_instruction") == 1
+    bus.receive(h("Action (0x05)"))
+    assert table.get("goal_velocity") == 200 and table.get("registered_instruction") == 0
+    assert firmware[0].last.goal_velocity == 200
+
+
+def test_action_without_reg_write_is_instruction_error(xm):
+    bus, _ = xm
+    assert status(bus, 1, Instruction2.ACTION).error == ErrorNumber.INSTRUCTION
+
+
+def test_ping_answers_model_number_and_firmware_version(xm):
+    bus, _ = xm
+    reply = status(bus, 1, Instruction2.PING)
+    assert reply.params == (1020).to_bytes(2, "little") + b"\x00"
+
+
+def test_sync_read_example_and_the_order_of_answers(xm):
+    bus, firmware = xm
+    set_sensed(firmware[0], present_position=166)
+    set_sensed(firmware[1], present_position=2079)
+    refresh(bus)
+    replies = bus.receive(h("Sync Read (0x82)"))
+    assert [r.data for r in replies] == [h("Read status"), h("Sync Read status ID 2")]
+    byte_s = BITS_PER_BYTE / 57600
+    rdt_s = 500e-6
+    assert replies[0].delay_s == pytest.approx(rdt_s)
+    assert replies[1].delay_s == pytest.approx(rdt_s + len(replies[0].data) * byte_s + rdt_s)
+
+
+def test_sync_write_example(xm):
+    bus, _ = xm
+    assert bus.receive(h("Sync Write (0x83)")) == []
+    assert bus.servo(1).table.get("goal_position") == 150
+    assert bus.servo(2).table.get("goal_position") == 170
+
+
+def test_bulk_read_example(xm):
+    bus, firmware = xm
+    set_sensed(firmware[0], present_input_voltage=119)
+    set_sensed(firmware[1], present_temperature=36)
+    refresh(bus)
+    assert [r.data for r in bus.receive(h("Bulk Read (0x92)"))] == [h("Bulk Read status ID 1"), h("Bulk Read status ID 2")]
+
+
+def test_bulk_write_example(xm):
+    bus, _ = xm
+    assert bus.receive(h("Bulk Write (0x93)")) == []
+    assert bus.servo(1).table.get("max_voltage_limit") == 160
+    assert bus.servo(2).table.get("temperature_limit") == 80
+
+
+def test_fast_sync_read_example_is_one_combined_status(xm):
+    bus, firmware = xm
+    for index, position in ((2, 166), (6, 2079), (3, 1023)):
+        set_sensed(firmware[index], present_position=position)
+    refresh(bus)
+    replies = bus.receive(h("Fast Sync Read (0x8A)"))
+    assert b"".join(r.data for r in replies) == h("Fast Sync Read status")
+    # The first servo waits its Return Delay Time, the others follow back to back.
+    byte_s = BITS_PER_BYTE / 57600
+    assert replies[0].delay_s == pytest.approx(500e-6)
+    for before, after in zip(replies, replies[1:]):
+        assert after.delay_s == pytest.approx(before.delay_s + len(before.data) * byte_s)
+
+
+def test_fast_bulk_read_example(xm):
+    bus, firmware = xm
+    set_sensed(firmware[2], present_position=166)
+    set_sensed(firmware[6], present_pwm=421)
+    set_sensed(firmware[3], present_temperature=31)
+    refresh(bus)
+    params = bytes.fromhex("03 84 00 04 00 07 7C 00 02 00 04 92 00 01 00")
+    replies = send(bus, 0xFE, Instruction2.FAST_BULK_READ, params)
+    assert b"".join(r.data for r in replies) == h("Fast Bulk Read status")
+
+
+# -- broadcast ----------------------------------------------------------------------------
+def test_broadcast_ping_every_servo_in_the_slot_of_its_id():
+    bus, _ = recording_bus(ids=(5, 1, 3), key="xl430-w250")
+    replies = bus.receive(h("Ping broadcast"))
+    assert [r.servo_id for r in replies] == [1, 3, 5]
+    slot_s = 14 * BITS_PER_BYTE / 57600 + 500e-6
+    for reply in replies:
+        assert reply.delay_s == pytest.approx(500e-6 + reply.servo_id * slot_s)
+        assert decode_packet2(reply.data).params == (1060).to_bytes(2, "little") + b"\x00"
+
+
+def test_broadcast_write_is_executed_silently_and_broadcast_read_not_at_all(xm):
+    bus, _ = xm
+    assert send(bus, 0xFE, Instruction2.WRITE, bytes((65, 0, 1))) == []
+    assert all(servo.table.get("led") == 1 for servo in bus.servos)
+    assert send(bus, 0xFE, Instruction2.READ, bytes((65, 0, 1, 0))) == []
+
+
+def test_factory_reset_all_is_not_executed_by_broadcast(xm):
+    bus, _ = xm
+    send(bus, 0xFE, Instruction2.WRITE, bytes((31, 0, 70)))
+    send(bus, 0xFE, Instruction2.FACTORY_RESET, b"\xff")
+    assert bus.servo(3).table.get("temperature_limit") == 70
+    send(bus, 0xFE, Instruction2.FACTORY_RESET, b"\x02")
+    assert bus.servo(3).table.get("temperature_limit") == 80 and bus.ids == list(range(1, 8))
+
+
+def test_factory_reset_options(xm):
+    bus, _ = xm
+    send(bus, 4, Instruction2.WRITE, bytes((8, 0, 3)))
+    assert status(bus, 4, Instruction2.FACTORY_RESET, b"\x01").id == 4  # answered from the old ID, before the reset
+    servo = bus.servos[3]
+    assert (servo.id, servo.table.get("baud_rate")) == (4, 1)
+    assert status(bus, 4, Instruction2.FACTORY_RESET, b"\xff").id == 4
+    assert servo.id == 1 and bus.servo(1) is bus.servos[0]
+
+
+def test_a_sync_instruction_to_one_id_is_ignored(xm):
+    bus, _ = xm
+    assert send(bus, 1, Instruction2.SYNC_READ, bytes((132, 0, 4, 0, 1))) == []
+
+
+def test_a_listed_servo_missing_breaks_the_chain(xm):
+    bus, _ = xm
+    replies = send(bus, 0xFE, Instruction2.SYNC_READ, bytes((132, 0, 4, 0, 1, 9, 2)))
+    assert [r.servo_id for r in replies] == [1]
+    fast = send(bus, 0xFE, Instruction2.FAST_SYNC_READ, bytes((132, 0, 4, 0, 1, 9, 2)))
+    assert len(fast) == 1  # the header and ID 1's share; the packet's LENGTH announces three
+
+
+# -- errors -------------------------------------------------------------------------------
+def test_crc_error_is_answered_with_error_3(xm):
+    bus, _ = xm
+    packet = bytearray(encode_instruction2(1, Instruction2.READ, bytes((132, 0, 4, 0))))
+    packet[-1] ^= 0xFF
+    reply = decode_packet2(bus.receive(bytes(packet))[0].data)
+    assert (reply.error, reply.params) == (ErrorNumber.CRC, bytes(4))
+    packet = bytearray(encode_instruction2(0xFE, Instruction2.PING))
+    packet[-1] ^= 0xFF
+    assert bus.receive(bytes(packet)) == []
+
+
+@pytest.mark.parametrize(
+    ("instruction", "params", "error"),
+    [
+        (0x07, b"", ErrorNumber.INSTRUCTION),  # undefined
+        (Instruction2.READ, b"\x84\x00\x04", ErrorNumber.RESULT_FAIL),  # 3 parameter bytes
+        (Instruction2.CLEAR, b"\x01DXL!", ErrorNumber.RESULT_FAIL),  # wrong fixed bytes
+        (Instruction2.WRITE, b"\x00\x00\x01\x00", ErrorNumber.ACCESS),
+        (Instruction2.WRITE, b"\x74\x00\x00\x02", ErrorNumber.DATA_LENGTH),
+        (Instruction2.WRITE, b"\x74\x00" + u32(5000), ErrorNumber.DATA_RANGE),
+        (Instruction2.WRITE, b"\x68\x00" + u32(300), ErrorNumber.DATA_LIMIT),
+        (Instruction2.READ, b"\x90\x02\x08\x00", ErrorNumber.ACCESS),  # 656..663 runs past 662
+    ],
+)
+def test_error_numbers_byte_for_byte(xm, instruction, params, error):
+    bus, _ = xm
+    replies = send(bus, 1, instruction, params)
+    data = bytes(8) if instruction == Instruction2.READ and len(params) == 4 else b""
+    assert [r.data for r in replies] == [encode_status2(1, error, data)]
+
+
+def test_eeprom_write_with_torque_on_is_access_error(xm):
+    bus, _ = xm
+    assert status(bus, 1, Instruction2.WRITE, bytes((64, 0, 1))).error == ErrorNumber.NONE
+    assert status(bus, 1, Instruction2.WRITE, bytes((11, 0, 1))).error == ErrorNumber.ACCESS
+
+
+def test_clear_while_moving_is_result_fail(xm):
+    bus, firmware = xm
+    set_sensed(firmware[0], moving=1)
+    refresh(bus)
+    assert status(bus, 1, Instruction2.CLEAR, b"\x01DXL\x22").error == ErrorNumber.RESULT_FAIL
+    assert firmware[0].clears == 0
+
+
+def test_alert_bit_while_a_hardware_error_is_latched(xm):
+    bus, firmware = xm
+    set_sensed(firmware[0], hardware_error_status=0x04)
+    refresh(bus)
+    reply = status(bus, 1, Instruction2.PING)
+    assert reply.error == 0x80 and reply.alert
+    assert status(bus, 1, Instruction2.ACTION).error == 0x80 | ErrorNumber.INSTRUCTION
+
+
+# -- Status Return Level, ID change, Return Delay Time -----------------------------------
+def test_status_return_level(xm):
+    bus, _ = xm
+    send(bus, 1, Instruction2.WRITE, bytes((68, 0, 1)))
+    assert send(bus, 1, Instruction2.WRITE, bytes((65, 0, 1))) == []
+    assert len(send(bus, 1, Instruction2.READ, bytes((65, 0, 1, 0)))) == 1
+    assert len(send(bus, 0xFE, Instruction2.SYNC_READ, bytes((65, 0, 1, 0, 1)))) == 1
+    send(bus, 1, Instruction2.WRITE, bytes((68, 0, 0)))
+    assert send(bus, 1, Instruction2.READ, bytes((65, 0, 1, 0))) == []
+    assert len(send(bus, 1, Instruction2.PING)) == 1
+
+
+def test_an_id_change_answers_from_the_old_id_then_moves(xm):
+    bus, _ = xm
+    assert status(bus, 7, Instruction2.WRITE, bytes((7, 0, 20))).id == 7
+    assert send(bus, 7, Instruction2.PING) == []
+    assert status(bus, 20, Instruction2.PING).id == 20
+
+
+def test_return_delay_time_in_2_us_units(xm):
+    bus, _ = xm
+    send(bus, 2, Instruction2.WRITE, bytes((9, 0, 10)))
+    assert send(bus, 2, Instruction2.PING)[0].delay_s == pytest.approx(20e-6)
+
+
+def test_a_servo_at_another_baud_does_not_hear(xm):
+    bus, _ = xm
+    assert send(bus, 1, Instruction2.PING) and not bus.receive(encode_instruction2(1, Instruction2.PING), line_bps=1e6)
+
+
+def test_status_packets_on_the_wire_are_ignored(xm):
+    bus, _ = xm
+    assert bus.receive(h("Ping status")) == []
+
+
+# -- firmware state: Realtime Tick, Bus Watchdog, reboot ----------------------------------
+def test_realtime_tick_counts_milliseconds_and_wraps(xm):
+    bus, _ = xm
+    bus.clock.advance(40.0)
+    tick = int.from_bytes(status(bus, 1, Instruction2.READ, bytes((120, 0, 2, 0))).params, "little")
+    assert tick == 40000 % 32768
+
+
+def test_bus_watchdog_stops_the_servo_and_refuses_goals_until_cleared(xm):
+    bus, firmware = xm
+    send(bus, 1, Instruction2.WRITE, bytes((11, 0, 1)))  # velocity mode
+    send(bus, 1, Instruction2.WRITE, bytes((64, 0, 1)))
+    send(bus, 1, Instruction2.WRITE, bytes((104, 0)) + u32(50))
+    send(bus, 1, Instruction2.WRITE, bytes((98, 0, 5)))  # 100 ms
+    bus.clock.advance(0.09)
+    assert status(bus, 1, Instruction2.READ, bytes((98, 0, 1, 0))).params == b"\x05"  # in time: still armed
+    bus.clock.advance(0.15)
+    bus.advance()
+    assert bus.servo(1).table.get("bus_watchdog") == 0xFF
+    assert firmware[0].last.goal_velocity == 0 and firmware[0].commands[-1][1]
+    assert status(bus, 1, Instruction2.WRITE, bytes((104, 0)) + u32(150)).error == ErrorNumber.DATA_RANGE
+    assert status(bus, 1, Instruction2.WRITE, bytes((98, 0, 0))).error == ErrorNumber.NONE
+    assert firmware[0].last.goal_velocity == 0  # still stopped: nothing new was asked
+    assert status(bus, 1, Instruction2.WRITE, bytes((104, 0)) + u32(150)).error == ErrorNumber.NONE
+    assert firmware[0].last.goal_velocity == 150
+
+
+def test_reboot_restores_the_ram_area_and_keeps_the_eeprom(xm):
+    bus, firmware = xm
+    send(bus, 1, Instruction2.WRITE, bytes((31, 0, 70)))
+    send(bus, 1, Instruction2.WRITE, bytes((65, 0, 1)))
+    send(bus, 1, Instruction2.REBOOT)
+    table = bus.servo(1).table
+    assert (table.get("temperature_limit"), table.get("led")) == (70, 0)
+    assert firmware[0].reboots == 1
+
+
+def test_boot_sets_goal_pwm_and_current_to_their_limits_and_goal_position_to_present(xm):
+    bus, firmware = xm
+    table = bus.servo(1).table
+    assert table.get("goal_pwm") == table.get("pwm_limit")
+    assert table.get("goal_current") == table.get("current_limit")
+    assert table.get("goal_position") == 2048
+    assert firmware[0].last.goal_pwm == table.get("pwm_limit")
+
+
+def test_models_mix_on_one_bus():
+    bus = Bus2([(1, model("xm430-w350")), (6, model("xl330-m077"))], lambda spec, index: RecordingFirmware(),
+               clock=VirtualClock())
+    models = {r.servo_id: decode_packet2(r.data).params[:2] for r in bus.receive(h("Ping broadcast"))}
+    assert models == {1: (1020).to_bytes(2, "little"), 6: (1190).to_bytes(2, "little")}
+
+
+def test_a_protocol_1_model_is_refused():
+    with pytest.raises(ValueError, match="not 2.0"):
+        Bus2([(1, model("ax-12a"))], lambda spec, index: RecordingFirmware())

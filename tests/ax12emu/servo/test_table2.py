@@ -1,0 +1,124 @@
+"""The Protocol 2.0 control table: every write check with its error number, reads, indirect addresses."""
+
+from __future__ import annotations
+
+import pytest
+
+from ax12emu.protocol.packets2 import ErrorNumber
+from ax12emu.protocol.servo_models import model
+from ax12emu.servo.table2 import Table2
+
+
+@pytest.fixture
+def table() -> Table2:
+    return Table2(model("xm430-w350").layout())
+
+
+def u32(value: int) -> bytes:
+    return (value & 0xFFFFFFFF).to_bytes(4, "little")
+
+
+def test_defaults_and_reads_by_name(table):
+    assert table.get("model_number") == 1020
+    assert table.get("velocity_limit") == 200
+    data, error = table.read(0, 2)
+    assert (data, error) == ((1020).to_bytes(2, "little"), ErrorNumber.NONE)
+
+
+def test_a_write_inside_the_rules_is_applied_whole(table):
+    check = table.check_write(116, u32(1000))
+    assert check.error == ErrorNumber.NONE
+    assert [e.name for e in check.entries] == ["goal_position"]
+    table.apply(check)
+    assert table.get("goal_position") == 1000
+
+
+def test_signed_registers_take_negative_values(table):
+    check = table.check_write(104, u32(-150))
+    assert check.error == ErrorNumber.NONE
+    table.apply(check)
+    assert table.get("goal_velocity") == -150
+
+
+@pytest.mark.parametrize(
+    ("address", "data", "error"),
+    [
+        (0, b"\x01\x00", ErrorNumber.ACCESS),  # Model Number is read-only
+        (14, b"\x00", ErrorNumber.ACCESS),  # 14 is not defined
+        (661, b"\x00\x00", ErrorNumber.ACCESS),  # runs past the table
+        (116, b"\x00\x02", ErrorNumber.DATA_LENGTH),  # 2 bytes of the 4-byte Goal Position
+        (118, b"\x00\x00", ErrorNumber.DATA_LENGTH),  # its upper half
+        (116, u32(4096), ErrorNumber.DATA_RANGE),  # beyond 0..4095
+        (64, b"\x02", ErrorNumber.DATA_RANGE),  # Torque Enable is 0 or 1
+        (104, u32(201), ErrorNumber.DATA_LIMIT),  # within +-1023 but beyond Velocity Limit 200
+        (104, u32(-201), ErrorNumber.DATA_LIMIT),  # "-velocity_limit" bounds it below
+        (102, (1194).to_bytes(2, "little"), ErrorNumber.DATA_RANGE),
+    ],
+)
+def test_each_check_names_its_error_and_writes_nothing(table, address, data, error):
+    before = bytes(table.row)
+    check = table.check_write(address, data)
+    assert check.error == error
+    assert bytes(table.row) == before
+
+
+def test_limits_are_judged_on_the_table_after_the_write(table):
+    """Max Position Limit lowered and Goal Position above it in one write: Data Limit; within it: accepted."""
+    table.apply(table.check_write(48, u32(2000)))
+    assert table.check_write(116, u32(2001)).error == ErrorNumber.DATA_LIMIT
+    assert table.check_write(116, u32(2000)).error == ErrorNumber.NONE
+
+
+def test_eeprom_is_locked_while_the_torque_is_on(table):
+    table.apply(table.check_write(64, b"\x01"))
+    assert table.check_write(11, b"\x01").error == ErrorNumber.ACCESS
+    assert table.check_write(65, b"\x01").error == ErrorNumber.NONE  # RAM stays writable
+    table.apply(table.check_write(64, b"\x00"))
+    assert table.check_write(11, b"\x01").error == ErrorNumber.NONE
+
+
+def test_access_comes_before_length_range_and_limit(table):
+    """A write spanning a read-only byte and a half register: Access Error first."""
+    assert table.check_write(122, b"\x00\x00\x00\x00").error == ErrorNumber.ACCESS
+
+
+def test_refused_registers_answer_data_range(table):
+    assert table.check_write(116, u32(100), refused=frozenset({"goal_position"})).error == ErrorNumber.DATA_RANGE
+    assert table.check_write(65, b"\x01", refused=frozenset({"goal_position"})).error == ErrorNumber.NONE
+
+
+def test_reads_span_gaps_and_past_the_end_is_access_error(table):
+    data, error = table.read(0, 148)
+    assert error == ErrorNumber.NONE and len(data) == 148
+    assert data[14] == 0
+    data, error = table.read(660, 4)
+    assert (data, error) == (bytes(4), ErrorNumber.ACCESS)
+
+
+def test_indirect_data_reads_and_writes_the_byte_its_address_names(table):
+    """Indirect Address 1..4 -> Goal Position (116..119): Indirect Data 1..4 stand for it."""
+    for n in range(4):
+        table.apply(table.check_write(168 + 2 * n, (116 + n).to_bytes(2, "little")))
+    check = table.check_write(224, u32(1234))
+    assert check.error == ErrorNumber.NONE
+    table.apply(check)
+    assert table.get("goal_position") == 1234
+    assert table.read(224, 4) == (u32(1234), ErrorNumber.NONE)
+
+
+def test_indirect_writes_keep_the_targets_rules(table):
+    """Through indirect data, a partial register is Data Length, a read-only target Access."""
+    for n in range(2):
+        table.apply(table.check_write(168 + 2 * n, (116 + n).to_bytes(2, "little")))
+    assert table.check_write(224, b"\x01\x02").error == ErrorNumber.DATA_LENGTH
+    table.apply(table.check_write(168, (132).to_bytes(2, "little")))  # Present Position
+    assert table.check_write(224, b"\x01").error == ErrorNumber.ACCESS
+
+
+def test_factory_defaults_keep_what_is_asked(table):
+    table.apply(table.check_write(7, b"\x05"))
+    table.apply(table.check_write(8, b"\x03"))
+    table.factory_defaults(keep=("id",))
+    assert (table.get("id"), table.get("baud_rate")) == (5, 1)
+    table.factory_defaults()
+    assert table.get("id") == 1
