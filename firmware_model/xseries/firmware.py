@@ -165,6 +165,7 @@ class XFirmware:
         self._torque_on = False
         self._last_torque_cmd = 0
         self._hw_error = 0
+        self._fixed = False
         self._overload_elapsed_s = 0.0
         self._duty = 0.0
         self._reset_control()
@@ -222,6 +223,7 @@ class XFirmware:
         """
         old = self._cmd
         self._cmd = commands
+        self._fixed = False
         if (commands.drive_mode ^ old.drive_mode) & 0x01:
             self._reset_turns()  # a mirrored frame counts its turns afresh
             self._hold_here()
@@ -318,11 +320,16 @@ class XFirmware:
         n = int((to_time_s - self.time_s) / step_s + 1e-9)
         if n <= 0:
             return
-        if self._at_rest():
-            self._cool(n * step_s)
-            self.time_s += n * step_s
-            self._check_voltage()
-            return
+        if self._fixed or self._at_rest():
+            # Nothing but the temperature would change: heat or cool in closed form, unless that
+            # would cross Temperature Limit on the way (then step, so the error comes on time).
+            power_w = self.physics.current_a ** 2 * self.resistance_ohm
+            settles_c = self.thermal.ambient_c + power_w * self.thermal.thermal_resistance_k_w
+            if settles_c <= self._cmd.temperature_limit or not self._cmd.shutdown & HW_ERROR_OVERHEATING:
+                self._relax_temperature(settles_c, n * step_s)
+                self.time_s += n * step_s
+                self._check_voltage()
+                return
         for _ in range(n):
             self._step_once()
 
@@ -336,14 +343,30 @@ class XFirmware:
             and physics.external_torque_nm() == 0.0
         )
 
-    def _cool(self, dt_s: float) -> None:
-        ambient = self.thermal.ambient_c
-        self.temperature_c = ambient + (self.temperature_c - ambient) * math.exp(-dt_s / self.thermal.time_constant_s)
+    def _relax_temperature(self, settles_c: float, dt_s: float) -> None:
+        """The first-order thermal model over ``dt_s`` at constant power: exponential approach to ``settles_c``."""
+        self.temperature_c = settles_c + (self.temperature_c - settles_c) * math.exp(-dt_s / self.thermal.time_constant_s)
+
+    def _state(self) -> tuple[bool | float, ...]:
+        """Everything a control step reads that a step can change (the fixed-point check compares it across a step)."""
+        return (
+            self._torque_on,
+            self.physics.angle_rad,
+            self.physics.velocity_rad_s,
+            self._duty,
+            self._integral,
+            self._velocity_integral,
+            self._current_correction,
+            self._traj_pulses,
+            self._traj_velocity_pulses_s,
+        )
 
     def _step_once(self) -> None:
+        """One control step; it also notes whether it was a fixed point (the next would repeat it exactly)."""
         cmd = self._cmd
         physics = self.physics
         step_s = self.step_s
+        before = self._state()
         self.time_s += step_s
         saturated = False
         if self._torque_on:
@@ -380,6 +403,16 @@ class XFirmware:
             self._traj_pulses = self._present_pulses()
             self._traj_velocity_pulses_s = 0.0
         self._protect(saturated, step_s)
+        # A held servo at rest repeats its step exactly: same angle and speed (a creep too slow to move
+        # the angle's last bit counts as rest), duty, integrators and trajectory, no profile left to
+        # run, nothing saturated (the overload timer would run).  The inputs that could change it
+        # (commands, torque, load, supply) clear the flag.
+        self._fixed = (
+            not saturated
+            and not self._profile_running()
+            and self._traj_velocity_pulses_s == self._goal_velocity_pulses_s
+            and self._state() == before
+        )
 
     def _position_pid(self) -> float:
         """PID plus feed-forward on the trajectory: PWM units (or current units in current-based position), unclipped."""
@@ -533,6 +566,7 @@ class XFirmware:
         The trajectory moves by the same turns and a running profile ends, so a holding servo keeps
         the same shaft angle instead of driving back over the cleared turns.
         """
+        self._fixed = False
         before = self._turn_base_pulses
         self._reset_turns()
         self._traj_pulses -= self._turn_base_pulses - before
@@ -542,14 +576,17 @@ class XFirmware:
 
     def set_external_torque(self, torque_nm: float) -> None:
         """A torque on the output shaft (N·m, positive = counter-clockwise), passed to the physics."""
+        self._fixed = False
         self.physics.set_external_torque(torque_nm)
 
     def set_supply_v(self, supply_v: float) -> None:
         """The bus supply voltage (V): the motor's drive and Present Input Voltage follow it."""
+        self._fixed = False
         self.physics.supply_v = float(supply_v)
 
     def set_load(self, *, inertia_kg_m2: float = 0.0, gravity_torque_nm: float = 0.0, gravity_zero_rad: float = 0.0) -> None:
         """What is on the horn (an inertia, a pendulum), passed to the physics."""
+        self._fixed = False
         self.physics.set_load(inertia_kg_m2=inertia_kg_m2, gravity_torque_nm=gravity_torque_nm, gravity_zero_rad=gravity_zero_rad)
 
 

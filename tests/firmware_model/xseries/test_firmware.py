@@ -363,3 +363,19 @@ def test_a_servo_at_rest_with_torque_off_skips_its_steps_and_one_pushed_moves():
     assert servo.physics.angle_rad > angle + 0.1
     assert servo.sense().present_velocity > 0
     assert VELOCITY_UNIT_PULSES_S == pytest.approx(0.229 * 4096 / 60)
+
+
+@pytest.mark.parametrize("model", MODELS)
+def test_a_held_servo_skips_repeated_steps_without_changing_the_outcome(model):
+    stepped, cmd_a = make(model, torque_enable=1, position_i_gain=0)
+    skipped, cmd_b = make(model, torque_enable=1, position_i_gain=0)
+    for servo, cmd in ((stepped, cmd_a), (skipped, cmd_b)):
+        write(servo, cmd, goal_position=servo.sense().present_position + 700)
+        run(servo, 4.0)
+    assert skipped._fixed  # settled: its steps repeat exactly
+    run(stepped, 20.0)
+    skipped.step_to(skipped.time_s + 20.0)
+    a, b = stepped.sense(), skipped.sense()
+    assert a == b
+    assert stepped.temperature_c == pytest.approx(skipped.temperature_c, abs=1e-6)
+    assert stepped.physics.angle_rad == skipped.physics.angle_rad
