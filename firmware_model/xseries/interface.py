@@ -61,7 +61,10 @@ class XCommands:
     drive_mode: int = 0
     homing_offset: int = 0
     moving_threshold: int = 10
+    #: Limits the PWM in every mode but PWM mode (e-manual "Goal PWM(100)"): a real servo sets it to
+    #: PWM Limit at power-on and REBOOT, so 0 here means a servo that cannot move.
     goal_pwm: int = 0
+    #: Limits the current in Current-based Position mode; a real servo sets it to Current Limit at power-on.
     goal_current: int = 0
     goal_velocity: int = 0
     goal_position: int = 0
