@@ -41,9 +41,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import replace
-from functools import partial
-from types import SimpleNamespace
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
@@ -55,7 +53,7 @@ from .params import ServoParams
 from .protection import alarm_bits, overload_timer_step, thermal_step
 from .sensors import DelayLine, LatchHistory, held_speed_rad_s, registers
 from .setpoint import apply_dead_zone
-from .stepping import FusedNumpySteps, StepConstants, fusable, fused_scalar_steps, generic_steps
+from .stepping import Kernel, ModelState, PerServo, StepConstants, StepPlan, step_kernel
 from .units import (
     DIRECTION_BIT,
     POSITION_MAX_RAW,
@@ -76,9 +74,37 @@ FULL_SCALE_SPEED_RAD_S = float(1023 * RAD_S_PER_SPEED_UNIT)
 _TWO_PI = 2.0 * math.pi
 _COMMAND_FIELDS = Commands.field_names()
 _RANGE_RAD, _UNIT_RAD = float(POSITION_RANGE_RAD), float(RAD_PER_POSITION_UNIT)
-_STATE = ("angle", "speed", "ref", "ref_vel", "drive", "demand", "integral", "prev_error", "current_sq_sum",
-          "temperature", "overload_timer", "sample_angle", "held_speed", "held_drive", "ext_nm", "weight_nm",
-          "blocked", "out")
+_STATE = tuple(f.name for f in fields(ModelState))
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class _Sensing:
+    """What :meth:`PhysicalModel.sense` and its alarms read of the commands, as numpy arrays of shape (N,)."""
+
+    enabled: np.ndarray
+    wheel: np.ndarray
+    #: Wheel mode asked to turn (a speed other than 0).
+    wheel_turning: np.ndarray
+    goal_rad: np.ndarray
+    temperature_limit: np.ndarray
+    min_voltage_limit: np.ndarray
+    max_voltage_limit: np.ndarray
+    any_wheel: bool
+    all_wheel: bool
+    all_enabled: bool
+    #: Moving as a read-only array of ones when it reads 1 whatever the shaft does (all driven wheels), else None.
+    always_moving: np.ndarray | None
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class _Plan:
+    """The commands decoded once per change: the step loop's plan and kernel, and what events and sense() read."""
+
+    step: StepPlan
+    kernel: Kernel
+    sensing: _Sensing
+    #: Drive above which the overload timer runs (the Torque Limit register; infinite with torque off).
+    overload_limit: PerServo
 
 
 def _per_servo(values, n: int) -> np.ndarray:
@@ -145,16 +171,16 @@ class PhysicalModel:
         fx = params.effects
         if fx.arm_weight_moment_nm:  # an arm on every shaft, until set_arm replaces it
             values["weight_nm"] = np.full(n, fx.arm_weight_moment_nm)
-        self._s = SimpleNamespace(**{k: self._to_backend(v) for k, v in values.items()})
+        self._s = ModelState(**{k: self._to_backend(v) for k, v in values.items()})
         self._init_effects(fx, angle)
         #: Decoded commands, keyed by the registers' bytes (and the object, for a quick check).
-        self._plan_cache: tuple[bytes, SimpleNamespace] | None = None
+        self._plan_cache: tuple[bytes, _Plan] | None = None
         self._plan_commands: Commands | None = None
         #: Registers for sense() that change only at events (held speed/load, temperature, alarms).
         self._slow: dict[str, np.ndarray] | None = None
         #: Rounded temperatures and overload flags at the last thermal event (see _thermal_event).
         self._thermal_key: tuple[bytes, bytes] | None = None
-        self._sensing: SimpleNamespace | None = None
+        self._sensing: _Sensing | None = None
 
     def _init_effects(self, fx, angle: np.ndarray) -> None:
         """Constants and state of the effects in ``params.effects`` (None where absent: the plain model)."""
@@ -400,7 +426,7 @@ class PhysicalModel:
         """The command registers' bytes: equal keys, equal plans."""
         return b"".join([np.ascontiguousarray(getattr(commands, name), dtype=np.int64).tobytes() for name in _COMMAND_FIELDS])
 
-    def _cached_plan(self, commands: Commands) -> SimpleNamespace:
+    def _cached_plan(self, commands: Commands) -> _Plan:
         """The decoded plan, rebuilt only when a register, the supply or an external load changed."""
         if self._plan_cache is not None and commands is self._plan_commands:
             return self._plan_cache[1]  # the bus hands over the same object until a register changes
@@ -411,7 +437,7 @@ class PhysicalModel:
         self._plan_commands = commands
         return self._plan_cache[1]
 
-    def _plan(self, c: Commands) -> SimpleNamespace:
+    def _plan(self, c: Commands) -> _Plan:
         """Decode the command registers into per-servo constants for the step loop."""
         p, n = self.params, self.n
         raw = {name: _per_servo(getattr(c, name), n) for name in _COMMAND_FIELDS}
@@ -434,39 +460,39 @@ class PhysicalModel:
         wheel_ff = (c_hold * p.torque_constant_nm_a * wheel_ref + p.viscous_friction_nm_s_rad * wheel_ref
                     + p.coulomb_friction_nm * np.sign(wheel_ref)) / (c_hold * volts)
         per_servo = dict(
-            enabled=enabled, wheel=wheel, goal_rad=goal_raw * RAD_PER_POSITION_UNIT,
-            max_speed=np.where((speed_raw & 0x3FF) == 0, FULL_SCALE_SPEED_RAD_S, magnitude),
-            wheel_ref=wheel_ref, wheel_ff=wheel_ff, cw_margin=comp.cw_margin, ccw_margin=comp.ccw_margin,
+            goal_rad=goal_raw * RAD_PER_POSITION_UNIT,
+            max_speed_rad_s=np.where((speed_raw & 0x3FF) == 0, FULL_SCALE_SPEED_RAD_S, magnitude),
+            wheel_ref_rad_s=wheel_ref, wheel_ff=wheel_ff, cw_margin=comp.cw_margin, ccw_margin=comp.ccw_margin,
             cw_gain=comp.cw_gain, ccw_gain=comp.ccw_gain, punch=comp.punch, limit=comp.limit,
-            en=enabled.astype(float), volts_r=np.where(enabled, volts / p.winding_resistance_ohm, 0.0),
-            overload_limit=np.where(enabled, register_limit, np.inf),  # torque off cannot overload
+            en=enabled.astype(float), stall_current_a=np.where(enabled, volts / p.winding_resistance_ohm, 0.0),
         )
-        plan = SimpleNamespace(**{k: self._to_backend(v.astype(float)) for k, v in per_servo.items()})
-        plan.enabled, plan.wheel = (bool(enabled[0]), bool(wheel[0])) if self._xp is SCALAR else (enabled, wheel)
-        plan.sensing = SimpleNamespace(
-            enabled=enabled, wheel=wheel, wheel_turning=(speed_raw & 0x3FF) != 0, goal_rad=goal_raw * RAD_PER_POSITION_UNIT,
-            temperature_limit=raw["temperature_limit"].copy(), min_voltage_limit=raw["min_voltage_limit"].copy(),
-            max_voltage_limit=raw["max_voltage_limit"].copy(), any_wheel=bool(wheel.any()), all_wheel=bool(wheel.all()),
-            all_enabled=bool(enabled.all()), always_moving=None,
-        )
-        if plan.sensing.all_wheel and bool((enabled & plan.sensing.wheel_turning).all()):
+        wheel_turning = (speed_raw & 0x3FF) != 0
+        all_wheel = bool(wheel.all())
+        always_moving = None
+        if all_wheel and bool((enabled & wheel_turning).all()):
             # Every servo driven at a speed in wheel mode: Moving is 1 whatever the shaft does, so
             # sense() hands over this one read-only array (the plant then need not rewrite it).
-            plan.sensing.always_moving = np.ones(n, dtype=np.int64)
-            plan.sensing.always_moving.flags.writeable = False
-        plan.any_wheel, plan.any_joint = plan.sensing.any_wheel, not plan.sensing.all_wheel
-        plan.any_disabled = bool((~enabled).any())
-        plan.any_arm = bool(np.any(self._array("weight_nm") != 0))
-        plan.any_ext = bool(np.any(self._array("ext_nm") != 0))
-        plan.any_blocked = bool(np.any(self._array("blocked") != 0))
-        plan.symmetric = bool(np.all(comp.cw_margin == comp.ccw_margin) and np.all(comp.cw_gain == comp.ccw_gain))
-        plan.half_play_rad, plan.history = self._half_play_rad, self._delay_line
-        if not (self.fused and fusable(self._k, plan)):
-            plan.kernel = partial(generic_steps, self._xp, plan, self._k)
-        elif self._xp is SCALAR:
-            plan.kernel = partial(fused_scalar_steps, plan, self._k)
-        else:
-            plan.kernel = FusedNumpySteps(plan, self._k, self._s, n)
+            always_moving = np.ones(n, dtype=np.int64)
+            always_moving.flags.writeable = False
+        sensing = _Sensing(
+            enabled=enabled, wheel=wheel, wheel_turning=wheel_turning, goal_rad=goal_raw * RAD_PER_POSITION_UNIT,
+            temperature_limit=raw["temperature_limit"].copy(), min_voltage_limit=raw["min_voltage_limit"].copy(),
+            max_voltage_limit=raw["max_voltage_limit"].copy(), any_wheel=bool(wheel.any()), all_wheel=all_wheel,
+            all_enabled=bool(enabled.all()), always_moving=always_moving,
+        )
+        step_plan = StepPlan(
+            **{k: self._to_backend(v.astype(float)) for k, v in per_servo.items()},
+            **(dict(enabled=bool(enabled[0]), wheel=bool(wheel[0])) if self._xp is SCALAR
+               else dict(enabled=enabled, wheel=wheel)),
+            any_wheel=sensing.any_wheel, any_joint=not all_wheel, any_disabled=bool((~enabled).any()),
+            any_arm=bool(np.any(self._array("weight_nm") != 0)), any_ext=bool(np.any(self._array("ext_nm") != 0)),
+            any_blocked=bool(np.any(self._array("blocked") != 0)),
+            symmetric=bool(np.all(comp.cw_margin == comp.ccw_margin) and np.all(comp.cw_gain == comp.ccw_gain)),
+            half_play_rad=self._half_play_rad, history=self._delay_line,
+        )
+        overload_limit = np.where(enabled, register_limit, np.inf)  # torque off cannot overload
+        plan = _Plan(step=step_plan, kernel=step_kernel(self._xp, step_plan, self._k, self._s, self.fused),
+                     sensing=sensing, overload_limit=self._to_backend(overload_limit.astype(float)))
         # In wheel mode the reference is unused; entering or leaving it restarts the reference at the shaft.
         was_wheel = self._sensing.wheel if self._sensing is not None else np.zeros(n, dtype=bool)
         restart = wheel | was_wheel
@@ -476,7 +502,7 @@ class PhysicalModel:
         self._s.ref_vel = self._to_backend(ref_vel)
         return plan
 
-    def _run(self, plan: SimpleNamespace, first: int, last: int) -> None:
+    def _run(self, plan: _Plan, first: int, last: int) -> None:
         """Steps ``first + 1 .. last``: the plan's kernel between events, the periodic events at their steps."""
         thermal_steps, hold_steps = self._thermal_steps, self._hold_steps
         step = first
@@ -492,7 +518,7 @@ class PhysicalModel:
                 if slow_changed:
                     self._slow = None
 
-    def _thermal_event(self, plan: SimpleNamespace) -> bool:
+    def _thermal_event(self, plan: _Plan) -> bool:
         """Heating, the overload timer and angle wrapping, once per thermal period.
 
         Returns whether a register it feeds (Present Temperature in whole degrees, the
@@ -510,10 +536,10 @@ class PhysicalModel:
                                                p.stall_speed_rad_s, period)
         # Only wheel mode turns endlessly; a joint-mode shaft keeps a continuous angle, so an
         # overshoot below 0 reads as a small negative error, not as a jump to the far end.
-        if plan.any_wheel:
+        if plan.step.any_wheel:
             turns = np.asarray(s.angle / _TWO_PI)
             if turns.min() < 0.0 or turns.max() >= 1.0:  # some shaft is a turn off (else all stay bound as they are)
-                shift = xp.where(plan.wheel, xp.floor(turns if xp is NUMPY else float(turns)) * _TWO_PI, 0.0 * s.angle)
+                shift = xp.where(plan.step.wheel, xp.floor(turns if xp is NUMPY else float(turns)) * _TWO_PI, 0.0 * s.angle)
                 s.angle, s.sample_angle, s.ref, s.out = s.angle - shift, s.sample_angle - shift, s.ref - shift, s.out - shift
                 if self._delay_line is not None:
                     self._delay_line.shift(shift)

@@ -75,7 +75,7 @@ def _trajectory(n: int, backend: str, fused: bool, load, make_commands, wheel: b
             states.append((model.angle_rad, model.speed_rad_s, model.reference_rad, model.drive, model.temperature_c,
                            np.array(model._s.current_sq_sum),  # the heating's running sum, not only its rounding
                            *(getattr(sensed, name) for name in type(sensed).field_names())))
-    held = (model.speed_rad_s == 0) & (wheel or model.reference_rad == model._cached_plan(cmds).goal_rad)
+    held = (model.speed_rad_s == 0) & (wheel or model.reference_rad == model._cached_plan(cmds).step.goal_rad)
     assert held.any(), "the scenario should end with a servo holding still (the kernels' fixed-point shortcut)"
     return states
 
@@ -162,15 +162,12 @@ def test_cruise_safe_distance_keeps_every_speed_limit_exactly():
     n = 1023
     k = StepConstants.from_params(ServoParams(), 1e-3, "compliance", PidGains())
     adt = k.accel_rad_s2 * k.step_s
-    full = lambda value: np.full(n, float(value))  # noqa: E731
-    c = type("C", (), dict(q=full(0.25 * adt * adt), two_a=full(2.0 * k.accel_rad_s2), half_adt=full(0.5 * adt),
-                           inv_dt=full(1.0 / k.step_s)))
     limit = np.arange(1, n + 1) * RAD_S_PER_SPEED_UNIT
-    safe = _cruise_safe_distance(c, limit)
+    safe = _cruise_safe_distance(k, limit)
     for scale in (1.0, 1.0 + 1e-12, 1.37, 1e3):
-        d = safe * scale
-        curve = np.sqrt(d * c.two_a + c.q) - c.half_adt
-        assert (np.minimum(limit, np.minimum(curve, d * c.inv_dt)) == limit).all()
+        d = safe * scale  # the setpoint's braking curve, written out from a and dt (setpoint.braking_speed)
+        curve = np.sqrt(d * (2.0 * k.accel_rad_s2) + 0.25 * adt * adt) - 0.5 * adt
+        assert (np.minimum(limit, np.minimum(curve, d * (1.0 / k.step_s))) == limit).all()
     # and not far beyond what the braking curve needs, (v**2 + v a dt) / 2a, or one step at v
     needed = np.maximum((limit**2 + limit * adt) / (2 * k.accel_rad_s2), limit * k.step_s)
     assert (safe < needed * (1 + 1e-6) + 1e-9).all()
