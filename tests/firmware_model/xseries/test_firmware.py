@@ -379,3 +379,34 @@ def test_a_held_servo_skips_repeated_steps_without_changing_the_outcome(model):
     assert a == b
     assert stepped.temperature_c == pytest.approx(skipped.temperature_c, abs=1e-6)
     assert stepped.physics.angle_rad == skipped.physics.angle_rad
+
+
+def test_xl430_reports_present_load_in_tenths_of_a_percent():
+    servo, cmd = make("XL430-W250", torque_enable=1, operating_mode=OperatingMode.PWM)
+    write(servo, cmd, goal_pwm=885)
+    _hold_shaft(servo, 0.3)  # full duty on a held shaft: the stall current, the load's full scale
+    assert servo.sense().present_current == pytest.approx(1000, abs=150)
+    write(servo, cmd, goal_pwm=-300)
+    _hold_shaft(servo, 0.3)
+    assert servo.sense().present_current == pytest.approx(-1000 * 300 / 885, abs=60)
+
+
+def test_following_error_and_goal_velocity_clipped_to_velocity_limit():
+    servo, cmd = make(torque_enable=1, profile_velocity=200, profile_acceleration=100)
+    write(servo, cmd, goal_position=servo.sense().present_position + 3000)
+    servo.set_external_torque(-6.0)  # the shaft cannot follow its trajectory
+    trace = run(servo, 0.5)
+    assert trace[-1].moving_status & 0x08
+    assert not run(make(torque_enable=1, profile_velocity=200, profile_acceleration=100)[0], 0.1)[-1].moving_status & 0x08
+    servo, cmd = make(torque_enable=1, operating_mode=OperatingMode.VELOCITY, velocity_limit=80)
+    write(servo, cmd, goal_velocity=150)
+    trace = run(servo, 1.0)
+    assert trace[-1].velocity_trajectory == 80 and abs(trace[-1].present_velocity - 80) <= 3
+
+
+def test_reverse_drive_mode_in_velocity_mode_turns_the_shaft_clockwise():
+    servo, cmd = make(torque_enable=1, drive_mode=0x01, operating_mode=OperatingMode.VELOCITY)
+    write(servo, cmd, goal_velocity=100)
+    trace = run(servo, 1.0)
+    assert abs(trace[-1].present_velocity - 100) <= 3
+    assert servo.physics.velocity_rad_s == pytest.approx(-100 * 0.229 * 2 * math.pi / 60, rel=0.05)
