@@ -53,6 +53,7 @@ values are plain ints named after their register.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -222,6 +223,7 @@ class XFirmware:
         by goal update does not undo them; :attr:`.XSensed.torque_enable` is the firmware's value.
         """
         old = self._cmd
+        commands = dataclasses.replace(commands)  # our own copy: a caller may reuse and mutate its object
         self._cmd = commands
         self._fixed = False
         if (commands.drive_mode ^ old.drive_mode) & 0x01:
