@@ -61,8 +61,8 @@ from .sensors import DelayLine
 from .setpoint import setpoint_velocity
 from .units import RAD_PER_POSITION_UNIT
 
-__all__ = ["StepConstants", "StepPlan", "ModelState", "Kernel", "step_kernel", "generic_steps", "fused_scalar_steps",
-           "FusedNumpySteps", "fusable"]
+__all__ = ["StepConstants", "StepPlan", "ModelState", "PerServo", "Kernel", "step_kernel", "generic_steps",
+           "fused_scalar_steps", "FusedNumpySteps", "fusable"]
 
 #: While no fixed point is found, the numpy kernel looks for one after every this many steps.
 CHECK_EVERY = 8
@@ -194,8 +194,9 @@ class StepPlan:
 class ModelState:
     """The state of :class:`~firmware_model.physical.PhysicalModel`, per servo (see :data:`PerServo`).
 
-    A kernel advances the first nine (the step's state); the model's periodic
-    events update the next five; the run-time loads are inputs the model sets.
+    A kernel advances the first nine (the step's state; with gear play the
+    generic loop also ``out``); the model's periodic events update the next
+    five; the run-time loads are inputs the model sets.
     Not frozen: the generic and scalar kernels bind new values, the numpy
     kernel writes its own arrays in place (see :class:`FusedNumpySteps`).
     """
@@ -654,6 +655,11 @@ class FusedNumpySteps:
     shortcut once one is found (:meth:`_repeat_fixed_point`) and the heating
     (:meth:`_add_heat`).
     """
+
+    # Slots: the scheduling in __call__ reads and writes the findings once per run of steps.
+    __slots__ = ("c", "plan", "buf", "wheel", "disabled", "ref_angle", "vel_speed_drive", "state", "n", "heat",
+                 "heat_rows", "_steps", "ref_resting", "at_rest", "cruising", "ref_cruise_left", "safe_distance",
+                 "can_cruise", "check_in", "rest_steps", "cruise_steps", "ref_cruise_steps")
 
     def __init__(self, plan: StepPlan, k: StepConstants, s: ModelState, n: int) -> None:
         self.c = _NumpyConstants.broadcast(plan, k, s, n)
