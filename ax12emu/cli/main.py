@@ -78,6 +78,11 @@ def build_parser() -> argparse.ArgumentParser:
 
     serve = sub.add_parser("serve", help="serve a bus of virtual servos on a pty or TCP")
     serve.add_argument("--ids", type=_ids, default=[1], metavar="LIST", help="servo IDs, e.g. 1,2,5 or 1-18 (default 1)")
+    serve.add_argument(
+        "--servo", metavar="SPEC",
+        help="X-series servos on Protocol 2.0: MODEL for every --ids ID (e.g. xl430-w250), or IDS:MODEL,... "
+        "per ID (e.g. 1-5:xm430-w350,6:xl330-m077); 'ax12emu models' lists the models",
+    )
     where = serve.add_mutually_exclusive_group()
     where.add_argument("--pty", action="store_true", help="serve on a pseudo-terminal (the default)")
     where.add_argument("--tcp", metavar="HOST:PORT", help="serve the raw byte stream on TCP instead (PORT 0: pick one)")
@@ -158,10 +163,34 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+#: Serve options that shape Protocol 1.0 servos only; with --servo each must keep its default.
+_PROTOCOL1_ONLY = ("web", "monitor", "state_dir", "trace", "params", "arm", "model", "controller", "profile",
+                   "broadcast_ping", "reset_reply_id", "goal_torque", "eeprom_busy_ms", "drop", "corrupt", "delay",
+                   "delay_s", "fault_ids", "fault_seed", "vanish", "duplicate", "alarm", "stall")
+
+
+def _check_servo_spec(parser: argparse.ArgumentParser, args: argparse.Namespace, argv: list[str]) -> None:
+    """Resolve ``--servo`` into ``args.servo_models`` [(ID, model key)], or exit with the reason."""
+    from ax12emu.protocol.servo_spec import parse_servo_spec
+
+    ids_given = any(a == "--ids" or a.startswith("--ids=") for a in argv)
+    try:
+        args.servo_models = parse_servo_spec(args.servo, args.ids if ids_given or ":" not in args.servo else None)
+    except ValueError as exc:
+        parser.error(f"--servo: {exc}")
+    defaults = parser.parse_args(["serve"])
+    for dest in _PROTOCOL1_ONLY:
+        if getattr(args, dest) != getattr(defaults, dest):
+            flag = "--" + dest.replace("_", "-")
+            parser.error(f"{flag} is not available with --servo yet (the Protocol 2.0 bus serves without it)")
+
+
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     """Parse and cross-check arguments; errors exit through argparse with a usage line."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    if args.command == "serve" and args.servo is not None:
+        _check_servo_spec(parser, args, sys.argv[1:] if argv is None else list(argv))
     if args.command == "serve":
         if args.link and args.tcp:
             parser.error("--link applies to a pty, not to --tcp")
@@ -188,7 +217,54 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     return args
 
 
+def _serve2(args: argparse.Namespace) -> int:
+    """``serve --servo``: X-series servos on Protocol 2.0, each with its model's table and firmware."""
+    from ax12emu.bus.bus2 import Bus2
+    from ax12emu.protocol.servo_models import model
+    from ax12emu.serve import BusServer
+    from ax12emu.servo.model_factory2 import XModelChoice, build_x_firmware
+    from ax12emu.servo.servo2 import Servo2Options
+
+    choice = XModelChoice(voltage_v=args.voltage, external_torque_nm=args.external_torque)
+    bus = Bus2(
+        [(servo_id, model(key)) for servo_id, key in args.servo_models],
+        lambda spec, index: build_x_firmware(spec, choice),
+        clock=WallClock(args.time_scale),
+        options=Servo2Options(reply_on_crc_error=args.checksum_error == "reply"),
+    )
+    transport = _open_transport(args)
+    server = BusServer(bus, transport, pace=args.pace, echo=args.echo)
+    signal.signal(signal.SIGINT, lambda signum, frame: server.stop())
+    signal.signal(signal.SIGTERM, lambda signum, frame: server.stop())
+    print(transport.url, flush=True)  # the first stdout line: the port, which scripts and tests read
+    log.info("serving %s on %s (Protocol 2.0%s%s)", ", ".join(f"{i}:{k}" for i, k in args.servo_models), transport.name,
+             ", paced" if args.pace else "", ", echo" if args.echo else "")
+    try:
+        server.serve_forever()
+    finally:
+        transport.close()
+        bus.close()
+        log.info("stopped; %d packets served", server.packets_in)
+    return 0
+
+
+def _open_transport(args: argparse.Namespace):
+    """The pty (default) or TCP transport the serve flags ask for."""
+    from ax12emu.serve import open_transport
+    from ax12emu.serve.transports.tcp import is_loopback
+
+    if args.tcp:
+        host, port = args.tcp_address
+        transport = open_transport("tcp", host=host, port=port)
+        if not is_loopback(host):
+            log.warning("serving on %s, reachable from other machines", transport.url)
+        return transport
+    return open_transport("pty", link=args.link)
+
+
 def _serve(args: argparse.Namespace) -> int:
+    if getattr(args, "servo_models", None):
+        return _serve2(args)
     from ax12emu.serve import BusServer, open_transport
     from ax12emu.serve.transports.tcp import is_loopback
 

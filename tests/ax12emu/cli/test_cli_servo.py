@@ -1,0 +1,43 @@
+"""``serve --servo``: the Protocol 2.0 bus from the command line; every mistake is one line and exit 2."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+from ax12emu.cli.main import parse_args
+
+
+def run(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "ax12emu", *args], capture_output=True, text=True, timeout=30)
+
+
+def test_a_model_for_every_id_and_per_id_models():
+    assert parse_args(["serve", "--servo", "xl430-w250", "--ids", "1-3"]).servo_models == [
+        (1, "xl430-w250"), (2, "xl430-w250"), (3, "xl430-w250")]
+    assert parse_args(["serve", "--servo", "xl430-w250"]).servo_models == [(1, "xl430-w250")]
+    assert parse_args(["serve", "--servo", "1-2:xm430-w350,6:xl330-m077"]).servo_models == [
+        (1, "xm430-w350"), (2, "xm430-w350"), (6, "xl330-m077")]
+    assert not hasattr(parse_args(["serve"]), "servo_models")
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--servo", "ax-12a"], "speaks Protocol 1.0, not 2.0"),
+        (["--servo", "xl999"], "unknown servo model 'xl999'"),
+        (["--servo", "1-3:xl430-w250", "--ids", "1-3"], "both name the IDs"),
+        (["--servo", "1-3:xl430-w250,3:xm430-w350"], "ID 3 is given two models"),
+        (["--servo", "xl430-w250", "--ids", "253"], "outside 0..252"),
+        (["--servo", "xl430-w250", "--web", "127.0.0.1:0"], "--web is not available with --servo"),
+        (["--servo", "xl430-w250", "--drop", "0.5"], "--drop is not available with --servo"),
+        (["--servo", "xl430-w250", "--voltage", "30"], "runs on 6.5..12 V, not 30 V"),
+    ],
+)
+def test_mistakes_are_one_line_and_exit_2(args, message):
+    result = run("serve", *args)
+    assert result.returncode == 2, result
+    assert "Traceback" not in result.stderr
+    assert message in result.stderr, result.stderr
