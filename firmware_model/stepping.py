@@ -15,6 +15,14 @@ buffers with its constants already broadcast, the scalar one (one servo) on
 plain floats with no function calls.  PID, asymmetric compliance and a mix
 of wheel and joint mode run the generic loop.
 
+So the step's arithmetic is written three times, on purpose: the step
+functions return fresh values (clear, and the reference), the numpy kernel
+needs every call in place, and the scalar one cannot afford a call (a
+Python call costs about as much as its whole step).  What the three share
+costs nothing a step: the rule that picks a kernel (:func:`fusable`,
+:func:`step_kernel`), the constants derived once (:class:`StepConstants`),
+and the one typed plan they all read (:class:`StepPlan`).
+
 The numpy kernel also skips what provably repeats: every ``CHECK_EVERY``
 steps, until it finds one, it compares the state after a step with the one
 before; a reference resting on its goal is not stepped again, a state that
@@ -428,7 +436,7 @@ class _NumpyConstants:
     #: (2, N): the step for the reference's velocity and the shaft's speed rows at once.
     step2_s: np.ndarray
     #: (2, N): position units per radian, for the reference and angle rows at once.
-    inv_unit2: np.ndarray
+    units_per_rad2: np.ndarray
     #: Zeros: ``heaviside(x, zero)`` is ``(x > 0)`` as 0.0 / 1.0.
     zero: np.ndarray
     #: Wheel mode's speed gain and the drive's lower bound.
@@ -462,7 +470,7 @@ class _NumpyConstants:
         return cls(
             q_rad2_s2=full(k.q_rad2_s2), two_a_rad_s2=full(k.two_a_rad_s2), half_adt_rad_s=full(k.half_adt_rad_s),
             inv_step_per_s=full(k.inv_step_per_s), adt_rad_s=full(k.adt_rad_s), neg_adt_rad_s=full(-k.adt_rad_s),
-            step_s=full(k.step_s), step2_s=np.full((2, n), k.step_s), inv_unit2=np.full((2, n), k.inv_unit), zero=zero,
+            step_s=full(k.step_s), step2_s=np.full((2, n), k.step_s), units_per_rad2=np.full((2, n), k.inv_unit), zero=zero,
             kv_s_rad=full(k.wheel_gain_s_rad), neg_limit=-plan.limit,
             disabled=~np.asarray(plan.enabled, dtype=bool) if plan.any_disabled else None,
             emf_stall_a=np.stack([full(k.k_over_r), np.asarray(plan.stall_current_a, dtype=float)]),
@@ -526,7 +534,7 @@ def _numpy_steps(c: _NumpyConstants, p: StepPlan, buf: _Scratch, ref_angle: np.n
     goal, max_speed, margin, gain, punch, limit, en = p.goal_rad, p.max_speed_rad_s, p.ccw_margin, p.ccw_gain, p.punch, p.limit, p.en
     wheel_ref, wheel_ff, wheel = p.wheel_ref_rad_s, p.wheel_ff, p.any_wheel  # fusable(): all in wheel mode or none
     q, two_a, half_adt, inv_dt = c.q_rad2_s2, c.two_a_rad_s2, c.half_adt_rad_s, c.inv_step_per_s
-    neg_adt, adt, dt, dt2, zero, inv_unit2 = c.neg_adt_rad_s, c.adt_rad_s, c.step_s, c.step2_s, c.zero, c.inv_unit2
+    neg_adt, adt, dt, dt2, zero, units_per_rad2 = c.neg_adt_rad_s, c.adt_rad_s, c.step_s, c.step2_s, c.zero, c.units_per_rad2
     kv, neg_limit, disabled = c.kv_s_rad, c.neg_limit, c.disabled
     emf_stall, eta_k_dv, bridge_share, bridge_against = c.emf_stall_a, c.eta_k_dv, c.bridge_share, c.bridge_against
     ext_dv, neg_weight_dv, arm_at, free = c.ext_dv_rad_s, c.neg_weight_dv_rad_s, c.arm_at_rad, c.free
@@ -578,7 +586,7 @@ def _numpy_steps(c: _NumpyConstants, p: StepPlan, buf: _Scratch, ref_angle: np.n
                 if disabled is not None:
                     copyto(ref, angle, where=disabled)
                 # controller.symmetric_compliance_drive, on the error in units
-                mul(ref_angle, inv_unit2, in_units)
+                mul(ref_angle, units_per_rad2, in_units)
                 rint(angle_units, t)
                 sub(ref_units, t, err)
                 absolute(err, d)
