@@ -716,7 +716,7 @@ class FusedNumpySteps:
         steps only turn the shaft by the same angle and heat.
         """
         self._take_in(s)
-        if self.at_rest or self.cruising:  # before setting up a step: servo loops call one step at a time
+        if self.at_rest or self.cruising:  # found in an earlier call: serving loops call one step at a time
             self._repeat_fixed_point(count)
             return
         if count > len(self.heat_rows) - 1:
