@@ -140,6 +140,10 @@ class Bus:
         """Present IDs, in slot order."""
         return [servo.id for servo in self.servos]
 
+    #: Replies to one packet may overlap on the wire (broadcast PING, duplicate IDs): the serving
+    #: loop merges them (``merge_replies``) rather than laying them one after another.
+    replies_in_sequence = False
+
     @property
     def physics_step_s(self) -> float:
         """The model's control step: the serving loop's physics tick lands on its grid."""

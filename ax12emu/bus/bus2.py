@@ -83,6 +83,10 @@ _REQUIRED_BROADCAST = _LISTED_READS | {Broadcast.REQUIRED_SILENT}
 class Bus2:
     """Protocol 2.0 servos on one wire, each with its own model file and firmware model."""
 
+    #: Several replies to one packet are timed one after another (see the module docstring): the
+    #: serving loop sends each at its own time.
+    replies_in_sequence = True
+
     def __init__(
         self,
         servos: Iterable[tuple[int, ServoModel]],

@@ -27,7 +27,8 @@ class Reply(NamedTuple):
     baud_bps: float
 
 
-def merge_replies(replies: Sequence[Reply], start_s: float, *, per_byte: bool) -> list[tuple[float, bytes]]:
+def merge_replies(replies: Sequence[Reply], start_s: float, *, per_byte: bool,
+                  in_sequence: bool = False) -> list[tuple[float, bytes]]:
     """Lay replies on the wire as (release time, bytes) chunks; colliding byte slots are AND-ed.
 
     Each reply starts ``delay_s`` after ``start_s`` and takes one byte time
@@ -35,7 +36,12 @@ def merge_replies(replies: Sequence[Reply], start_s: float, *, per_byte: bool) -
     fall in the same byte slot are AND-ed, as on an open-drain TTL line.
     With ``per_byte`` each byte is released when its last bit has arrived
     (wire pacing); otherwise a single reply goes out whole at its due time.
+    ``in_sequence``: the bus timed its replies one after another (Protocol 2.0's
+    broadcast Ping slots, Sync Read's answers in list order); without pacing
+    each then goes out whole at its own due time instead of all at the first's.
     """
+    if in_sequence and not per_byte:
+        return [(start_s + reply.delay_s, reply.data) for reply in replies]
     if len(replies) == 1 and not per_byte:
         reply = replies[0]
         return [(start_s + reply.delay_s, reply.data)]

@@ -99,6 +99,8 @@ class BusServer:
         self._hot_until = 0.0
         self._connections = getattr(transport, "connections", None)
         self._yield_after_reply = getattr(transport, "yield_after_reply", False) and hasattr(os, "sched_yield")
+        #: The bus times several replies to one packet one after another (see ``merge_replies``).
+        self._in_sequence = bus.replies_in_sequence
         #: Whether the clock is fine enough to wait on for a few microseconds (not Windows before 3.13).
         self._exact_clock = time.get_clock_info("monotonic").resolution <= 1e-6
         self._next_physics = time.monotonic()
@@ -197,7 +199,7 @@ class BusServer:
             if self._yield_after_reply:
                 os.sched_yield()
             return
-        self._schedule(merge_replies(replies, end, per_byte=self.pace))
+        self._schedule(merge_replies(replies, end, per_byte=self.pace, in_sequence=self._in_sequence))
         if not self.pace and replies[0].delay_s == 0.0:
             self._flush(now)
 

@@ -14,7 +14,7 @@ from x2_testkit import RecordingFirmware, recording_bus
 
 from ax12emu.bus.bus2 import Bus2
 from ax12emu.bus.clock import VirtualClock
-from ax12emu.bus.reply import BITS_PER_BYTE
+from ax12emu.bus.reply import BITS_PER_BYTE, merge_replies
 from ax12emu.protocol.packets2 import (
     ErrorNumber,
     Instruction2,
@@ -364,3 +364,13 @@ def test_models_mix_on_one_bus():
 def test_a_protocol_1_model_is_refused():
     with pytest.raises(ValueError, match="not 2.0"):
         Bus2([(1, model("ax-12a"))], lambda spec, index: RecordingFirmware())
+
+
+def test_replies_timed_in_sequence_go_out_each_at_its_own_time():
+    """Without pacing, a broadcast Ping's answers leave at their slots, not all at the first one's."""
+    bus, _ = recording_bus(ids=(1, 2), key="xl430-w250")
+    replies = bus.receive(h("Ping broadcast"))
+    chunks = merge_replies(replies, 10.0, per_byte=False, in_sequence=bus.replies_in_sequence)
+    assert [(t, data) for t, data in chunks] == [(10.0 + r.delay_s, r.data) for r in replies]
+    paced = merge_replies(replies, 10.0, per_byte=True, in_sequence=True)
+    assert b"".join(data for _, data in paced) == b"".join(r.data for r in replies)
