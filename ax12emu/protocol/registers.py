@@ -16,7 +16,7 @@ from types import MappingProxyType
 
 import numpy as np
 
-__all__ = ["Access", "Area", "Entry", "Profile", "Layout", "compile_layout", "MAX_ENTRY_SIZE"]
+__all__ = ["Access", "Area", "Entry", "ModeRange", "Profile", "Layout", "compile_layout", "MAX_ENTRY_SIZE"]
 
 #: The widest register any table has: the X series' 4-byte positions and velocities.
 MAX_ENTRY_SIZE = 4
@@ -34,6 +34,20 @@ class Area(enum.Enum):
 
     EEPROM = "EEPROM"
     RAM = "RAM"
+
+
+@dataclass(frozen=True)
+class ModeRange:
+    """A register's range while another register holds one of some values (X series: Goal Position in
+    Extended Position Control Mode takes -1,048,575..1,048,575 and ignores the position limits)."""
+
+    #: The register that selects this range (``operating_mode``).
+    register: str
+    values: tuple[int, ...]
+    minimum: int
+    maximum: int
+    #: Whether ``minimum_from``/``maximum_from`` still bound the value.
+    limits: bool = True
 
 
 @dataclass(frozen=True)
@@ -61,6 +75,8 @@ class Entry:
     #: widest values those registers allow.  Not enforced by :class:`~ax12emu.protocol.control_table.ControlTable`.
     minimum_from: str | None = None
     maximum_from: str | None = None
+    #: Ranges that replace ``minimum``/``maximum`` while another register selects them (first match wins).
+    mode_ranges: tuple[ModeRange, ...] = ()
 
     @property
     def end(self) -> int:

@@ -48,7 +48,9 @@ Entry keys: ``address``, ``size`` (1, 2 or 4), ``name`` (snake_case, unique), ``
 e-manual gives none, "-", and 0 is used), ``min``/``max`` (absent: the full span of the size, signed or
 not), ``signed``, ``min_from``/``max_from`` (a register bounding this one at run time, "-" to negate),
 ``count``/``first``/``default_step`` (a run of equal registers such as Indirect Address 1..28: ``{n}``
-in the name counts from ``first``, default 1), ``note`` (free text, for readers).
+in the name counts from ``first``, default 1), ``note`` (free text, for readers), ``ranges_when`` (ranges
+another register selects: ``[{ register = "operating_mode", values = [4], min = -1048575, max = 1048575,
+limits = false }]``, ``limits`` saying whether ``min_from``/``max_from`` still apply).
 """
 
 from __future__ import annotations
@@ -63,7 +65,7 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
-from .registers import MAX_ENTRY_SIZE, Access, Area, Entry, Layout, Profile, compile_layout
+from .registers import MAX_ENTRY_SIZE, Access, Area, Entry, Layout, ModeRange, Profile, compile_layout
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -80,7 +82,8 @@ SHUTDOWN_CLEARS = ("torque_limit", "torque_enable")
 _MODEL_KEYS = {"name", "model_number", "firmware_version", "protocols", "source", "baud_rates_bps"}
 _TABLE_KEYS = {"size", "entries"}
 _ENTRY_KEYS = {"address", "size", "name", "access", "area", "default", "min", "max", "signed", "min_from", "max_from",
-               "count", "first", "default_step", "note"}
+               "count", "first", "default_step", "note", "ranges_when"}
+_RANGE_WHEN_KEYS = {"register", "values", "min", "max", "limits"}
 _PROFILE_KEYS = {"source", "overrides", "extra_entries", "lock_writable", "shutdown_clears"}
 _OVERRIDE_KEYS = {"default": "default", "min": "minimum", "max": "maximum"}
 _PHYSICAL_KEYS = {"source", "gear_ratio", "weight_g", "resolution_deg", "position_range_deg", "operating_voltage_v",
@@ -246,6 +249,7 @@ def _entries(where: _Where, raw: Any, field_name: str) -> tuple[Entry, ...]:
                 bounds[key] = where.text(item[key], f"{label}.{key}")
         if "note" in item:
             where.text(item["note"], f"{label}.note")
+        modes = _ranges_when(where, item.get("ranges_when", []), f"{label}.ranges_when", low, high)
         count = where.integer(item.get("count", 1), f"{label}.count")
         first = where.integer(item.get("first", 1), f"{label}.first")
         step = where.integer(item.get("default_step", 0), f"{label}.default_step")
@@ -260,14 +264,36 @@ def _entries(where: _Where, raw: Any, field_name: str) -> tuple[Entry, ...]:
             if not minimum <= value <= maximum:
                 raise where.error(f"{label}.default_step", f"copy {first + k} has default {value}, outside {minimum}..{maximum}")
             out.append(Entry(address + k * size, size, name.replace("{n}", str(first + k)), access, value, minimum,
-                             maximum, area, signed, bounds.get("min_from"), bounds.get("max_from")))
+                             maximum, area, signed, bounds.get("min_from"), bounds.get("max_from"), modes))
+    return tuple(out)
+
+
+def _ranges_when(where: _Where, raw: Any, field_name: str, low: int, high: int) -> tuple[ModeRange, ...]:
+    """``ranges_when``: ranges another register selects, each inside the entry's size."""
+    if not isinstance(raw, list):
+        raise where.error(field_name, f"must be an array of tables, got {type(raw).__name__}")
+    out = []
+    for index, item in enumerate(raw):
+        label = f"{field_name}[{index}]"
+        item = where.table(item, label, _RANGE_WHEN_KEYS, {"register", "values", "min", "max"})
+        values = item["values"]
+        if not isinstance(values, list) or not values:
+            raise where.error(f"{label}.values", f"must be a non-empty list of register values, got {values!r}")
+        minimum, maximum = where.integer(item["min"], f"{label}.min"), where.integer(item["max"], f"{label}.max")
+        if not low <= minimum <= maximum <= high:
+            raise where.error(label, f"range {minimum}..{maximum} does not fit the entry ({low}..{high}) or is empty")
+        limits = item.get("limits", True)
+        if not isinstance(limits, bool):
+            raise where.error(f"{label}.limits", f"must be true or false, got {limits!r}")
+        out.append(ModeRange(where.text(item["register"], f"{label}.register"),
+                             tuple(where.integer(v, f"{label}.values") for v in values), minimum, maximum, limits))
     return tuple(out)
 
 
 def _check_bounds_names(where: _Where, entries: tuple[Entry, ...], field_name: str) -> None:
     names = {e.name for e in entries}
     for entry in entries:
-        for ref in (entry.minimum_from, entry.maximum_from):
+        for ref in (entry.minimum_from, entry.maximum_from, *(m.register for m in entry.mode_ranges)):
             if ref is not None and ref.lstrip("-") not in names:
                 raise where.error(f"{field_name} ({entry.name})", f"bound register {ref!r} is not in the table")
 

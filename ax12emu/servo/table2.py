@@ -17,7 +17,8 @@ Write checks, in order (e-manual, "DYNAMIXEL Protocol 2.0" > "Status Packet" > "
 * Data Length Error (5): a register written in part ("when you attempt to only use 2 bytes of a
   item that has been defined as 4 bytes"); written through indirect data, the same rule holds for
   the bytes the indirect addresses reach;
-* Data Range Error (4): a value outside the register's minimum/maximum;
+* Data Range Error (4): a value outside the register's minimum/maximum, or the range its mode selects
+  (``ranges_when``: Goal Position in Extended Position Control Mode);
 * Data Limit Error (6): a value outside the registers that bound it at run time (``min_from`` /
   ``max_from``: Goal Position within Min/Max Position Limit, Goal PWM within +-PWM Limit ...),
   judged on the table as it would be after the write, so limits and goal written together agree.
@@ -155,15 +156,23 @@ class Table2:
         candidate = bytearray(row)
         for target, byte in changes.items():
             candidate[target] = byte
-        for entry in touched:
+        ranges = [self._range(entry, candidate) for entry in touched]
+        for entry, (minimum, maximum, _) in zip(touched, ranges):
             if entry.name in refused:
                 return WriteCheck(ErrorNumber.DATA_RANGE)
-            if not entry.minimum <= entry.value_in(candidate) <= entry.maximum:
+            if not minimum <= entry.value_in(candidate) <= maximum:
                 return WriteCheck(ErrorNumber.DATA_RANGE)
-        for entry in touched:
-            if not self._within_limits(entry, candidate):
+        for entry, (_, _, limits) in zip(touched, ranges):
+            if limits and not self._within_limits(entry, candidate):
                 return WriteCheck(ErrorNumber.DATA_LIMIT)
         return WriteCheck(ErrorNumber.NONE, changes, tuple(touched))
+
+    def _range(self, entry: Entry, image: bytearray) -> tuple[int, int, bool]:
+        """The entry's (minimum, maximum, limits apply) in ``image``: a mode's range where one is selected."""
+        for mode in entry.mode_ranges:
+            if self.layout.by_name[mode.register].value_in(image) in mode.values:
+                return mode.minimum, mode.maximum, mode.limits
+        return entry.minimum, entry.maximum, True
 
     def _bound(self, ref: str, image: bytearray) -> int:
         negate = ref.startswith("-")

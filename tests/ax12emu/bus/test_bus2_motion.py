@@ -67,3 +67,12 @@ def test_torque_off_leaves_the_shaft_and_a_reboot_keeps_its_angle():
     assert read(bus, 1, 64, 1) == 0
     assert abs(read(bus, 1, 132, 4) - before) <= 2
     assert read(bus, 1, 116, 4) == read(bus, 1, 132, 4)  # Goal Position starts at Present Position again
+
+
+def test_extended_position_mode_turns_past_one_revolution():
+    bus = xl430_bus(ids=(1,))
+    assert request(bus, 1, Instruction2.WRITE, bytes((11, 0, 4))).error == ErrorNumber.NONE
+    request(bus, 1, Instruction2.WRITE, bytes((64, 0, 1)))
+    assert request(bus, 1, Instruction2.WRITE, bytes((116, 0)) + u32(2048 + 6000)).error == ErrorNumber.NONE
+    bus.clock.advance(5.0)
+    assert abs(read(bus, 1, 132, 4) - (2048 + 6000)) <= 10

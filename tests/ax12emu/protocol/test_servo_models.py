@@ -220,3 +220,18 @@ def test_protocol_2_models_give_baud_rates_and_current_units():
     assert xl430.baud_rates_bps[1] == 57600 and xl430.baud_rates_bps[3] == 1_000_000
     assert (xl430.physical.current_unit_ma, xm430.physical.current_unit_ma) == (None, 2.69)
     assert model("ax-12a").baud_rates_bps == ()
+
+
+def test_ranges_when_are_read_and_checked():
+    goal = model("xl430-w250").layout().by_name["goal_position"]
+    assert [(m.register, m.values, m.minimum, m.maximum, m.limits) for m in goal.mode_ranges] == [
+        ("operating_mode", (4,), -1048575, 1048575, False)]
+    entry = '{ address = 4, size = 1, name = "x", access = "RW", area = "RAM", ranges_when = [ %s ] },'
+    for spec, message in [
+        ('{ register = "nothing", values = [1], min = 0, max = 1 }', r"'nothing' is not in the table"),
+        ('{ register = "model_number", values = [], min = 0, max = 1 }', r"values: must be a non-empty list"),
+        ('{ register = "model_number", values = [1], min = 0, max = 300 }', r"does not fit the entry"),
+        ('{ register = "model_number", values = [1], min = 0, max = 1, limits = 2 }', r"limits: must be true or false"),
+    ]:
+        with pytest.raises(ValueError, match=message):
+            parse_model(_minimal(extra=entry % spec), "t", "bad.toml")

@@ -122,3 +122,15 @@ def test_factory_defaults_keep_what_is_asked(table):
     assert (table.get("id"), table.get("baud_rate")) == (5, 1)
     table.factory_defaults()
     assert table.get("id") == 1
+
+
+def test_extended_position_mode_widens_goal_position_and_drops_the_limits(table):
+    """e-manual, Goal Position(116): -1,048,575 ~ 1,048,575 in Extended Position Control Mode, limits unused."""
+    assert table.check_write(116, u32(-5000)).error == ErrorNumber.DATA_RANGE
+    table.apply(table.check_write(48, u32(3000)))  # Max Position Limit
+    table.apply(table.check_write(11, b"\x04"))  # Extended Position Control Mode
+    for value in (-5000, 1_048_575, 3001):
+        assert table.check_write(116, u32(value)).error == ErrorNumber.NONE, value
+    assert table.check_write(116, u32(1_048_576)).error == ErrorNumber.DATA_RANGE
+    table.apply(table.check_write(11, b"\x03"))
+    assert table.check_write(116, u32(3001)).error == ErrorNumber.DATA_LIMIT
