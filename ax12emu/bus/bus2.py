@@ -75,6 +75,8 @@ log = logging.getLogger(__name__)
 #: Builds one servo's firmware model from its model file (``spec``) and its index on the bus.
 FirmwareFactory = Callable[[ServoModel, int], XServoModel]
 
+#: The largest LENGTH a packet can announce.
+MAX_LENGTH = 0xFFFF
 _EXECUTED_SILENTLY = frozenset({Broadcast.SILENT, Broadcast.EACH_ANSWERS})
 _LISTED_READS = frozenset({Broadcast.REQUIRED_EACH_ANSWERS, Broadcast.REQUIRED_COMBINED_ANSWER})
 _REQUIRED_BROADCAST = _LISTED_READS | {Broadcast.REQUIRED_SILENT}
@@ -267,7 +269,10 @@ class Bus2:
             return []
         replies: list[Reply] = []
         if fast:
-            parts = [FastStatusPart(servo_id, 0, bytes(length)) for servo_id, _, length in reads]
+            # The first servo's header announces every listed share; those never sent stand in as zeros.
+            if 1 + sum(4 + length for _, _, length in reads) > MAX_LENGTH:
+                return []  # no LENGTH can announce them: nobody can start the packet
+            parts = [FastStatusPart(0, 0, bytes(length)) for _, _, length in reads]
             for k, (servo, error, data) in enumerate(answered):
                 parts[k] = FastStatusPart(servo.id, status_byte(servo, error), data)
             pieces = fast_status_pieces(parts)[: len(answered)]

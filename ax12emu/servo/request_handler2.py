@@ -25,8 +25,9 @@ Policy, with sources (ROBOTIS e-manual, "DYNAMIXEL Protocol 2.0"; X series "Stat
 * the status packet is built before the instruction takes effect on ID, baud, Return Delay Time
   and Status Return Level: a servo whose ID changes answers from its old ID, and Factory Reset and
   Reboot answer before they reset (the e-manual's examples answer from ID 1 after both);
-* a READ that fails still carries the bytes asked for, zero: dynamixel-sdk indexes the data of
-  an erroring reply, and a short one would crash the client instead of reporting the error.
+* a READ that fails still carries the bytes asked for, zero (up to the table's size):
+  dynamixel-sdk indexes the data of an erroring reply, and a short one would crash the client
+  instead of reporting the error.
 """
 
 from __future__ import annotations
@@ -220,10 +221,10 @@ def answers(servo: Servo2, instruction: int) -> bool:
     return level >= 2 or (level == 1 and instruction in READ_INSTRUCTIONS)
 
 
-def _read_length(packet: InstructionPacket2) -> int:
-    """Bytes a READ asked for, so an erroring reply still carries them."""
+def _read_length(servo: Servo2, packet: InstructionPacket2) -> int:
+    """Bytes a READ asked for (at most the table's size), so an erroring reply still carries them."""
     if packet.instruction == Instruction2.READ and len(packet.params) == 4:
-        return packet.params[2] | (packet.params[3] << 8)
+        return min(packet.params[2] | (packet.params[3] << 8), servo.table.size)
     return 0
 
 
@@ -238,22 +239,20 @@ def handle2(servo: Servo2, packet: InstructionPacket2) -> Outcome2:
     instruction = packet.instruction
     talks = packet.id != BROADCAST_ID and answers(servo, instruction)
     if not packet.crc_ok:
-        error, data = ErrorNumber.CRC, bytes(_read_length(packet))
+        error, data = ErrorNumber.CRC, bytes(_read_length(servo, packet))
         talks = talks and servo.options.reply_on_crc_error
     else:
         params = parse_params(instruction, packet.params)
         handler = HANDLERS.get(instruction)
         if handler is None:
-            error, data = ErrorNumber.INSTRUCTION, bytes(_read_length(packet))
+            error, data = ErrorNumber.INSTRUCTION, bytes(_read_length(servo, packet))
         elif isinstance(params, Malformed):
-            error, data = ErrorNumber.RESULT_FAIL, bytes(_read_length(packet))
+            error, data = ErrorNumber.RESULT_FAIL, bytes(_read_length(servo, packet))
         elif (packet.id == BROADCAST_ID and instruction == Instruction2.FACTORY_RESET
               and params.option is FactoryResetOption.ALL):
             return Outcome2(None, reply_id, delay_s, ErrorNumber.NONE)
         else:
             error, data = handler(servo, params)
-            if error and instruction == Instruction2.READ:
-                data = data.ljust(_read_length(packet), b"\x00")
             reply = encode_status2(reply_id, status_byte(servo, error), data) if talks else None
             after = AFTER_REPLY.get(instruction)
             if after is not None and not error:

@@ -112,11 +112,11 @@ class Table2:
     def read(self, address: int, length: int) -> tuple[bytes, int]:
         """``length`` bytes from ``address`` and the error number; past the table, Access Error and zeros.
 
-        Always ``length`` bytes: dynamixel-sdk indexes the data of an erroring
-        reply, so a short one would crash the client instead of reporting the error.
+        ``length`` bytes (at most the table's size): dynamixel-sdk indexes the data of an
+        erroring reply, so a short one would crash the client instead of reporting the error.
         """
         if address + length > self.size:
-            return bytes(length), ErrorNumber.ACCESS
+            return bytes(min(length, self.size)), ErrorNumber.ACCESS
         if not self._indirect:
             return bytes(self.row[address : address + length]), ErrorNumber.NONE
         row = self.row

@@ -7,6 +7,7 @@ protocol side answers and what it hands the model, not motion.
 from __future__ import annotations
 
 import dataclasses
+import random
 
 import pytest
 from protocol2_vectors import EMANUAL_PACKETS
@@ -374,3 +375,33 @@ def test_replies_timed_in_sequence_go_out_each_at_its_own_time():
     assert [(t, data) for t, data in chunks] == [(10.0 + r.delay_s, r.data) for r in replies]
     paced = merge_replies(replies, 10.0, per_byte=True, in_sequence=True)
     assert b"".join(data for _, data in paced) == b"".join(r.data for r in replies)
+
+
+def test_requests_too_big_to_answer_do_not_crash_the_bus(xm):
+    bus, _ = xm
+    # Fast Sync Read of 65535 bytes from three servos: no LENGTH can announce it, nobody starts.
+    assert send(bus, 0xFE, Instruction2.FAST_SYNC_READ, bytes((0, 0, 0xFF, 0xFF, 1, 2, 3))) == []
+    # The broadcast ID in a Fast list: the servos before it answer, the chain stops there.
+    assert len(send(bus, 0xFE, Instruction2.FAST_SYNC_READ, bytes((0, 0, 2, 0, 1, 0xFE, 2)))) == 1
+    # A READ of 65535 bytes: Access Error with the table's worth of zeros, not a 64 KiB packet.
+    reply = status(bus, 1, Instruction2.READ, bytes((0, 0, 0xFF, 0xFF)))
+    assert (reply.error, len(reply.params)) == (ErrorNumber.ACCESS, 662)
+
+
+def test_random_packets_and_noise_never_raise():
+    """Seeded random instructions, parameters, flipped bits and noise: every one is answered or ignored."""
+    bus, _ = recording_bus(ids=(1, 2, 3), key="xm430-w350")
+    rng = random.Random(7)
+    instructions = [int(i) for i in Instruction2 if i != Instruction2.STATUS] + [0x07, 0x99]
+    for _ in range(3000):
+        address = rng.choice((7, 8, 9, 11, 48, 64, 68, 98, 104, 116, 168, 224, 660, 65535))
+        params = address.to_bytes(2, "little") + bytes(rng.randrange(256) for _ in range(rng.randrange(12)))
+        data = bytearray(encode_instruction2(rng.choice((0, 1, 2, 3, 9, 0xFE)), rng.choice(instructions), params))
+        if rng.random() < 0.1:
+            data[rng.randrange(len(data))] ^= 1 << rng.randrange(8)
+        if rng.random() < 0.05:
+            data = bytearray(rng.randrange(256) for _ in range(rng.randrange(1, 30)))
+        for reply in bus.receive(bytes(data)):
+            assert reply.data.startswith(b"\xff\xff\xfd\x00")
+        if rng.random() < 0.1:
+            bus.clock.advance(0.01)
