@@ -19,7 +19,7 @@ from dynamixel_sdk import (
     GroupSyncWrite,
     PacketHandler,
 )
-from emu_testkit import PatientPortHandler, ok
+from emu_testkit import PatientPortHandler, UrlPortHandler, ok
 
 from ax12emu.protocol.packets2 import ErrorNumber
 
@@ -35,7 +35,7 @@ pytestmark = pytest.mark.wallclock
 
 @contextmanager
 def sdk2(path: str):
-    port = PatientPortHandler(path)
+    port = UrlPortHandler(path) if "://" in path else PatientPortHandler(path)
     assert port.openPort(), f"could not open {path}"
     assert port.setBaudRate(BAUD)
     try:
@@ -146,3 +146,16 @@ def test_a_mixed_bus_per_id(emulator):
         found, comm = ph.broadcastPing(port)
         assert comm == COMM_SUCCESS
         assert {servo_id: info[0] for servo_id, info in found.items()} == {1: 1020, 2: 1020, 3: 1190}
+
+
+def test_over_tcp_too(emulator):
+    """The same bus behind TCP (socket:// through pyserial): ping, a sync read of all six."""
+    url = emulator("--servo", "xl430-w250", "--ids", "1-6", "--tcp", "127.0.0.1:0").port
+    assert url.startswith("socket://")
+    with sdk2(url) as (port, ph):
+        assert ok(ph.ping(port, 6)) == XL430_MODEL_NUMBER
+        read = GroupSyncRead(port, ph, PRESENT_POSITION, 4)
+        for servo_id in IDS:
+            assert read.addParam(servo_id)
+        assert read.txRxPacket() == COMM_SUCCESS
+        assert [read.getData(servo_id, PRESENT_POSITION, 4) for servo_id in IDS] == [2048] * 6
