@@ -21,7 +21,7 @@ Model (everything referred to the output shaft, ``G`` the gear ratio):
   that is there only near rest, plus gear friction that grows with the torque the gears carry:
   ``|mu_e tau_ext - mu_m tau_motor|`` (BAM's "load-dependent directional" models M5, M6: a gear pair
   driven from the motor side loses a share of the motor's torque, one back-driven by the load a share
-  of the load's), and a viscous ``b w``.  All the extra terms default to zero: the plain model.
+  of the load's), with its own Stribeck part at rest (the same fading), and a viscous ``b w``.  All the extra terms default to zero: the plain model.
 * Load: the reflected rotor and gear inertia, plus what :meth:`XPhysics.set_load` puts on the horn
   (an inertia and a pendulum), plus an external torque.
 
@@ -103,6 +103,10 @@ class XPhysicsParams:
     load_friction_motor: float = 0.0
     #: Gear friction per N m of external torque the gears carry (back-driven by the load), dimensionless.
     load_friction_external: float = 0.0
+    #: Extra gear friction at rest per N m carried from the motor side and from the load side, fading with speed
+    #: as the Stribeck term does (BAM's ``load_friction_motor_stribeck`` and ``load_friction_external_stribeck``).
+    load_stribeck_motor: float = 0.0
+    load_stribeck_external: float = 0.0
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -114,7 +118,7 @@ class XPhysicsParams:
             if getattr(self, name) <= 0:
                 raise ValueError(f"XPhysicsParams.{name} must be positive, got {getattr(self, name)!r}")
         for name in ("coulomb_friction_nm", "viscous_friction_nm_s_rad", "stribeck_friction_nm", "load_friction_motor",
-                     "load_friction_external"):
+                     "load_friction_external", "load_stribeck_motor", "load_stribeck_external"):
             if getattr(self, name) < 0:
                 raise ValueError(f"XPhysicsParams.{name} must be >= 0, got {getattr(self, name)!r}")
 
@@ -197,11 +201,20 @@ class XPhysics:
     ``angle_rad`` is the output shaft's angle, continuous (it counts turns); positive is counter-clockwise.
     """
 
-    def __init__(self, params: XPhysicsParams, *, supply_v: float, angle_rad: float = 0.0) -> None:
+    def __init__(self, params: XPhysicsParams, *, supply_v: float, angle_rad: float = 0.0,
+                 supply_resistance_ohm: float = 0.0) -> None:
         if not isinstance(params, XPhysicsParams):
             raise TypeError(f"params must be XPhysicsParams, got {type(params).__name__}")
+        if not (math.isfinite(supply_resistance_ohm) and supply_resistance_ohm >= 0):
+            raise ValueError(f"supply_resistance_ohm must be >= 0, got {supply_resistance_ohm!r}")
         self.params = params
+        #: Open-circuit voltage of the supply, V (settable).
         self.supply_v = float(supply_v)
+        #: Resistance of the supply and its wires up to the servo's input, ohm (settable; 0: a stiff supply).
+        self.supply_resistance_ohm = float(supply_resistance_ohm)
+        #: Voltage at the servo's input over the last step (what Present Input Voltage reads): the supply less
+        #: the drop the bridge's input current makes across ``supply_resistance_ohm``.
+        self.bus_voltage_v = self.supply_v
         self.angle_rad = float(angle_rad)
         self.velocity_rad_s = 0.0
         self.current_a = 0.0
@@ -248,23 +261,30 @@ class XPhysics:
         external = self.external_torque_nm()
         if driven:
             duty = -1.0 if duty < -1.0 else (1.0 if duty > 1.0 else float(duty))
+            # The bridge draws duty * i from the supply, which sags by R_s duty i, and applies duty times
+            # that to the winding: i = (duty V - k_e w) / (R + duty**2 R_s).
+            resistance = p.resistance_ohm + duty * duty * self.supply_resistance_ohm
             applied_v = duty * self.supply_v
-            drive_nm = p.torque_constant_nm_a * applied_v / p.resistance_ohm
-            damping = p.back_emf_damping_nm_s_rad + p.viscous_friction_nm_s_rad
+            drive_nm = p.torque_constant_nm_a * applied_v / resistance
+            motor_damping = p.torque_constant_nm_a * p.back_emf_v_s_rad / resistance
+            damping = motor_damping + p.viscous_friction_nm_s_rad
         else:
+            resistance = p.resistance_ohm
             applied_v = 0.0
             drive_nm = 0.0
+            motor_damping = 0.0
             damping = p.viscous_friction_nm_s_rad
         # Speed-proportional torques at the new speed (backward Euler), the rest at the old state.
         scale = inertia + dt_s * damping
         free = (inertia * w + dt_s * (drive_nm + external)) / scale
         # Dry friction budget (BAM's), taken at the step's starting state.
         budget = p.coulomb_friction_nm
-        if p.stribeck_friction_nm:
-            budget += p.stribeck_friction_nm * math.exp(-abs(w / p.stribeck_velocity_rad_s) ** p.stribeck_exponent)
+        motor_nm = drive_nm - motor_damping * w
         if p.load_friction_motor or p.load_friction_external:
-            motor_nm = (drive_nm - p.back_emf_damping_nm_s_rad * w) if driven else 0.0
             budget += abs(p.load_friction_external * external - p.load_friction_motor * motor_nm)
+        if p.stribeck_friction_nm or p.load_stribeck_motor or p.load_stribeck_external:
+            at_rest = math.exp(-abs(w / p.stribeck_velocity_rad_s) ** p.stribeck_exponent)
+            budget += at_rest * (p.stribeck_friction_nm + abs(p.load_stribeck_external * external - p.load_stribeck_motor * motor_nm))
         slip = dt_s * budget / scale
         if free > slip:
             w_new = free - slip
@@ -275,7 +295,9 @@ class XPhysics:
         self.velocity_rad_s = w_new
         self.angle_rad += w_new * dt_s
         if driven:
-            self.current_a = (applied_v - p.back_emf_v_s_rad * w_new) / p.resistance_ohm
+            self.current_a = (applied_v - p.back_emf_v_s_rad * w_new) / resistance
+            self.bus_voltage_v = self.supply_v - self.supply_resistance_ohm * duty * self.current_a
         else:
             self.current_a = 0.0
+            self.bus_voltage_v = self.supply_v
         self.motor_torque_nm = p.torque_constant_nm_a * self.current_a

@@ -231,3 +231,41 @@ def test_load_dependent_friction_holds_a_heavier_load_and_stribeck_sticks_more()
     for _ in range(1500):
         spinning.step(1.0, DT_S)
     assert spinning.velocity_rad_s == pytest.approx(p.no_load_speed_rad_s(5.0), rel=1e-3)  # gone at speed
+
+
+def test_a_soft_supply_sags_with_the_bridge_current_and_weakens_the_stall():
+    """The bridge draws duty * i from a supply with resistance R_s: i = duty V / (R + duty**2 R_s) at rest."""
+    p = _params("xl330-m288")
+    for duty in (1.0, 0.5):
+        shaft = XPhysics(p, supply_v=7.4, supply_resistance_ohm=1.0)
+        shaft.set_external_torque(-5.0)  # held at rest (pushed back, but one step barely moves it)
+        shaft.step(duty, 1e-6)
+        assert shaft.current_a == pytest.approx(duty * 7.4 / (p.resistance_ohm + duty**2 * 1.0), rel=1e-3)
+        assert shaft.bus_voltage_v == pytest.approx(7.4 - 1.0 * duty * shaft.current_a, rel=1e-6)
+    stiff = XPhysics(p, supply_v=7.4)
+    stiff.step(1.0, DT_S)
+    assert stiff.bus_voltage_v == 7.4
+    stiff.step(1.0, DT_S, driven=False)
+    assert stiff.bus_voltage_v == 7.4 and stiff.current_a == 0.0
+    with pytest.raises(ValueError, match="supply_resistance_ohm"):
+        XPhysics(p, supply_v=7.4, supply_resistance_ohm=-1.0)
+
+
+def test_load_dependent_friction_at_rest_holds_a_driven_shaft_that_sliding_friction_would_not():
+    """Gear friction at rest growing with the motor's torque: a driven shaft against a load stays put; the same
+    torques with the shaft already sliding keep it going (the at-rest part has faded)."""
+    p = _params("xl330-m288")
+    sticky = XPhysicsParams(**{**p.__dict__, "load_stribeck_motor": 0.6, "stribeck_velocity_rad_s": 0.05})
+    load = 0.3
+    duty = 0.7 * (load + p.coulomb_friction_nm) / p.stall_torque_nm(7.4) + 0.3  # drive above the load, below the held band
+    held = XPhysics(sticky, supply_v=7.4)
+    held.set_external_torque(-load)
+    for _ in range(200):
+        held.step(duty, DT_S)
+    assert held.angle_rad == 0.0
+    moving = XPhysics(sticky, supply_v=7.4)
+    moving.set_external_torque(-load)
+    moving.velocity_rad_s = 1.0
+    for _ in range(200):
+        moving.step(duty, DT_S)
+    assert moving.velocity_rad_s > 0.5
