@@ -81,7 +81,8 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     check = sub.add_parser("conformance", help="run the Protocol 1.0 (or 2.0) checks against any port (emulator or servo)")
     check.add_argument("port", metavar="PORT", help="device path or pyserial URL (socket://HOST:PORT, ax12emu://...)")
     check.add_argument("--ids", type=_typed(_ids), default=[1], metavar="LIST", help="IDs on the bus to check (default 1)")
-    check.add_argument("--baud", type=int, default=1_000_000, help="host bit rate (default 1000000)")
+    check.add_argument("--baud", type=int, default=None,
+                       help="host bit rate (default 1000000; with --protocol 2.0, 57600: the X series' factory Baud Rate 1)")
     check.add_argument("--timeout-ms", type=float, default=50.0, metavar="MS", help="reply timeout (default 50)")
     check.add_argument("--destructive", action="store_true", help="also change ID, baud and RESET (all restored afterwards)")
     check.add_argument("--profile", choices=sorted(PROFILES), default=DEFAULT_PROFILE, help="expected control-table defaults")
@@ -90,6 +91,11 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                        help="1.0 (AX/MX) or 2.0 (X series; the table comes from the model number each servo pings)")
 
     cli_models.add_command(sub)
+
+
+#: The host rate a suite starts at unless told: the servos' factory Baud Rate, 1 Mbps on the AX-12
+#: (Protocol 1.0) and 57,600 bps on the X series (e-manual, e.g. XL430-W250 "Baud Rate(8)": initial 1, 57,600).
+FACTORY_BAUD_BPS = {"1.0": 1_000_000, "2.0": 57_600}
 
 
 def _decode(args: argparse.Namespace) -> int:
@@ -108,7 +114,7 @@ def _conformance(args: argparse.Namespace) -> int:
     report = conformance.run(
         args.port,
         args.ids,
-        baud=args.baud,
+        baud=args.baud if args.baud is not None else FACTORY_BAUD_BPS[args.protocol],
         timeout_s=args.timeout_ms / 1e3,
         destructive=args.destructive,
         profile=args.profile,

@@ -49,3 +49,39 @@ def test_protocol_2_suite_on_a_protocol_1_bus_fails_at_the_first_ping():
     assert not report.passed
     assert [r.name for r in report.results] == ["read tables"]
     assert "no reply to PING id=1" in report.results[0].figure
+
+
+#: An XL430-W250 pair and an XL330-M288 pair: both Protocol 2.0 tables the Koch arm uses.
+MIXED = "1-2:xl430-w250,3-4:xl330-m288"
+MIXED_IDS = [1, 2, 3, 4]
+
+
+@pytest.mark.wallclock
+@pytest.mark.parametrize("transport", ["pty", "tcp"])
+def test_protocol_2_suite_passes_against_served_x_series(transport, emulator):
+    """Every Protocol 2.0 check passes against ``ax12emu serve --servo`` (its own process), tables unchanged.
+
+    The data-limit check is a pass only with DATA_LIMIT (a DATA_RANGE would be a note), so every row is checked.
+    """
+    where = ["--tcp", "127.0.0.1:0"] if transport == "tcp" else []
+    served = emulator("--servo", MIXED, *where)
+    report = conformance.run(served.port, MIXED_IDS, protocol="2.0", baud=57_600, timeout_s=CONFORMANCE_TIMEOUT_S)
+    assert report.passed, report.table()
+    assert all(r.outcome == conformance.PASS for r in report.results), report.table()
+    assert len(report.results) == len(conformance.CHECKS2) + 1
+
+
+@pytest.mark.wallclock
+def test_cli_protocol_2_starts_at_the_x_series_factory_baud(emulator):
+    """``ax12emu conformance PORT --protocol 2.0`` with no --baud talks at 57,600 bps and exits 0."""
+    import subprocess
+    import sys
+
+    served = emulator("--servo", "xl330-m288", "--ids", "1")
+    result = subprocess.run(
+        [sys.executable, "-m", "ax12emu", "conformance", served.port, "--protocol", "2.0",
+         "--timeout-ms", str(round(CONFORMANCE_TIMEOUT_S * 1e3)), "--only", "ping", "--only", "SYNC_READ"],
+        capture_output=True, text=True, timeout=60,
+    )
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "Protocol 2.0" in result.stdout and "XL330-M288 (1200)" in result.stdout
