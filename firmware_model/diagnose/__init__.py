@@ -11,7 +11,9 @@ phase, command onsets, fitted with the base model and never named), :mod:`.repla
 trace through ``PhysicalModel``), :mod:`.batch` (many parameter sets at
 once), :mod:`.phases` (motion phases), :mod:`.metrics` (scales, costs,
 gaps), :mod:`.effects` (the effect library), :mod:`.evaluate` (batched
-scoring, lockstep fits), :mod:`.search` (forward selection),
+scoring, lockstep fits), :mod:`.search` (forward selection: the round
+loop), :mod:`.selection` (screening and fitting candidates),
+:mod:`.verdict` (the tests and rules that name, reject or mark tentative),
 :mod:`.output` (verdict, report, parameter files), :mod:`.excitation` and
 :mod:`.synthetic` (test data), :mod:`.cli`.
 """

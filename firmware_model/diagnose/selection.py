@@ -1,0 +1,292 @@
+"""Selection: which effects are worth fitting this round, and their fits against the current model.
+
+Why it is apart from the verdict (:mod:`.verdict`): screening and fitting
+need the trace, the simulator and the current model (base values, chosen
+effects, the recording's traits); judging a fit needs none of them, only the
+numbers a fit leaves.  This module turns the current model into those
+numbers, typed (:class:`Score`, :class:`Screened`, :class:`Fit`), and decides
+nothing about names.
+
+* **Screen** (:meth:`Selection.screen`): every remaining effect on its coarse
+  grid, all in one batched simulation, with the current model's other
+  parameters fixed; effects with ``nuisances`` have those recording traits
+  re-fitted at each grid point.
+* **Shortlist** (:func:`shortlist`): the :data:`FIT_TOP` most promising smooth
+  effects (lowest screened cost, and below the current model's) and the best
+  grid-only one.
+* **Fit** (:meth:`Selection.fit_shortlist`): the smooth ones by
+  :func:`scipy.optimize.least_squares` (soft-L1 loss on residuals whitened
+  by channel noise, the shared base parameters and the smooth accepted
+  effects re-fitted with the effect, started at the best grid points: a
+  multi-start for the non-smooth parameters), all fits in lockstep threads
+  sharing each simulation; grid-only effects (``smooth=False``) keep their
+  grid optimum (:meth:`Selection.grid_fit`).
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from ..params import ServoParams
+from .effects import BASE_PARAMS, LIBRARY, Effect, Param, apply_effects
+from .evaluate import Evaluator, Lockstep
+from .metrics import F_SCALE, effective_count
+from .nuisance import PROFILERS, Nuisance, fit_onsets, profile_hold_phase
+from .trace import Trace
+
+__all__ = ["Selection", "Score", "Screened", "Fit", "Linearisation", "shortlist", "FIT_TOP", "MAX_NFEV"]
+
+#: Candidates fitted per round.
+FIT_TOP = 3
+#: Function evaluations per fit (each one batched simulation).
+MAX_NFEV = 10
+
+#: A pseudo-effect with no parameters: fitting it re-fits only the shared base parameters.
+_BASE_ONLY = Effect("base", "", "", (), lambda v, k: {}, ())
+
+
+@dataclass(frozen=True)
+class Score:
+    """How well one model reproduces the trace: what every test of a fit is computed from."""
+
+    #: Robust cost on the training rows.
+    cost_train: float
+    #: Robust cost on the held-out rows (never fitted to).
+    cost_held: float
+    #: Training rows' count corrected for autocorrelation (the sample size the BIC and the intervals use).
+    n_eff: float
+
+
+@dataclass
+class Screened:
+    """One effect's coarse grid, screened against the current model."""
+
+    effect: str
+    #: Every grid point (parameter values) and its training cost, in grid order.
+    table: list[tuple[dict[str, float], float]]
+    #: The grid point with the lowest training cost, that cost and its whitened residual (n, C).
+    best_values: dict[str, float]
+    best_cost: float
+    best_z: np.ndarray
+    #: Each grid point's re-fitted recording traits (knob -> value), keyed by the point's values in order.
+    nuisance: dict[tuple[float, ...], dict[str, float]]
+
+    def starts(self, count: int) -> list[dict[str, float]]:
+        """The ``count`` best grid points, best first: where the least-squares fits start."""
+        return [vals for vals, _ in sorted(self.table, key=lambda e: e[1])[:count]]
+
+
+@dataclass(frozen=True)
+class Linearisation:
+    """A least-squares fit's model at its optimum: what the Wald test needs."""
+
+    #: Parameter of each Jacobian column (the effect's, the re-fitted accepted effects', the base's).
+    names: list[str]
+    #: Whitened training residuals, flattened (rows x channels).
+    residual: np.ndarray
+    #: d residual / d parameter, one column per name.
+    jacobian: np.ndarray
+
+
+@dataclass
+class Fit:
+    """One effect fitted against the current model: values and how well the result reproduces the trace."""
+
+    effect: str
+    values: dict[str, float]
+    #: The shared base parameters as re-fitted with the effect.
+    base: dict[str, float]
+    #: Every effect's values with this one added (accepted smooth effects re-fitted with it).
+    refitted: dict[str, dict[str, float]]
+    score: Score
+    #: Whitened residual of the fitted model, all rows (n, C).
+    z: np.ndarray
+    #: Least-squares fits: the linearisation at the optimum (for the Wald test); None for grid-only fits.
+    linear: Linearisation | None = None
+    #: Grid-only fits: the screened grid with each point's training cost (for the profile test).
+    grid: list[tuple[dict[str, float], float]] = field(default_factory=list)
+
+
+class Selection:
+    """The current model of one trace (base, chosen effects, recording traits) and how to fit changes to it."""
+
+    def __init__(self, trace: Trace, params: ServoParams, progress: Callable[[str], None]) -> None:
+        self.ev = Evaluator(trace, params)
+        self.params = params
+        self.progress = progress
+        self.base_params = tuple(Param(p.name, getattr(params, p.name), p.low, p.high, (getattr(params, p.name),),
+                                       p.fd_step, p.hidden) for p in BASE_PARAMS)
+        self.base = {p.name: p.null for p in self.base_params}
+        self.chosen: dict[str, dict[str, float]] = {}
+        self.nuisance = Nuisance(onsets_fitted=not self.ev.schedule.onsets_known)
+
+    def knobs(self, base: dict[str, float], chosen: dict[str, dict[str, float]],
+              nuisance: dict[str, float] | None = None) -> dict[str, float]:
+        """Simulator knobs for base values, the recording's nuisance (``nuisance`` overrides it) and chosen effects."""
+        k = dict(self.ev.null)
+        k.update(base)
+        k.update(self.nuisance.knobs())
+        k.update(nuisance or {})
+        return apply_effects(k, chosen)
+
+    def fit_nuisance(self) -> None:
+        """Re-fit the recording's traits to the current model (see :mod:`.nuisance`): onsets, then the hold phase."""
+        if self.nuisance.onsets_fitted:
+            self.nuisance.onsets = fit_onsets(self.ev, self.knobs(self.base, self.chosen), self.nuisance.onsets)
+            self.ev.onsets = self.nuisance.onsets
+        self.nuisance.hold_phase_s = profile_hold_phase(self.ev, self.knobs(self.base, self.chosen))
+
+    def residual(self) -> np.ndarray:
+        """Whitened residual (n, C) of the current model."""
+        return self.ev.whiten(self.ev.run([self.knobs(self.base, self.chosen)]))[0]
+
+    def score(self, z: np.ndarray) -> Score:
+        """Costs and effective training count of whitened residuals ``z`` (n, C)."""
+        s, h = self.ev.costs(z)
+        return Score(s, h, effective_count(z[self.ev.train]))
+
+    # ------------------------------------------------------------------ screen
+    def screen(self, remaining: list[str], round_no: int) -> dict[str, Screened]:
+        """Every remaining effect on its coarse grid, in one batched simulation (see the module docstring)."""
+        ev = self.ev
+        grid_reqs, owners = [], []
+        profiled: dict[tuple[str, tuple], dict[str, float]] = {}  # (effect, grid point) -> its re-fitted traits
+        for name in remaining:
+            e = LIBRARY[name]
+            for combo in itertools.product(*(p.grid for p in e.params)):
+                vals = dict(zip([p.name for p in e.params], combo))
+                req = self.knobs(self.base, {**self.chosen, name: vals})
+                prof: dict[str, float] = {}
+                for nuisance in e.nuisances:  # re-fitted for this grid point (sensing only: no new simulation)
+                    prof.update(PROFILERS[nuisance](ev, req))
+                req.update(prof)
+                profiled[(name, combo)] = prof
+                grid_reqs.append(req)
+                owners.append((name, vals))
+        self.progress(f"round {round_no}: screening {len(remaining)} effects on {len(grid_reqs)} grid points")
+        zs = ev.whiten(ev.run(grid_reqs))
+        out: dict[str, Screened] = {}
+        for (name, vals), z in zip(owners, zs):
+            s, _ = ev.costs(z)
+            entry = out.get(name)
+            if entry is None:
+                entry = out[name] = Screened(name, [], {}, np.inf, None,
+                                             {c: p for (n, c), p in profiled.items() if n == name})
+            entry.table.append((vals, s))
+            if s < entry.best_cost:
+                entry.best_values, entry.best_cost, entry.best_z = vals, s, z
+        return out
+
+    # ------------------------------------------------------------------ fits
+    def fit_shortlist(self, screened: dict[str, Screened], smooth: list[str], with_base: bool
+                      ) -> tuple[list[Fit], Fit | None]:
+        """Least-squares fits of the ``smooth`` shortlist (each its best start), and of the base alone if asked.
+
+        Each effect starts from its best grid point; effects with ``starts`` >
+        1 also from their next-best ones (all fits share each batched
+        simulation, so extra starts cost columns, not passes).
+        """
+        lock = Lockstep(self.ev.run)
+        starts = [(n, vals) for n in smooth for vals in screened[n].starts(LIBRARY[n].starts)]
+        jobs = [lambda n=n, v=v: self.fit(LIBRARY[n], v, lock, screened[n].nuisance[tuple(v.values())])
+                for n, v in starts]
+        if with_base:  # the shared base parameters alone, in the same batches
+            jobs.append(lambda: self.fit(_BASE_ONLY, {}, lock))
+        all_fits: list[Fit] = lock.map(jobs)
+        base_fit = all_fits.pop() if with_base else None
+        fits = []
+        for name in smooth:  # the best start of each effect (lowest training cost)
+            mine = [f for (n, _), f in zip(starts, all_fits) if n == name]
+            fits.append(min(mine, key=lambda f: f.score.cost_train))
+        return fits, base_fit
+
+    def grid_fit(self, screened: Screened) -> Fit:
+        """A grid-only effect at its grid optimum, against the current base and chosen effects."""
+        values = {k: float(v) for k, v in screened.best_values.items()}
+        refitted = {**{k: dict(v) for k, v in self.chosen.items()}, screened.effect: values}
+        _, held = self.ev.costs(screened.best_z)
+        score = Score(screened.best_cost, held, effective_count(screened.best_z[self.ev.train]))
+        return Fit(screened.effect, values, dict(self.base), refitted, score, screened.best_z, grid=screened.table)
+
+    def fit(self, effect: Effect, start: dict[str, float], lock: Lockstep,
+            nuisance: dict[str, float] | None = None) -> Fit:
+        """Fit ``effect`` plus the base and the smooth accepted effects, from ``start``.
+
+        ``nuisance``: the recording's traits as re-fitted at ``start`` (for an
+        effect with ``nuisances``), held through the fit.
+
+        The accepted effects are re-fitted too (their columns cost little in a
+        batched simulation), so a new effect is not accepted merely to patch an
+        earlier fit.
+        """
+        owners = [(effect.name, p) for p in effect.params]
+        owners += [(name, p) for name in self.chosen if LIBRARY[name].smooth for p in LIBRARY[name].params]
+        owners += [("base", p) for p in self.base_params]
+        names = [p.name for _, p in owners]
+        lo = np.array([p.low for _, p in owners])
+        hi = np.array([p.high for _, p in owners])
+        step = np.array([p.fd_step for _, p in owners])
+        x0 = np.array([start.get(p.name, p.null) if o == effect.name else
+                       (self.base[p.name] if o == "base" else self.chosen[o][p.name]) for o, p in owners], dtype=float)
+        x0 = np.clip(x0, lo + 1e-9 * (hi - lo), hi - 1e-9 * (hi - lo))
+        cache: dict[bytes, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+        train = self.ev.train
+
+        def split(x):
+            chosen = {k: dict(v) for k, v in self.chosen.items()}
+            base: dict[str, float] = {}
+            values: dict[str, float] = {}
+            for (o, p), v in zip(owners, x):
+                if o == "base":
+                    base[p.name] = float(v)
+                elif o == effect.name:
+                    values[p.name] = float(v)
+                else:
+                    chosen[o][p.name] = float(v)
+            if effect.params:
+                chosen[effect.name] = values
+            return values, base, chosen
+
+        def evaluate(x):
+            key = x.tobytes()
+            if key not in cache:
+                pts, hs = [x.copy()], []
+                for j in range(len(x)):
+                    h = step[j] if x[j] + step[j] <= hi[j] else -step[j]
+                    xp = x.copy()
+                    xp[j] += h
+                    pts.append(xp)
+                    hs.append(h)
+                reqs = []
+                for pt in pts:
+                    _, b, chosen = split(pt)
+                    reqs.append(self.knobs(b, chosen, nuisance))
+                z = self.ev.whiten(lock.submit(reqs))
+                r0 = z[0][train].ravel()
+                jac = np.stack([(z[j + 1][train].ravel() - r0) / hs[j] for j in range(len(x))], axis=1)
+                cache[key] = (r0, jac, z[0])
+            return cache[key]
+
+        res = least_squares(lambda x: evaluate(x)[0], x0, jac=lambda x: evaluate(x)[1], bounds=(lo, hi),
+                            loss="soft_l1", f_scale=F_SCALE, x_scale=step, max_nfev=MAX_NFEV * effect.effort,
+                            method="trf", ftol=1e-4, xtol=1e-3)
+        r0, jac, z = evaluate(res.x)
+        values, base, chosen = split(res.x)
+        return Fit(effect.name, values, base, chosen, self.score(z), z, linear=Linearisation(names, r0, jac))
+
+
+def shortlist(screened: dict[str, Screened], current_cost: float) -> tuple[list[str], list[str]]:
+    """(smooth effects to fit by least squares, grid-only effects to judge at their optimum), best first.
+
+    Only effects whose best grid point already beats the current model
+    (training cost ``current_cost``) are worth a fit.
+    """
+    ranked = sorted((s.best_cost, n) for n, s in screened.items() if s.best_cost < current_cost)
+    smooth = [n for _, n in ranked if LIBRARY[n].smooth][:FIT_TOP]
+    rough = [n for _, n in ranked if not LIBRARY[n].smooth][:1]
+    return smooth, rough
