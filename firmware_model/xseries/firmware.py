@@ -134,6 +134,13 @@ class XFirmware:
     ``current_unit_a`` is Goal/Present Current's unit (1 mA on the XL330/XC330, 2.69 mA on the XM430)
     or ``None`` for a model without current sensing (the XL430), which reports Present Load (0.1 % of
     ``load_full_scale_a``) in Present Current's place and has no current modes.
+
+    ``position_output_scale`` multiplies the position controller's output (PID and feed-forward)
+    after the e-manual's gain conversion.  1 is the e-manual read as PWM units per pulse (KPP =
+    P/128).  A real XL330 reads half of that: in Rhoban's eight BAM pendulum logs
+    (../shared/reference/real-xl330, kp 100 and 400, 5.8..8.3 V) Present PWM is (P/128) x error x
+    0.50 (correlation 1.000, the same at every voltage) until it saturates at 885; so 0.5 for the
+    XL330.  No such data for the other models: they keep the e-manual's 1.
     """
 
     def __init__(
@@ -145,8 +152,10 @@ class XFirmware:
         step_s: float = 0.001,
         thermal: ThermalParams | None = None,
         overload_time_s: float = 1.0,
+        position_output_scale: float = 1.0,
     ) -> None:
         self.physics = physics
+        self.position_output_scale = position_output_scale
         self.step_s = step_s
         self.time_s = 0.0
         self.resistance_ohm = physics.params.resistance_ohm
@@ -423,13 +432,14 @@ class XFirmware:
         difference = error - self._prev_error
         self._prev_error = error
         step_s = self.step_s
-        output = cmd.position_p_gain / 128.0 * error + cmd.position_d_gain / 16.0 * difference
+        scale = self.position_output_scale
+        output = scale * (cmd.position_p_gain / 128.0 * error + cmd.position_d_gain / 16.0 * difference)
         if cmd.feedforward_1st_gain:
-            output += cmd.feedforward_1st_gain / 4.0 * self._traj_velocity_pulses_s * step_s
+            output += scale * cmd.feedforward_1st_gain / 4.0 * self._traj_velocity_pulses_s * step_s
         if cmd.feedforward_2nd_gain:
-            output += cmd.feedforward_2nd_gain / 4.0 * self._traj_accel_pulses_s2 * step_s * step_s
+            output += scale * cmd.feedforward_2nd_gain / 4.0 * self._traj_accel_pulses_s2 * step_s * step_s
         if cmd.position_i_gain:
-            ki = cmd.position_i_gain / 65536.0
+            ki = scale * cmd.position_i_gain / 65536.0
             integral = self._integral + error
             limit = max(cmd.current_limit, 1) if cmd.operating_mode == OperatingMode.CURRENT_BASED_POSITION else PWM_FULL_SCALE
             if abs(output + ki * integral) < limit or integral * error < 0:
@@ -602,13 +612,15 @@ def build_x_servo(
     step_s: float = 0.001,
     thermal: ThermalParams | None = None,
     overload_time_s: float = 1.0,
+    position_output_scale: float = 1.0,
 ) -> XFirmware:
     """One X-series servo from its data-sheet numbers: :class:`XFirmware` over :class:`.physics.XPhysics`.
 
     ``ratings``: the data sheet's ``(voltage_v, stall_torque_nm, stall_current_a, no_load_speed_rpm)``
     rows (as in the model files); ``current_unit_a``: Goal/Present Current's unit in amperes (0.001
     on the XL330/XC330, 0.00269 on the XM430) or ``None`` on a model without current sensing (the
-    XL430: Present Load in 0.1 % of the sheet's stall current at the rating nearest ``supply_v``).
+    XL430: Present Load in 0.1 % of the sheet's stall current at the rating nearest ``supply_v``);
+    ``position_output_scale``: see :class:`XFirmware` (0.5 measured on the XL330, else 1).
     """
     params = XPhysicsParams.from_datasheet(gear_ratio=gear_ratio, ratings=ratings)
     physics = XPhysics(params, supply_v=supply_v, angle_rad=angle_rad)
@@ -620,4 +632,5 @@ def build_x_servo(
         step_s=step_s,
         thermal=thermal,
         overload_time_s=overload_time_s,
+        position_output_scale=position_output_scale,
     )
