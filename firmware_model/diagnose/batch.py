@@ -35,7 +35,8 @@ from ..units import RAD_PER_POSITION_UNIT, RAD_S_PER_SPEED_UNIT
 from .replay import DEFAULT_REGISTERS
 from .schedule import Schedule, Segment
 
-__all__ = ["DYNAMIC_KNOBS", "SENSING_KNOBS", "Record", "simulate", "sample", "null_knobs", "THERMAL_PERIOD_STEPS"]
+__all__ = ["DYNAMIC_KNOBS", "SENSING_KNOBS", "EFFECT_FIELD_KNOBS", "Record", "simulate", "sample", "null_knobs",
+           "THERMAL_PERIOD_STEPS"]
 
 #: Knobs that change the motion, with their null values (or None: take it from ServoParams).
 DYNAMIC_KNOBS = {
@@ -71,13 +72,35 @@ def load_dv(xp, angle_rad, weight_nm, step_over_inertia):
     return arm_gravity_torque_nm(xp, angle_rad, weight_nm * step_over_inertia)
 
 
+#: The knob that reproduces each :class:`~firmware_model.params.ServoEffects` field a params file may carry
+#: (a twin written by the diagnosis, ``[effects]``), so a fit started from that file simulates it as it is served.
+#: ``command_delay_s`` has none: the batch shifts readings, not commands (:func:`null_knobs` refuses it).
+EFFECT_FIELD_KNOBS = {
+    "backlash_rad": "backlash_rad",
+    "sensing_delay_s": "delay_s",
+    "drive_ceiling_fraction": "drive_ceiling",
+    "arm_weight_moment_nm": "arm_weight_nm",
+    "extra_compliance_margin_units": "extra_margin_units",
+    "position_offset_units": "position_offset_units",
+    "position_gain": "position_gain",
+}
+
+
 def null_knobs(params: ServoParams) -> dict[str, float]:
-    """Every knob at the value that reproduces ``params`` exactly."""
+    """Every knob at the value that reproduces ``params`` exactly, its ``effects`` included.
+
+    Raises ``ValueError`` for an effect the batch cannot reproduce (a command delay).
+    """
     out = {}
     for name, null in {**DYNAMIC_KNOBS, **SENSING_KNOBS}.items():
         if null is None:
             null = params.sample_hold_s if name == "hold_s" else getattr(params, name)
         out[name] = float(null)
+    for field_name, value in params.effects.present().items():
+        if field_name not in EFFECT_FIELD_KNOBS:
+            raise ValueError(f"[effects] {field_name} cannot be simulated by the diagnosis (it shifts when commands "
+                             "act, which a trace cannot tell from a reading latency): use sensing_delay_s")
+        out[EFFECT_FIELD_KNOBS[field_name]] = float(value)
     return out
 
 

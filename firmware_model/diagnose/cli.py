@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..params import ServoParams
+from .batch import null_knobs
 from .effects import LIBRARY
 from .nuisance import first_movement_onset, first_movement_row, locate_onset
 from .output import verdict_json, verdict_text, write_outputs
@@ -67,7 +68,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                    help="measured trace: the project's CSV (firmware_model.diagnose.trace) or a Wizard 2 graph export")
     p.add_argument("--out", required=True, metavar="DIR", help="where report.md, plots and params.toml go")
     p.add_argument("--json", action="store_true", help="print the verdict as one JSON object")
-    p.add_argument("--params", metavar="FILE", help="start from these ServoParams (TOML) instead of the defaults")
+    p.add_argument("--params", metavar="FILE", help="start from these ServoParams (TOML; its [effects] are simulated too) instead of the defaults")
     p.add_argument("--effects", metavar="LIST", help=f"comma-separated subset of: {', '.join(LIBRARY)}")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
     w = p.add_argument_group("what a Wizard 2 export does not record (only for such files)")
@@ -192,6 +193,7 @@ def main(argv: list[str] | None = None) -> int:
     say = progress or (lambda msg: None)
     try:
         params = ServoParams.from_toml(args.params) if args.params else ServoParams()
+        null_knobs(params)  # the fit simulates the file's [effects] too: refuse one it cannot, before any work
         data = load_input(args, params, say)
     except (TraceFormatError, ValueError, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)

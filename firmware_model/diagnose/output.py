@@ -50,12 +50,15 @@ EFFECT_FIELDS = {
 }
 
 
-def fitted_effects(named: list[str], knobs: dict[str, float]) -> tuple[ServoEffects, list[str]]:
+def fitted_effects(named: list[str], knobs: dict[str, float],
+                   kept: ServoEffects = ServoEffects()) -> tuple[ServoEffects, list[str]]:
     """The ServoEffects of the ``named`` effects from the final knobs, and a note per value pinned to its range.
 
-    A value at the effect's null stays absent.
+    ``kept``: the effects the fit started from (a twin's ``[effects]``), written again unless a named effect
+    re-fitted them (the knobs then hold the total: the start plus what was added).  A value at the effect's
+    null stays absent.
     """
-    values, notes = {}, []
+    values, notes = dict(kept.present()), []
     for effect in named:
         for field_name, knob in EFFECT_FIELDS.get(effect, {}).items():
             value = float(knobs[knob])
@@ -76,7 +79,7 @@ def fitted_params(d: Diagnosis, params: ServoParams = ServoParams()) -> ServoPar
                "load_inertia_kg_m2": max(params.load_inertia_kg_m2 + k["extra_inertia_kg_m2"], 0.0)}
     if "sample_hold" in d.named:
         changes["sample_hold_s"] = round(k["hold_s"], 2)
-    changes["effects"] = fitted_effects(d.named, k)[0]
+    changes["effects"] = fitted_effects(d.named, k, params.effects)[0]
     return replace(params, **changes)
 
 
@@ -189,7 +192,7 @@ def write_outputs(trace: Trace, d: Diagnosis, out: str | Path, source: str = "tr
     out.mkdir(parents=True, exist_ok=True)
     files = _plots(trace, d, out)
     (out / "report.md").write_text(_report(trace, d, files, source), encoding="utf-8")
-    notes = fitted_effects(d.named, d.knobs)[1]
+    notes = fitted_effects(d.named, d.knobs, params.effects)[1]
     header = (f"fitted by firmware_model.diagnose from {source}; named effects: {', '.join(d.named) or 'none'}",
               *notes)
     fitted_params(d, params).to_toml(out / "params.toml", comments=header)

@@ -47,6 +47,35 @@ def test_twin_predicts_the_loaded_steps_with_only_the_bar_inertia(twin, rec):
     assert result["rms"] < 5.0
 
 
+#: What the diagnosis names first on each loaded step from the twin, where it misses (measured 2026-11-23).
+NAMED_FROM_TWIN_MISSES = {
+    "AX12A_LOAD3_1.csv": "names backlash first (0.0098 +- 0.0028 rad, dBIC 42; extra_inertia is not fitted: a 0.73e-3 "
+                         "bar leaves the twin resting at 497, and only the rest level, which play moves as well, "
+                         "tells the fits apart)",
+}
+
+
+@pytest.mark.parametrize("rec", [pytest.param(r, marks=pytest.mark.xfail(r.file in NAMED_FROM_TWIN_MISSES, strict=True,
+                                                                        reason=NAMED_FROM_TWIN_MISSES.get(r.file, "")))
+                                 for r in tool.RECORDINGS if r.servo == "AX-12A" and r.load_kg_m2 > 0],
+                         ids=lambda r: r.file)
+def test_diagnosis_from_the_twin_names_the_bar_inertia(twin, rec, tmp_path):
+    """From the twin, the workflow on a loaded step names extra_inertia first, its 95 % interval holding the bar's J."""
+    from firmware_model.diagnose.cli import load_input, parse_args
+    from firmware_model.diagnose.search import diagnose
+
+    if not (DATA / rec.file).exists():
+        pytest.skip(f"{rec.file} not found in {DATA}")
+    params, _ = twin
+    args = parse_args([str(DATA / rec.file), "--out", str(tmp_path), "--goal", "500",
+                       "--voltage", str(params.supply_voltage_v)])
+    d = diagnose(load_input(args, params).trace, params)
+    assert d.named and d.named[0] == "extra_inertia", d.named
+    first = d.accepted[0]
+    j, half = first.values["extra_inertia_kg_m2"], first.uncertainty["extra_inertia_kg_m2"]
+    assert abs(j - rec.load_kg_m2) <= half, (j, half, rec.load_kg_m2)
+
+
 def test_default_model_overshoots_like_the_real_servo():
     """No fit: the default model at its 9.6 V; the model before the coasting bridge missed by 17 units."""
     rec = tool.load(DATA / tool.FIT_ON)

@@ -90,6 +90,15 @@ def test_wizard_options_refused_for_a_trace_and_bad_voltage(tmp_path, capsys):
     assert "--voltage 30.0 V is outside" in capsys.readouterr().err
 
 
+def test_params_with_an_effect_the_fit_cannot_simulate_exit_2(tmp_path, capsys):
+    """A command delay in [effects] cannot be simulated by the fit (it would be diagnosed as if absent): refused."""
+    params = tmp_path / "p.toml"
+    params.write_text("[effects]\ncommand_delay_s = 0.01\n", encoding="utf-8")
+    f = _wizard_file(tmp_path / "w.csv")
+    assert main([str(f), "--out", str(tmp_path / "o"), "--params", str(params)]) == 2
+    assert "command_delay_s cannot be simulated" in capsys.readouterr().err
+
+
 def test_malformed_wizard_export_exits_2(tmp_path):
     """A broken header is reported with file and line, no traceback."""
     bad = tmp_path / "bad.csv"

@@ -28,6 +28,16 @@ def test_fitted_effects_carry_the_fitted_values(effect):
     assert fitted_effects([], knobs)[0] == ServoEffects()  # only named effects go in
 
 
+def test_a_twins_effects_are_kept_and_a_refit_one_is_written_as_its_total():
+    """Diagnosing from a twin's params.toml: its [effects] stay in the new file; more play adds to its play."""
+    start = ServoEffects(backlash_rad=0.02, arm_weight_moment_nm=0.2)
+    twin = ServoParams(effects=start)
+    assert fitted_effects([], null_knobs(twin), start)[0] == start
+    knobs = apply_effects(null_knobs(twin), {"backlash": {"backlash_rad": 0.01}})
+    effects, _ = fitted_effects(["backlash"], knobs, start)
+    assert effects.present() == pytest.approx({"backlash_rad": 0.03, "arm_weight_moment_nm": 0.2})
+
+
 def test_a_value_that_cannot_be_served_is_pinned_with_a_note():
     """A negative delay (the reading ahead of the shaft) is served as none, and the note says so."""
     knobs = apply_effects(null_knobs(ServoParams()), {"delay": {"delay_s": -0.004}})

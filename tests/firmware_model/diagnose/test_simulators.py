@@ -1,15 +1,17 @@
 """The batched simulator reproduces PhysicalModel's replay exactly, and every effect's null value is the base model."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
-from firmware_model.diagnose.batch import null_knobs, sample, simulate
+from firmware_model.diagnose.batch import EFFECT_FIELD_KNOBS, null_knobs, sample, simulate
 from firmware_model.diagnose.effects import LIBRARY, apply_effects
 from firmware_model.diagnose.excitation import commands_at, program
 from firmware_model.diagnose.replay import replay
 from firmware_model.diagnose.schedule import compile_schedule
 from firmware_model.diagnose.trace import Trace
-from firmware_model.params import ServoParams
+from firmware_model.params import ServoEffects, ServoParams
 
 
 def _trace(duration=6.0):
@@ -36,6 +38,42 @@ def test_null_value_is_the_base_model(name):
     """Each effect at its null values maps onto exactly the base knobs."""
     base = null_knobs(ServoParams())
     assert apply_effects(base, {name: LIBRARY[name].null_values()}) == base
+
+
+#: A twin carrying every effect the batch can simulate ([effects] in its params.toml).
+TWIN_EFFECTS = ServoEffects(backlash_rad=0.02, sensing_delay_s=0.012, drive_ceiling_fraction=0.8,
+                            arm_weight_moment_nm=0.2, extra_compliance_margin_units=2.0, position_offset_units=-3.0,
+                            position_gain=1.02)
+
+
+def test_a_twins_effects_are_its_null_knobs():
+    """A fit started from a params file simulates its [effects] as served, and each library effect is added to them."""
+    twin = dataclasses.replace(ServoParams(), effects=TWIN_EFFECTS)
+    base = null_knobs(twin)
+    for field_name, knob in EFFECT_FIELD_KNOBS.items():
+        assert base[knob] == getattr(TWIN_EFFECTS, field_name), field_name
+    for name in LIBRARY:
+        assert apply_effects(base, {name: LIBRARY[name].null_values()}) == base, name
+    more = apply_effects(base, {"backlash": {"backlash_rad": 0.01}, "delay": {"delay_s": 0.005}})
+    assert more["backlash_rad"] == pytest.approx(0.03) and more["delay_s"] == pytest.approx(0.017)
+
+
+def test_batch_with_a_twins_effects_equals_the_served_twin():
+    """The fit's base model, started from a twin with effects, reads what ``serve --params`` of that twin reads."""
+    twin = dataclasses.replace(ServoParams(), effects=TWIN_EFFECTS)
+    tr = _trace(4.0)
+    schedule = compile_schedule(tr, 1e-3, twin.supply_voltage_v)
+    k1 = {k: np.array([v]) for k, v in null_knobs(twin).items()}
+    out = sample(schedule, simulate(schedule, twin, k1, 1), twin, k1)
+    served = replay(tr, twin)
+    for ch in ("present_position", "present_speed", "present_load"):
+        np.testing.assert_array_equal(out[ch][:, 0], served[ch], err_msg=ch)
+    assert np.sqrt(np.mean((served["present_position"] - replay(tr)["present_position"]) ** 2.0)) > 2.0
+
+
+def test_a_command_delay_cannot_be_simulated_and_says_so():
+    with pytest.raises(ValueError, match="command_delay_s"):
+        null_knobs(dataclasses.replace(ServoParams(), effects=ServoEffects(command_delay_s=0.01)))
 
 
 def test_effects_change_something():
