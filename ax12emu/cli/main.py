@@ -21,7 +21,7 @@ from ax12emu.bus import Bus
 from ax12emu.bus.clock import WallClock
 from ax12emu.bus.state_store import StateFileError, StateStore
 from ax12emu.cli import hil as cli_hil
-from ax12emu.protocol.control_table import DEFAULT_PROFILE, PROFILES
+from ax12emu.protocol.control_table import AX12_MODEL, DEFAULT_PROFILE, PROFILES
 from ax12emu.protocol.ids import parse_ids
 from ax12emu.servo.model_factory import MODELS, ModelChoice, build_model, parse_arm
 from ax12emu.servo.virtual_servo import ServoOptions
@@ -81,7 +81,13 @@ def build_parser() -> argparse.ArgumentParser:
     serve.add_argument(
         "--servo", metavar="SPEC",
         help="X-series servos on Protocol 2.0: MODEL for every --ids ID (e.g. xl430-w250), or IDS:MODEL,... "
-        "per ID (e.g. 1-5:xm430-w350,6:xl330-m077); 'ax12emu models' lists the models",
+        "per ID (e.g. 1-5:xm430-w350,6:xl330-m077; ax-12a IDs beside them share the wire on Protocol 1.0); "
+        "'ax12emu models' lists the models",
+    )
+    serve.add_argument(
+        "--baud", type=_positive_float, metavar="BPS",
+        help="with --servo: every servo starts at this bit rate (its Baud Rate register set to match; "
+        "default: each model's factory rate, 57600 on the X series, 1000000 on the AX-12A)",
     )
     where = serve.add_mutually_exclusive_group()
     where.add_argument("--pty", action="store_true", help="serve on a pseudo-terminal (the default)")
@@ -175,9 +181,12 @@ def _check_servo_spec(parser: argparse.ArgumentParser, args: argparse.Namespace,
 
     ids_given = any(a == "--ids" or a.startswith("--ids=") for a in argv)
     try:
-        args.servo_models = parse_servo_spec(args.servo, args.ids if ids_given or ":" not in args.servo else None)
+        args.servo_models = parse_servo_spec(args.servo, args.ids if ids_given or ":" not in args.servo else None,
+                                             also=(AX12_MODEL,))
     except ValueError as exc:
         parser.error(f"--servo: {exc}")
+    if all(key == AX12_MODEL for _, key in args.servo_models):
+        parser.error("--servo: no Protocol 2.0 servo; serve AX-12As without --servo")
     defaults = parser.parse_args(["serve"])
     for dest in _PROTOCOL1_ONLY:
         if getattr(args, dest) != getattr(defaults, dest):
@@ -191,6 +200,8 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     args = parser.parse_args(argv)
     if args.command == "serve" and args.servo is not None:
         _check_servo_spec(parser, args, sys.argv[1:] if argv is None else list(argv))
+    elif args.command == "serve" and args.baud is not None:
+        parser.error("--baud applies with --servo (the AX-12A bus starts at 1000000)")
     if args.command == "serve":
         if args.link and args.tcp:
             parser.error("--link applies to a pty, not to --tcp")
@@ -226,19 +237,34 @@ def _serve2(args: argparse.Namespace) -> int:
     from ax12emu.servo.servo2 import Servo2Options
 
     choice = XModelChoice(voltage_v=args.voltage, external_torque_nm=args.external_torque)
+    clock = WallClock(args.time_scale)
     bus = Bus2(
-        [(servo_id, model(key)) for servo_id, key in args.servo_models],
+        [(servo_id, model(key)) for servo_id, key in args.servo_models if key != AX12_MODEL],
         lambda spec, index: build_x_firmware(spec, choice),
-        clock=WallClock(args.time_scale),
+        clock=clock,
         options=Servo2Options(reply_on_crc_error=args.checksum_error == "reply"),
     )
+    if args.baud is not None:
+        for servo in bus.servos:
+            servo.start_at_baud(args.baud)
+    ax_ids = [servo_id for servo_id, key in args.servo_models if key == AX12_MODEL]
+    if ax_ids:
+        from ax12emu.bus.mixed import MixedBus
+        from ax12emu.servo.virtual_servo import baud_value
+
+        bus1 = Bus(ax_ids, options=ServoOptions(reply_on_checksum_error=args.checksum_error == "reply"), clock=clock,
+                   model=build_model(ModelChoice(voltage_v=args.voltage, external_torque_nm=args.external_torque), len(ax_ids)))
+        if args.baud is not None:
+            for servo in bus1.servos:
+                servo.table.set("baud_rate", baud_value(args.baud))
+        bus = MixedBus(bus1, bus)
     transport = _open_transport(args)
     server = BusServer(bus, transport, pace=args.pace, echo=args.echo)
     signal.signal(signal.SIGINT, lambda signum, frame: server.stop())
     signal.signal(signal.SIGTERM, lambda signum, frame: server.stop())
     print(transport.url, flush=True)  # the first stdout line: the port, which scripts and tests read
-    log.info("serving %s on %s (Protocol 2.0%s%s)", ", ".join(f"{i}:{k}" for i, k in args.servo_models), transport.name,
-             ", paced" if args.pace else "", ", echo" if args.echo else "")
+    log.info("serving %s on %s (Protocol %s%s%s)", ", ".join(f"{i}:{k}" for i, k in args.servo_models), transport.name,
+             "2.0 and 1.0" if ax_ids else "2.0", ", paced" if args.pace else "", ", echo" if args.echo else "")
     try:
         server.serve_forever()
     finally:

@@ -101,6 +101,13 @@ class Servo2:
         """The status packets' Alert bit: set while Hardware Error Status(70) is non-zero."""
         return self.table.has("hardware_error_status") and self.table.get("hardware_error_status") != 0
 
+    def start_at_baud(self, bps: float) -> None:
+        """Set Baud Rate to the value whose rate is ``bps`` (a bus started at another rate than the factory's)."""
+        rates = self.spec.baud_rates_bps
+        if bps not in rates:
+            raise ValueError(f"{self.spec.name} runs at {', '.join(map(str, rates))} bps, not {bps:.0f}")
+        self.table.set("baud_rate", rates.index(int(bps)))
+
     # -- firmware events ------------------------------------------------------------------
     def power_on(self) -> None:
         """Power-up and reboot: Goal PWM/Current at their limits, Goal Position at Present Position, nothing registered.

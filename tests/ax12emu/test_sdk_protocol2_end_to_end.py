@@ -159,3 +159,18 @@ def test_over_tcp_too(emulator):
             assert read.addParam(servo_id)
         assert read.txRxPacket() == COMM_SUCCESS
         assert [read.getData(servo_id, PRESENT_POSITION, 4) for servo_id in IDS] == [2048] * 6
+
+
+def test_a_wire_mixing_ax12a_on_protocol_1_and_xl430_on_protocol_2(emulator):
+    """One port, two packet handlers: each protocol finds its own servos, IDs 1 and 2 exist on both."""
+    port_path = emulator("--servo", "1-2:ax-12a,1-3:xl430-w250", "--baud", "1000000").port
+    with sdk2(port_path) as (port, ph2):
+        assert port.setBaudRate(1_000_000)
+        ph1 = PacketHandler(1.0)
+        assert [ok(ph1.ping(port, servo_id)) for servo_id in (1, 2)] == [12, 12]
+        assert ph1.ping(port, 3)[1] == COMM_RX_TIMEOUT
+        assert [ok(ph2.ping(port, servo_id)) for servo_id in (1, 2, 3)] == [XL430_MODEL_NUMBER] * 3
+        assert ok(ph1.read2ByteTxRx(port, 2, 36)) == 512  # the AX-12A's Present Position, mid-range
+        assert ok(ph2.read4ByteTxRx(port, 2, PRESENT_POSITION)) == 2048
+        assert ph1.write1ByteTxRx(port, 1, 25, 1) == (COMM_SUCCESS, 0)  # the AX-12A's LED
+        assert ok(ph2.read1ByteTxRx(port, 1, LED)) == 0  # the XL430 with the same ID untouched

@@ -26,7 +26,7 @@ def test_a_model_for_every_id_and_per_id_models():
 @pytest.mark.parametrize(
     ("args", "message"),
     [
-        (["--servo", "ax-12a"], "speaks Protocol 1.0, not 2.0"),
+        (["--servo", "mx-28"], "speaks Protocol 1.0, not 2.0"),
         (["--servo", "xl999"], "unknown servo model 'xl999'"),
         (["--servo", "1-3:xl430-w250", "--ids", "1-3"], "both name the IDs"),
         (["--servo", "1-3:xl430-w250,3:xm430-w350"], "ID 3 is given two models"),
@@ -34,6 +34,11 @@ def test_a_model_for_every_id_and_per_id_models():
         (["--servo", "xl430-w250", "--web", "127.0.0.1:0"], "--web is not available with --servo"),
         (["--servo", "xl430-w250", "--drop", "0.5"], "--drop is not available with --servo"),
         (["--servo", "xl430-w250", "--voltage", "30"], "runs on 6.5..12 V, not 30 V"),
+        (["--baud", "1000000"], "--baud applies with --servo"),
+        (["--servo", "xl430-w250", "--baud", "250000"], "runs at 9600, 57600, 115200, 1000000"),
+        (["--servo", "1:ax-12a,2:xl430-w250", "--baud", "4500000"], "an AX-12A cannot run at 4500000 bps"),
+        (["--servo", "1-2:ax-12a"], "no Protocol 2.0 servo"),
+        (["--servo", "1:ax-12a,1:ax-12a,2:xl430-w250"], "ID 1 is given two models"),
     ],
 )
 def test_mistakes_are_one_line_and_exit_2(args, message):

@@ -1,0 +1,110 @@
+"""One wire shared by Protocol 1.0 servos (AX-12A) and Protocol 2.0 servos (the X series).
+
+Why it exists: robots mix generations (an arm of X-series servos beside AX-12 grippers), and a
+client that speaks both protocols on one port must find each servo answering its own protocol
+only.  A real wire carries every byte to every servo, and each servo's firmware frames the
+stream with its own protocol's rules; here the bytes go to both buses, each with its own framer,
+so a packet of one protocol is noise to the other's servos exactly as ``framing2``'s docstring
+works out case by case (a stuffed 2.0 packet can hold a 1.0 header that makes the 1.0 servos wait
+for bytes until their silence timeout; a 1.0 packet is never a 2.0 header).
+
+IDs are per protocol: a 1.0 packet to ID 1 reaches the 1.0 servo with ID 1 and no 2.0 servo, so
+both may have ID 1.  Both buses keep one clock.  The 1.0 bus's reply cache is bypassed (a cached
+answer would skip the 2.0 framer's view of the bytes); faults and the live view are the 1.0
+bus's alone and not offered here.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Sequence
+
+from .bus import Bus
+from .bus2 import Bus2
+from .reply import Reply
+
+__all__ = ["MixedBus"]
+
+
+class _Framers:
+    """What the serving loop asks of a framer, for both buses' framers at once."""
+
+    def __init__(self, *framers) -> None:
+        self._framers = framers
+
+    @property
+    def buffered(self) -> int:
+        return sum(framer.buffered for framer in self._framers)
+
+    def reset(self) -> None:
+        for framer in self._framers:
+            framer.reset()
+
+
+class MixedBus:
+    """A Protocol 1.0 bus and a Protocol 2.0 bus on one wire and one clock."""
+
+    #: Protocol 1.0 replies to one packet may collide: they are merged on the wire.
+    replies_in_sequence = False
+
+    def __init__(self, bus1: Bus, bus2: Bus2) -> None:
+        if bus1.clock is not bus2.clock:
+            raise ValueError("both buses of one wire must keep one clock")
+        self.bus1, self.bus2 = bus1, bus2
+        self.clock = bus1.clock
+        self.framer = _Framers(bus1.framer, bus2.framer)
+        self.faults = None
+
+    @property
+    def servos(self) -> list:
+        return [*self.bus1.servos, *self.bus2.servos]
+
+    @property
+    def ids(self) -> list[int]:
+        return [*self.bus1.ids, *self.bus2.ids]
+
+    @property
+    def request_lag_s(self) -> float:
+        return self.bus1.request_lag_s
+
+    @request_lag_s.setter
+    def request_lag_s(self, lag_s: float) -> None:
+        self.bus1.request_lag_s = self.bus2.request_lag_s = lag_s
+
+    @property
+    def physics_step_s(self) -> float:
+        return min(self.bus1.physics_step_s, self.bus2.physics_step_s)
+
+    def advance(self) -> bool:
+        moved1 = self.bus1.advance()
+        return self.bus2.advance() or moved1
+
+    def advance_in_pieces(self) -> Iterator[None]:
+        yield from self.bus1.advance_in_pieces()
+        yield from self.bus2.advance_in_pieces()
+
+    def cached_replies(self, data: bytes, line_bps: float | None = None) -> Sequence[Reply] | None:
+        """No reply cache on a mixed wire: always None."""
+        return None
+
+    def answer(self, data: bytes, now_s: float | None = None, *, line_bps: float | None = None,
+               cache: bool = True, looked_up: bool = False) -> list[Sequence[Reply]]:
+        """Both protocols' servos hear ``data``; the replies of each completed packet, 1.0's first."""
+        return [*self.bus1.answer(data, now_s, line_bps=line_bps, cache=False),
+                *self.bus2.answer(data, now_s, line_bps=line_bps)]
+
+    def receive(self, data: bytes, now_s: float | None = None, *, line_bps: float | None = None) -> list[Reply]:
+        return [reply for replies in self.answer(data, now_s, line_bps=line_bps) for reply in replies]
+
+    def expire(self, now_s: float) -> None:
+        self.bus1.expire(now_s)
+        self.bus2.expire(now_s)
+
+    def close(self) -> None:
+        self.bus1.close()
+        self.bus2.close()
+
+    def __enter__(self) -> "MixedBus":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

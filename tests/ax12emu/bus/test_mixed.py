@@ -1,0 +1,47 @@
+"""A wire shared by AX-12As (Protocol 1.0) and X-series servos (Protocol 2.0): each protocol's servos answer only their own."""
+
+from __future__ import annotations
+
+import pytest
+from x2_testkit import RecordingFirmware
+
+from ax12emu.bus.bus import Bus
+from ax12emu.bus.bus2 import Bus2
+from ax12emu.bus.clock import VirtualClock
+from ax12emu.bus.mixed import MixedBus
+from ax12emu.protocol.packets import Instruction, encode_instruction
+from ax12emu.protocol.packets2 import Instruction2, decode_packet2, encode_instruction2
+from ax12emu.protocol.servo_models import model
+
+
+def mixed() -> MixedBus:
+    clock = VirtualClock()
+    return MixedBus(Bus([1, 2], clock=clock), Bus2([(1, model("xl430-w250")), (3, model("xl430-w250"))],
+                                                  lambda spec, index: RecordingFirmware(), clock=clock))
+
+
+def test_each_protocol_reaches_its_own_servos_even_with_the_same_id():
+    bus = mixed()
+    (reply,) = bus.receive(encode_instruction(1, Instruction.PING))
+    assert reply.data[:3] == b"\xff\xff\x01" and len(reply.data) == 6  # an AX-12A's status
+    (reply,) = bus.receive(encode_instruction2(1, Instruction2.PING))
+    assert decode_packet2(reply.data).params[:2] == (1060).to_bytes(2, "little")
+    assert bus.receive(encode_instruction(3, Instruction.PING)) == []
+    assert bus.receive(encode_instruction2(2, Instruction2.PING)) == []
+    assert sorted(bus.ids) == [1, 1, 2, 3]
+
+
+def test_a_stuffed_2_0_packet_makes_the_1_0_servos_wait_for_their_silence_timeout():
+    """framing2: FF FF FD FD in a stuffed 2.0 packet reads as a 1.0 header with LENGTH 253 to the 1.0 servos."""
+    bus = mixed()
+    stuffed = encode_instruction2(1, Instruction2.WRITE, bytes((224, 0, 0xFF, 0xFF, 0xFD, 0)))
+    assert b"\xff\xff\xfd\xfd" in stuffed
+    assert len(bus.receive(stuffed, now_s=0.0)) == 1  # the 2.0 servo answers its write
+    assert bus.receive(encode_instruction(2, Instruction.PING), now_s=0.001) == []  # swallowed by the 1.0 framer
+    assert len(bus.receive(encode_instruction(2, Instruction.PING), now_s=0.1)) == 1  # after the silence timeout
+
+
+def test_one_clock_for_both():
+    with pytest.raises(ValueError, match="one clock"):
+        MixedBus(Bus([1], clock=VirtualClock()), Bus2([(1, model("xl430-w250"))], lambda s, i: RecordingFirmware(),
+                                                      clock=VirtualClock()))
