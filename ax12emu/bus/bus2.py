@@ -30,6 +30,9 @@ instruction, byte times at each servo's baud, 10 bits a byte):
   Instructions"); Write, Reg Write, Action, Factory Reset, Reboot, Clear and Backup to the broadcast
   ID: executed by every servo, answered by none; Sync/Bulk instructions are executed only when sent
   to the broadcast ID ("Packet ID field : 0xFE"), and ignored otherwise;
+* a packet to a servo's Secondary ID (12) (and not to its ID, which "has a higher priority"): executed
+  on the RAM area only and answered by nobody (e-manual, X series, "Secondary ID(12)"); Sync/Bulk
+  lists name IDs, not Secondary IDs;
 * status packets on the wire (another servo's answer) are heard and ignored.
 
 Time: before any request the firmware models are brought to the present (and one control step
@@ -206,12 +209,18 @@ class Bus2:
         if log.isEnabledFor(logging.DEBUG):
             log.debug("rx id=%d inst=%#04x params=%s -> IDs %s", packet.id, packet.instruction, packet.params.hex(" "),
                       [s.id for s in targets])
-        for servo in targets:
+        # Servos whose Secondary ID this is (and not their ID: "ID(7) has a higher priority").
+        grouped = [] if broadcast else [s for s in self.servos if s.secondary_id == packet.id and s.id != packet.id
+                                        and self._hears(s, line_bps)]
+        for servo in (*targets, *grouped):
             servo.heard(now_s)
         spec = INSTRUCTION_SPECS.get(packet.instruction)
         kind = spec.broadcast if spec is not None else None
         if not packet.crc_ok or not broadcast:
             replies = [] if kind in _REQUIRED_BROADCAST and packet.crc_ok else self._each_own(packet, targets)
+            if packet.crc_ok and kind not in _REQUIRED_BROADCAST:
+                for servo in grouped:
+                    handle2(servo, packet, secondary=True)
         elif kind in _LISTED_READS:
             replies = self._listed(packet, line_bps)
         elif packet.instruction == Instruction2.PING:

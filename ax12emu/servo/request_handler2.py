@@ -228,12 +228,27 @@ def _read_length(servo: Servo2, packet: InstructionPacket2) -> int:
     return 0
 
 
-def handle2(servo: Servo2, packet: InstructionPacket2) -> Outcome2:
-    """Execute ``packet`` (addressed to ``servo`` or broadcast) and build the servo's own answer.
+#: What a packet to the Secondary ID does not do: it "cannot modify" the EEPROM area (e-manual, Secondary ID(12)).
+_NOT_BY_SECONDARY_ID = frozenset({int(Instruction2.FACTORY_RESET), int(Instruction2.CONTROL_TABLE_BACKUP)})
+
+
+def handle2(servo: Servo2, packet: InstructionPacket2, *, secondary: bool = False) -> Outcome2:
+    """Execute ``packet`` (addressed to ``servo``, its Secondary ID, or broadcast) and build the servo's own answer.
 
     Broadcast packets are executed here but answered by nobody (the bus calls this only for
-    instructions a broadcast executes silently); the listed reads are the bus's.
+    instructions a broadcast executes silently); the listed reads are the bus's.  A packet to the
+    Secondary ID (``secondary``) is executed without an answer ("If Instruction Packet ID is the
+    same as Secondary ID(12), the Status Packet will not be returned") and reaches the RAM area only.
     """
+    if secondary:
+        if packet.instruction in _NOT_BY_SECONDARY_ID:
+            return Outcome2(None, servo.id, servo.return_delay_s, ErrorNumber.ACCESS)
+        servo.ram_only = True
+        try:
+            outcome = handle2(servo, packet._replace(id=BROADCAST_ID))
+        finally:
+            servo.ram_only = False
+        return outcome
     reply_id = servo.id
     delay_s = servo.return_delay_s
     instruction = packet.instruction

@@ -19,7 +19,7 @@ from ax12emu.protocol.servo_models import ServoModel
 from .plant2 import Plant2
 from .table2 import Table2
 
-__all__ = ["GOAL_REGISTERS", "Servo2", "Servo2Options", "WATCHDOG_ERROR", "WATCHDOG_UNIT_S"]
+__all__ = ["GOAL_REGISTERS", "SECONDARY_ID_MAX", "Servo2", "Servo2Options", "WATCHDOG_ERROR", "WATCHDOG_UNIT_S"]
 
 #: The Goal registers ("Goal Value": e-manual, X series, "Bus Watchdog(98)"); writing one starts a new profile.
 GOAL_REGISTERS = frozenset({"goal_pwm", "goal_current", "goal_velocity", "goal_position"})
@@ -31,6 +31,8 @@ WATCHDOG_UNIT_S = 0.020
 #: "Goal PWM(100)" and "Goal Current(102)" take PWM Limit and Current Limit at power-up; without it a
 #: default Goal PWM of 0 would allow no output at all).
 BOOT_GOALS = {"goal_pwm": "pwm_limit", "goal_current": "current_limit"}
+#: The highest active Secondary ID(12); 253..255 switch the function off.
+SECONDARY_ID_MAX = 252
 #: Realtime Tick(120) counts milliseconds from 0 to 32767 and wraps (e-manual, "Realtime Tick(120)").
 REALTIME_TICK_PERIOD = 32768
 
@@ -75,6 +77,8 @@ class Servo2:
         self.eeprom_dirty = False
         #: The backup area of Control Table Backup (0x20): the table's bytes, or None.
         self.backup: bytes | None = None
+        #: True while a packet addressed to the Secondary ID is handled: the EEPROM area is out of reach.
+        self.ram_only = False
         self.plant: Plant2 = plant_factory(self)
         self.power_on()
 
@@ -95,6 +99,14 @@ class Servo2:
     @property
     def status_return_level(self) -> int:
         return self.table.row[self._level_at]
+
+    @property
+    def secondary_id(self) -> int | None:
+        """Secondary ID(12) when active (0..252), else None (e-manual: "253 or higher ... deactivated")."""
+        if not self.table.has("secondary_id"):
+            return None
+        value = self.table.get("secondary_id")
+        return value if value <= SECONDARY_ID_MAX else None
 
     @property
     def alert(self) -> bool:
@@ -162,6 +174,8 @@ class Servo2:
         check = table.check_write(address, data, refused=GOAL_REGISTERS if self.watchdog_error else frozenset())
         if check.error:
             return check.error
+        if self.ram_only and any(entry.area is Area.EEPROM for entry in check.entries):
+            return ErrorNumber.ACCESS  # "The EEPROM area ... cannot be modified with Secondary ID(12)"
         table.apply(check)
         names = {entry.name for entry in check.entries}
         goal_written = bool(names & GOAL_REGISTERS)

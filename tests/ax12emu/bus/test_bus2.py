@@ -405,3 +405,18 @@ def test_random_packets_and_noise_never_raise():
             assert reply.data.startswith(b"\xff\xff\xfd\x00")
         if rng.random() < 0.1:
             bus.clock.advance(0.01)
+
+
+def test_secondary_id_groups_servos_silently_and_on_the_ram_area_only(xm):
+    """e-manual, Secondary ID(12): executed by the group, no status packet, EEPROM out of reach, ID first."""
+    bus, _ = xm
+    for servo_id in (1, 2, 3):
+        send(bus, servo_id, Instruction2.WRITE, bytes((12, 0, 5)))  # Secondary ID 5
+    replies = send(bus, 5, Instruction2.WRITE, bytes((65, 0, 1)))
+    assert [r.servo_id for r in replies] == [5]  # only the servo whose ID it is answers
+    assert [bus.servo(i).table.get("led") for i in range(1, 8)] == [1, 1, 1, 0, 1, 0, 0]  # ID 5 itself too
+    send(bus, 5, Instruction2.WRITE, bytes((31, 0, 60)))  # Temperature Limit: EEPROM
+    assert [bus.servo(i).table.get("temperature_limit") for i in (1, 2, 3, 5)] == [80, 80, 80, 60]
+    send(bus, 3, Instruction2.WRITE, bytes((12, 0, 255)))  # off again
+    send(bus, 5, Instruction2.WRITE, bytes((65, 0, 0)))
+    assert [bus.servo(i).table.get("led") for i in (1, 2, 3, 5)] == [0, 0, 1, 0]
