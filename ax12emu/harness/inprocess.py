@@ -6,7 +6,8 @@ wait in a timed queue and a ``read`` returns them only once their Return
 Delay Time (plus any injected delay) has passed, blocking up to its timeout
 like a real port.  Replies of several servos are laid on the line as the
 server does (:func:`ax12emu.serve.server.merge_replies`), so duplicate IDs
-collide the same way.  The host's baud rate is passed to the bus, so a
+collide the same way; a Protocol 2.0 bus's replies, timed one after another
+(broadcast Ping slots, Sync Read answers in list order), are released each at its own time.  The host's baud rate is passed to the bus, so a
 servo at another baud is deaf, as on a pty.
 
 Not modelled: wire time of the bytes (replies arrive whole), the
@@ -28,6 +29,7 @@ from collections.abc import Callable
 from typing import Any
 
 from ax12emu.bus.bus import Bus
+from ax12emu.bus.bus2 import Bus2
 from ax12emu.bus.reply import merge_replies
 from ax12emu.tracing.trace import IN, OUT, TraceWriter
 
@@ -44,9 +46,11 @@ class LinkBusy(RuntimeError):
 class InProcessLink:
     """A host endpoint on ``bus``, safe to use from several threads."""
 
-    def __init__(self, bus: Bus, *, trace: TraceWriter | None = None) -> None:
+    def __init__(self, bus: Bus | Bus2, *, trace: TraceWriter | None = None) -> None:
         self.bus = bus
         self.trace = trace
+        #: The bus timed its replies one after another (Protocol 2.0): each is released at its own time.
+        self._in_sequence = bool(getattr(bus, "replies_in_sequence", False))
         self.lock = threading.RLock()
         self._cond = threading.Condition(self.lock)
         self._pending: list[tuple[float, int, bytes]] = []
@@ -82,7 +86,7 @@ class InProcessLink:
             for replies in self.bus.answer(data, now, line_bps=line_bps):  # with the reply cache, as the server
                 self.packets_in += 1
                 if replies:
-                    for release_s, chunk in merge_replies(replies, now, per_byte=False):
+                    for release_s, chunk in merge_replies(replies, now, per_byte=False, in_sequence=self._in_sequence):
                         self._seq += 1
                         heapq.heappush(self._pending, (release_s, self._seq, chunk))
             self._cond.notify_all()

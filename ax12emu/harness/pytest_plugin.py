@@ -15,6 +15,12 @@ default is ID 1.  The ``ax12_bus_options`` marker passes keyword arguments
 to :class:`~ax12emu.VirtualBus` (``transport="inprocess"``,
 ``virtual_time=True``, ``faults=FaultConfig(...)``, ...).
 
+Protocol 2.0 servos (the X series): the ``ax12_servo`` marker takes the servo text of
+``ax12emu serve --servo`` (``@pytest.mark.ax12_servo("xl430-w250")`` with ``ax12_ids``, or
+``@pytest.mark.ax12_servo("1-5:xm430-w350,6:xl330-m077")`` alone); ``pytest --ax12-servo SPEC``
+gives every ax12_bus without the marker those servos, so a suite written for one model runs
+against another.
+
 ``pytest --ax12-web`` serves a live page of each bus (see the live-view docs)
 and keeps it up after the test, pass or fail, until Ctrl-C, so a failing
 test can be watched and its last state inspected.
@@ -39,6 +45,13 @@ def pytest_addoption(parser: pytest.Parser) -> None:
         "--ax12-web",
         action="store_true",
         help="serve a live view of each ax12_bus and keep it up after the test until Ctrl-C",
+    )
+    group.addoption(
+        "--ax12-servo",
+        default=None,
+        metavar="SPEC",
+        help="Protocol 2.0 servos for every ax12_bus without an ax12_servo marker: MODEL (e.g. xl430-w250) "
+        "or IDS:MODEL,... (e.g. 1-5:xm430-w350,6:xl330-m077); 'ax12emu models' lists the models",
     )
     group.addoption(
         "--ax12-web-at",
@@ -73,6 +86,7 @@ def pytest_configure(config: pytest.Config) -> None:
     """Register the markers so ``--strict-markers`` accepts them."""
     config.addinivalue_line("markers", "ax12_ids(*ids): servo IDs of the ax12_bus fixture (default 1)")
     config.addinivalue_line("markers", "ax12_bus_options(**kwargs): keyword arguments for ax12emu.VirtualBus")
+    config.addinivalue_line("markers", "ax12_servo(spec): Protocol 2.0 servos of the ax12_bus fixture, as serve --servo takes them")
 
 
 def _default_transport() -> str:
@@ -84,13 +98,17 @@ def ax12_bus(request: pytest.FixtureRequest) -> Iterator[Any]:
     """A running virtual AX-12 bus; ``ax12_bus.port`` is the port to open."""
     from ax12emu.harness.virtual_bus import VirtualBus
 
-    ids: list[int] = [1]
+    ids: list[int] | None = None  # VirtualBus's default: ID 1, or the IDs a per-ID servo text names
     marker = request.node.get_closest_marker("ax12_ids")
     if marker is not None:
         ids = [int(i) for arg in marker.args for i in (arg if isinstance(arg, (list, tuple)) else [arg])]
     if hasattr(request, "param"):
         ids = list(request.param) if isinstance(request.param, (list, tuple)) else [int(request.param)]
-    options = {"transport": _default_transport()}
+    options: dict[str, Any] = {"transport": _default_transport()}
+    servo_marker = request.node.get_closest_marker("ax12_servo")
+    servo = servo_marker.args[0] if servo_marker is not None and servo_marker.args else request.config.getoption("--ax12-servo", None)
+    if servo is not None:
+        options["servo"] = servo
     options_marker = request.node.get_closest_marker("ax12_bus_options")
     if options_marker is not None:
         options.update(options_marker.kwargs)

@@ -16,6 +16,12 @@ under the in-process link's lock), so a test never races a packet::
 Servos are addressed by their present ID in the state methods, and by their
 *slot* (the ID they were launched with) in ``bus.faults`` (see
 :mod:`ax12emu.faults.injection`).
+
+``servo=`` serves Protocol 2.0 servos instead (the X series), read as ``ax12emu serve --servo``
+reads it: ``VirtualBus([1, 2], servo="xl430-w250")`` or ``VirtualBus(servo="1-5:xm430-w350,6:xl330-m077")``.
+Each servo then has its model's table, and the register methods take that table's names
+(``bus.read(1, "present_position")``).  What the Protocol 1.0 bus has and this one has not yet
+(a pinned temperature or voltage, the live view, a set angle) is refused with the reason.
 """
 
 from __future__ import annotations
@@ -28,17 +34,20 @@ from collections.abc import Callable, Iterable
 from typing import Any
 
 from ax12emu.bus.bus import Bus
+from ax12emu.bus.bus2 import Bus2
 from ax12emu.bus.clock import VirtualClock, WallClock
 from ax12emu.faults.config import FaultConfig
 from ax12emu.faults.injection import Faults
 from ax12emu.live.controls import ServedControls
 from ax12emu.servo.model_factory import ModelChoice, build_model
+from ax12emu.servo.servo2 import GOAL_REGISTERS, Servo2
 from ax12emu.servo.virtual_servo import ServoOptions
 from ax12emu.tracing.trace import TraceWriter
 from firmware_model.interface import AngleSettable, ServoModel
 from firmware_model.params import ServoParams
 
 from .inprocess import InProcessLink, register, unregister
+from .servos2 import build_bus2, servo_list
 
 __all__ = ["VirtualBus", "TRANSPORTS"]
 
@@ -73,6 +82,15 @@ def _web_address(web: str | tuple[str, int] | bool | None) -> tuple[str, int] | 
     return (str(host), int(port))
 
 
+def _servo_with(bus: Bus | Bus2, servo_id: int, name: str):
+    """The servo answering to ``servo_id``; KeyError naming the register its model's table lacks."""
+    servo = bus.servo(servo_id)
+    if name not in servo.table.layout.by_name:
+        model = servo.spec.name if isinstance(servo, Servo2) else f"the {servo.table.layout.profile.name} table"
+        raise KeyError(f"{model} has no register {name!r} (ID {servo_id}); table(ID) lists its registers")
+    return servo
+
+
 class _FaultsOnBus:
     """``bus.faults``: every Faults method, run where the bus is served."""
 
@@ -94,7 +112,7 @@ class VirtualBus:
 
     def __init__(
         self,
-        ids: Iterable[int] = (1,),
+        ids: Iterable[int] | None = None,
         *,
         transport: str = "pty",
         virtual_time: bool = False,
@@ -110,21 +128,35 @@ class VirtualBus:
         name: str | None = None,
         tcp_address: tuple[str, int] = ("127.0.0.1", 0),
         web: str | tuple[str, int] | bool | None = None,
+        servo: str | None = None,
+        baud_bps: float | None = None,
     ) -> None:
         if transport not in TRANSPORTS:
             raise ValueError(f"unknown transport {transport!r}; choose one of: {', '.join(TRANSPORTS)}")
         self.transport_name = transport
         self.virtual_time = virtual_time
         clock = VirtualClock() if virtual_time else WallClock(time_scale)
-        slots = list(ids)
-        if params is not None:  # a parameter file (e.g. a fitted twin's params.toml, effects included) or object
-            if model is not None and not isinstance(model, str):
-                raise ValueError("params= builds the physical model; it cannot go with a model object")
-            given = {"params": params} if isinstance(params, ServoParams) else {"params_path": params}
-            model = build_model(ModelChoice(name=model or "physical", **given), len(slots))
-        elif isinstance(model, str):
-            model = build_model(ModelChoice(name=model), len(slots))
-        self.bus = Bus(slots, options=options, model=model, clock=clock)
+        self.bus: Bus | Bus2
+        if servo is not None:
+            refused = [name for name, given in (
+                ("options", options != ServoOptions()), ("model", model is not None), ("params", params is not None),
+                ("faults", faults is not None and faults.active), ("web", _web_address(web) is not None),
+            ) if given]
+            if refused:
+                raise ValueError(f"{', '.join(refused)}: not available with servo= (the Protocol 2.0 bus has no such option yet)")
+            self.bus = build_bus2(servo, None if ids is None else list(ids), clock=clock, baud_bps=baud_bps)
+        else:
+            if baud_bps is not None:
+                raise ValueError("baud_bps applies with servo= (the AX-12A bus starts at its factory 1,000,000 bps)")
+            slots = [1] if ids is None else list(ids)
+            if params is not None:  # a parameter file (e.g. a fitted twin's params.toml, effects included) or object
+                if model is not None and not isinstance(model, str):
+                    raise ValueError("params= builds the physical model; it cannot go with a model object")
+                given = {"params": params} if isinstance(params, ServoParams) else {"params_path": params}
+                model = build_model(ModelChoice(name=model or "physical", **given), len(slots))
+            elif isinstance(model, str):
+                model = build_model(ModelChoice(name=model), len(slots))
+            self.bus = Bus(slots, options=options, model=model, clock=clock)
         self.seed = seed
         if faults is not None and faults.active:
             faults.install(self.bus)
@@ -154,7 +186,7 @@ class VirtualBus:
         self._started = True
         try:
             if self._trace_path:
-                self._trace = TraceWriter(self._trace_path, profile=self.bus.options.profile)
+                self._trace = self._open_trace(self._trace_path)
             if self.transport_name == "inprocess":
                 self._link = InProcessLink(self.bus, trace=self._trace)
                 register(self.name, self._link)
@@ -177,6 +209,11 @@ class VirtualBus:
             self.close()
             raise
         return self
+
+    def _open_trace(self, path: str) -> TraceWriter:
+        if isinstance(self.bus, Bus2):
+            return TraceWriter(path, servos=servo_list(self.bus))
+        return TraceWriter(path, profile=self.bus.options.profile)
 
     def _start_live(self) -> None:
         """The live page (``web=...``): sampled through :meth:`call`; its controls are this object's methods."""
@@ -256,7 +293,13 @@ class VirtualBus:
         return fn(self.bus)
 
     def _faults(self, bus: Bus) -> Faults:
+        self._protocol1_only("faults")
         return self._controls.faults_of(bus)
+
+    def _protocol1_only(self, what: str) -> None:
+        """A clear refusal of what the Protocol 2.0 bus does not offer yet."""
+        if isinstance(self.bus, Bus2):
+            raise NotImplementedError(f"{what}: not available on a Protocol 2.0 bus (servo=) yet")
 
     @property
     def faults(self) -> Any:
@@ -283,16 +326,17 @@ class VirtualBus:
 
     # -- servo state ---------------------------------------------------------------------------
     def read(self, servo_id: int, name: str) -> int:
-        """A register by name, as a client would read it now."""
-        return self.call(lambda bus: bus.servo(servo_id).table.get(name))
+        """A register by name (the servo model's table's names), as a client would read it now."""
+        return self.call(lambda bus: _servo_with(bus, servo_id, name).table.get(name))
 
     def write(self, servo_id: int, name: str, value: int) -> None:
         """Set a register as the firmware would (no access or range check); an ``id`` write moves the servo."""
 
         def _write(bus: Bus) -> None:
-            servo = bus.servo(servo_id)
-            servo.table.layout.by_name[name]
-            servo.table.set(name, value)  # the plant hears of it (ControlTable.on_set)
+            servo = _servo_with(bus, servo_id, name)
+            servo.table.set(name, value)  # a 1.0 plant hears of it (ControlTable.on_set)
+            if isinstance(servo, Servo2):  # a 2.0 firmware takes its commands when told
+                servo.plant.command(goal_written=name in GOAL_REGISTERS)
             if name == "id":
                 bus.reindex()
 
@@ -303,11 +347,27 @@ class VirtualBus:
         return self.call(lambda bus: {e.name: bus.servo(servo_id).table.get(e.name) for e in bus.servo(servo_id).table.layout.entries})
 
     def angle_deg(self, servo_id: int) -> float:
-        """The simulated shaft angle in degrees from the CW end (0..300 over positions 0..1023)."""
-        return self.call(lambda bus: float(bus.model.angle_rad[bus.servo(servo_id).index]) * _DEG_PER_RAD)
+        """The simulated shaft angle in degrees from the CW end (0..300 over positions 0..1023).
+
+        On a Protocol 2.0 servo: the output shaft's angle as its physics counts it (turns included;
+        180 at the start, where Present Position reads 2048).
+        """
+
+        def _angle(bus: Bus) -> float:
+            if isinstance(bus, Bus2):
+                firmware = bus.servo(servo_id).plant.firmware
+                physics = getattr(firmware, "physics", None)
+                if physics is None:
+                    raise NotImplementedError(f"{type(firmware).__name__} does not show its shaft angle (no physics)")
+                return float(physics.angle_rad) * _DEG_PER_RAD
+            return float(bus.model.angle_rad[bus.servo(servo_id).index]) * _DEG_PER_RAD
+
+        return self.call(_angle)
 
     def set_angle_deg(self, servo_id: int, degrees: float) -> None:
         """Move the shaft by hand (torque off, or the controller pulls it back)."""
+
+        self._protocol1_only("set_angle_deg")
 
         def _set(bus: Bus) -> None:
             model = bus.model
@@ -326,12 +386,17 @@ class VirtualBus:
 
     def set_temperature(self, servo_id: int, celsius: float | None) -> None:
         """Pin Present Temperature (above Temperature Limit: Overheating); None releases it."""
+        self._protocol1_only("set_temperature")
         self._controls.set_temperature(servo_id, celsius)
 
     def set_voltage(self, servo_id: int, volts: float | None) -> None:
         """Pin Present Voltage (outside the voltage limits: Input Voltage error); None releases it."""
+        self._protocol1_only("set_voltage")
         self._controls.set_voltage(servo_id, volts)
 
     def set_external_torque(self, servo_id: int, torque_nm: float) -> None:
         """A torque on the output shaft (N m, positive CCW), through the model's ``set_external_torque``."""
+        if isinstance(self.bus, Bus2):
+            self.call(lambda bus: bus.servo(servo_id).plant.firmware.set_external_torque(torque_nm))
+            return
         self._controls.set_external_torque(servo_id, torque_nm)

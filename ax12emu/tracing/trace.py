@@ -43,7 +43,7 @@ class Chunk(NamedTuple):
 class TraceWriter:
     """Appends chunks to a JSON-lines file; timestamps are monotonic seconds since creation."""
 
-    def __init__(self, path: str | os.PathLike[str], *, profile: str = "ax12a") -> None:
+    def __init__(self, path: str | os.PathLike[str], *, profile: str = "ax12a", servos: str | None = None) -> None:
         self.path = Path(path)
         self._file: IO[str] | None = open(self.path, "w", encoding="utf-8")
         self._start = time.monotonic()
@@ -52,6 +52,8 @@ class TraceWriter:
             "started": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
             "profile": profile,
         }
+        if servos is not None:  # Protocol 2.0 servos as --servo writes them: the decoder names their registers
+            header["servos"] = servos
         self._file.write(json.dumps(header) + "\n")
 
     def record(self, direction: str, data: bytes, now: float | None = None) -> None:

@@ -18,6 +18,11 @@
 #   params=FILE       servo parameters as TOML, effects included (e.g. firmware_model.diagnose's params.toml)
 #   drop, corrupt, delay, delay_s, fault_ids, seed, vanish, duplicate, alarm, stall:
 #                     fault injection, as the serve flags (see ax12emu.faults.injection)
+#   servo=SPEC        Protocol 2.0 servos instead of AX-12As, as `ax12emu serve --servo` takes them:
+#                     MODEL for every ID of ids= (default 1), or IDS:MODEL,... alone
+#                     (e.g. servo=xl430-w250&ids=1-6, servo=1-5:xm430-w350,6:xl330-m077)
+#   baud=BPS          with servo=: every servo starts at this bit rate (default: each model's factory
+#                     rate, 57600 on the X series); the port must be opened at the same rate
 # Options of any URL:
 #   logging=debug|info|warning|error   per-handler logger "ax12emu.harness.urlhandler"
 #
@@ -36,9 +41,11 @@ import urllib.parse
 from serial.serialutil import PortNotOpenError, SerialBase, SerialException, to_bytes
 
 from ax12emu.bus import Bus
+from ax12emu.bus.bus2 import Bus2
 from ax12emu.bus.clock import VirtualClock, WallClock
 from ax12emu.faults.config import FAULT_OPTIONS, FaultConfig
 from ax12emu.harness.inprocess import InProcessLink, LinkBusy, lookup
+from ax12emu.harness.servos2 import build_bus2, servo_list
 from ax12emu.protocol.ids import parse_ids
 from ax12emu.servo.model_factory import ModelChoice, build_model
 from ax12emu.servo.virtual_servo import ServoOptions
@@ -49,11 +56,14 @@ __all__ = ["Serial", "UrlError", "EXPECTED"]
 EXPECTED = (
     'expected "ax12emu://[NAME][?ids=LIST&profile=NAME&virtual_time=0|1&goal_torque=on|unchanged'
     '&eeprom_busy_ms=MS&trace=FILE&params=FILE&seed=N&drop=F&...'
+    '&servo=MODEL|IDS:MODEL,...&baud=BPS'
     '&logging={debug|info|warning|error}]"'
 )
 LOGGER_LEVELS = {"debug": logging.DEBUG, "info": logging.INFO, "warning": logging.WARNING, "error": logging.ERROR}
 #: Options of a private bus besides the fault ones.
-BUS_OPTIONS = ("ids", "profile", "virtual_time", "goal_torque", "eeprom_busy_ms", "trace", "params")
+BUS_OPTIONS = ("ids", "profile", "virtual_time", "goal_torque", "eeprom_busy_ms", "trace", "params", "servo", "baud")
+#: Options a Protocol 2.0 bus (servo=) takes; the others shape AX-12As only.
+SERVO_OPTIONS = ("ids", "virtual_time", "trace", "servo", "baud")
 
 
 class UrlError(SerialException, ValueError):
@@ -65,7 +75,7 @@ class Serial(SerialBase):
 
     def __init__(self, *args, **kwargs) -> None:
         self._link: InProcessLink | None = None
-        self._private: tuple[Bus, TraceWriter | None] | None = None
+        self._private: tuple[Bus | Bus2, TraceWriter | None] | None = None
         self.logger: logging.Logger | None = None
         super().__init__(*args, **kwargs)
 
@@ -128,6 +138,10 @@ class Serial(SerialBase):
         unknown = sorted(set(options) - set(BUS_OPTIONS) - set(FAULT_OPTIONS))
         if unknown:
             raise UrlError(f"{EXPECTED}: unknown option(s) {', '.join(unknown)}")
+        if "servo" in options:
+            return self._servo_bus(options)
+        if "baud" in options:
+            raise UrlError(f"{EXPECTED}: baud= applies with servo= (the AX-12A bus starts at 1000000)")
         try:
             ids = parse_ids(options.pop("ids", ["1"])[-1])
             profile = options.pop("profile", ["ax12a"])[-1]
@@ -157,6 +171,33 @@ class Serial(SerialBase):
         self._private = (bus, trace)
         if self.logger:
             self.logger.info("private bus with IDs %s", ids)
+        return InProcessLink(bus, trace=trace)
+
+    def _servo_bus(self, options: dict[str, list[str]]) -> InProcessLink:
+        """A private Protocol 2.0 bus (``servo=``); options of the AX-12A bus are refused by name."""
+        refused = sorted(set(options) - set(SERVO_OPTIONS))
+        if refused:
+            raise UrlError(f"{EXPECTED}: {', '.join(refused)} not available with servo= (the Protocol 2.0 bus has no such option yet)")
+        try:
+            spec = options["servo"][-1]
+            ids = parse_ids(options["ids"][-1]) if "ids" in options else None
+            virtual = options.get("virtual_time", ["0"])[-1]
+            if virtual not in ("0", "1"):
+                raise ValueError(f"virtual_time must be 0 or 1, got {virtual!r}")
+            baud_text = options.get("baud", [None])[-1]
+            try:
+                baud_bps = None if baud_text is None else float(baud_text)
+            except ValueError:
+                raise ValueError(f"baud must be a bit rate, got {baud_text!r}") from None
+            bus = build_bus2(spec, ids, clock=VirtualClock() if virtual == "1" else WallClock(), baud_bps=baud_bps)
+        except ValueError as exc:
+            raise UrlError(f"{EXPECTED}: {exc}") from None
+        trace_path = options.get("trace", [None])[-1]
+        servos = servo_list(bus)
+        trace = TraceWriter(trace_path, servos=servos) if trace_path else None
+        self._private = (bus, trace)
+        if self.logger:
+            self.logger.info("private Protocol 2.0 bus: %s", servos)
         return InProcessLink(bus, trace=trace)
 
     def _reconfigure_port(self) -> None:

@@ -1,0 +1,195 @@
+"""VirtualBus, ``ax12emu://`` and the pytest plugin serving Protocol 2.0 servos (``servo=``).
+
+The client is unmodified dynamixel-sdk with PacketHandler(2.0) (through ``emu_testkit.UrlPortHandler``,
+the port subclass the docs show for URLs); register helpers take the model's own names.
+"""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+import serial
+from dynamixel_sdk import COMM_RX_TIMEOUT, COMM_SUCCESS, GroupSyncRead, PacketHandler
+from emu_testkit import UrlPortHandler, ok
+
+import ax12emu  # noqa: F401  (registers the URL handler)
+from ax12emu import VirtualBus
+from ax12emu.harness.urlhandler.protocol_ax12emu import UrlError
+from ax12emu.protocol.packets2 import ErrorNumber, Instruction2, encode_instruction2, encode_status2
+from ax12emu.protocol.servo_models import model
+
+BAUD = 57600
+XL430, XM430, XL330 = 1060, 1020, 1190
+TORQUE_ENABLE, LED, GOAL_POSITION, PRESENT_POSITION = 64, 65, 116, 132
+
+pytest_plugins = ["pytester"]
+
+
+def sdk2(url: str, baud: int = BAUD) -> tuple[UrlPortHandler, PacketHandler]:
+    port = UrlPortHandler(url)
+    assert port.openPort() and port.setBaudRate(baud)
+    return port, PacketHandler(2.0)
+
+
+def test_in_process_bus_answers_dynamixel_sdk_by_model():
+    """A per-ID servo text: each ID answers with its model's number; a Sync Read of all; an error number."""
+    with VirtualBus(servo="1-2:xm430-w350,3:xl330-m077", transport="inprocess") as bus:
+        assert bus.bus.ids == [1, 2, 3]
+        port, ph = sdk2(bus.port)
+        try:
+            assert [ok(ph.ping(port, i)) for i in (1, 2, 3)] == [XM430, XM430, XL330]
+            assert ph.ping(port, 4)[1] == COMM_RX_TIMEOUT
+            found, comm = ph.broadcastPing(port)
+            assert comm == COMM_SUCCESS and {i: v[0] for i, v in found.items()} == {1: XM430, 2: XM430, 3: XL330}
+            read = GroupSyncRead(port, ph, PRESENT_POSITION, 4)
+            for servo_id in (1, 2, 3):
+                assert read.addParam(servo_id)
+            assert read.txRxPacket() == COMM_SUCCESS
+            assert [read.getData(i, PRESENT_POSITION, 4) for i in (1, 2, 3)] == [bus.read(i, "present_position") for i in (1, 2, 3)]
+            assert ph.write4ByteTxRx(port, 3, GOAL_POSITION, 5000) == (COMM_SUCCESS, ErrorNumber.DATA_RANGE)
+        finally:
+            port.closePort()
+
+
+def test_register_helpers_use_the_model_table_names():
+    """read/write/table by the X-series names; a write reaches the firmware (a goal moves the shaft, in virtual time)."""
+    with VirtualBus([1, 2], servo="xl430-w250", transport="inprocess", virtual_time=True) as bus:
+        table = bus.table(1)
+        assert table["model_number"] == XL430 and "profile_velocity" in table and "cw_angle_limit" not in table
+        start = bus.read(1, "present_position")
+        assert abs(bus.angle_deg(1) - start * 360.0 / 4096) < 0.1
+        bus.write(1, "torque_enable", 1)
+        bus.write(1, "goal_position", start + 1024)
+        bus.step(2.0)
+        assert abs(bus.read(1, "present_position") - (start + 1024)) <= 20
+        assert abs(bus.angle_deg(1) - (start + 1024) * 360.0 / 4096) < 2.0
+        assert bus.read(2, "present_position") == start  # the other servo held still
+        assert math.isclose(bus.now_s, 2.0)
+        with pytest.raises(KeyError, match="XL430-W250 has no register 'cw_angle_limit'"):
+            bus.read(1, "cw_angle_limit")
+
+
+def test_id_write_moves_the_servo_on_the_bus():
+    with VirtualBus([1], servo="xl430-w250", transport="inprocess") as bus:
+        bus.write(1, "id", 9)
+        assert bus.bus.ids == [9] and bus.read(9, "id") == 9
+        port, ph = sdk2(bus.port)
+        try:
+            assert ok(ph.ping(port, 9)) == XL430
+        finally:
+            port.closePort()
+
+
+def test_external_torque_reaches_the_firmware():
+    """A torque on a limp shaft turns it (virtual time)."""
+    with VirtualBus([1], servo="xl430-w250", transport="inprocess", virtual_time=True) as bus:
+        start = bus.angle_deg(1)
+        bus.set_external_torque(1, 0.3)
+        bus.step(0.5)
+        assert bus.angle_deg(1) > start + 5.0
+
+
+def test_served_on_a_pty_too():
+    """The same servos behind a pty, at another start baud (baud_bps)."""
+    with VirtualBus([3], servo="xl330-m077", baud_bps=1_000_000) as bus:
+        assert bus.read(3, "baud_rate") == 3
+        port, ph = sdk2(bus.port, 1_000_000)
+        try:
+            assert ok(ph.ping(port, 3)) == XL330
+            assert ph.write1ByteTxRx(port, 3, LED, 1) == (COMM_SUCCESS, 0)
+            assert bus.read(3, "led") == 1
+        finally:
+            port.closePort()
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"servo": "xl999"}, "unknown servo model 'xl999'"),
+        ({"servo": "ax-12a"}, "ax-12a speaks Protocol 1.0, not 2.0"),
+        ({"servo": "1:xl430-w250", "ids": [1]}, "give one of them"),
+        ({"servo": "xl430-w250", "baud_bps": 12345}, "not 12345"),
+        ({"servo": "xl430-w250", "model": "kinematic"}, "model: not available with servo="),
+        ({"baud_bps": 57600}, "baud_bps applies with servo="),
+    ],
+)
+def test_bad_servo_arguments_are_named(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        VirtualBus(**kwargs)
+
+
+def test_what_the_2_0_bus_lacks_is_refused_by_name():
+    with VirtualBus(servo="xl430-w250", transport="inprocess") as bus:
+        for call in (lambda: bus.set_temperature(1, 80), lambda: bus.set_voltage(1, 9.0),
+                     lambda: bus.set_angle_deg(1, 10.0)):
+            with pytest.raises(NotImplementedError, match="Protocol 2.0 bus"):
+                call()
+
+
+def test_url_servo_option_builds_a_private_2_0_bus():
+    """ax12emu://?servo=...: the port's baud is the line's; the servos answer at their factory 57,600."""
+    with serial.serial_for_url("ax12emu://?servo=xl430-w250&ids=1,2", baudrate=BAUD, timeout=0.5) as link:
+        link.write(encode_instruction2(2, Instruction2.PING))
+        firmware = model("xl430-w250").firmware_version or 0  # the model file's, when it gives one
+        assert link.read(14) == encode_status2(2, 0, bytes([XL430 & 0xFF, XL430 >> 8, firmware]))
+    with serial.serial_for_url("ax12emu://?servo=1:xl430-w250", baudrate=1_000_000, timeout=0.05) as link:
+        link.write(encode_instruction2(1, Instruction2.PING))
+        assert link.read(14) == b""  # deaf at another baud, as on the wire
+    with serial.serial_for_url("ax12emu://?servo=1:xl430-w250&baud=1000000", baudrate=1_000_000, timeout=0.5) as link:
+        link.write(encode_instruction2(1, Instruction2.PING))
+        assert len(link.read(14)) == 14
+
+
+def test_url_through_dynamixel_sdk():
+    port, ph = sdk2("ax12emu://?servo=1-3:xm430-w350&virtual_time=1")
+    try:
+        assert ok(ph.read2ByteTxRx(port, 3, 0)) == XM430
+        assert ph.write1ByteTxRx(port, 2, TORQUE_ENABLE, 1) == (COMM_SUCCESS, 0)
+        assert ok(ph.read1ByteTxRx(port, 2, TORQUE_ENABLE)) == 1
+    finally:
+        port.closePort()
+
+
+@pytest.mark.parametrize(
+    "url, message",
+    [
+        ("ax12emu://?servo=nope", "unknown servo model 'nope'"),
+        ("ax12emu://?servo=", "empty servo list"),
+        ("ax12emu://?servo=1-2:xl430-w250&ids=3", "give one of them"),
+        ("ax12emu://?servo=xl430-w250&baud=fast", "baud must be a bit rate"),
+        ("ax12emu://?servo=xl430-w250&baud=1234", "not 1234"),
+        ("ax12emu://?servo=xl430-w250&drop=0.5", "drop not available with servo="),
+        ("ax12emu://?servo=xl430-w250&profile=ax12a", "profile not available with servo="),
+        ("ax12emu://?ids=1&baud=57600", "baud= applies with servo="),
+    ],
+)
+def test_bad_servo_urls_are_named(url, message):
+    with pytest.raises(UrlError, match=message):
+        serial.serial_for_url(url, baudrate=BAUD)
+
+
+@pytest.mark.ax12_servo("xl430-w250")
+@pytest.mark.ax12_ids(2, 3)
+@pytest.mark.ax12_bus_options(transport="inprocess")
+def test_plugin_marker_serves_2_0_servos(ax12_bus):
+    assert ax12_bus.bus.ids == [2, 3] and ax12_bus.read(3, "model_number") == XL430
+
+
+def test_plugin_option_serves_every_bus(pytester):
+    """pytest --ax12-servo SPEC: a test without the marker gets those servos; the marker still wins."""
+    pytester.makepyfile(
+        """
+        import pytest
+
+        def test_default(ax12_bus):
+            assert ax12_bus.bus.ids == [1, 4]
+            assert ax12_bus.read(4, "model_number") == 1190
+
+        @pytest.mark.ax12_servo("xm430-w350")
+        def test_marker(ax12_bus):
+            assert ax12_bus.read(1, "model_number") == 1020
+        """
+    )
+    result = pytester.runpytest_inprocess("--ax12-servo", "1,4:xl330-m077", "--strict-markers", "-p", "no:cacheprovider")
+    result.assert_outcomes(passed=2)
