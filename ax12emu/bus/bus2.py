@@ -39,9 +39,11 @@ Time: before any request the firmware models are brought to the present (and one
 past a client's write), as the Protocol 1.0 bus does with ``Plant.catch_up``; the Bus Watchdog of
 each servo measures the silence since the last instruction packet it heard.
 
-Not modelled: faults injection, the reply cache, persisted EEPROM state, the live view (the
-Protocol 1.0 bus has them), a servo's busy time after a write to its EEPROM, and the time a
-rebooting servo is deaf.
+EEPROM areas persist in a :class:`~ax12emu.bus.state_store.StateStore` as on the 1.0 bus (by
+register name, keyed by the ID a servo was launched with).
+
+Not modelled: faults injection, the reply cache, the live view (the Protocol 1.0 bus has them),
+a servo's busy time after a write to its EEPROM, and the time a rebooting servo is deaf.
 """
 
 from __future__ import annotations
@@ -70,6 +72,7 @@ from firmware_model.xseries.interface import XServoModel
 from .bus import BAUD_TOLERANCE
 from .clock import VirtualClock, WallClock
 from .reply import BITS_PER_BYTE, Reply
+from .state_store import StateStore
 
 __all__ = ["Bus2", "FirmwareFactory"]
 
@@ -100,6 +103,7 @@ class Bus2:
         clock: WallClock | VirtualClock | None = None,
         options: Servo2Options = Servo2Options(),
         framer: Framer2 | None = None,
+        state_store: StateStore | None = None,
     ) -> None:
         slots = list(servos)
         if not slots:
@@ -118,6 +122,12 @@ class Bus2:
             model = firmware(spec, index)
             self.servos.append(Servo2(spec, lambda servo, m=model: Plant2(m, servo.table),
                                       servo_id=servo_id, index=index, options=options))
+        #: Where each servo's EEPROM area persists, keyed by the ID it was launched with; None: nowhere.
+        self.state_store = state_store
+        if state_store is not None:
+            for slot, servo in zip(ids, self.servos):
+                if state_store.load(slot, servo.table):
+                    servo.power_on()
         self._by_id: dict[int, list[Servo2]] = {}
         self.reindex()
         #: How far behind the clock physics may be when a packet is served (see ``Bus.request_lag_s``).
@@ -233,6 +243,11 @@ class Bus2:
             replies = []  # Read to the broadcast ID, or an undefined instruction: not executed
         if packet.crc_ok and kind not in _LISTED_READS and packet.instruction != Instruction2.PING:
             self.reindex()
+            for slot, servo in zip(self.slots, self.servos):
+                if servo.eeprom_dirty:
+                    servo.eeprom_dirty = False
+                    if self.state_store is not None:
+                        self.state_store.save(slot, servo.table)
         return replies
 
     def _each_own(self, packet: InstructionPacket2, targets: list[Servo2]) -> list[Reply]:
@@ -300,11 +315,16 @@ class Bus2:
 
     # -- life cycle --------------------------------------------------------------------
     def save_state(self) -> None:
-        """Nothing persists on this bus yet (see the module docstring)."""
+        """Write every servo's EEPROM area to the state store (if any)."""
+        if self.state_store is not None:
+            for slot, servo in zip(self.slots, self.servos):
+                self.state_store.save(slot, servo.table)
 
     def close(self) -> None:
-        """Safe to call more than once."""
-        self._closed = True
+        """Save state; safe to call more than once."""
+        if not self._closed:
+            self._closed = True
+            self.save_state()
 
     def __enter__(self) -> "Bus2":
         return self

@@ -18,10 +18,27 @@ import json
 import os
 import tempfile
 from pathlib import Path
+from typing import Protocol
 
-from ax12emu.protocol.control_table import Access, Area, ControlTable
+from ax12emu.protocol.control_table import Access, Area
+from ax12emu.protocol.registers import Layout, Profile
 
-__all__ = ["StateStore", "StateFileError"]
+__all__ = ["PersistentTable", "StateStore", "StateFileError"]
+
+
+class PersistentTable(Protocol):
+    """What the store needs of a control table: the AX-12's ``ControlTable`` and the Protocol 2.0 ``Table2`` both are one."""
+
+    layout: Layout
+
+    @property
+    def profile(self) -> Profile: ...
+
+    def get(self, name: str) -> int: ...
+
+    def eeprom_bytes(self) -> bytes: ...
+
+    def load_eeprom(self, data: bytes) -> None: ...
 
 
 class StateFileError(ValueError):
@@ -46,7 +63,7 @@ class StateStore:
             raise ValueError(f"servo slot must be 0..253, got {slot}")
         return self.directory / f"servo-{int(slot):03d}.json"
 
-    def load(self, slot: int, table: ControlTable) -> bool:
+    def load(self, slot: int, table: PersistentTable) -> bool:
         """Load the slot's EEPROM into ``table``; False if there is no file yet."""
         path = self.path_for(slot)
         if not path.exists():
@@ -66,15 +83,16 @@ class StateStore:
                     value = registers[entry.name]
                     if not isinstance(value, int) or isinstance(value, bool):
                         raise TypeError(f"{entry.name} must be an integer, got {value!r}")
-                    if not 0 <= value < 256**entry.size:
+                    low = -(1 << (8 * entry.size - 1)) if entry.signed else 0
+                    if not low <= value < low + 256**entry.size:
                         raise ValueError(f"{entry.name} = {value} does not fit in {entry.size} byte(s)")
-                    image[entry.address : entry.end] = value.to_bytes(entry.size, "little")
+                    image[entry.address : entry.end] = entry.to_bytes(value)
             table.load_eeprom(bytes(image))
         except (OSError, ValueError, TypeError, KeyError) as exc:
             raise StateFileError(f"{path}: unusable state file ({exc}); remove it or start with --factory-reset") from exc
         return True
 
-    def save(self, slot: int, table: ControlTable) -> None:
+    def save(self, slot: int, table: PersistentTable) -> None:
         """Write the slot's EEPROM atomically."""
         registers = {
             entry.name: table.get(entry.name)

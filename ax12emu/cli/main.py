@@ -15,6 +15,7 @@ import logging
 import signal
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 
 from ax12emu import __version__
 from ax12emu.bus import Bus
@@ -170,7 +171,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 #: Serve options that shape Protocol 1.0 servos only; with --servo each must keep its default.
-_PROTOCOL1_ONLY = ("web", "monitor", "state_dir", "trace", "params", "arm", "model", "controller", "profile",
+_PROTOCOL1_ONLY = ("web", "monitor", "trace", "params", "arm", "model", "controller", "profile",
                    "broadcast_ping", "reset_reply_id", "goal_torque", "eeprom_busy_ms", "drop", "corrupt", "delay",
                    "delay_s", "fault_ids", "fault_seed", "vanish", "duplicate", "alarm", "stall")
 
@@ -228,6 +229,10 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     return args
 
 
+#: Under --state-dir, where the Protocol 2.0 servos' files go (the AX-12As' stay at the top).
+STATE_SUBDIR_2 = "protocol2"
+
+
 def _serve2(args: argparse.Namespace) -> int:
     """``serve --servo``: X-series servos on Protocol 2.0, each with its model's table and firmware."""
     from ax12emu.bus.bus2 import Bus2
@@ -238,12 +243,17 @@ def _serve2(args: argparse.Namespace) -> int:
 
     choice = XModelChoice(voltage_v=args.voltage, external_torque_nm=args.external_torque)
     clock = WallClock(args.time_scale)
+    # Protocol 2.0 servos keep their EEPROM in a directory of their own: IDs are per protocol.
+    store2 = StateStore(Path(args.state_dir) / STATE_SUBDIR_2) if args.state_dir else None
+    store1 = StateStore(args.state_dir) if args.state_dir else None
     bus = Bus2(
         [(servo_id, model(key)) for servo_id, key in args.servo_models if key != AX12_MODEL],
         lambda spec, index: build_x_firmware(spec, choice),
         clock=clock,
         options=Servo2Options(reply_on_crc_error=args.checksum_error == "reply"),
+        state_store=None if args.factory_reset else store2,
     )
+    bus.state_store = store2
     if args.baud is not None:
         for servo in bus.servos:
             servo.start_at_baud(args.baud)
@@ -253,7 +263,9 @@ def _serve2(args: argparse.Namespace) -> int:
         from ax12emu.servo.virtual_servo import baud_value
 
         bus1 = Bus(ax_ids, options=ServoOptions(reply_on_checksum_error=args.checksum_error == "reply"), clock=clock,
-                   model=build_model(ModelChoice(voltage_v=args.voltage, external_torque_nm=args.external_torque), len(ax_ids)))
+                   model=build_model(ModelChoice(voltage_v=args.voltage, external_torque_nm=args.external_torque), len(ax_ids)),
+                   state_store=None if args.factory_reset else store1)
+        bus1.state_store = store1
         if args.baud is not None:
             for servo in bus1.servos:
                 servo.table.set("baud_rate", baud_value(args.baud))

@@ -98,6 +98,27 @@ class Table2:
         self.row[start:] = self.layout.defaults[start:]
 
     @property
+    def profile(self):
+        """The model profile this table follows (its name goes into saved state)."""
+        return self.layout.profile
+
+    def eeprom_bytes(self) -> bytes:
+        """The EEPROM area, the part that persists."""
+        return bytes(self.row[: self.layout.eeprom_end])
+
+    def load_eeprom(self, data: bytes) -> None:
+        """Restore a persisted EEPROM area; every writable value must be in its range (read-only ones stay the model's)."""
+        end = self.layout.eeprom_end
+        if len(data) != end:
+            raise ValueError(f"EEPROM image must be {end} bytes, got {len(data)}")
+        writable = [e for e in self.layout.entries if e.area is Area.EEPROM and e.access is Access.RW]
+        for entry in writable:
+            if not entry.minimum <= entry.value_in(data) <= entry.maximum:
+                raise ValueError(f"{entry.name} = {entry.value_in(data)} is outside {entry.minimum}..{entry.maximum}")
+        for entry in writable:
+            self.row[entry.address : entry.end] = data[entry.address : entry.end]
+
+    @property
     def torque_on(self) -> bool:
         return bool(self.row[self._torque_enable])
 

@@ -174,3 +174,16 @@ def test_a_wire_mixing_ax12a_on_protocol_1_and_xl430_on_protocol_2(emulator):
         assert ok(ph2.read4ByteTxRx(port, 2, PRESENT_POSITION)) == 2048
         assert ph1.write1ByteTxRx(port, 1, 25, 1) == (COMM_SUCCESS, 0)  # the AX-12A's LED
         assert ok(ph2.read1ByteTxRx(port, 1, LED)) == 0  # the XL430 with the same ID untouched
+
+
+def test_state_dir_keeps_the_eeprom_between_runs(emulator, tmp_path):
+    args = ("--servo", "xl430-w250", "--ids", "1-2", "--state-dir", str(tmp_path))
+    first = emulator(*args)
+    with sdk2(first.port) as (port, ph):
+        assert ph.write1ByteTxRx(port, 2, 7, 12) == (COMM_SUCCESS, 0)  # ID 2 -> 12
+        assert ph.write4ByteTxRx(port, 1, 20, 0xFFFFFF38) == (COMM_SUCCESS, 0)  # Homing Offset -200
+    assert first.stop() == 0
+    with sdk2(emulator(*args).port) as (port, ph):
+        assert ok(ph.ping(port, 12)) == XL430_MODEL_NUMBER
+        assert ok(ph.read4ByteTxRx(port, 1, 20)) == 0xFFFFFF38
+    assert (tmp_path / "protocol2" / "servo-002.json").exists()

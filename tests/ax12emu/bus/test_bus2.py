@@ -16,6 +16,7 @@ from x2_testkit import RecordingFirmware, recording_bus
 from ax12emu.bus.bus2 import Bus2
 from ax12emu.bus.clock import VirtualClock
 from ax12emu.bus.reply import BITS_PER_BYTE, merge_replies
+from ax12emu.bus.state_store import StateStore
 from ax12emu.protocol.packets2 import (
     ErrorNumber,
     Instruction2,
@@ -420,3 +421,15 @@ def test_secondary_id_groups_servos_silently_and_on_the_ram_area_only(xm):
     send(bus, 3, Instruction2.WRITE, bytes((12, 0, 255)))  # off again
     send(bus, 5, Instruction2.WRITE, bytes((65, 0, 0)))
     assert [bus.servo(i).table.get("led") for i in (1, 2, 3, 5)] == [0, 0, 1, 0]
+
+
+def test_eeprom_persists_by_launch_id_signed_values_too(tmp_path):
+    store = StateStore(tmp_path)
+    bus, _ = recording_bus(ids=(1, 2), key="xm430-w350", state_store=store)
+    send(bus, 1, Instruction2.WRITE, bytes((20, 0)) + u32(-300))  # Homing Offset, signed
+    send(bus, 2, Instruction2.WRITE, bytes((7, 0, 9)))  # ID 2 -> 9
+    send(bus, 1, Instruction2.WRITE, bytes((65, 0, 1)))  # LED: RAM, not kept
+    bus.close()
+    again, _ = recording_bus(ids=(1, 2), key="xm430-w350", state_store=store)
+    assert again.ids == [1, 9]
+    assert again.servo(1).table.get("homing_offset") == -300 and again.servo(1).table.get("led") == 0
