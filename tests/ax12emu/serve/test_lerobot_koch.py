@@ -423,3 +423,30 @@ def test_handshake_refuses_a_bus_of_the_wrong_models(emulator):
             bus.connect()
     finally:
         bus.close()
+
+
+def test_the_docs_recipe_connects_without_setup_and_takes_its_calibration_file(emulator):
+    """docs/lerobot.md: ``--baud 1000000`` serves the arm where lerobot connects, and the calibration file the page
+    shows, written as ``KochFollower.calibrate`` writes a file, puts each joint at the middle of its range."""
+    import json
+    import re
+    from pathlib import Path
+
+    page = (Path(__file__).resolve().parents[3] / "docs" / "lerobot.md").read_text(encoding="utf-8")
+    serve_line = re.search(r"ax12emu serve (--servo \S+ --baud \d+)", page).group(1).split()
+    file_text = re.search(r"```json\n(.*?)\n\s*```", page, re.DOTALL).group(1)
+    calibration = {m: {k: v for k, v in c.items() if k != "id"} for m, c in json.loads(file_text).items()}
+    assert {m: c["id"] for m, c in json.loads(file_text).items()} == {m: KOCH[m][0] for m in KOCH}
+
+    served = emulator(*serve_line)
+    bus = KochBus(served.port)
+    bus.connect()
+    try:
+        assert bus.read_calibration() != calibration  # is_calibrated is False: lerobot offers to write the file
+        bus.disable_torque()
+        bus.write_calibration(calibration)
+        assert bus.read_calibration() == calibration
+        observed = bus.sync_read("Present_Position")
+        assert all(abs(observed[m] - (50.0 if m == "gripper" else 0.0)) < 1.0 for m in KOCH), observed
+    finally:
+        bus.close()
