@@ -190,6 +190,7 @@ class Servo2:
         """FACTORY_RESET: every register to its default except ``keep``; the sensed registers stay the model's."""
         self.table.factory_defaults(keep)
         self.plant.release()
+        self.plant.command()  # the firmware takes the defaults (torque off) before its registers are copied back
         self.plant.write_back()
         self.eeprom_dirty = True
         self.power_on()

@@ -76,3 +76,12 @@ def test_extended_position_mode_turns_past_one_revolution():
     assert request(bus, 1, Instruction2.WRITE, bytes((116, 0)) + u32(2048 + 6000)).error == ErrorNumber.NONE
     bus.clock.advance(5.0)
     assert abs(read(bus, 1, 132, 4) - (2048 + 6000)) <= 10
+
+
+def test_factory_reset_turns_the_torque_off_in_the_firmware_too():
+    bus = xl430_bus(ids=(1,))
+    request(bus, 1, Instruction2.WRITE, bytes((64, 0, 1)))
+    assert request(bus, 1, Instruction2.FACTORY_RESET, b"\x02").error == ErrorNumber.NONE
+    bus.clock.advance(0.01)
+    assert read(bus, 1, 64, 1) == 0
+    assert bus.servo(1).plant.firmware.sense().torque_enable == 0
