@@ -433,3 +433,25 @@ def test_eeprom_persists_by_launch_id_signed_values_too(tmp_path):
     again, _ = recording_bus(ids=(1, 2), key="xm430-w350", state_store=store)
     assert again.ids == [1, 9]
     assert again.servo(1).table.get("homing_offset") == -300 and again.servo(1).table.get("led") == 0
+
+
+def test_control_table_backup_stores_with_torque_off_and_restores_the_eeprom():
+    bus, firmware = recording_bus(ids=(1, 2), key="xl430-w250")  # its table has Backup Ready (147)
+    table = bus.servo(1).table
+    assert [r.data for r in bus.receive(h("Control Table Backup (0x20) store"))] == [EMPTY_OK]
+    assert table.get("backup_ready") == 1
+    send(bus, 1, Instruction2.WRITE, bytes((31, 0, 50)))  # Temperature Limit
+    restore = encode_instruction2(1, Instruction2.CONTROL_TABLE_BACKUP, b"\x02CTRL")
+    assert [r.data for r in bus.receive(restore)] == [EMPTY_OK]
+    assert table.get("temperature_limit") == 72 and firmware[0].reboots == 1
+    send(bus, 1, Instruction2.WRITE, bytes((64, 0, 1)))
+    assert status(bus, 1, Instruction2.CONTROL_TABLE_BACKUP, b"\x01CTRL").error == ErrorNumber.RESULT_FAIL
+    assert status(bus, 2, Instruction2.CONTROL_TABLE_BACKUP, b"\x02CTRL").error == ErrorNumber.RESULT_FAIL  # nothing stored
+
+
+def test_reg_write_is_checked_when_registered_and_bulk_write_errors_are_silent(xm):
+    bus, _ = xm
+    assert status(bus, 1, Instruction2.REG_WRITE, b"\x74\x00" + u32(5000)).error == ErrorNumber.DATA_RANGE
+    assert bus.servo(1).table.get("registered_instruction") == 0
+    assert send(bus, 0xFE, Instruction2.BULK_WRITE, bytes((1, 0x74, 0, 4, 0)) + u32(5000) + bytes((2, 65, 0, 1, 0, 1))) == []
+    assert bus.servo(1).table.get("goal_position") == 2048 and bus.servo(2).table.get("led") == 1
