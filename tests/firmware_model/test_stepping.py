@@ -80,10 +80,32 @@ def _trajectory(n: int, backend: str, fused: bool, load, make_commands, wheel: b
     return states
 
 
-@pytest.mark.parametrize("params", sorted(PARAMS))
-@pytest.mark.parametrize("mode", ["joint", "wheel"])
-@pytest.mark.parametrize("load", sorted(LOADS))
-@pytest.mark.parametrize("n, backend", [(1, "scalar"), (1, "numpy"), (3, "numpy")])
+#: The kernels and the ways the settings above reach them: servo count with backend, run mode.
+KERNELS, MODES = [(1, "scalar"), (1, "numpy"), (3, "numpy")], ["joint", "wheel"]
+
+
+def _pairwise_cases() -> list[tuple[int, str, str, str, str]]:
+    """Every parameter set with every load, the kernel and mode turning with their sum (k = p + q).
+
+    Every pair of settings meets in some case (each kernel with each load, parameter set and mode; each
+    load with each mode and parameter set): k mod 3 and k mod 2 take all six joint values over k = 0..5,
+    and k covers them for every fixed p or q.  20 cases instead of the 120 of the whole cross product,
+    which the kernels do not need: they branch on each setting by itself (arm, load, bridge, viscous, wheel).
+    """
+    return [(*KERNELS[(p + q) % 3], load, MODES[(p + q) % 2], params)
+            for p, params in enumerate(sorted(PARAMS)) for q, load in enumerate(sorted(LOADS))]
+
+
+def test_pairwise_cases_cover_every_pair_of_settings():
+    cases = _pairwise_cases()
+    factors = [sorted(set(KERNELS)), sorted(LOADS), MODES, sorted(PARAMS)]
+    rows = [((n, backend), load, mode, params) for n, backend, load, mode, params in cases]
+    for i in range(4):
+        for j in range(i + 1, 4):
+            assert {(r[i], r[j]) for r in rows} == {(a, b) for a in factors[i] for b in factors[j]}, (i, j)
+
+
+@pytest.mark.parametrize("n, backend, load, mode, params", _pairwise_cases())
 def test_fused_kernels_equal_the_generic_loop(n, backend, load, mode, params, commands):
     fused, generic = (_trajectory(n, backend, flag, LOADS[load], commands, mode == "wheel", PARAMS[params])
                       for flag in (True, False))
