@@ -61,7 +61,7 @@ from ax12emu.protocol.packets2 import (
 from ax12emu.protocol.registers import Access, Area, Entry, Layout
 from ax12emu.protocol.servo_models import ServoModel, model, model_names
 
-from .checks import Check, Note, Skipped, expect
+from .checks import Check, Failed, Note, Skipped, expect
 from .link import Link2, Response2
 
 __all__ = ["CHECKS2", "Context2", "model_for_number", "table_differences2"]
@@ -722,6 +722,141 @@ def check_defaults(ctx: Context2) -> "str | Note":
     return "all at defaults"
 
 
+def check_alert(ctx: Context2) -> str:
+    """[P2] "Status Packet > Error": bit 7 (Alert) is set "when there has been a problem in the Device"
+    and Hardware Error Status(70) "can indicate the cause": each servo's Ping carries Alert exactly
+    when its Hardware Error Status is non-zero."""
+    figures = []
+    for servo_id in ctx.ids:
+        status = ctx.status(servo_id, Instruction2.PING)
+        hardware = ctx.get(servo_id, "hardware_error_status")
+        expect(status.alert == bool(hardware), f"ID {servo_id}: Alert {int(status.alert)} with Hardware Error Status {hardware:#04x}")
+        figures.append(f"{servo_id}: {hardware:#04x}")
+    return "Hardware Error Status " + ", ".join(figures) + "; Alert matches"
+
+
+# -- destructive: all put back, but a failure halfway may leave the servo changed -------------------
+#: How long a rebooting or reset servo may take before it answers a Ping again (the e-manual gives no time).
+BOOT_WAIT_S = 2.0
+
+
+def _wait_for(ctx: Context2, servo_id: int) -> float:
+    """Ping ``servo_id`` until it answers (after Reboot or Factory Reset); the seconds it took."""
+    start = time.perf_counter()
+    packet = encode_instruction2(servo_id, Instruction2.PING)
+    while time.perf_counter() - start < BOOT_WAIT_S:
+        if ctx.link.transact(packet).status is not None:
+            return time.perf_counter() - start
+    raise Failed(f"ID {servo_id} silent for {BOOT_WAIT_S} s after the instruction")
+
+
+def _write_back(ctx: Context2, servo_id: int, image: bytes) -> list[str]:
+    """Write every register that differs from ``image`` back, EEPROM first (torque is off), Torque Enable last."""
+    layout = ctx.layout(servo_id)
+    now = ctx.table(servo_id)
+    order = [e for e in layout.entries if e.access is Access.RW and e.name not in ("id", "baud_rate", "torque_enable")]
+    order += [layout.by_name["torque_enable"]]
+    refused = []
+    for entry in order:
+        value = entry.value_in(image)
+        if entry.value_in(now) != value and ctx.put(servo_id, entry.name, value):
+            refused.append(entry.name)
+    return refused
+
+
+def check_reboot(ctx: Context2) -> str:
+    """[P2] "Reboot": answered with an empty status (the example's), then the device restarts;
+    [CT] "Area": the RAM area returns to its initial values, the EEPROM area is kept.  Torque
+    Enable, LED and Registered Instruction read 0 afterwards; everything is written back."""
+    servo = ctx.target
+    before = ctx.table(servo)
+    exact(ctx.status(servo, Instruction2.REBOOT), servo, ErrorNumber.NONE)
+    took = _wait_for(ctx, servo)
+    layout = ctx.layout(servo)
+    after = ctx.table(servo)
+    try:
+        for name in ("torque_enable", "led", "registered_instruction"):
+            expect(layout.by_name[name].value_in(after) == 0, f"{name} is {layout.by_name[name].value_in(after)} after Reboot")
+        eeprom = [e for e in layout.entries if e.area is Area.EEPROM and e.value_in(before) != e.value_in(after)]
+        expect(not eeprom, "Reboot changed the EEPROM area: " + ", ".join(e.name for e in eeprom))
+    finally:
+        refused = _write_back(ctx, servo, before)
+    expect(not refused, "could not write back " + ", ".join(refused))
+    return f"answered, back after {_ms(took)}; RAM at power-up values, EEPROM kept; written back"
+
+
+def check_factory_reset(ctx: Context2) -> str:
+    """[P2] "Factory Reset": option 0x02 "Reset all except ID and Baudrate", answered with an empty
+    status; the table returns to its factory defaults ([CT] "Initial Value") but for ID and Baud Rate.
+    Everything is written back (torque off first: the EEPROM area is locked while it is on)."""
+    servo = ctx.target
+    before = ctx.table(servo)
+    layout = ctx.layout(servo)
+    if ctx.torque_on(servo):
+        ctx.must_put(servo, "torque_enable", 0)
+    exact(ctx.status(servo, Instruction2.FACTORY_RESET, b"\x02"), servo, ErrorNumber.NONE)
+    took = _wait_for(ctx, servo)
+    try:
+        after = ctx.table(servo)
+        ignore = {"id", "baud_rate", "firmware_version", "model_information", "goal_position", "goal_velocity", "goal_pwm",
+                  "goal_current"}
+        differ = [d for d in table_differences2(layout.defaults, after, layout) if d.split()[0] not in ignore]
+        expect(not differ, "after Factory Reset 0x02: " + ", ".join(differ))
+        kept = layout.by_name["baud_rate"].value_in(after), layout.by_name["id"].value_in(after)
+        expect(kept == (layout.by_name["baud_rate"].value_in(before), servo), f"baud and ID after the reset: {kept}")
+    finally:
+        refused = _write_back(ctx, servo, before)
+    expect(not refused, "could not write back " + ", ".join(refused))
+    return f"answered, back after {_ms(took)}; table at defaults but ID and baud; written back"
+
+
+def check_id_change(ctx: Context2) -> str:
+    """[CT] ID(7): 0 ~ 252, an EEPROM register.  After writing a free ID only the new ID answers; put back.
+    Which ID the write's own status comes from the e-manual does not say; the figure shows it."""
+    old, new = ctx.target, ctx.free_id()
+    if ctx.torque_on(old):
+        raise Skipped("torque is on: ID is in the EEPROM area")
+    entry = ctx.entry(old, "id")
+    response = ctx.transact(encode_instruction2(old, Instruction2.WRITE, _u16(entry.address) + bytes((new,))))
+    try:
+        ctx.status(new, Instruction2.PING)
+        expect(ctx.silent(encode_instruction2(old, Instruction2.PING)), f"old ID {old} still answers")
+    finally:
+        ctx.transact(encode_instruction2(new, Instruction2.WRITE, _u16(entry.address) + bytes((old,))))
+    ctx.status(old, Instruction2.PING)
+    answered = "silent" if response.status is None else f"answered from ID {response.status.id}"
+    return f"{old}->{new}->{old}; the write {answered}"
+
+
+def check_baud_change(ctx: Context2) -> "str | Note":
+    """[CT] Baud Rate(8): the register selects the bit rate (the model file's table of the page's
+    values).  After writing another value the servo answers at that rate only; put back."""
+    servo = ctx.target
+    rates = ctx.models[servo].baud_rates_bps
+    if not rates:
+        raise Skipped(f"{ctx.models[servo].name}'s model file lists no baud rates")
+    if ctx.torque_on(servo):
+        raise Skipped("torque is on: Baud Rate is in the EEPROM area")
+    original = ctx.get(servo, "baud_rate")
+    host = ctx.link.baud
+    value = next(v for v in (3, 1, 0) if v != original and v < len(rates))
+    changed = False
+    try:
+        ctx.must_put(servo, "baud_rate", value)
+        changed = True
+        old_rate_silent = ctx.silent(encode_instruction2(servo, Instruction2.PING))
+        ctx.link.baud = rates[value]
+        rtt = statistics.median(ctx.ping_rtts(servo, 3))
+    finally:
+        if changed:
+            ctx.link.baud = rates[value]
+            ctx.put(servo, "baud_rate", original)
+        ctx.link.baud = host
+    ctx.status(servo, Instruction2.PING)
+    figure = f"answers at {rates[value]} bps ({_ms(rtt)}); at {host} bps: {'silent' if old_rate_silent else 'still answered'}"
+    return figure if old_rate_silent else Note(figure + " (the port carries no line rate?)")
+
+
 CHECKS2: tuple[Check, ...] = (
     Check("ping", check_ping),
     Check("absent ID is silent", check_absent_id),
@@ -747,5 +882,10 @@ CHECKS2: tuple[Check, ...] = (
     Check("broadcast READ/WRITE", check_broadcast_read_write),
     Check("status return levels", check_status_return_level),
     Check("return delay", check_return_delay),
+    Check("alert bit", check_alert),
+    Check("ID change", check_id_change, destructive=True),
+    Check("baud change", check_baud_change, destructive=True),
+    Check("REBOOT", check_reboot, destructive=True),
+    Check("FACTORY_RESET keeping ID and baud", check_factory_reset, destructive=True),
 )
 
