@@ -77,6 +77,12 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     decode.add_argument("file", metavar="FILE", help="a JSON-lines trace from serve --trace, or a binary capture")
     decode.add_argument("--raw", action="store_true", help="treat FILE as a raw capture even if it looks like JSON")
     decode.add_argument("--profile", choices=sorted(PROFILES), default=DEFAULT_PROFILE, help="register names of this profile")
+    decode.add_argument("--protocol", choices=("auto", "1.0", "both"), default="auto",
+                        help="frame Protocol 1.0 only, or 1.0 and 2.0 (a wire of X-series servos, alone or beside "
+                        "AX-12s); auto: both when the trace names 2.0 servos or the bytes hold a 2.0 header")
+    decode.add_argument("--servo", metavar="SPEC",
+                        help="name the registers of Protocol 2.0 packets by these models (IDS:MODEL,..., as serve --servo); "
+                        "default: the servos the trace's header names, else addresses")
 
     check = sub.add_parser("conformance", help="run the Protocol 1.0 (or 2.0) checks against any port (emulator or servo)")
     check.add_argument("port", metavar="PORT", help="device path or pyserial URL (socket://HOST:PORT, ax12emu://...)")
@@ -100,10 +106,12 @@ FACTORY_BAUD_BPS = {"1.0": 1_000_000, "2.0": 57_600}
 
 def _decode(args: argparse.Namespace) -> int:
     from ax12emu.tracing.decoder import decode, format_decoded
-    from ax12emu.tracing.trace import read_capture, read_raw
+    from ax12emu.tracing.trace import read_capture, read_raw, trace_header
 
     chunks = read_raw(args.file) if args.raw else read_capture(args.file)
-    for item in decode(chunks, profile=args.profile):
+    servos = args.servo if args.servo is not None else (None if args.raw else trace_header(args.file).get("servos"))
+    protocol = None if args.protocol == "auto" else args.protocol
+    for item in decode(chunks, profile=args.profile, protocol=protocol, servos=servos):
         print(format_decoded(item))
     return 0
 

@@ -14,24 +14,62 @@ an exact repeat of the last instruction is the adapter's echo, a code that is
 no instruction but a plausible error byte is a status packet, and anything
 else is an instruction.  Without timestamps a truncated packet cannot be told
 from one still arriving, so it may swallow the start of the next.
+
+Protocol 2.0 (the X series), alone or on one wire with Protocol 1.0 servos: with
+``protocol="both"`` every byte goes to both protocols' framers, as on a mixed wire
+each servo frames the stream by its own rules.  The first framer to complete a packet
+claims its bytes (the other framer's partial frame is dropped: it was that packet's
+bytes), and the bytes no packet claimed are shown as noise before the next packet.
+A 2.0 packet says itself whether it is a status (instruction 0x55), so only the echo
+needs the conversation.  Registers of 2.0 packets are named by the servos' model files
+when ``servos`` gives them (a trace of a 2.0 bus records them), else by address.
+:func:`decode` picks ``"both"`` by itself when the bytes hold a 2.0 header.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from typing import NamedTuple
 
 from ax12emu.protocol.control_table import DEFAULT_PROFILE
 from ax12emu.protocol.describe import describe_instruction, describe_status
+from ax12emu.protocol.describe2 import describe_instruction2, describe_status2
 from ax12emu.protocol.framing import Framer
+from ax12emu.protocol.framing2 import DEFAULT_MAX_LENGTH, Framer2
 from ax12emu.protocol.packets import BROADCAST_ID, Instruction, InstructionPacket
+from ax12emu.protocol.packets2 import HEADER2, InstructionPacket2, StatusPacket2
+from ax12emu.protocol.servo_models import model
+from ax12emu.protocol.servo_spec import parse_servo_spec
 
 from .trace import IN, OUT, Chunk
 
-__all__ = ["Decoded", "Decoder", "decode", "format_decoded", "INSTRUCTION", "STATUS", "ECHO", "GARBAGE"]
+__all__ = ["Decoded", "Decoder", "decode", "format_decoded", "register_names", "INSTRUCTION", "STATUS", "ECHO", "GARBAGE",
+           "PROTOCOLS"]
 
 INSTRUCTION, STATUS, ECHO, GARBAGE = "instruction", "status", "echo", "garbage"
 _INSTRUCTIONS = frozenset(int(code) for code in Instruction)
+#: What a Decoder frames: Protocol 1.0 only (the AX-12 bus, as before there was a 2.0 bus) or both.
+PROTOCOLS = ("1.0", "both")
+#: Bytes of a 2.0 frame around its parameters: header, ID, LENGTH, INST and CRC.
+_FRAME2_OVERHEAD = len(HEADER2) + 1 + 2 + 1 + 2
+#: A packet a Decoder shows: Protocol 1.0 or 2.0.
+AnyPacket = InstructionPacket | InstructionPacket2 | StatusPacket2
+
+
+def register_names(servos: str) -> dict[int, dict[int, str]]:
+    """Address -> register name per ID, from the ``--servo`` text of Protocol 2.0 servos (``1-5:xm430-w350,...``)."""
+    names: dict[int, dict[int, str]] = {}
+    for servo_id, key in parse_servo_spec(servos):
+        names[servo_id] = {entry.address: entry.name for entry in model(key).layout().entries}
+    return names
+
+
+def _wire2(packet: InstructionPacket2 | StatusPacket2) -> int:
+    """How many bytes the 2.0 ``packet`` took on the wire (stuffing included)."""
+    combined_status = isinstance(packet, StatusPacket2) and packet.id == BROADCAST_ID
+    if packet.crc_ok and not combined_status:
+        return len(packet.encode())
+    return _FRAME2_OVERHEAD + (1 if isinstance(packet, StatusPacket2) else 0) + len(packet.params)
 
 
 class Decoded(NamedTuple):
@@ -39,18 +77,22 @@ class Decoded(NamedTuple):
 
     t: float | None
     kind: str
-    packet: InstructionPacket | None
+    packet: AnyPacket | None
     text: str
     #: For a status packet: seconds since the instruction it answers ended (traces only).
     latency_s: float | None = None
     #: For garbage: how many bytes were thrown away.
     discarded: int = 0
+    #: The packet's bytes as they were on the line (``protocol="both"``); empty: rebuilt from ``packet``.
+    wire: bytes = b""
 
     @property
     def raw(self) -> bytes:
         """Wire bytes of the packet (with its checksum as received if it was corrupt)."""
-        if self.packet is None:
-            return b""
+        if self.wire or self.packet is None:
+            return self.wire
+        if isinstance(self.packet, (InstructionPacket2, StatusPacket2)):
+            return self.packet.encode()
         data = self.packet.encode()
         return data if self.packet.checksum_ok else data[:-1] + bytes((data[-1] ^ 0xFF,))
 
@@ -69,6 +111,41 @@ class _Stream:
         return packets, lost
 
 
+class _BothStream:
+    """A Protocol 1.0 and a 2.0 framer on one direction's bytes; the first packet completed claims its bytes."""
+
+    #: Bytes kept to give a packet its wire bytes: the longest frame either framer accepts.
+    _KEEP = DEFAULT_MAX_LENGTH + _FRAME2_OVERHEAD + 1
+
+    def __init__(self) -> None:
+        self.framer1, self.framer2 = Framer(), Framer2()
+        self.recent = bytearray()
+        #: Bytes since the last packet ended that no packet has claimed yet.
+        self.unclaimed = 0
+
+    def feed(self, byte: bytes, t: float | None) -> tuple[list[tuple[AnyPacket, bytes]], int]:
+        """One byte in; the packets it completes with their wire bytes, and the noise before them."""
+        self.unclaimed += 1
+        self.recent += byte
+        del self.recent[: -self._KEEP]
+        out: list[tuple[AnyPacket, bytes]] = []
+        lost = 0
+        for framer, other, length in ((self.framer2, self.framer1, _wire2), (self.framer1, self.framer2, _wire1)):
+            for packet in framer.feed(byte, t):
+                size = length(packet)
+                lost += max(self.unclaimed - size, 0)
+                self.unclaimed = 0
+                other.reset()
+                out.append((packet, bytes(self.recent[-size:])))
+            if out:
+                break  # the other framer was reset: the byte was this packet's
+        return out, lost
+
+
+def _wire1(packet: InstructionPacket) -> int:
+    return len(packet.params) + 6
+
+
 class _Conversation:
     """The last instruction: it names a READ's data and says who may answer."""
 
@@ -76,6 +153,8 @@ class _Conversation:
         self.request: InstructionPacket | None = None
         self.t: float | None = None
         self.answered = False
+        self.request2: InstructionPacket2 | None = None
+        self.t2: float | None = None
 
     def classify(self, packet: InstructionPacket, direction: str | None) -> str:
         last = self.request
@@ -91,6 +170,25 @@ class _Conversation:
         if packet.instruction not in _INSTRUCTIONS and packet.instruction < 0x80:
             return STATUS
         return INSTRUCTION
+
+    def describe2(self, packet: InstructionPacket2 | StatusPacket2, wire: bytes, chunk: Chunk,
+                  names: Mapping[int, Mapping[int, str]]) -> Decoded:
+        """A Protocol 2.0 packet: a status says so itself; a repeat of the last instruction is the echo."""
+        last = self.request2
+        if isinstance(packet, StatusPacket2):
+            latency = None if chunk.t is None or self.t2 is None else chunk.t - self.t2
+            text = describe_status2(packet, last, names.get(packet.id, self._common(names)))
+            return Decoded(chunk.t, STATUS, packet, text, latency, wire=wire)
+        table = names.get(packet.id, self._common(names))
+        if chunk.direction != IN and last is not None and packet == last:
+            return Decoded(chunk.t, ECHO, packet, "echo of " + describe_instruction2(packet, table), wire=wire)
+        self.request2, self.t2 = packet, chunk.t
+        return Decoded(chunk.t, INSTRUCTION, packet, describe_instruction2(packet, table), wire=wire)
+
+    @staticmethod
+    def _common(names: Mapping[int, Mapping[int, str]]) -> Mapping[int, str] | None:
+        """Names for a packet to the broadcast ID: the first servo's table (the X series share their addresses)."""
+        return next(iter(names.values()), None)
 
     def describe(self, packet: InstructionPacket, chunk: Chunk, profile: str) -> Decoded:
         kind = self.classify(packet, chunk.direction)
@@ -108,14 +206,23 @@ class _Conversation:
 class Decoder:
     """Decodes chunks as they come (a live view), keeping the framers and the conversation between calls."""
 
-    def __init__(self, *, profile: str = DEFAULT_PROFILE) -> None:
+    def __init__(self, *, profile: str = DEFAULT_PROFILE, protocol: str = "1.0", servos: str | None = None) -> None:
+        if protocol not in PROTOCOLS:
+            raise ValueError(f"protocol must be one of {', '.join(PROTOCOLS)}, got {protocol!r}")
         self.profile = profile
+        self.protocol = protocol
+        #: Protocol 2.0 register names per ID (``servos``: the ``--servo`` text), else addresses.
+        self.names = register_names(servos) if servos else {}
+        if protocol == "both":
+            self._both = {IN: _BothStream(), OUT: _BothStream(), None: _BothStream()}
         self._streams = {IN: _Stream(), OUT: _Stream(), None: _Stream()}
         self._talk = _Conversation()
 
     def feed(self, chunk: Chunk, out: list[Decoded] | None = None) -> list[Decoded]:
         """Append the packets ``chunk`` completes to ``out`` (a new list by default) and return it."""
         out = [] if out is None else out
+        if self.protocol == "both":
+            return self._feed_both(chunk, out)
         stream = self._streams[chunk.direction]
         # Byte by byte, so discarded bytes are reported where they were on the line.
         for offset in range(len(chunk.data)):
@@ -127,10 +234,34 @@ class Decoder:
             out.extend(self._talk.describe(packet, chunk, self.profile) for packet in packets)
         return out
 
+    def _feed_both(self, chunk: Chunk, out: list[Decoded]) -> list[Decoded]:
+        stream = self._both[chunk.direction]
+        for offset in range(len(chunk.data)):
+            packets, lost = stream.feed(chunk.data[offset : offset + 1], chunk.t)
+            if lost:
+                out.append(Decoded(chunk.t, GARBAGE, None, f"{lost} byte(s) discarded while hunting for a frame", discarded=lost))
+            for packet, wire in packets:
+                if isinstance(packet, InstructionPacket):
+                    out.append(self._talk.describe(packet, chunk, self.profile)._replace(wire=wire))
+                else:
+                    out.append(self._talk.describe2(packet, wire, chunk, self.names))
+        return out
 
-def decode(chunks: Iterable[Chunk], *, profile: str = DEFAULT_PROFILE) -> list[Decoded]:
-    """Decode chunks (a trace or a raw capture) into packets in line order."""
-    decoder = Decoder(profile=profile)
+
+def decode(chunks: Iterable[Chunk], *, profile: str = DEFAULT_PROFILE, protocol: str | None = None,
+           servos: str | None = None) -> list[Decoded]:
+    """Decode chunks (a trace or a raw capture) into packets in line order.
+
+    ``protocol``: ``"1.0"``, ``"both"``, or None to choose ``"both"`` when ``servos`` names
+    Protocol 2.0 servos or the bytes of one direction hold a 2.0 header.
+    """
+    if protocol is None:
+        chunks = list(chunks)
+        by_direction: dict[str | None, bytearray] = {}
+        for chunk in chunks:
+            by_direction.setdefault(chunk.direction, bytearray()).extend(chunk.data)
+        protocol = "both" if servos or any(HEADER2 in data for data in by_direction.values()) else "1.0"
+    decoder = Decoder(profile=profile, protocol=protocol, servos=servos)
     out: list[Decoded] = []
     for chunk in chunks:
         decoder.feed(chunk, out)

@@ -8,6 +8,9 @@ packets.  The format is plain JSON lines so any tool can read it::
     {"t": 0.012345, "dir": "in", "data": "ff ff 01 02 01 fb"}
     {"t": 0.012861, "dir": "out", "data": "ff ff 01 02 00 fc"}
 
+A trace of Protocol 2.0 servos adds ``"servos": "1:xl430-w250,2:xl430-w250"`` (the
+``--servo`` text, launch ID by launch ID) to the header, so the decoder can name their registers.
+
 ``t`` is seconds since the first line (monotonic clock); ``in`` is what
 the host sent (before any collision garbling), ``out`` what the bus put on
 the line (status packets, echoed bytes).  A raw capture from hardware (host
@@ -25,7 +28,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import IO, NamedTuple
 
-__all__ = ["TraceWriter", "Chunk", "read_trace", "read_raw", "read_capture", "TRACE_FORMAT", "IN", "OUT"]
+__all__ = ["TraceWriter", "Chunk", "read_trace", "read_raw", "read_capture", "trace_header", "TRACE_FORMAT", "IN", "OUT"]
 
 TRACE_FORMAT = "ax12emu-trace/1"
 #: Directions: host to servos, servos (or the adapter's echo) to host.
@@ -100,6 +103,19 @@ def read_trace(path: str | os.PathLike[str]) -> Iterator[Chunk]:
                 yield Chunk(float(record["t"]), direction, bytes.fromhex(record["data"]))
             except (ValueError, KeyError, TypeError) as exc:
                 raise ValueError(f"{path}:{number}: not a trace line ({exc})") from None
+
+
+def trace_header(path: str | os.PathLike[str]) -> dict:
+    """The header line of a JSON-lines trace (``profile``, and ``servos`` for a Protocol 2.0 bus); {} for a raw capture."""
+    with open(path, "rb") as handle:
+        first = handle.readline(4096).strip()
+    if not first.startswith(b"{"):
+        return {}
+    try:
+        record = json.loads(first)
+    except ValueError:
+        return {}
+    return record if isinstance(record, dict) and record.get("format") == TRACE_FORMAT else {}
 
 
 def read_raw(path: str | os.PathLike[str]) -> Iterator[Chunk]:
