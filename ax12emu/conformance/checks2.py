@@ -577,7 +577,8 @@ _BULK_REGISTERS = ("id", "model_number", "max_position_limit")
 
 def check_bulk_read(ctx: Context2) -> str:
     """[P2] "Bulk Read" (0x92, ID 0xFE): different address and length per device, each answers with its
-    own status packet in the listed order (the example: ID 1 then ID 2).  ID(7, 1 byte), Model
+    own status packet; the page's later revisions say "[Status Packet] will be returned in order,
+    according to input ID in the [Instruction Packet]" (https://emanual.robotis.com/docs/en/dxl/protocol2/#bulk-read-0x92).  ID(7, 1 byte), Model
     Number(0, 2) and Max Position Limit(48, 4) in turn, IDs listed in reverse."""
     order = list(reversed(ctx.ids))
     asked = {i: ctx.entry(i, _BULK_REGISTERS[n % len(_BULK_REGISTERS)]) for n, i in enumerate(order)}
