@@ -133,8 +133,8 @@ class Servo2:
             if table.has(goal) and table.has(limit):
                 table.set(goal, table.get(limit))
         if table.has("goal_position") and table.has("present_position"):
-            entry = table.layout.by_name["goal_position"]
-            table.set("goal_position", max(entry.minimum, min(entry.maximum, table.get("present_position"))))
+            low, high, _ = table.range_of(table.layout.by_name["goal_position"])
+            table.set("goal_position", max(low, min(high, table.get("present_position"))))
         self.registered_write = None
         if table.has("registered_instruction"):
             table.set("registered_instruction", 0)

@@ -177,7 +177,7 @@ class Table2:
         candidate = bytearray(row)
         for target, byte in changes.items():
             candidate[target] = byte
-        ranges = [self._range(entry, candidate) for entry in touched]
+        ranges = [self.range_of(entry, candidate) for entry in touched]
         for entry, (minimum, maximum, _) in zip(touched, ranges):
             if entry.name in refused:
                 return WriteCheck(ErrorNumber.DATA_RANGE)
@@ -188,8 +188,9 @@ class Table2:
                 return WriteCheck(ErrorNumber.DATA_LIMIT)
         return WriteCheck(ErrorNumber.NONE, changes, tuple(touched))
 
-    def _range(self, entry: Entry, image: bytearray) -> tuple[int, int, bool]:
-        """The entry's (minimum, maximum, limits apply) in ``image``: a mode's range where one is selected."""
+    def range_of(self, entry: Entry, image: bytearray | None = None) -> tuple[int, int, bool]:
+        """The entry's (minimum, maximum, limits apply) in ``image`` (default: the table): a mode's range where one is selected."""
+        image = self.row if image is None else image
         for mode in entry.mode_ranges:
             if self.layout.by_name[mode.register].value_in(image) in mode.values:
                 return mode.minimum, mode.maximum, mode.limits
