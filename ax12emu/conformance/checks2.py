@@ -44,6 +44,8 @@ from __future__ import annotations
 
 import statistics
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 from ax12emu.protocol.describe2 import describe_error2
@@ -58,6 +60,7 @@ from ax12emu.protocol.packets2 import (
     encode_instruction2,
     encode_status2,
 )
+from ax12emu.protocol.params2 import BACKUP_KEY
 from ax12emu.protocol.registers import Access, Area, Entry, Layout
 from ax12emu.protocol.servo_models import ServoModel, model, model_names
 
@@ -439,14 +442,13 @@ def check_access(ctx: Context2) -> str:
     return "; ".join(figures)
 
 
-def check_eeprom_locked(ctx: Context2) -> str:
-    """[P2] error 0x07 Access: "Attempt to write a value in the ROM domain while in a state of Torque
-    Enable (ROM Lock)"; [CT] Torque Enable(64): "Setting [it] to '1' will enable output Torque and all
-    Data in the EEPROM area will be locked".  With torque on, a WRITE of Return Delay Time(9) with its
-    own value is refused with Access.  If torque is off, it is turned on only in a holding mode
-    ([CT] Operating Mode 3, 4, 5), after Goal Position is set to Present Position (no movement), and
-    both are restored."""
-    servo = ctx.target
+@contextmanager
+def _torque_held(ctx: Context2, servo: int) -> Iterator[bool]:
+    """Torque on for the duration, holding the present position; yields whether it was on already.
+
+    If torque is off it is turned on only in a holding mode ([CT] Operating Mode 3, 4, 5), after
+    Goal Position is set to Present Position (no movement); both are put back afterwards.
+    """
     was_on = ctx.torque_on(servo)
     goal = None
     try:
@@ -459,15 +461,49 @@ def check_eeprom_locked(ctx: Context2) -> str:
             if ctx.put(servo, "goal_position", present):
                 raise Skipped(f"Present Position {present} is not a valid Goal Position here")
             ctx.must_put(servo, "torque_enable", 1)
-        delay = ctx.get(servo, "return_delay_time")
-        entry = ctx.entry(servo, "return_delay_time")
-        figure = error_reply(ctx, servo, Instruction2.WRITE, _u16(entry.address) + bytes((delay,)), ErrorNumber.ACCESS,
-                             "EEPROM write with torque on")
+        yield was_on
     finally:
         if not was_on and goal is not None:
             ctx.put(servo, "torque_enable", 0)
             ctx.put(servo, "goal_position", goal)
+
+
+def check_eeprom_locked(ctx: Context2) -> str:
+    """[P2] error 0x07 Access: "Attempt to write a value in the ROM domain while in a state of Torque
+    Enable (ROM Lock)"; [CT] Torque Enable(64): "Setting [it] to '1' will enable output Torque and all
+    Data in the EEPROM area will be locked".  With torque on, a WRITE of Return Delay Time(9) with its
+    own value is refused with Access (torque turned on for the check as :func:`_torque_held` says)."""
+    servo = ctx.target
+    with _torque_held(ctx, servo) as was_on:
+        delay = ctx.get(servo, "return_delay_time")
+        entry = ctx.entry(servo, "return_delay_time")
+        figure = error_reply(ctx, servo, Instruction2.WRITE, _u16(entry.address) + bytes((delay,)), ErrorNumber.ACCESS,
+                             "EEPROM write with torque on")
     return figure + ("" if was_on else " (torque turned on holding the present position, then off)")
+
+
+#: [P2] "Control Table Backup (0x20)": "Supported DYNAMIXELs: X430/540 Series (Fw v45 or above), X330 Series
+#: (Fw v46 or above)" (https://emanual.robotis.com/docs/en/dxl/protocol2/#control-table-backup-0x20).
+BACKUP_FIRMWARE = {"330": 46, "430": 45, "540": 45}
+
+
+def check_result_fail(ctx: Context2) -> "str | Note":
+    """[P2] error 0x01 Result Fail, "Failed to process the sent Instruction Packet"; [P2] "Control Table
+    Backup (0x20)": "If the Torque Enable is set as '1' (Torque On), Status Packet with Result Fail will
+    be returned".  A backup store (0x01 "CTRL") with torque on (:func:`_torque_held`) is refused with
+    Result Fail and stores nothing.  A firmware older than the page's v45 (X430/540) or v46 (X330)
+    has no such instruction: Instruction Error from it is a Note."""
+    servo = ctx.target
+    firmware = ctx.read(servo, ctx.entry(servo, "firmware_version").address, 1)[0]
+    series = next((s for s in BACKUP_FIRMWARE if s in ctx.models[servo].name), None)
+    with _torque_held(ctx, servo):
+        status = ctx.status(servo, Instruction2.CONTROL_TABLE_BACKUP, b"\x01" + BACKUP_KEY)
+    number = status.error & ERROR_NUMBER_MASK
+    if number == ErrorNumber.INSTRUCTION and series is not None and firmware < BACKUP_FIRMWARE[series]:
+        return Note(f"firmware {firmware}: no Control Table Backup (INSTRUCTION)")
+    expect(number == ErrorNumber.RESULT_FAIL, f"backup store with torque on: {describe_error2(status.error)} (firmware {firmware})")
+    exact(status, servo, ErrorNumber.RESULT_FAIL)
+    return f"backup store with torque on: RESULT_FAIL (firmware {firmware})"
 
 
 def check_data_limit(ctx: Context2) -> "str | Note":
@@ -873,6 +909,7 @@ CHECKS2: tuple[Check, ...] = (
     Check("access error", check_access),
     Check("EEPROM locked by torque", check_eeprom_locked),
     Check("data limit error", check_data_limit),
+    Check("result fail", check_result_fail),
     Check("instruction error", check_instruction_error),
     Check("REG_WRITE + ACTION", check_reg_write_action),
     Check("SYNC_READ", check_sync_read),
