@@ -9,7 +9,10 @@ Files hold register values by name (readable, diffable) and are replaced
 atomically (temporary file, fsync, rename), so a crash mid-write leaves the
 old or the new state, never a mix.  Names are built only from integers, so
 no input can make the store touch a file outside its directory, and a state
-file that is a symlink is refused rather than followed.
+file that is a symlink is refused rather than followed.  A file also keeps
+its servo's model number: another model launched on the same slot (Protocol 2.0
+buses mix models, each with its own EEPROM layout) is refused with a message
+rather than given an image that is not its own.
 """
 
 from __future__ import annotations
@@ -77,6 +80,12 @@ class StateStore:
             registers = document["eeprom"]
             if not isinstance(registers, dict):
                 raise TypeError("'eeprom' must be an object")
+            saved_model = document.get("model_number")
+            if saved_model is not None and saved_model != table.get("model_number"):
+                raise StateFileError(
+                    f"{path}: holds the EEPROM of another model ({document.get('profile', '?')}, model number {saved_model}), "
+                    f"not {table.profile.name} (model number {table.get('model_number')}); the servo launched with ID {slot} "
+                    "is another model now: remove the file, give the state its own --state-dir, or start with --factory-reset")
             image = bytearray(table.eeprom_bytes())
             for entry in table.layout.entries:
                 if entry.area is Area.EEPROM and entry.access is Access.RW and entry.name in registers:
@@ -88,6 +97,8 @@ class StateStore:
                         raise ValueError(f"{entry.name} = {value} does not fit in {entry.size} byte(s)")
                     image[entry.address : entry.end] = entry.to_bytes(value)
             table.load_eeprom(bytes(image))
+        except StateFileError:
+            raise
         except (OSError, ValueError, TypeError, KeyError) as exc:
             raise StateFileError(f"{path}: unusable state file ({exc}); remove it or start with --factory-reset") from exc
         return True
@@ -99,7 +110,10 @@ class StateStore:
             for entry in table.layout.entries
             if entry.area is Area.EEPROM and entry.access is Access.RW
         }
-        document = {"format": "ax12emu-eeprom/1", "profile": table.profile.name, "eeprom": registers}
+        # The model number keys the image to its model: a different model started on the same ID (a
+        # Protocol 2.0 bus mixes models, each with its own EEPROM layout) must not take it for its own.
+        document = {"format": "ax12emu-eeprom/1", "profile": table.profile.name, "model_number": table.get("model_number"),
+                    "eeprom": registers}
         path = self.path_for(slot)
         fd, tmp = tempfile.mkstemp(prefix=path.name, suffix=".tmp", dir=self.directory)
         try:
