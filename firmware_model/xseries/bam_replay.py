@@ -34,7 +34,7 @@ from .bam_log import PWM_FULL_SCALE, PendulumLog
 from .interface import OperatingMode, XCommands, XServoModel
 from .physics import GRAVITY_M_S2, XPhysics, XPhysicsParams
 
-__all__ = ["READ_LEAD_S", "GOAL_LEAD_S", "PULSES_PER_TURN", "MIDDLE_PULSES", "replay_positions", "recorder_commands"]
+__all__ = ["READ_LEAD_S", "GOAL_LEAD_S", "PULSES_PER_TURN", "MIDDLE_PULSES", "replay", "replay_positions", "recorder_commands"]
 
 #: Present Position is read this long before the sample's stamp (see the module docstring).
 READ_LEAD_S = 1.4e-3
@@ -84,6 +84,18 @@ def replay_positions(
     first position, at rest, and is told each sample's goal and Torque Enable at the time the recorder
     wrote them.
     """
+    return replay(log, params, make_model, gravity_zero_rad=gravity_zero_rad, supply_resistance_ohm=supply_resistance_ohm)[0]
+
+
+def replay(
+    log: PendulumLog,
+    params: XPhysicsParams,
+    make_model: Callable[[XPhysics], XServoModel],
+    *,
+    gravity_zero_rad: float = 0.0,
+    supply_resistance_ohm: float = 0.0,
+) -> tuple[np.ndarray, np.ndarray]:
+    """As :func:`replay_positions`, with Present PWM (register units) read at the same times."""
     start_rad = math.pi + float(log.position_rad[0])  # raw 2048 is half a turn from raw 0
     physics = XPhysics(params, supply_v=log.supply_v, angle_rad=start_rad, supply_resistance_ohm=supply_resistance_ohm)
     physics.set_load(inertia_kg_m2=log.inertia_kg_m2, gravity_torque_nm=log.gravity_moment_nm(GRAVITY_M_S2),
@@ -92,6 +104,7 @@ def replay_positions(
     # The model's clock starts at 0; the log's first goal is written GOAL_LEAD_S before its first stamp.
     origin_s = float(log.time_s[0]) - GOAL_LEAD_S - model.step_s
     out = np.empty(len(log.time_s))
+    pwm = np.empty(len(log.time_s), dtype=np.int64)
     last: tuple[int, bool] | None = None
     for k, stamp in enumerate(log.time_s):
         enable = bool(log.torque_enable[k])
@@ -104,5 +117,7 @@ def replay_positions(
             model.command(commands, goal_written=enable)
             last = key
         model.step_to(stamp - READ_LEAD_S - origin_s)
-        out[k] = (model.sense().present_position - MIDDLE_PULSES) * _RAD_PER_PULSE
-    return out
+        sensed = model.sense()
+        out[k] = (sensed.present_position - MIDDLE_PULSES) * _RAD_PER_PULSE
+        pwm[k] = sensed.present_pwm
+    return out, pwm
