@@ -21,7 +21,8 @@ Model (everything referred to the output shaft, ``G`` the gear ratio):
   that is there only near rest, plus gear friction that grows with the torque the gears carry:
   ``|mu_e tau_ext - mu_m tau_motor|`` (BAM's "load-dependent directional" models M5, M6: a gear pair
   driven from the motor side loses a share of the motor's torque, one back-driven by the load a share
-  of the load's), with its own Stribeck part at rest (the same fading), and a viscous ``b w``.  All the extra terms default to zero: the plain model.
+  of the load's), with its own Stribeck part at rest (the same fading), a part growing with the square
+  of the motor's torque (BAM's M6 has quadratic terms), and a viscous ``b w``.  All the extra terms default to zero: the plain model.
 * Load: the reflected rotor and gear inertia, plus what :meth:`XPhysics.set_load` puts on the horn
   (an inertia and a pendulum), plus an external torque.
 
@@ -107,6 +108,9 @@ class XPhysicsParams:
     #: as the Stribeck term does (BAM's ``load_friction_motor_stribeck`` and ``load_friction_external_stribeck``).
     load_stribeck_motor: float = 0.0
     load_stribeck_external: float = 0.0
+    #: Gear friction growing with the square of the motor torque the gears carry, per N m (BAM's M6 has such
+    #: quadratic terms; its XL330 fit, ``load_friction_motor_quad``, uses it).
+    load_friction_motor_quadratic_per_nm: float = 0.0
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -118,7 +122,8 @@ class XPhysicsParams:
             if getattr(self, name) <= 0:
                 raise ValueError(f"XPhysicsParams.{name} must be positive, got {getattr(self, name)!r}")
         for name in ("coulomb_friction_nm", "viscous_friction_nm_s_rad", "stribeck_friction_nm", "load_friction_motor",
-                     "load_friction_external", "load_stribeck_motor", "load_stribeck_external"):
+                     "load_friction_external", "load_stribeck_motor", "load_stribeck_external",
+                     "load_friction_motor_quadratic_per_nm"):
             if getattr(self, name) < 0:
                 raise ValueError(f"XPhysicsParams.{name} must be >= 0, got {getattr(self, name)!r}")
 
@@ -282,6 +287,8 @@ class XPhysics:
         motor_nm = drive_nm - motor_damping * w
         if p.load_friction_motor or p.load_friction_external:
             budget += abs(p.load_friction_external * external - p.load_friction_motor * motor_nm)
+        if p.load_friction_motor_quadratic_per_nm:
+            budget += p.load_friction_motor_quadratic_per_nm * motor_nm * motor_nm
         if p.stribeck_friction_nm or p.load_stribeck_motor or p.load_stribeck_external:
             at_rest = math.exp(-abs(w / p.stribeck_velocity_rad_s) ** p.stribeck_exponent)
             budget += at_rest * (p.stribeck_friction_nm + abs(p.load_stribeck_external * external - p.load_stribeck_motor * motor_nm))

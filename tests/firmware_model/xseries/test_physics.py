@@ -269,3 +269,20 @@ def test_load_dependent_friction_at_rest_holds_a_driven_shaft_that_sliding_frict
     for _ in range(200):
         moving.step(duty, DT_S)
     assert moving.velocity_rad_s > 0.5
+
+
+def test_quadratic_gear_friction_costs_more_at_high_motor_torque():
+    """The quadratic term: a driven shaft's steady speed falls by more at full duty than at half (friction ~ tau_m**2)."""
+    p = _params("xl330-m288")
+    quad = XPhysicsParams(**{**p.__dict__, "load_friction_motor_quadratic_per_nm": 1.0})
+    losses = []
+    for duty in (0.5, 1.0):
+        speeds = []
+        for params in (p, quad):
+            shaft = XPhysics(params, supply_v=7.4)
+            shaft.set_external_torque(-0.5 * duty * params.stall_torque_nm(7.4))  # a load, so the motor carries torque
+            for _ in range(1500):
+                shaft.step(duty, DT_S)
+            speeds.append(shaft.velocity_rad_s)
+        losses.append(speeds[0] - speeds[1])
+    assert 0.0 < losses[0] and 2.0 * losses[0] < losses[1]
