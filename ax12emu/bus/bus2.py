@@ -42,8 +42,11 @@ each servo measures the silence since the last instruction packet it heard.
 EEPROM areas persist in a :class:`~ax12emu.bus.state_store.StateStore` as on the 1.0 bus (by
 register name, keyed by the ID a servo was launched with).
 
-Not modelled: faults injection, the reply cache, the live view (the Protocol 1.0 bus has them),
-a servo's busy time after a write to its EEPROM, and the time a rebooting servo is deaf.
+Faults: the wire's (``bus.faults``, :class:`ax12emu.faults.WireFaults`): a status packet dropped,
+corrupted or delayed, a servo unplugged (it hears nothing, and a Sync/Bulk Read's chain breaks at
+it).  Not modelled: faults of a servo's own (alarms, a blocked shaft,
+pinned readings), the reply cache, the live view (the Protocol 1.0 bus has them), a servo's busy
+time after a write to its EEPROM, and the time a rebooting servo is deaf.
 """
 
 from __future__ import annotations
@@ -69,7 +72,7 @@ from ax12emu.servo.request_handler2 import answers, handle2, listed_read, status
 from ax12emu.servo.servo2 import Servo2, Servo2Options
 from firmware_model.xseries.interface import XServoModel
 
-from .bus import BAUD_TOLERANCE
+from .bus import BAUD_TOLERANCE, Interceptor
 from .clock import VirtualClock, WallClock
 from .reply import BITS_PER_BYTE, Reply
 from .state_store import StateStore
@@ -132,8 +135,9 @@ class Bus2:
         self.reindex()
         #: How far behind the clock physics may be when a packet is served (see ``Bus.request_lag_s``).
         self.request_lag_s = 0.0
-        #: No fault injection on this bus (the serving loop and harness test for None).
-        self.faults = None
+        #: Injected wire faults (``ax12emu.faults.WireFaults``: replies dropped, corrupted or delayed,
+        #: servos unplugged); None costs one test per packet.
+        self.faults: Interceptor | None = None
         self._closed = False
 
     # -- lookup ------------------------------------------------------------------------
@@ -222,6 +226,10 @@ class Bus2:
         # Servos whose Secondary ID this is (and not their ID: "ID(7) has a higher priority").
         grouped = [] if broadcast else [s for s in self.servos if s.secondary_id == packet.id and s.id != packet.id
                                         and self._hears(s, line_bps)]
+        faults = self.faults
+        if faults is not None:  # an unplugged servo hears nothing (ax12emu.faults: wire faults)
+            targets = [s for s in targets if faults.admit(s)]
+            grouped = [s for s in grouped if faults.admit(s)]
         for servo in (*targets, *grouped):
             servo.heard(now_s)
         spec = INSTRUCTION_SPECS.get(packet.instruction)
@@ -248,6 +256,8 @@ class Bus2:
                     servo.eeprom_dirty = False
                     if self.state_store is not None:
                         self.state_store.save(slot, servo.table)
+        if faults is not None and replies:
+            replies = faults.on_replies(replies)
         return replies
 
     def _each_own(self, packet: InstructionPacket2, targets: list[Servo2]) -> list[Reply]:
@@ -285,7 +295,8 @@ class Bus2:
         for servo_id, address, length in reads:
             found = self._by_id.get(servo_id)
             servo = found[0] if found else None
-            if servo is None or not self._hears(servo, line_bps) or not answers(servo, packet.instruction):
+            if (servo is None or not self._hears(servo, line_bps) or not answers(servo, packet.instruction)
+                    or (self.faults is not None and not self.faults.admit(servo))):
                 break
             error, data = listed_read(servo, address, length)
             answered.append((servo, error, data))

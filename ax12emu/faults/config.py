@@ -12,10 +12,11 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from .injection import Faults, parse_alarm_bits
+from .injection import Faults, faults_for, parse_alarm_bits
 
 if TYPE_CHECKING:
     from ax12emu.bus.bus import Bus
+    from ax12emu.bus.bus2 import Bus2
 
 __all__ = ["FaultConfig", "FAULT_OPTIONS"]
 
@@ -84,9 +85,12 @@ class FaultConfig:
         """Whether any fault is configured."""
         return any((self.drop, self.corrupt, self.delay, self.vanish, self.duplicate, self.alarm, self.stall))
 
-    def install(self, bus: "Bus") -> Faults:
-        """Attach a :class:`Faults` with this configuration to ``bus`` and return it."""
-        faults = Faults(bus, seed=self.seed)
+    def install(self, bus: "Bus | Bus2") -> Faults:
+        """Attach a :class:`Faults` with this configuration to ``bus`` and return it.
+
+        On a Protocol 2.0 bus: :class:`~.injection.WireFaults`, which refuses ``alarm`` and ``stall`` with a ValueError.
+        """
+        faults = faults_for(bus, seed=self.seed)
         faults.set_reply_faults(
             drop=self.drop, corrupt=self.corrupt, delay=self.delay, delay_s=self.delay_s, ids=self.fault_ids or None
         )

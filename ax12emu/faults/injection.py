@@ -40,6 +40,15 @@ What a client sees, fault by fault (dynamixel-sdk's names):
 
 Servos are named by *slot*, the ID they were launched with (``--ids``), so a
 fault stays on the same servo when a client changes its ID.
+
+A Protocol 2.0 bus (:class:`~ax12emu.bus.bus2.Bus2`) takes :class:`WireFaults`: the
+faults of the wire (``drop``, ``corrupt``, ``delay``, ``vanish``), which
+bend packets and presence alike on either protocol (``duplicate`` waits for the
+2.0 wire to collide simultaneous answers).  A corrupt Protocol 2.0 status
+packet has a wrong CRC (its last byte flipped) -> ``COMM_RX_CORRUPT``.  The faults of
+a servo's own (``alarm``, ``stall``, ``hold``) act on the AX-12's alarm bits and its
+model's shaft, which an X-series servo reports otherwise (Hardware Error Status and
+the Alert bit), so they are refused there with the reason.
 """
 
 from __future__ import annotations
@@ -56,9 +65,10 @@ from firmware_model.units import RAD_PER_POSITION_UNIT
 
 if TYPE_CHECKING:
     from ax12emu.bus import Bus, Reply
+    from ax12emu.bus.bus2 import Bus2
     from ax12emu.servo.virtual_servo import VirtualServo
 
-__all__ = ["Faults", "ALARM_NAMES", "parse_alarm_bits"]
+__all__ = ["Faults", "WireFaults", "ALARM_NAMES", "parse_alarm_bits", "faults_for"]
 
 log = logging.getLogger(__name__)
 
@@ -379,3 +389,33 @@ def _held_alarms(servo: "VirtualServo") -> int:
     if not table.get("min_voltage_limit") <= table.get("present_voltage") <= table.get("max_voltage_limit"):
         bits |= int(StatusError.INPUT_VOLTAGE)
     return bits
+
+
+class WireFaults(Faults):
+    """The wire's faults alone, for a bus of servos whose own faults this layer cannot raise (Protocol 2.0)."""
+
+    def _own(self, what: str) -> ValueError:
+        return ValueError(f"{what}: not available on a Protocol 2.0 bus yet; its faults are the wire's "
+                          "(drop, corrupt, delay, vanish)")
+
+    def force_alarm(self, slot: int, bits: int | str) -> None:
+        raise self._own("alarm")
+
+    def stall(self, slot: int, *, overload_after_s: float = 1.0) -> None:
+        raise self._own("stall")
+
+    def hold(self, slot: int, name: str, value: int | None) -> None:
+        raise self._own("hold")
+
+    def duplicate(self, slot: int, as_id: int) -> None:
+        # The Protocol 2.0 bus lays the replies to one packet one after another (Bus2.replies_in_sequence),
+        # so two servos answering at once would reach the client whole instead of AND-ed on the wire.
+        raise ValueError("duplicate: not available on a Protocol 2.0 bus yet (its wire does not collide "
+                         "simultaneous answers); its faults are drop, corrupt, delay and vanish")
+
+
+def faults_for(bus: "Bus | Bus2", *, seed: int = 0) -> Faults:
+    """The faults a bus can take: all of them on the AX-12 bus, the wire's on a Protocol 2.0 bus."""
+    from ax12emu.bus.bus2 import Bus2
+
+    return WireFaults(bus, seed=seed) if isinstance(bus, Bus2) else Faults(bus, seed=seed)  # type: ignore[arg-type]

@@ -21,7 +21,9 @@ Servos are addressed by their present ID in the state methods, and by their
 reads it: ``VirtualBus([1, 2], servo="xl430-w250")`` or ``VirtualBus(servo="1-5:xm430-w350,6:xl330-m077")``.
 Each servo then has its model's table, and the register methods take that table's names
 (``bus.read(1, "present_position")``).  What the Protocol 1.0 bus has and this one has not yet
-(a pinned temperature or voltage, the live view, a set angle) is refused with the reason.
+(a pinned temperature or voltage, the live view, a set angle, the faults of a servo's own: alarm,
+stall) is refused with the reason; the wire's faults work (``bus.faults.set_reply_faults(drop=0.5)``,
+``vanish``: :class:`~ax12emu.faults.injection.WireFaults`).
 """
 
 from __future__ import annotations
@@ -140,7 +142,7 @@ class VirtualBus:
         if servo is not None:
             refused = [name for name, given in (
                 ("options", options != ServoOptions()), ("model", model is not None), ("params", params is not None),
-                ("faults", faults is not None and faults.active), ("web", _web_address(web) is not None),
+                ("web", _web_address(web) is not None),
             ) if given]
             if refused:
                 raise ValueError(f"{', '.join(refused)}: not available with servo= (the Protocol 2.0 bus has no such option yet)")
@@ -293,7 +295,6 @@ class VirtualBus:
         return fn(self.bus)
 
     def _faults(self, bus: Bus) -> Faults:
-        self._protocol1_only("faults")
         return self._controls.faults_of(bus)
 
     def _protocol1_only(self, what: str) -> None:

@@ -22,7 +22,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from ax12emu.bus import Bus
-from ax12emu.faults.injection import Faults, parse_alarm_bits
+from ax12emu.faults.injection import Faults, faults_for, parse_alarm_bits
 
 __all__ = ["Controls", "ServedControls", "ACTIONS", "ControlError", "apply"]
 
@@ -69,7 +69,7 @@ class ServedControls:
 
     def faults_of(self, bus: Bus) -> Faults:
         if bus.faults is None:
-            bus.faults = Faults(bus, seed=self.seed)
+            bus.faults = faults_for(bus, seed=self.seed)  # a Protocol 2.0 bus takes the wire's faults only
         return bus.faults
 
     @property

@@ -23,6 +23,8 @@
 #                     (e.g. servo=xl430-w250&ids=1-6, servo=1-5:xm430-w350,6:xl330-m077)
 #   baud=BPS          with servo=: every servo starts at this bit rate (default: each model's factory
 #                     rate, 57600 on the X series); the port must be opened at the same rate
+#                     With servo=, the wire's faults apply (drop, corrupt, delay, delay_s, fault_ids,
+#                     seed, vanish); duplicate, alarm and stall are refused.
 # Options of any URL:
 #   logging=debug|info|warning|error   per-handler logger "ax12emu.harness.urlhandler"
 #
@@ -63,7 +65,8 @@ LOGGER_LEVELS = {"debug": logging.DEBUG, "info": logging.INFO, "warning": loggin
 #: Options of a private bus besides the fault ones.
 BUS_OPTIONS = ("ids", "profile", "virtual_time", "goal_torque", "eeprom_busy_ms", "trace", "params", "servo", "baud")
 #: Options a Protocol 2.0 bus (servo=) takes; the others shape AX-12As only.
-SERVO_OPTIONS = ("ids", "virtual_time", "trace", "servo", "baud")
+SERVO_OPTIONS = ("ids", "virtual_time", "trace", "servo", "baud",
+                 "drop", "corrupt", "delay", "delay_s", "fault_ids", "seed", "vanish")
 
 
 class UrlError(SerialException, ValueError):
@@ -189,7 +192,10 @@ class Serial(SerialBase):
                 baud_bps = None if baud_text is None else float(baud_text)
             except ValueError:
                 raise ValueError(f"baud must be a bit rate, got {baud_text!r}") from None
+            faults = FaultConfig.from_options({name: texts for name, texts in options.items() if name in FAULT_OPTIONS})
             bus = build_bus2(spec, ids, clock=VirtualClock() if virtual == "1" else WallClock(), baud_bps=baud_bps)
+            if faults.active:
+                faults.install(bus)
         except ValueError as exc:
             raise UrlError(f"{EXPECTED}: {exc}") from None
         trace_path = options.get("trace", [None])[-1]
