@@ -171,9 +171,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 #: Serve options that shape Protocol 1.0 servos only; with --servo each must keep its default.
-_PROTOCOL1_ONLY = ("web", "monitor", "trace", "params", "arm", "model", "controller", "profile",
-                   "broadcast_ping", "reset_reply_id", "goal_torque", "eeprom_busy_ms", "drop", "corrupt", "delay",
-                   "delay_s", "fault_ids", "fault_seed", "vanish", "duplicate", "alarm", "stall")
+#: (--trace and the wire's faults, --drop --corrupt --delay --vanish, serve both.)
+_PROTOCOL1_ONLY = ("web", "monitor", "params", "arm", "model", "controller", "profile",
+                   "broadcast_ping", "reset_reply_id", "goal_torque", "eeprom_busy_ms", "duplicate", "alarm", "stall")
 
 
 def _check_servo_spec(parser: argparse.ArgumentParser, args: argparse.Namespace, argv: list[str]) -> None:
@@ -270,8 +270,16 @@ def _serve2(args: argparse.Namespace) -> int:
             for servo in bus1.servos:
                 servo.table.set("baud_rate", baud_value(args.baud))
         bus = MixedBus(bus1, bus)
+    faults = cli_hil.fault_config(args)
+    if faults.active:
+        if ax_ids:
+            raise ValueError("fault flags apply to a wire of Protocol 2.0 servos alone, not beside AX-12As yet")
+        faults.install(bus)
+    # The header names the 2.0 servos, so ax12emu decode names their registers.
+    servos2 = ",".join(f"{i}:{k}" for i, k in args.servo_models if k != AX12_MODEL)
+    trace = TraceWriter(args.trace, servos=servos2) if args.trace else None
     transport = _open_transport(args)
-    server = BusServer(bus, transport, pace=args.pace, echo=args.echo)
+    server = BusServer(bus, transport, pace=args.pace, echo=args.echo, trace=trace)
     signal.signal(signal.SIGINT, lambda signum, frame: server.stop())
     signal.signal(signal.SIGTERM, lambda signum, frame: server.stop())
     print(transport.url, flush=True)  # the first stdout line: the port, which scripts and tests read
@@ -282,6 +290,8 @@ def _serve2(args: argparse.Namespace) -> int:
     finally:
         transport.close()
         bus.close()
+        if trace is not None:
+            trace.close()
         log.info("stopped; %d packets served", server.packets_in)
     return 0
 
