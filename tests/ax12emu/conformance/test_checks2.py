@@ -51,6 +51,11 @@ def test_protocol_2_suite_on_a_protocol_1_bus_fails_at_the_first_ping():
     assert "no reply to PING id=1" in report.results[0].figure
 
 
+#: The reply timeout for the served runs: longer than CONFORMANCE_TIMEOUT_S because each X-series servo's
+#: physics (1 ms steps) must catch up with the wall clock before a request is answered, which on a loaded
+#: shared machine took over 200 ms for the first Ping; every silent check waits this long.
+SERVED_TIMEOUT_S = 0.5
+
 #: An XL430-W250 pair and an XL330-M288 pair: both Protocol 2.0 tables the Koch arm uses.
 MIXED = "1-2:xl430-w250,3-4:xl330-m288"
 MIXED_IDS = [1, 2, 3, 4]
@@ -68,7 +73,7 @@ def test_protocol_2_suite_passes_against_served_x_series(transport, emulator):
     where = ["--tcp", "127.0.0.1:0"] if transport == "tcp" else []
     served = emulator("--servo", MIXED, *where)
     destructive = transport == "pty"
-    report = conformance.run(served.port, MIXED_IDS, protocol="2.0", baud=57_600, timeout_s=CONFORMANCE_TIMEOUT_S,
+    report = conformance.run(served.port, MIXED_IDS, protocol="2.0", baud=57_600, timeout_s=SERVED_TIMEOUT_S,
                              destructive=destructive)
     assert report.passed, report.table()
     expected = {c.name: conformance.PASS if destructive or not c.destructive else conformance.SKIP for c in conformance.CHECKS2}
@@ -84,7 +89,7 @@ def test_cli_protocol_2_starts_at_the_x_series_factory_baud(emulator):
     served = emulator("--servo", "xl330-m288", "--ids", "1")
     result = subprocess.run(
         [sys.executable, "-m", "ax12emu", "conformance", served.port, "--protocol", "2.0",
-         "--timeout-ms", str(round(CONFORMANCE_TIMEOUT_S * 1e3)), "--only", "ping", "--only", "SYNC_READ"],
+         "--timeout-ms", str(round(SERVED_TIMEOUT_S * 1e3)), "--only", "ping", "--only", "SYNC_READ"],
         capture_output=True, text=True, timeout=60,
     )
     assert result.returncode == 0, result.stdout + result.stderr

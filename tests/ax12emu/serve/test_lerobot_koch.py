@@ -75,6 +75,16 @@ KOCH = {
 EXTENDED_POSITION, CURRENT_POSITION = 4, 5
 
 
+class LerobotPort(PatientPortHandler):
+    """dynamixel-sdk's PortHandler waiting at least lerobot's own timeout, 1000 ms (dynamixel.py
+    DEFAULT_TIMEOUT_MS, set at connect), for each reply: six X-series servos' physics must catch up
+    with the wall clock before a request is answered, which a loaded shared machine can delay."""
+
+    def setPacketTimeout(self, packet_length):  # noqa: N802 (the SDK's name)
+        super().setPacketTimeout(packet_length)
+        self.packet_timeout = max(self.packet_timeout, 1000.0)
+
+
 class LerobotError(Exception):
     """What lerobot raises (ConnectionError / RuntimeError) where the SDK reports a failure or a status error."""
 
@@ -83,8 +93,8 @@ class KochBus:
     """The calls ``DynamixelMotorsBus`` makes, on stock dynamixel-sdk objects."""
 
     def __init__(self, port: str) -> None:
-        # dynamixel.py DynamixelMotorsBus.__init__ (the patient port only raises the SDK's reply timeout floor).
-        self.port_handler = PatientPortHandler(port)
+        # dynamixel.py DynamixelMotorsBus.__init__ (the port only raises the SDK's reply timeout floor).
+        self.port_handler = LerobotPort(port)
         self.packet_handler = PacketHandler(2.0)
         self.sync_reader = GroupSyncRead(self.port_handler, self.packet_handler, 0, 0)
         self.sync_writer = GroupSyncWrite(self.port_handler, self.packet_handler, 0, 0)
