@@ -51,9 +51,9 @@ def test_protocol_2_suite_on_a_protocol_1_bus_fails_at_the_first_ping():
     assert "no reply to PING id=1" in report.results[0].figure
 
 
-#: The reply timeout for the served runs: longer than CONFORMANCE_TIMEOUT_S because each X-series servo's
-#: physics (1 ms steps) must catch up with the wall clock before a request is answered, which on a loaded
-#: shared machine took over 200 ms for the first Ping; every silent check waits this long.
+#: The reply timeout for the served runs, longer than CONFORMANCE_TIMEOUT_S: on the shared, loaded test
+#: machine the first Ping twice went unanswered within 200 ms (cause not found: it takes 1-3 ms at a load
+#: of 10 on two cores); every silent check waits this long.
 SERVED_TIMEOUT_S = 0.5
 
 #: An XL430-W250 pair and an XL330-M288 pair: both Protocol 2.0 tables the Koch arm uses.

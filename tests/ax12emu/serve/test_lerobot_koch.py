@@ -77,8 +77,8 @@ EXTENDED_POSITION, CURRENT_POSITION = 4, 5
 
 class LerobotPort(PatientPortHandler):
     """dynamixel-sdk's PortHandler waiting at least lerobot's own timeout, 1000 ms (dynamixel.py
-    DEFAULT_TIMEOUT_MS, set at connect), for each reply: six X-series servos' physics must catch up
-    with the wall clock before a request is answered, which a loaded shared machine can delay."""
+    DEFAULT_TIMEOUT_MS, set at connect), for each reply, rather than the SDK's few milliseconds: the
+    tests run on a shared, loaded machine, where a reply can come late for reasons of the host."""
 
     def setPacketTimeout(self, packet_length):  # noqa: N802 (the SDK's name)
         super().setPacketTimeout(packet_length)
