@@ -442,6 +442,16 @@ def check_access(ctx: Context2) -> str:
     return "; ".join(figures)
 
 
+def check_read_undefined(ctx: Context2) -> Note:
+    """[P2] error 0x07 Access lists "Attempt to read a value in an Address that is Write Only or has not
+    been defined"; yet tools read whole runs of the table, gaps included.  A READ of the first undefined
+    address alone: the figure says whether this device answers Access or data (a note either way)."""
+    layout = ctx.layout(ctx.target)
+    gap = next(a for a in range(layout.table_size) if layout.owner[a] < 0)
+    status = ctx.status(ctx.target, Instruction2.READ, _u16(gap) + _u16(1))
+    return Note(f"READ @{gap}+1: {describe_error2(status.error)}, {len(status.params)} data byte(s) {_hex(status.params)}")
+
+
 @contextmanager
 def _torque_held(ctx: Context2, servo: int) -> Iterator[bool]:
     """Torque on for the duration, holding the present position; yields whether it was on already.
@@ -907,6 +917,7 @@ CHECKS2: tuple[Check, ...] = (
     Check("data length error", check_data_length),
     Check("data range error", check_data_range),
     Check("access error", check_access),
+    Check("read of an undefined address", check_read_undefined),
     Check("EEPROM locked by torque", check_eeprom_locked),
     Check("data limit error", check_data_limit),
     Check("result fail", check_result_fail),

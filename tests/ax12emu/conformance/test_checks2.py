@@ -77,6 +77,7 @@ def test_protocol_2_suite_passes_against_served_x_series(transport, emulator):
                              destructive=destructive)
     assert report.passed, report.table()
     expected = {c.name: conformance.PASS if destructive or not c.destructive else conformance.SKIP for c in conformance.CHECKS2}
+    expected["read of an undefined address"] = conformance.NOTE  # the e-manual leaves it open: a note always
     assert {r.name: r.outcome for r in report.results} == {**expected, "table unchanged": conformance.PASS}, report.table()
 
 
