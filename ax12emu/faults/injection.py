@@ -55,6 +55,7 @@ from __future__ import annotations
 
 import logging
 import random
+import sys
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -416,6 +417,8 @@ class WireFaults(Faults):
 
 def faults_for(bus: "Bus | Bus2", *, seed: int = 0) -> Faults:
     """The faults a bus can take: all of them on the AX-12 bus, the wire's on a Protocol 2.0 bus."""
-    from ax12emu.bus.bus2 import Bus2
-
-    return WireFaults(bus, seed=seed) if isinstance(bus, Bus2) else Faults(bus, seed=seed)  # type: ignore[arg-type]
+    # A Bus2 exists only once its module is loaded: the AX-12 bus's users do not pay for importing it.
+    bus2 = sys.modules.get("ax12emu.bus.bus2")
+    if bus2 is not None and isinstance(bus, bus2.Bus2):
+        return WireFaults(bus, seed=seed)  # type: ignore[arg-type]
+    return Faults(bus, seed=seed)  # type: ignore[arg-type]
