@@ -77,6 +77,8 @@ class Entry:
     maximum_from: str | None = None
     #: Ranges that replace ``minimum``/``maximum`` while another register selects them (first match wins).
     mode_ranges: tuple[ModeRange, ...] = ()
+    #: The only values a write may give, where the source lists them (Operating Mode: 0, 1, 3, 4, 5, 16); None: any in range.
+    allowed: tuple[int, ...] | None = None
 
     @property
     def end(self) -> int:

@@ -50,7 +50,8 @@ not), ``signed``, ``min_from``/``max_from`` (a register bounding this one at run
 ``count``/``first``/``default_step`` (a run of equal registers such as Indirect Address 1..28: ``{n}``
 in the name counts from ``first``, default 1), ``note`` (free text, for readers), ``ranges_when`` (ranges
 another register selects: ``[{ register = "operating_mode", values = [4], min = -1048575, max = 1048575,
-limits = false }]``, ``limits`` saying whether ``min_from``/``max_from`` still apply).
+limits = false }]``, ``limits`` saying whether ``min_from``/``max_from`` still apply), ``values`` (the only
+values a write may give, where the source lists them: Operating Mode's modes).
 """
 
 from __future__ import annotations
@@ -82,7 +83,7 @@ SHUTDOWN_CLEARS = ("torque_limit", "torque_enable")
 _MODEL_KEYS = {"name", "model_number", "firmware_version", "protocols", "source", "baud_rates_bps"}
 _TABLE_KEYS = {"size", "entries"}
 _ENTRY_KEYS = {"address", "size", "name", "access", "area", "default", "min", "max", "signed", "min_from", "max_from",
-               "count", "first", "default_step", "note", "ranges_when"}
+               "count", "first", "default_step", "note", "ranges_when", "values"}
 _RANGE_WHEN_KEYS = {"register", "values", "min", "max", "limits"}
 _PROFILE_KEYS = {"source", "overrides", "extra_entries", "lock_writable", "shutdown_clears"}
 _OVERRIDE_KEYS = {"default": "default", "min": "minimum", "max": "maximum"}
@@ -250,6 +251,14 @@ def _entries(where: _Where, raw: Any, field_name: str) -> tuple[Entry, ...]:
         if "note" in item:
             where.text(item["note"], f"{label}.note")
         modes = _ranges_when(where, item.get("ranges_when", []), f"{label}.ranges_when", low, high)
+        allowed = None
+        if "values" in item:
+            raw_values = item["values"]
+            if not isinstance(raw_values, list) or not raw_values:
+                raise where.error(f"{label}.values", f"must be a non-empty list of the values a write may give, got {raw_values!r}")
+            allowed = tuple(where.integer(v, f"{label}.values") for v in raw_values)
+            if any(not minimum <= v <= maximum for v in allowed) or default not in allowed:
+                raise where.error(f"{label}.values", f"{list(allowed)} must lie in {minimum}..{maximum} and hold the default {default}")
         count = where.integer(item.get("count", 1), f"{label}.count")
         first = where.integer(item.get("first", 1), f"{label}.first")
         step = where.integer(item.get("default_step", 0), f"{label}.default_step")
@@ -264,7 +273,7 @@ def _entries(where: _Where, raw: Any, field_name: str) -> tuple[Entry, ...]:
             if not minimum <= value <= maximum:
                 raise where.error(f"{label}.default_step", f"copy {first + k} has default {value}, outside {minimum}..{maximum}")
             out.append(Entry(address + k * size, size, name.replace("{n}", str(first + k)), access, value, minimum,
-                             maximum, area, signed, bounds.get("min_from"), bounds.get("max_from"), modes))
+                             maximum, area, signed, bounds.get("min_from"), bounds.get("max_from"), modes, allowed))
     return tuple(out)
 
 

@@ -18,7 +18,8 @@ Write checks, in order (e-manual, "DYNAMIXEL Protocol 2.0" > "Status Packet" > "
   item that has been defined as 4 bytes"); written through indirect data, the same rule holds for
   the bytes the indirect addresses reach;
 * Data Range Error (4): a value outside the register's minimum/maximum, or the range its mode selects
-  (``ranges_when``: Goal Position in Extended Position Control Mode);
+  (``ranges_when``: Goal Position in Extended Position Control Mode), or not among the values the
+  source lists (``values``: Operating Mode);
 * Data Limit Error (6): a value outside the registers that bound it at run time (``min_from`` /
   ``max_from``: Goal Position within Min/Max Position Limit, Goal PWM within +-PWM Limit ...),
   judged on the table as it would be after the write, so limits and goal written together agree.
@@ -181,7 +182,8 @@ class Table2:
         for entry, (minimum, maximum, _) in zip(touched, ranges):
             if entry.name in refused:
                 return WriteCheck(ErrorNumber.DATA_RANGE)
-            if not minimum <= entry.value_in(candidate) <= maximum:
+            value = entry.value_in(candidate)
+            if not minimum <= value <= maximum or (entry.allowed is not None and value not in entry.allowed):
                 return WriteCheck(ErrorNumber.DATA_RANGE)
         for entry, (_, _, limits) in zip(touched, ranges):
             if limits and not self._within_limits(entry, candidate):

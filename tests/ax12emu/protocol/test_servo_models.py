@@ -222,7 +222,7 @@ def test_protocol_2_models_give_baud_rates_and_current_units():
     assert model("ax-12a").baud_rates_bps == ()
 
 
-def test_ranges_when_are_read_and_checked():
+def test_ranges_when_and_values_are_read_and_checked():
     goal = model("xl430-w250").layout().by_name["goal_position"]
     assert [(m.register, m.values, m.minimum, m.maximum, m.limits) for m in goal.mode_ranges] == [
         ("operating_mode", (4,), -1048575, 1048575, False)]
@@ -235,3 +235,7 @@ def test_ranges_when_are_read_and_checked():
     ]:
         with pytest.raises(ValueError, match=message):
             parse_model(_minimal(extra=entry % spec), "t", "bad.toml")
+    for values, message in [("[]", "must be a non-empty list"), ("[1, 300]", r"must lie in 0..255"), ("[1, 2]", "hold the default 0")]:
+        bad = f'{{ address = 4, size = 1, name = "x", access = "RW", area = "RAM", values = {values} }},'
+        with pytest.raises(ValueError, match=message):
+            parse_model(_minimal(extra=bad), "t", "bad.toml")

@@ -134,3 +134,12 @@ def test_extended_position_mode_widens_goal_position_and_drops_the_limits(table)
     assert table.check_write(116, u32(1_048_576)).error == ErrorNumber.DATA_RANGE
     table.apply(table.check_write(11, b"\x03"))
     assert table.check_write(116, u32(3001)).error == ErrorNumber.DATA_LIMIT
+
+
+def test_operating_mode_takes_only_the_modes_the_model_lists(table):
+    """XM430-W350, Operating Mode(11): 0, 1, 3, 4, 5, 16; the XL430-W250 has no current modes."""
+    assert [table.check_write(11, bytes((mode,))).error for mode in (0, 2, 5, 6, 15, 16)] == [
+        ErrorNumber.NONE, ErrorNumber.DATA_RANGE, ErrorNumber.NONE, ErrorNumber.DATA_RANGE, ErrorNumber.DATA_RANGE,
+        ErrorNumber.NONE]
+    xl430 = Table2(model("xl430-w250").layout())
+    assert xl430.check_write(11, b"\x05").error == ErrorNumber.DATA_RANGE
