@@ -18,7 +18,8 @@ Servos are addressed by their present ID in the state methods, and by their
 :mod:`ax12emu.faults.injection`).
 
 ``servo=`` serves Protocol 2.0 servos instead (the X series), read as ``ax12emu serve --servo``
-reads it: ``VirtualBus([1, 2], servo="xl430-w250")`` or ``VirtualBus(servo="1-5:xm430-w350,6:xl330-m077")``.
+reads it: ``VirtualBus([1, 2], servo="xl430-w250")`` or ``VirtualBus(servo="1-5:xm430-w350,6:xl330-m077")``,
+``options=Servo2Options(...)`` for the behaviours the e-manual leaves open.
 Each servo then has its model's table, and the register methods take that table's names
 (``bus.read(1, "present_position")``).  What the Protocol 1.0 bus has and this one has not yet
 (a pinned temperature or voltage, the live view, a set angle, the faults of a servo's own: alarm,
@@ -42,7 +43,7 @@ from ax12emu.faults.config import FaultConfig
 from ax12emu.faults.injection import Faults
 from ax12emu.live.controls import ServedControls
 from ax12emu.servo.model_factory import ModelChoice, build_model
-from ax12emu.servo.servo2 import GOAL_REGISTERS, Servo2
+from ax12emu.servo.servo2 import GOAL_REGISTERS, Servo2, Servo2Options
 from ax12emu.servo.virtual_servo import ServoOptions
 from ax12emu.tracing.trace import TraceWriter
 from firmware_model.interface import AngleSettable, ServoModel
@@ -119,7 +120,7 @@ class VirtualBus:
         transport: str = "pty",
         virtual_time: bool = False,
         time_scale: float = 1.0,
-        options: ServoOptions = ServoOptions(),
+        options: ServoOptions | Servo2Options = ServoOptions(),
         model: ServoModel | str | None = None,
         params: str | os.PathLike[str] | ServoParams | None = None,
         faults: FaultConfig | None = None,
@@ -141,13 +142,17 @@ class VirtualBus:
         self.bus: Bus | Bus2
         if servo is not None:
             refused = [name for name, given in (
-                ("options", options != ServoOptions()), ("model", model is not None), ("params", params is not None),
+                ("options", not isinstance(options, Servo2Options) and options != ServoOptions()),
+                ("model", model is not None), ("params", params is not None),
                 ("web", _web_address(web) is not None),
             ) if given]
             if refused:
                 raise ValueError(f"{', '.join(refused)}: not available with servo= (the Protocol 2.0 bus has no such option yet)")
-            self.bus = build_bus2(servo, None if ids is None else list(ids), clock=clock, baud_bps=baud_bps)
+            options2 = options if isinstance(options, Servo2Options) else Servo2Options()
+            self.bus = build_bus2(servo, None if ids is None else list(ids), clock=clock, baud_bps=baud_bps, options=options2)
         else:
+            if isinstance(options, Servo2Options):
+                raise ValueError("Servo2Options apply with servo= (Protocol 2.0 servos); the AX-12A bus takes ServoOptions")
             if baud_bps is not None:
                 raise ValueError("baud_bps applies with servo= (the AX-12A bus starts at its factory 1,000,000 bps)")
             slots = [1] if ids is None else list(ids)

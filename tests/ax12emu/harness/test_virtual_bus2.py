@@ -18,6 +18,8 @@ from ax12emu import VirtualBus
 from ax12emu.harness.urlhandler.protocol_ax12emu import UrlError
 from ax12emu.protocol.packets2 import ErrorNumber, Instruction2, encode_instruction2, encode_status2
 from ax12emu.protocol.servo_models import model
+from ax12emu.servo.servo2 import Servo2Options
+from ax12emu.servo.virtual_servo import ServoOptions
 
 BAUD = 57600
 XL430, XM430, XL330 = 1060, 1020, 1190
@@ -103,6 +105,19 @@ def test_served_on_a_pty_too():
             port.closePort()
 
 
+def test_served_over_tcp_with_options_of_the_2_0_servos():
+    """TCP; Servo2Options(reply_on_crc_error=False): a packet with a wrong CRC goes unanswered."""
+    with VirtualBus([1], servo="xl430-w250", transport="tcp", options=Servo2Options(reply_on_crc_error=False)) as bus:
+        assert bus.port.startswith("socket://")
+        with serial.serial_for_url(bus.port, timeout=0.3) as link:
+            bad = bytearray(encode_instruction2(1, Instruction2.PING))
+            bad[-1] ^= 0xFF
+            link.write(bytes(bad))
+            assert link.read(14) == b""
+            link.write(encode_instruction2(1, Instruction2.PING))
+            assert len(link.read(14)) == 14
+
+
 @pytest.mark.parametrize(
     "kwargs, message",
     [
@@ -112,6 +127,8 @@ def test_served_on_a_pty_too():
         ({"servo": "xl430-w250", "baud_bps": 12345}, "not 12345"),
         ({"servo": "xl430-w250", "model": "kinematic"}, "model: not available with servo="),
         ({"baud_bps": 57600}, "baud_bps applies with servo="),
+        ({"options": Servo2Options()}, "Servo2Options apply with servo="),
+        ({"servo": "xl430-w250", "options": ServoOptions(profile="ax12-2006")}, "options: not available with servo="),
     ],
 )
 def test_bad_servo_arguments_are_named(kwargs, message):
