@@ -1,9 +1,9 @@
 """tools/live_dataset.py: live recordings through dynamixel-sdk from ``ax12emu serve``, diagnosed.
 
-The end-to-end cases record in real time (10 s each, one at a time, then
-both diagnosed at once): a clean servo must get no effect named, and a
-reading latency hidden after the recording must be named first, which only
-works because the recorder says when each command was sent.
+The end-to-end cases record one clean trace in real time (10 s) and hide a
+reading latency in a copy afterwards, then diagnose both at once: the clean
+servo must get no effect named, and the hidden latency must be named first,
+which only works because the recorder says when each command was sent.
 """
 
 import importlib.util
@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from firmware_model.diagnose.search import diagnose
-from firmware_model.diagnose.trace import Trace, command_time_errors, read_trace
+from firmware_model.diagnose.trace import Trace, command_time_errors, read_trace, write_trace
 
 ROOT = Path(__file__).resolve().parents[2]
 TOOL = ROOT / "tools" / "live_dataset.py"
@@ -95,8 +95,8 @@ def test_bad_knob_is_a_clear_error(tmp_path):
     assert r.returncode == 2 and "unknown knob 'gremlins'" in r.stderr and "Traceback" not in r.stderr
 
 
-#: Live cases, seeds fixed, not picked: (knob, seed).
-CASES = {"clean": ("none", 11), "delay": ("delay", 12)}
+#: The live recording's seed and the seed of the reading latency hidden in it afterwards (fixed, not picked).
+CLEAN_SEED, DELAY_SEED = 11, 12
 
 
 def _diagnose(path: str):
@@ -106,19 +106,23 @@ def _diagnose(path: str):
 
 @pytest.fixture(scope="module")
 def live_results(tmp_path_factory):
-    """Record each case live, one at a time (real time), then diagnose them two at once."""
+    """One clean recording made live (real time), a copy with the delay knob's latency hidden, both diagnosed at once.
+
+    The delay knob hides its latency in the recording after it was made (record_live applies shift_readings,
+    tested above), so the copy is the clean recording as ``--knob delay`` would have left it: the hidden latency
+    is the only difference between the two traces.
+    """
     folder = tmp_path_factory.mktemp("live")
-    paths = {}
-    for case, (knob, seed) in CASES.items():
-        out, key = folder / f"{case}.csv", folder / f"{case}.json"
-        subprocess.run([sys.executable, str(TOOL), str(out), "--key", str(key), "--knob", knob, "--seed", str(seed),
-                        "--duration", "10"], check=True, capture_output=True, timeout=120)
-        paths[case] = out
+    paths = {case: folder / f"{case}.csv" for case in ("clean", "delay")}
+    subprocess.run([sys.executable, str(TOOL), str(paths["clean"]), "--key", str(folder / "clean.json"), "--knob", "none",
+                    "--seed", str(CLEAN_SEED), "--duration", "10"], check=True, capture_output=True, timeout=120)
+    setup = _tool().KNOBS["delay"].draw(np.random.default_rng(DELAY_SEED))
+    write_trace(_tool().shift_readings(read_trace(paths["clean"]), setup.shift_s), paths["delay"])
+    keys = {"clean": json.loads((folder / "clean.json").read_text()), "delay": {"effect": "delay", "truth": setup.truth}}
     with ProcessPoolExecutor(max(1, min(2, os.cpu_count() or 1))) as pool:
         futures = {case: pool.submit(_diagnose, str(path)) for case, path in paths.items()}
         results = {case: f.result() for case, f in futures.items()}
-    keys = {case: json.loads(path.with_suffix(".json").read_text()) for case, path in paths.items()}
-    return {case: (read_trace(paths[case]), keys[case], *results[case]) for case in CASES}
+    return {case: (read_trace(paths[case]), keys[case], *results[case]) for case in paths}
 
 
 @pytest.mark.wallclock
