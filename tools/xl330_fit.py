@@ -74,7 +74,7 @@ def read_logs(folder: Path) -> dict[int, list[PendulumLog]]:
 
 
 def _row(name: str, base: float, model: float) -> str:
-    return f"{name:<34} {1e3 * base:>9.1f} {1e3 * model:>9.1f} {model / base:>7.2f}"
+    return f"{name:<40} {1e3 * base:>9.1f} {1e3 * model:>9.1f} {model / base:>7.2f}"
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -113,7 +113,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"XL330 ({MODEL_KEY}) physics fitted on the {len(train)} logs at kp = {args.fit_kp}, predicting {len(held)} at "
           f"kp = {', '.join(str(kp) for kp in sorted(by_kp) if kp != args.fit_kp)}")
     print("Position MAE, mrad, closed-loop replay through the X-series firmware model")
-    print(f"{'log':<34} {'baseline':>9} {'model':>9} {'ratio':>7}")
+    print(f"{'log (position fit)':<40} {'baseline':>9} {'model':>9} {'ratio':>7}")
     for k, log in enumerate(train):
         print(_row(f"{log.name} (fitted)", b["fitted_mae"][k], m["fitted_mae"][k]))
     print(_row(f"mean, kp = {args.fit_kp} (fitted)", float(np.mean(b["fitted_mae"])), float(np.mean(m["fitted_mae"]))))
@@ -121,10 +121,11 @@ def main(argv: list[str] | None = None) -> int:
         print(_row(f"{log.name} (predicted)", b["held_mae"][k], m["held_mae"][k]))
     held_base, held_model = float(np.mean(b["held_mae"])), float(np.mean(m["held_mae"]))
     print(_row("mean, predicted", held_base, held_model))
-    ratio = held_model / held_base
-    print(f"goal: predicted ratio <= {GOAL_RATIO}: {'met' if ratio <= GOAL_RATIO else 'MISSED'} ({ratio:.2f})")
-    print(_row("start (equation error), fitted", float(np.mean(b["start_fitted_mae"])), float(np.mean(m["start_fitted_mae"]))))
-    print(_row("start (equation error), predicted", float(np.mean(b["start_held_mae"])), float(np.mean(m["start_held_mae"]))))
+    print(_row("equation-error fit alone, fitted", float(np.mean(b["start_fitted_mae"])), float(np.mean(m["start_fitted_mae"]))))
+    eq_base, eq_model = float(np.mean(b["start_held_mae"])), float(np.mean(m["start_held_mae"]))
+    print(_row("equation-error fit alone, predicted", eq_base, eq_model))
+    for label, ratio in (("position fit", held_model / held_base), ("equation-error fit", eq_model / eq_base)):
+        print(f"goal, {label}: predicted ratio <= {GOAL_RATIO}: {'met' if ratio <= GOAL_RATIO else 'MISSED'} ({ratio:.2f})")
     print(f"data-sheet default (no fit), predicted: {1e3 * float(np.mean(default_mae)):.1f} mrad")
     for label in ("baseline", "model"):
         r = results[label]["result"]

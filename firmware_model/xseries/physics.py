@@ -57,6 +57,12 @@ voltage, at the motor).  Where the sheet's three figures cannot come from one mo
 an efficiency at most one (the XL330-M077: its stall torque per stall current is above its back-EMF
 constant), the stall current is the figure dropped: ``k_t = k_e`` and ``R = k_t / c``, so stall
 torque and no-load speed still hold and the stall current comes out higher than the sheet's.
+
+Against a real XL330 (``tools/xl330_fit.py``, Rhoban's BAM pendulum logs): fitted at Position P Gain
+100 and replayed at 400 through the X-series firmware model, Coulomb + viscous friction leaves 103 mrad
+of mean position error and the load-dependent gear friction above (motor-side 0.17, load-side 0.18,
+quadratic 0.41 per N m, Coulomb 0.004 N m, an ideal motor with ``k_e`` 0.407 V s/rad, near the data
+sheet's 0.413) 47 mrad; the data-sheet default, unfitted, 110 mrad.
 """
 
 from __future__ import annotations

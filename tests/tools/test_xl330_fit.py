@@ -5,6 +5,8 @@ Coulomb + viscous fitted the same way.  The tool's full fit ends in a least squa
 positions (minutes); this test runs the reduced fit that starts it, the equation-error least squares
 on the kp = 100 logs (each parameter fitted here, nothing taken from a previous run), and replays the
 kp = 400 logs with both parameter sets.  Skipped where the logs are absent (third-party data).
+Measured: 51.7 against 106.2 mrad (0.49, a narrow pass); the tool's position fit: 46.5 against
+102.9 mrad (0.45).
 """
 
 from __future__ import annotations
