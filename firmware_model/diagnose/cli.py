@@ -126,7 +126,8 @@ def _wizard_input(ex: WizardExport, args: argparse.Namespace, params: ServoParam
 
     recorded = [c for c in ("goal_position", "moving_speed", "voltage") if c in ex.values]
     facts = {"format": "wizard", "model": ex.model_name, "rows_seen": ex.rows_seen, "rows_read": ex.rows_read,
-             "skipped": dict(ex.skipped), "items_ignored": list(ex.ignored_items), "recorded": recorded}
+             "skipped": dict(ex.skipped), "items_ignored": list(ex.ignored_items), "recorded": recorded,
+             "reading_period_s": ex.read_period_s, "rows_on_reading_clock": ex.read_share if ex.read_s is not None else None}
     notes = [ex.summary()]
     if ex.model_name.replace("-", "").upper() != "AX12A":
         notes.append(f"the export is from an {ex.model_name}; the model is an AX-12A's (its parameters are not "

@@ -28,6 +28,20 @@ kept only if every field parses and its time is later than the last kept
 row's.  Anything wrong with the header is an error
 (:class:`WizardFormatError`, a ``ValueError`` naming the file and line).
 
+**When a row was read.**  The Wizard stamps each row on its graph timer's
+16 ms tick (:data:`TICK_S`) with the newest reading since the last tick,
+while it reads the servo on its own, steadier clock (about 20 ms on the
+shared AX-12A exports: at full speed each row is 23-30 units past the last
+whether its stamp is 16 or 32 ms later; a tick with no new reading gets no
+row).  So a stamp can be up to a tick after its reading, which at full speed
+is +-10 units of apparent error.  :func:`reading_times` rebuilds the reading
+clock from the stamps alone (no model): the period and phase whose readings,
+each stamped on the first tick after it, reproduce which ticks have a row,
+fitted in blocks of :data:`CLOCK_BLOCK_ROWS` rows between stalls; a row the
+clock does not explain keeps the middle of its tick.  :func:`to_trace` uses
+those times; ``t_s`` keeps the stamps.  An export not stamped on a 16 ms tick
+is left as stamped.
+
 Items map to trace columns by name (:data:`ITEM_COLUMNS`); items that map to
 none (e.g. Present Temperature) are listed in
 :attr:`WizardExport.ignored_items` and not read.  Present Speed and Present
@@ -60,7 +74,22 @@ from ..units import DIRECTION_BIT
 from .trace import Trace, TraceFormatError
 
 __all__ = ["WizardExport", "WizardFormatError", "ITEM_COLUMNS", "SIGNED_ITEMS", "MAGIC", "is_wizard_export",
-           "read_wizard", "parse_wizard", "to_trace"]
+           "read_wizard", "parse_wizard", "to_trace", "reading_times", "TICK_S"]
+
+#: The Wizard graph timer's tick (s): every stamp is a whole number of ticks (+-1 ms) from the first.
+TICK_S = 0.016
+#: A stamp within this much of a whole tick counts as on the tick (s); the shared exports stray by 1 ms.
+TICK_TOLERANCE_S = 0.0015
+#: The export is taken as tick-stamped when at least this share of its stamps is on the tick.
+TICK_SHARE = 0.9
+#: Reading periods tried (s): slower than the tick (a faster clock leaves a new reading at every tick, and
+#: nothing to rebuild), up to three ticks.
+CLOCK_PERIODS_S = (0.0165, 0.048)
+#: Rows per block of one fitted clock (long enough to pin the period, short enough that its drift stays
+#: well under a ms), and a gap longer than this many ticks (a stall of the Wizard) starts a new block.
+CLOCK_BLOCK_ROWS, STALL_TICKS = 40, 4
+#: Fewer rows than this between stalls pin no clock.
+MIN_CLOCK_ROWS = 8
 
 #: First field of the first line of every Wizard 2 graph export.
 MAGIC = "DYNAMIXEL Graph"
@@ -110,6 +139,16 @@ class WizardExport:
     skipped_lines: list[int] = field(default_factory=list)
     #: Time of the first kept row in the file's own clock, ms.
     t0_ms: float = 0.0
+    #: When each kept row was read (s from the first reading; :func:`reading_times`); None: as stamped.
+    read_s: np.ndarray | None = None
+    #: The rebuilt reading clock's median period (s) and the share of rows it explains; None if not rebuilt.
+    read_period_s: float | None = None
+    read_share: float = 0.0
+
+    @property
+    def times_s(self) -> np.ndarray:
+        """The rows' times a trace uses: when they were read where the clock was rebuilt, else the stamps."""
+        return self.t_s if self.read_s is None else self.read_s
 
     @property
     def rows_read(self) -> int:
@@ -129,6 +168,9 @@ class WizardExport:
                f"items read: {', '.join(i for i in self.items if i in ITEM_COLUMNS)}")
         if self.ignored_items:
             out += f"; ignored: {', '.join(self.ignored_items)}"
+        if self.read_period_s is not None:
+            out += (f"; rows stamped on the {1000 * TICK_S:.0f} ms tick, read every {1000 * self.read_period_s:.1f} ms: "
+                    f"reading times rebuilt ({100 * self.read_share:.0f} % of rows on the clock)")
         return out
 
 
@@ -227,6 +269,9 @@ def parse_wizard(text: str, source: str = "wizard export") -> WizardExport:
     data = np.array(kept, dtype=float)
     ex.t0_ms = float(data[0, 0])
     ex.t_s = (data[:, 0] - data[0, 0]) / 1000.0
+    read = reading_times(ex.t_s)
+    if read is not None:
+        ex.read_s, ex.read_period_s, ex.read_share = read
     for j, item in enumerate(items, start=1):
         col = ITEM_COLUMNS.get(item)
         if col is None:
@@ -236,6 +281,76 @@ def parse_wizard(text: str, source: str = "wizard export") -> WizardExport:
             v = np.where(v >= DIRECTION_BIT, -(v & (DIRECTION_BIT - 1)), v)
         ex.values[col] = v
     return ex
+
+
+def _clock_scores(rows: np.ndarray, periods: np.ndarray, phase_step_s: float):
+    """For each (period, phase): readings at ``phase + k * period`` from the tick before the block's first row,
+    each stamped on the first tick at or after it.  Score: ticks with a row that a reading explains, minus
+    ticks a reading predicts that have none (a lost row costs one; a wrong period costs many).
+    Returns (score, period, phase) arrays over all pairs."""
+    span = (len(rows) + 1) * TICK_S
+    out = []
+    for period in periods:
+        phase = np.arange(0.0, period, phase_step_s)
+        k = np.arange(int(span / period) + 2)
+        tick = np.ceil((phase[:, None] + k[None, :] * period) / TICK_S - 1e-9).astype(np.int64) - 1
+        inside = (tick >= 0) & (tick < len(rows))
+        hit = rows[np.clip(tick, 0, len(rows) - 1)] & inside
+        out.append((hit.sum(axis=1) - (inside & ~hit).sum(axis=1), np.full(len(phase), period), phase))
+    return tuple(np.concatenate(x) for x in zip(*out))
+
+
+def _block_readings(ticks: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """(reading time s, on the clock?, period s) of each row of one block, from its stamps' tick numbers.
+
+    A coarse then a fine search over period and phase; every clock with the best score explains the stamps
+    equally well, so each row's reading is the mean over all of them of the reading inside its tick.
+    """
+    rows = np.zeros(int(ticks[-1] - ticks[0]) + 1, dtype=bool)
+    rows[ticks - ticks[0]] = True
+    score, period, _ = _clock_scores(rows, np.arange(*CLOCK_PERIODS_S, 5e-5), 2.5e-4)
+    near = period[np.argmax(score)]
+    score, period, phase = _clock_scores(rows, np.arange(near - 2e-4, near + 2e-4, 1e-5), 1e-4)
+    best = score == score.max()
+    period, phase = period[best], phase[best]
+    origin = (ticks[0] - 1) * TICK_S + phase  # (candidates,)
+    lo = (ticks - 1) * TICK_S  # each row's tick starts here; its reading is the first one after
+    at = origin[:, None] + np.ceil((lo[None, :] - origin[:, None]) / period[:, None] - 1e-9) * period[:, None]
+    ok = at <= (ticks * TICK_S)[None, :] + 1e-9
+    count = ok.sum(axis=0)
+    mean = np.where(count > 0, (at * ok).sum(axis=0) / np.maximum(count, 1), (ticks - 0.5) * TICK_S)
+    return mean, count > 0, float(np.mean(period))
+
+
+def reading_times(t_s: np.ndarray) -> tuple[np.ndarray, float, float] | None:
+    """When each row of a tick-stamped export was read (s from the first reading), the clock's period, the
+    share of rows it explains; None if the export is not stamped on the Wizard's tick (see the module doc).
+
+    Each row's reading is placed where the rebuilt clock puts it inside the tick before its stamp; a row the
+    clock does not explain keeps the middle of that tick.
+    """
+    t = np.asarray(t_s, dtype=float)
+    ticks_f = t / TICK_S
+    ticks = np.rint(ticks_f).astype(np.int64)
+    if len(t) < MIN_CLOCK_ROWS or np.mean(np.abs(ticks_f - ticks) * TICK_S <= TICK_TOLERANCE_S) < TICK_SHARE:
+        return None
+    read = (ticks - 0.5) * TICK_S
+    on_clock = np.zeros(len(t), dtype=bool)
+    periods = []
+    cuts = np.r_[0, np.flatnonzero(np.diff(ticks) > STALL_TICKS) + 1, len(t)]
+    for a, b in zip(cuts[:-1], cuts[1:]):
+        starts = list(range(a, b, CLOCK_BLOCK_ROWS))
+        if len(starts) > 1 and b - starts[-1] < MIN_CLOCK_ROWS:  # a short tail joins the block before it
+            starts.pop()
+        for s, e in zip(starts, starts[1:] + [b]):
+            if e - s < MIN_CLOCK_ROWS:  # too few rows to pin a clock: they keep the middle of their tick
+                continue
+            read[s:e], on_clock[s:e], period = _block_readings(ticks[s:e])
+            periods.append(period)
+    if not periods:
+        return None
+    read = np.maximum.accumulate(read)
+    return read - read[0], float(np.median(periods)), float(on_clock.mean())
 
 
 def _number(text: str) -> float | None:
@@ -253,7 +368,7 @@ def to_trace(ex: WizardExport, goal_position: int, onset_s: float, moving_speed:
 
     The goal is ``initial_goal`` (default: the first Present Position, i.e.
     the servo was holding where it stood) until ``onset_s`` (s from the first
-    kept row), then ``goal_position``; recorded Goal Position / Moving Speed
+    kept row's reading: the trace's times are :attr:`WizardExport.times_s`), then ``goal_position``; recorded Goal Position / Moving Speed
     columns, where plotted, are used instead.  The change goes on the last
     row read before ``onset_s``; only with ``onset_known`` (the user knows
     when the goal was written) does the trace also record the time itself
@@ -261,7 +376,7 @@ def to_trace(ex: WizardExport, goal_position: int, onset_s: float, moving_speed:
     trait of the recording (:mod:`.nuisance`).  ``voltage_v``: supply,
     unless the export plotted Present Voltage (None: the model's default).
     """
-    t = ex.t_s
+    t = ex.times_s
     n = len(t)
     if "present_position" not in ex.values:
         raise WizardFormatError("the export has no Present Position column: nothing to compare the model with",

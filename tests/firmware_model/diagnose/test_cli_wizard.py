@@ -115,6 +115,8 @@ def test_real_export_runs(tmp_path):
     assert r.returncode == 0, r.stderr
     v = json.loads(r.stdout)
     assert v["input"]["rows_read"] == 205 and v["input"]["onset_source"] == "estimated"
-    assert v["input"]["first_movement_s"] == pytest.approx(1.936)
-    assert 1.85 < v["input"]["onset_s"] < 1.936  # before the first reading that shows movement
+    # stamped 1.936 s after the first row; read on the Wizard's ~20 ms clock, 1.942 s after the first reading
+    assert v["input"]["reading_period_s"] == pytest.approx(0.020, abs=5e-4)
+    assert v["input"]["first_movement_s"] == pytest.approx(1.942, abs=0.002)
+    assert 1.85 < v["input"]["onset_s"] < v["input"]["first_movement_s"]  # before the first reading that moved
     assert np.isfinite(v["gap_rms_after"]["present_position"])
