@@ -138,6 +138,8 @@ class Servo2:
         self.registered_write = None
         if table.has("registered_instruction"):
             table.set("registered_instruction", 0)
+        if table.has("backup_ready"):  # the backup area outlives a reboot, so the firmware finds it again at boot
+            table.set("backup_ready", int(self.backup is not None))
         self.plant.command()
 
     def heard(self, now_s: float) -> None:

@@ -444,6 +444,9 @@ def test_control_table_backup_stores_with_torque_off_and_restores_the_eeprom():
     restore = encode_instruction2(1, Instruction2.CONTROL_TABLE_BACKUP, b"\x02CTRL")
     assert [r.data for r in bus.receive(restore)] == [EMPTY_OK]
     assert table.get("temperature_limit") == 72 and firmware[0].reboots == 1
+    assert table.get("backup_ready") == 1  # the backup outlives the reboot of the restore
+    send(bus, 1, Instruction2.REBOOT)
+    assert table.get("backup_ready") == 1
     send(bus, 1, Instruction2.WRITE, bytes((64, 0, 1)))
     assert status(bus, 1, Instruction2.CONTROL_TABLE_BACKUP, b"\x01CTRL").error == ErrorNumber.RESULT_FAIL
     assert status(bus, 2, Instruction2.CONTROL_TABLE_BACKUP, b"\x02CTRL").error == ErrorNumber.RESULT_FAIL  # nothing stored
