@@ -30,7 +30,17 @@ frames/s reaching the client.
 page draws every frame, as a tester's browser would; on a two-core machine its
 drawing competes with the bus for the processor).
 
-Usage: ``python tools/bench_protocol.py [--seconds 2] [--rounds 3] [--web [socket|chromium]]``
+``--protocol 2.0`` measures a robot's Protocol 2.0 control cycle instead: through dynamixel-sdk's
+PacketHandler(2.0), a GroupSyncRead of Present Position from six X-series servos and a
+GroupSyncWrite of their Goal Positions, at Return Delay Time 0, against ``ax12emu serve --servo
+MODEL --ids 1-6`` and a bare Protocol 2.0 responder (a few lines answering each Sync Read with six
+fixed status packets at once and staying silent on the Sync Write), alternated in the same 0.2 s
+turns; goal: >= 80 % of the bare rate.  The emulator lays the six status packets one after another,
+each when the one before it has left the wire at 1 Mbps (150 us each), also without ``--pace``
+(``Bus2``, ``merge_replies(in_sequence=True)``); the bare responder does not, so 750 us of each of
+the emulator's cycles is the modelled bus itself.
+
+Usage: ``python tools/bench_protocol.py [--seconds 2] [--rounds 3] [--web [socket|chromium]] [--protocol 2.0 [--model M]]``
 """
 
 from __future__ import annotations
@@ -47,7 +57,7 @@ import textwrap
 import time
 from pathlib import Path
 
-from dynamixel_sdk import COMM_SUCCESS, PacketHandler, PortHandler
+from dynamixel_sdk import COMM_SUCCESS, GroupSyncRead, GroupSyncWrite, PacketHandler, PortHandler
 
 #: Per byte written into the EEPROM area, how long to leave the servo alone (about 6 ms measured, 9 ms by the datasheet).
 EEPROM_WAIT_S = 0.009
@@ -66,6 +76,27 @@ BARE_RESPONDER = textwrap.dedent(
         while len(pending) >= 8:
             pending = pending[8:]
             os.write(master, reply)
+    """
+)
+
+
+#: The Protocol 2.0 counterpart: answers each Sync Read (instruction 0x82) with the status packets
+#: given in hex as its argument, all at once, and stays silent on every other packet (a Sync Write).
+BARE_RESPONDER2 = textwrap.dedent(
+    """
+    import os, pty, select, sys, tty
+    master, slave = pty.openpty()
+    tty.setraw(slave)
+    print(os.ttyname(slave), flush=True)
+    reply = bytes.fromhex(sys.argv[1])
+    pending = b""
+    while True:
+        select.select([master], [], [])
+        pending += os.read(master, 4096)
+        while len(pending) >= 8 and len(pending) >= 7 + pending[5] + 256 * pending[6]:
+            if pending[7] == 0x82:
+                os.write(master, reply)
+            pending = pending[7 + pending[5] + 256 * pending[6]:]
     """
 )
 
@@ -91,35 +122,45 @@ def stop(process: subprocess.Popen) -> None:
 
 
 class Session:
-    """An open dynamixel-sdk port on one server, reading Present Position of ID 1 in timed runs."""
+    """An open dynamixel-sdk port on one server, running one transaction in timed runs.
 
-    def __init__(self, path: str, *, baud: int = 1_000_000, setup=None) -> None:
+    ``transaction(port, ph)`` builds the transaction: a callable that runs it once and returns
+    the SDK's result code; by default a read of Present Position of ID 1 (Protocol 1.0).
+    """
+
+    def __init__(self, path: str, *, baud: int = 1_000_000, setup=None, protocol: float = 1.0,
+                 transaction=None) -> None:
         self.port = PortHandler(path)
         self.port.openPort()
         self.port.setBaudRate(baud)
-        self.ph = PacketHandler(1.0)
+        self.ph = PacketHandler(protocol)
         if setup:
             setup(self.port, self.ph)
+        if transaction is None:
+            read, port = self.ph.read2ByteTxRx, self.port
+            self.transaction = lambda: read(port, 1, 36)[1]
+        else:
+            self.transaction = transaction(self.port, self.ph)
         self.latencies: list[float] = []
         self.failures = 0
         self.elapsed_s = 0.0
         self.warm_up(200)
 
-    def warm_up(self, reads: int) -> None:
-        """Untimed reads (the first ones after a pause pay for catching up)."""
-        for _ in range(reads):
-            self.ph.read2ByteTxRx(self.port, 1, 36)
+    def warm_up(self, count: int) -> None:
+        """Untimed transactions (the first ones after a pause pay for catching up)."""
+        for _ in range(count):
+            self.transaction()
 
     def run(self, seconds: float) -> None:
-        """Read as fast as possible for ``seconds``, adding to the totals."""
-        read, port, latencies = self.ph.read2ByteTxRx, self.port, self.latencies
+        """Run the transaction as fast as possible for ``seconds``, adding to the totals."""
+        transaction, latencies = self.transaction, self.latencies
         start_s = time.perf_counter()
         end = start_s + seconds
         while True:
             t0 = time.perf_counter()
             if t0 >= end:
                 break
-            _, comm, _ = read(port, 1, 36)
+            comm = transaction()
             latencies.append(time.perf_counter() - t0)
             self.failures += comm != COMM_SUCCESS
         self.elapsed_s += time.perf_counter() - start_s
@@ -193,6 +234,92 @@ def configure(rdt: int, ids: list[int], moving: bool, baud_value: int | None = N
             time.sleep(0.05)
 
     return setup
+
+
+#: X-series control table (ROBOTIS e-manual, XL430-W250): Return Delay Time, Torque Enable, Goal and
+#: Present Position.
+X_RETURN_DELAY_TIME, X_TORQUE_ENABLE, X_GOAL_POSITION, X_PRESENT_POSITION = 9, 64, 116, 132
+#: The Protocol 2.0 loop's servos: one leg's worth, as a robot's control cycle reads and drives them.
+SYNC_IDS = list(range(1, 7))
+#: Cycles between swaps of the two sets of Goal Positions, so the servos keep moving.
+GOAL_SWAP_CYCLES = 500
+
+
+def configure2(port: PortHandler, ph: PacketHandler) -> None:
+    """Return Delay Time 0 and torque on, on every servo of the Protocol 2.0 loop."""
+    for servo_id in SYNC_IDS:
+        ph.write1ByteTxRx(port, servo_id, X_RETURN_DELAY_TIME, 0)
+        time.sleep(EEPROM_WAIT_S)
+        ph.write1ByteTxRx(port, servo_id, X_TORQUE_ENABLE, 1)
+
+
+def sync_cycle(port: PortHandler, ph: PacketHandler):
+    """A control cycle: GroupSyncRead of every servo's Present Position, then GroupSyncWrite of Goal Positions.
+
+    Only the transactions are timed: the client's own work on the answers (getData) is left out, so
+    the emulator's share of each cycle is as large as the loop can make it.
+    """
+    read = GroupSyncRead(port, ph, X_PRESENT_POSITION, 4)
+    for servo_id in SYNC_IDS:
+        read.addParam(servo_id)
+    writes = []
+    for goal in (1024, 3072):
+        write = GroupSyncWrite(port, ph, X_GOAL_POSITION, 4)
+        for servo_id in SYNC_IDS:
+            write.addParam(servo_id, list((goal + 50 * servo_id).to_bytes(4, "little")))
+        writes.append(write)
+    cycles = 0
+
+    def cycle() -> int:
+        nonlocal cycles
+        cycles += 1
+        comm = read.txRxPacket()
+        written = writes[cycles // GOAL_SWAP_CYCLES % 2].txPacket()
+        return comm if comm != COMM_SUCCESS else written
+
+    return cycle
+
+
+def bare_sync_reply() -> bytes:
+    """The status packets the bare Protocol 2.0 responder answers every Sync Read with."""
+    from ax12emu.protocol.packets2 import encode_status2
+
+    return b"".join(encode_status2(servo_id, 0, (2048).to_bytes(4, "little")) for servo_id in SYNC_IDS)
+
+
+def compare_interleaved(servers: list[tuple[object, list[str], dict]], seconds: float) -> dict[str, dict]:
+    """Start each (name, command, Session keywords) server, measure them in alternating turns, stop them."""
+    processes = []
+    try:
+        targets = {}
+        for name, command, session in servers:
+            process, path = start(command)
+            processes.append(process)
+            targets[name] = (process, Session(path, **session))
+        return measure_interleaved(targets, seconds)
+    finally:
+        for process in processes:
+            stop(process)
+
+
+def measure_protocol2(emulator: list[str], model: str, seconds: float) -> None:
+    """The Protocol 2.0 loop against a bare responder and ``ax12emu serve --servo MODEL``, in alternating turns."""
+    loop = {"protocol": 2.0, "transaction": sync_cycle}
+    with tempfile.TemporaryDirectory() as tmp:
+        script = Path(tmp, "bare2.py")
+        script.write_text(BARE_RESPONDER2)
+        result = compare_interleaved([
+            ("bare", [sys.executable, str(script), bare_sync_reply().hex()], loop),
+            ("emulator", emulator + ["--servo", model, "--ids", f"1-{len(SYNC_IDS)}", "--baud", "1000000"],
+             {**loop, "setup": configure2}),
+        ], seconds)
+    bare = result["bare"]
+    what = f"GroupSyncRead + GroupSyncWrite x {len(SYNC_IDS)}, RDT 0"
+    print(row("reference: bare Protocol 2.0 responder", bare))
+    print(row(f"ax12emu --servo {model}", result["emulator"], bare["rate"]))
+    print()
+    print(f"{what}: {result['emulator']['rate'] / bare['rate']:.1%} of bare (goal >= 80 %), "
+          f"p99 {result['emulator']['p99_us']:.0f} us")
 
 
 def transaction_times(trace: Path) -> list[float]:
@@ -347,10 +474,18 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--web", nargs="?", const="socket", choices=("socket", "chromium"),
                         help="only the live view's cost: reads with and without --web and a streaming client "
                              "(a WebSocket client, or the page in headless Chromium), interleaved")
+    parser.add_argument("--protocol", choices=("1.0", "2.0"), default="1.0",
+                        help="2.0: only the Protocol 2.0 loop (Sync Read + Sync Write of six X-series servos) "
+                             "against a bare Protocol 2.0 responder, in 0.2 s turns")
+    parser.add_argument("--model", default="xl430-w250", help="with --protocol 2.0: the X-series model served")
     args = parser.parse_args(argv)
     if args.rounds < 1 or not args.seconds > 0:
         parser.error("--rounds must be >= 1 and --seconds > 0")
     emulator = [sys.executable, "-m", "ax12emu", "serve"]
+    if args.protocol == "2.0":
+        print(f"machine: {os.cpu_count()} cores, Python {sys.version.split()[0]}, load {os.getloadavg()[0]:.1f}")
+        measure_protocol2(emulator, args.model, args.seconds * args.rounds)
+        return 0
     if args.web:
         print(f"machine: {os.cpu_count()} cores, Python {sys.version.split()[0]}")
         measure_web_cost(emulator, args.seconds * args.rounds, args.web)
@@ -362,21 +497,11 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         script = Path(tmp, "bare.py")
         script.write_text(BARE_RESPONDER)
-        processes = []
-        try:
-            targets = {}
-            for name, command, setup in (
-                ("bare", [sys.executable, str(script)], None),
-                (1, emulator + ["--ids", "1"], configure(0, [1], moving=True)),
-                (18, emulator + ["--ids", "1-18"], configure(0, list(range(1, 19)), moving=True)),
-            ):
-                process, path = start(command)
-                processes.append(process)
-                targets[name] = (process, Session(path, setup=setup))
-            fast = measure_interleaved(targets, args.seconds * args.rounds)
-        finally:
-            for process in processes:
-                stop(process)
+        fast = compare_interleaved([
+            ("bare", [sys.executable, str(script)], {}),
+            (1, emulator + ["--ids", "1"], {"setup": configure(0, [1], moving=True)}),
+            (18, emulator + ["--ids", "1-18"], {"setup": configure(0, list(range(1, 19)), moving=True)}),
+        ], args.seconds * args.rounds)
     bare = fast.pop("bare")
     print(row("reference: bare pty responder", bare))
     if bare["p99_us"] >= 1000:
