@@ -61,7 +61,7 @@ def test_ping_and_broadcast_ping_find_all_six(xl430):
         assert ph.ping(port, 9)[1] == COMM_RX_TIMEOUT
         found, comm = ph.broadcastPing(port)
         assert comm == COMM_SUCCESS
-        assert found == {servo_id: [XL430_MODEL_NUMBER, 0] for servo_id in IDS}
+        assert found == {servo_id: [XL430_MODEL_NUMBER, 45] for servo_id in IDS}  # model file: firmware_version 45
 
 
 def test_one_two_and_four_byte_reads_and_writes(xl430):

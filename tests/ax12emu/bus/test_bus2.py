@@ -107,7 +107,8 @@ def test_action_without_reg_write_is_instruction_error(xm):
 def test_ping_answers_model_number_and_firmware_version(xm):
     bus, _ = xm
     reply = status(bus, 1, Instruction2.PING)
-    assert reply.params == (1020).to_bytes(2, "little") + b"\x00"
+    assert reply.params == (1020).to_bytes(2, "little") + bytes((45,))  # the model file's firmware_version
+    assert bus.servo(1).table.get("firmware_version") == 45
 
 
 def test_sync_read_example_and_the_order_of_answers(xm):
@@ -178,7 +179,7 @@ def test_broadcast_ping_every_servo_in_the_slot_of_its_id():
     slot_s = 14 * BITS_PER_BYTE / 57600 + 500e-6
     for reply in replies:
         assert reply.delay_s == pytest.approx(500e-6 + reply.servo_id * slot_s)
-        assert decode_packet2(reply.data).params == (1060).to_bytes(2, "little") + b"\x00"
+        assert decode_packet2(reply.data).params == (1060).to_bytes(2, "little") + bytes((45,))
 
 
 def test_broadcast_write_is_executed_silently_and_broadcast_read_not_at_all(xm):
