@@ -87,12 +87,8 @@ class Entry:
 
     def value_in(self, image: np.ndarray | bytes) -> int:
         """This entry's value in a table image (a row, a candidate row or saved bytes), little-endian."""
-        value = 0
-        for offset in range(self.size):
-            value |= int(image[self.address + offset]) << (8 * offset)
-        if self.signed and value >= 1 << (8 * self.size - 1):
-            value -= 1 << (8 * self.size)
-        return value
+        # One C call (a NumPy row slice is a buffer too): the Protocol 2.0 write path reads dozens of registers a packet.
+        return int.from_bytes(image[self.address : self.address + self.size], "little", signed=self.signed)
 
     def to_bytes(self, value: int) -> bytes:
         """``value`` as this entry's bytes (two's complement when signed, any int masked to the size)."""

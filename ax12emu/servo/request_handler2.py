@@ -32,6 +32,7 @@ Policy, with sources (ROBOTIS e-manual, "DYNAMIXEL Protocol 2.0"; X series "Stat
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Mapping
 from typing import NamedTuple
 
@@ -61,6 +62,10 @@ from ax12emu.protocol.params2 import (
 from .servo2 import Servo2
 
 __all__ = ["HANDLERS", "READ_INSTRUCTIONS", "Outcome2", "answers", "handle2", "listed_read", "status_byte"]
+
+#: ``parse_params`` remembered for the last packets: a broadcast Sync/Bulk Write reaches every servo,
+#: and each would parse the same parameters again (the results are frozen, so sharing them is safe).
+_parsed = functools.lru_cache(maxsize=64)(parse_params)
 
 #: Instructions Status Return Level 1 answers besides PING.
 READ_INSTRUCTIONS = frozenset(int(i) for i in (Instruction2.READ, Instruction2.SYNC_READ, Instruction2.BULK_READ,
@@ -257,7 +262,7 @@ def handle2(servo: Servo2, packet: InstructionPacket2, *, secondary: bool = Fals
         error, data = ErrorNumber.CRC, bytes(_read_length(servo, packet))
         talks = talks and servo.options.reply_on_crc_error
     else:
-        params = parse_params(instruction, packet.params)
+        params = _parsed(instruction, packet.params if type(packet.params) is bytes else bytes(packet.params))
         handler = HANDLERS.get(instruction)
         if handler is None:
             error, data = ErrorNumber.INSTRUCTION, bytes(_read_length(servo, packet))
