@@ -37,7 +37,8 @@ QUOTED = {
                    (84, 2, "position_p_gain", "RW", 640, (0, 16383)), (126, 2, "present_load", "R", None, None),
                    (147, 1, "backup_ready", "R", None, None), (578, 2, "indirect_address_29", "RW", 634, (64, 661)),
                    (661, 1, "indirect_data_56", "RW", 0, (0, 255))],
-    "xm430-w350": [(7, 1, "id", "RW", 1, (0, 253)), (8, 1, "baud_rate", "RW", 1, (0, 7)),
+    # The page prints ID 0 ~ 253; the file keeps 0 ~ 252, as Protocol 2.0 never uses 253 (0xFD) as an ID.
+    "xm430-w350": [(7, 1, "id", "RW", 1, (0, 252)), (8, 1, "baud_rate", "RW", 1, (0, 7)),
                    (38, 2, "current_limit", "RW", 1193, (0, 1193)), (44, 4, "velocity_limit", "RW", 200, (0, 1023)),
                    (76, 2, "velocity_i_gain", "RW", 1920, None), (84, 2, "position_p_gain", "RW", 800, None),
                    (102, 2, "goal_current", "RW", None, (-1193, 1193)), (222, 2, "indirect_address_28", "RW", 251, None)],
