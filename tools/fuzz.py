@@ -24,6 +24,9 @@ After every input (one chunk) the harness checks:
 
 and at the end of each case a PING after a pause is answered cleanly.
 
+Protocol 2.0 servos, and a wire shared by 1.0 and 2.0 servos, are fuzzed by
+``tools/fuzz2.py``, which drives this file's 1.0 grammar and oracle for the 1.0 side.
+
 Usage::
 
     python tools/fuzz.py --inputs 1000000          # the full run

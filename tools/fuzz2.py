@@ -24,7 +24,7 @@ The oracle sees every 2.0 packet the bus's framer completes (the bus's
 and checks, with code of its own (CRC, stuffing, the control table's rules read
 from the model files):
 
-* no exception, at most ``HANG_S`` per chunk, the framers hold less than one
+* no exception, at most ``HANG_S`` of CPU time per chunk, the framers hold less than one
   maximal frame plus the chunk;
 * each packet the framer hands on is in the bytes fed, with a right CRC over
   them (or flagged as corrupt), and a whole valid packet sent after a pause is
@@ -880,10 +880,13 @@ def run_case(case: Case2) -> int:
         before1 = one.bus1.rows.copy() if one is not None else None
         alarms_before = [s.alarms for s in one.bus1.servos] if one is not None else None
         model_time_s = one.bus1.plant.model.time_s if one is not None else 0.0
-        started = time.perf_counter()
+        started_cpu_s, started_s = time.thread_time(), time.perf_counter()
         replies = bus.receive(data, wire_s, line_bps=case.line_bps)
-        if time.perf_counter() - started > HANG_S:
-            raise FuzzFailure(f"{where}: took {time.perf_counter() - started:.1f} s")
+        # CPU time, so a machine shared with other work does not count as a hang; waiting on
+        # something counts by the wall clock, with room for the machine's load.
+        if time.thread_time() - started_cpu_s > HANG_S or time.perf_counter() - started_s > 5 * HANG_S:
+            raise FuzzFailure(f"{where}: took {time.thread_time() - started_cpu_s:.1f} s of CPU, "
+                              f"{time.perf_counter() - started_s:.1f} s")
         fed += 1
         if bus2.framer.buffered > DEFAULT_MAX_LENGTH + 7 + len(data):
             raise FuzzFailure(f"{where}: the 2.0 framer holds {bus2.framer.buffered} bytes")
@@ -1239,8 +1242,8 @@ def fuzz(max_inputs: int, *, seconds: float | None = None, seed: int | None = No
     rounds = 0
     try:
         while stats.inputs < max_inputs and not (deadline is not None and time.monotonic() > deadline):
-            if seed is not None:
-                hypothesis.seed(seed + rounds)(target)
+            if seed is not None:  # runs with nearby seeds must not share rounds
+                hypothesis.seed(seed * 1_000_000 + rounds)(target)
             rounds += 1
             target()
     except Exception as exc:

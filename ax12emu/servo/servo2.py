@@ -191,6 +191,8 @@ class Servo2:
     def factory_reset(self, keep: tuple[str, ...]) -> None:
         """FACTORY_RESET: every register to its default except ``keep``; the sensed registers stay the model's."""
         self.table.factory_defaults(keep)
+        if self.spec.firmware_version is not None and self.table.has("firmware_version"):
+            self.table.set("firmware_version", self.spec.firmware_version)  # the firmware's own, not a setting
         self.plant.release()
         self.plant.command()  # the firmware takes the defaults (torque off) before its registers are copied back
         self.plant.write_back()

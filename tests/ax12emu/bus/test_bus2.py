@@ -206,6 +206,7 @@ def test_factory_reset_options(xm):
     assert (servo.id, servo.table.get("baud_rate")) == (4, 1)
     assert status(bus, 4, Instruction2.FACTORY_RESET, b"\xff").id == 4
     assert servo.id == 1 and bus.servo(1) is bus.servos[0]
+    assert servo.table.get("firmware_version") == 45  # the firmware's own: no reset changes it
 
 
 def test_a_sync_instruction_to_one_id_is_ignored(xm):
