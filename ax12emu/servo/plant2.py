@@ -8,8 +8,8 @@ one plant per servo, and registers are matched by name: a model's table without 
 
 What it adds to the seam, from the e-manual (X series, "Bus Watchdog(98)"):
 :meth:`hold` stops the servo as the Bus Watchdog does ("the DYNAMIXEL will stop"): the model is
-commanded to hold its present position at zero velocity, PWM and current, whatever the Goal
-registers say, until :meth:`release` (the next goal a client writes after the error is cleared).
+commanded to hold its present position at zero velocity (and zero PWM or current in the modes
+whose goal they are), whatever the Goal registers say, until :meth:`release` (the next goal a client writes after the error is cleared).
 Shutdown is the firmware's: it reports Torque Enable among the sensed registers.
 """
 
@@ -20,7 +20,7 @@ import struct
 from collections.abc import Callable, Iterator
 
 from ax12emu.protocol.registers import Entry
-from firmware_model.xseries.interface import XCommands, XSensed, XServoModel
+from firmware_model.xseries.interface import OperatingMode, XCommands, XSensed, XServoModel
 
 from .table2 import Table2
 
@@ -99,9 +99,19 @@ class Plant2:
         self._write_unseen = True
 
     def hold(self) -> None:
-        """Stop where the shaft is (Bus Watchdog): zero velocity, PWM and current, goal = present position."""
+        """Stop where the shaft is (Bus Watchdog): goal = present position, zero velocity, and zero PWM or current in the modes that take them as goals.
+
+        Goal PWM (and Goal Current in Current-based Position mode) also cap the drive in the other
+        modes; zeroing them there would leave the servo limp instead of stopped.
+        """
         present = self.table.get("present_position") if self.table.has("present_position") else 0
-        self._held = {"goal_velocity": 0, "goal_pwm": 0, "goal_current": 0, "goal_position": present}
+        held = {"goal_velocity": 0, "goal_position": present}
+        mode = self.table.get("operating_mode") if self.table.has("operating_mode") else OperatingMode.POSITION
+        if mode == OperatingMode.PWM:
+            held["goal_pwm"] = 0
+        elif mode == OperatingMode.CURRENT:
+            held["goal_current"] = 0
+        self._held = held
         self.command(goal_written=True)
 
     def release(self) -> None:

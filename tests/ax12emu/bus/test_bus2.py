@@ -339,6 +339,20 @@ def test_bus_watchdog_stops_the_servo_and_refuses_goals_until_cleared(xm):
     assert firmware[0].last.goal_velocity == 150
 
 
+def test_bus_watchdog_in_position_mode_holds_the_shaft_with_its_drive_limits_kept(xm):
+    # Goal PWM caps the drive in position mode: zeroed by the watchdog, the servo would go limp, not stop.
+    bus, firmware = xm
+    table = bus.servo(1).table
+    send(bus, 1, Instruction2.WRITE, bytes((64, 0, 1)))
+    send(bus, 1, Instruction2.WRITE, bytes((98, 0, 5)))  # 100 ms
+    bus.clock.advance(0.25)
+    bus.advance()
+    assert table.get("bus_watchdog") == 0xFF
+    held = firmware[0].last
+    assert held.goal_position == table.get("present_position") and held.goal_velocity == 0
+    assert held.goal_pwm == table.get("pwm_limit") and held.goal_current == table.get("current_limit")
+
+
 def test_reboot_restores_the_ram_area_and_keeps_the_eeprom(xm):
     bus, firmware = xm
     send(bus, 1, Instruction2.WRITE, bytes((31, 0, 70)))
