@@ -91,6 +91,11 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                        help="host bit rate (default 1000000; with --protocol 2.0, 57600: the X series' factory Baud Rate 1)")
     check.add_argument("--timeout-ms", type=float, default=50.0, metavar="MS", help="reply timeout (default 50)")
     check.add_argument("--destructive", action="store_true", help="also change ID, baud and RESET (all restored afterwards)")
+    check.add_argument("--motion", action="store_true",
+                       help="also run the checks that turn the shaft (Protocol 2.0: velocity and current modes, the two "
+                       "profiles; up to about a turn each way at a third of the no-load speed, torque on, then off and "
+                       "every register put back). A flag of its own, apart from --destructive: those put the bus at risk "
+                       "(ID, baud), these what is on the horn; run them only with the horn free to turn")
     check.add_argument("--profile", choices=sorted(PROFILES), default=DEFAULT_PROFILE, help="expected control-table defaults")
     check.add_argument("--only", action="append", metavar="CHECK", help="run only this check (repeatable)")
     check.add_argument("--protocol", choices=("1.0", "2.0"), default="1.0",
@@ -128,6 +133,7 @@ def _conformance(args: argparse.Namespace) -> int:
         profile=args.profile,
         only=args.only,
         protocol=args.protocol,
+        motion=args.motion,
     )
     print(f"{args.port}, IDs {','.join(map(str, args.ids))}, Protocol {args.protocol}")
     print(report.table())

@@ -49,6 +49,8 @@ class Report:
     ids: tuple[int, ...]
     destructive: bool
     results: tuple[Result, ...]
+    #: The checks that turn the shaft were run (``motion=True``).
+    motion: bool = False
 
     @property
     def passed(self) -> bool:
@@ -65,7 +67,8 @@ class Report:
         lines = [f"{'check':<{width}}  result  measured", f"{'-' * width}  ------  --------"]
         lines += [f"{r.name:<{width}}  {r.outcome:<6}  {r.figure}" for r in self.results]
         failed = sum(r.outcome == FAIL for r in self.results)
-        lines.append(f"{len(self.results)} checks, {failed} failed" + (" (destructive set included)" if self.destructive else ""))
+        included = [name for name, on in (("destructive", self.destructive), ("motion", self.motion)) if on]
+        lines.append(f"{len(self.results)} checks, {failed} failed" + (f" ({' and '.join(included)} sets included)" if included else ""))
         return "\n".join(lines)
 
 
@@ -91,6 +94,7 @@ def run_on_link(
     profile: str = DEFAULT_PROFILE,
     only: Sequence[str] | None = None,
     port_name: str = "",
+    motion: bool = False,
 ) -> Report:
     """Run the checks over an open :class:`Link` (a :class:`Link2` runs the Protocol 2.0 suite)."""
     ctx: Context | Context2
@@ -105,16 +109,19 @@ def run_on_link(
         for servo_id in ctx.ids:
             ctx.before[servo_id] = ctx.table(servo_id)
     except (Failed, OSError) as exc:
-        return Report(port_name, tuple(ids), destructive, (Result("read tables", FAIL, str(exc), 0.0),))
+        return Report(port_name, tuple(ids), destructive, (Result("read tables", FAIL, str(exc), 0.0),), motion)
     for check in checks:
         if only is not None and check.name not in only:
             continue
         if check.destructive and not destructive:
             results.append(Result(check.name, SKIP, "destructive: needs --destructive", 0.0))
             continue
+        if check.motion and not motion:
+            results.append(Result(check.name, SKIP, "turns the shaft: needs --motion", 0.0))
+            continue
         results.append(_run_one(check, ctx))
     results.append(_run_one(Check("table unchanged", unchanged), ctx))
-    return Report(port_name, tuple(ids), destructive, tuple(results))
+    return Report(port_name, tuple(ids), destructive, tuple(results), motion)
 
 
 def _unchanged(ctx: Context) -> str:
@@ -146,6 +153,7 @@ def run(
     profile: str = DEFAULT_PROFILE,
     only: Sequence[str] | None = None,
     protocol: str = "1.0",
+    motion: bool = False,
 ) -> Report:
     """Open ``port`` (a device path or a pyserial URL), run the ``protocol`` suite, close the port."""
     if not ids:
@@ -154,6 +162,6 @@ def run(
         raise ValueError(f"protocol must be one of {', '.join(PROTOCOLS)}, got {protocol!r}")
     link = (Link2 if protocol == "2.0" else Link)(open_port(port, baud), timeout_s=timeout_s)
     try:
-        return run_on_link(link, ids, destructive=destructive, profile=profile, only=only, port_name=port)
+        return run_on_link(link, ids, destructive=destructive, profile=profile, only=only, port_name=port, motion=motion)
     finally:
         link.close()

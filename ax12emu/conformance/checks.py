@@ -176,11 +176,12 @@ _ALARMS = int(StatusError.INPUT_VOLTAGE | StatusError.OVERHEATING | StatusError.
 
 @dataclass(frozen=True)
 class Check:
-    """One named check; ``destructive`` ones run only when asked."""
+    """One named check; ``destructive`` ones and ``motion`` ones (they turn the shaft) run only when asked."""
 
     name: str
     run: Callable[[Context], "str | Note"]
     destructive: bool = False
+    motion: bool = False
 
 
 def _ms(seconds: float) -> str:

@@ -686,6 +686,48 @@ def check_broadcast_ping(ctx: Context2) -> str:
     return f"answers from {seen}, the last {_ms(last_s)} after the Ping"
 
 
+#: dynamixel-sdk's Protocol 2.0 ``broadcastPing`` budget: a status packet of 14 bytes and 3 ms for every ID up to
+#: the highest, plus 16 ms (the USB adapter's latency timer) (protocol2_packet_handler.py: ``STATUS_LENGTH = 14``,
+#: ``setPacketTimeoutMillis((wait_length * tx_time_per_byte) + (3.0 * MAX_ID) + 16.0)``).
+SDK_PING_STATUS_BYTES, SDK_PING_SLOT_S, SDK_PING_LATENCY_S = 14, 0.003, 0.016
+
+
+def check_broadcast_ping_timing(ctx: Context2) -> str:
+    """[P2] "Ping": to the Broadcast ID "all connected devices will respond with a status packet", and (Example 2)
+    in ID order; the e-manual gives no time for a device's turn.  [CT] Return Delay Time(9) delays every status
+    packet by 2 us a unit.  What clients rely on is dynamixel-sdk's budget: ID n answered within the instruction,
+    Return Delay Time and n + 1 slots of a 14-byte status plus 3 ms, plus 16 ms of adapter latency; here each ID
+    must answer within that budget plus the link's own overhead (the fastest unicast Ping's round trip less its
+    wire time).  The figure gives each answer's arrival and the time per ID (a line through them): the turn a
+    device waits is left open by the e-manual, so it is reported, not judged (a USB adapter delivers answers in
+    batches, which hides the spacing)."""
+    byte_s = 10.0 / ctx.link.baud
+    delay_s = max(ctx.get(i, "return_delay_time") for i in ctx.ids) * 2e-6
+    ping = encode_instruction2(BROADCAST_ID, Instruction2.PING)
+    unicast = min(ctx.ping_rtts(ctx.target, 5))
+    overhead_s = max(0.0, unicast - (len(ping) + SDK_PING_STATUS_BYTES) * byte_s - delay_s)
+    budget = {i: len(ping) * byte_s + delay_s + (i + 1) * (SDK_PING_STATUS_BYTES * byte_s + SDK_PING_SLOT_S)
+              + SDK_PING_LATENCY_S + overhead_s for i in ctx.ids}
+    wait_s = max(budget.values()) + ctx.link.timeout_s
+    start = time.perf_counter()
+    ctx.link.send(ping)
+    arrivals: list[tuple[int, float]] = []
+    while True:
+        response = ctx.link.receive(wait_s, start=start)
+        if response.status is None:
+            break
+        arrivals.append((response.status.id, response.rtt_s))
+    seen = [i for i, _ in arrivals]
+    expect(set(ctx.ids) <= set(seen) and seen == sorted(seen), f"answers from {seen}, expected {sorted(ctx.ids)} in order")
+    late = [f"ID {i} at {_ms(t)} (budget {_ms(budget[i])})" for i, t in arrivals if i in budget and t > budget[i]]
+    figure = ", ".join(f"{i}: {_ms(t)}" for i, t in arrivals)
+    if len(arrivals) > 1:
+        slope = statistics.linear_regression([i for i, _ in arrivals], [t for _, t in arrivals]).slope
+        figure += f"; {slope * 1e3:.2f} ms per ID (a 14-byte status is {_ms(SDK_PING_STATUS_BYTES * byte_s)})"
+    expect(not late, "late: " + "; ".join(late) + f" ({figure})")
+    return figure + f"; link overhead {_ms(overhead_s)}"
+
+
 def check_broadcast_read_write(ctx: Context2) -> str:
     """[P2] "Packet ID" NOTE: with the Broadcast ID "Status Packet will not be returned for READ and WRITE
     Instructions"; [P2] "Packet ID": 0xFE "makes all connected devices execute the Instruction
@@ -904,6 +946,365 @@ def check_baud_change(ctx: Context2) -> "str | Note":
     return figure if old_rate_silent else Note(figure + " (the port carries no line rate?)")
 
 
+# -- motion: the shaft turns (only with --motion) --------------------------------------------------
+# Every motion check needs torque off to start (Operating Mode and Drive Mode are EEPROM registers),
+# runs on the first ID of each model under test, writes its goal before turning torque on (a real
+# servo boots with Goal Current at Current Limit and Goal PWM at PWM Limit), and puts back every
+# register it or the mode change touched ([CT] Operating Mode(11) NOTE: a mode change resets the
+# gains, "Profile Velocity(112) and Profile Acceleration(108) will be set to '0'", "Goal PWM(100) is
+# reset to the value of PWM Limit(36)").  Speeds are a third of the data sheet's no-load speed at its
+# lowest rated supply, so any supply the servo is rated for reaches them.
+
+#: [CT] Operating Mode(11) values.
+CURRENT_MODE, VELOCITY_MODE = 0, 1
+#: [CT] Drive Mode(10) bit 2: "Time-based Profile" (0: Velocity-based Profile).
+TIME_BASED_BIT = 0x04
+#: [CT] Moving Status(123): bit 1 "Profile Ongoing", bits 4-5 the profile type (11: trapezoidal).
+PROFILE_ONGOING, PROFILE_TYPE_MASK, TRAPEZOIDAL = 0x02, 0x30, 0x30
+#: [CT] Goal/Present Velocity(104, 128) unit, rev/min; Present Position(132): 4096 pulses a turn.
+RPM_PER_UNIT = 0.229
+PULSES_PER_REV = 4096
+#: The goal speeds, as a fraction of the data sheet's no-load speed at its lowest rated supply (ours).
+SPEED_FRACTION = 0.3
+#: The goal current, as a fraction of the data sheet's stall current at its lowest rated supply (ours): well
+#: above what a free gearbox needs to turn, far below what heats the motor in half a second.
+CURRENT_FRACTION = 0.15
+#: How long a servo in Velocity Control Mode may take to come within tolerance of Goal Velocity (ours: the
+#: e-manual gives no time; the default Velocity PI gains settle well within it), then how long it is measured.
+VELOCITY_SETTLE_S, VELOCITY_WINDOW_S = 1.0, 0.25
+#: Present Velocity within max(2 units, 10 %) of the goal: a real servo's reading jitters by a unit or two.
+VELOCITY_TOLERANCE = 0.10
+#: Each direction of the current-mode check, seconds; samples closer than this to a goal write are not judged
+#: (the current loop and the sensor's filter settle).
+CURRENT_PHASE_S, CURRENT_SETTLE_S = 0.3, 0.015
+#: Present Current within max(20 mA, 15 %) of Goal Current while the current loop has voltage to spare.
+CURRENT_TOLERANCE, CURRENT_TOLERANCE_MA = 0.15, 20.0
+#: PWM at or above this fraction of Goal PWM: the drive is out of voltage (back-EMF), the current may fall short.
+PWM_SATURATED = 0.9
+#: The profile checks' travel, pulses, and the time-based profile's t3 and t1, ms.
+PROFILE_TRAVEL_PULSES = 400
+TIME_BASED_T3_MS, TIME_BASED_T1_MS = 500, 120
+#: Velocity-based acceleration time t1 the check asks for (ours), ms.
+VELOCITY_BASED_T1_MS = 150
+#: Position Trajectory may be this late against the plan: [CT] "What is the Profile" NOTE (older pages):
+#: "Dynamixel supports Jerk control ... actual travel time by the target trajectory of Profile could be
+#: longer than t3", by how much not said (ours: 10 % of t3); early by no more than two control steps.
+PROFILE_LATE_FRACTION, PROFILE_EARLY_MS = 0.10, 2.0
+#: Position Trajectory within this many pulses of the plan (rounding of the register and of 64 vs 0.229 rpm).
+PROFILE_PULSES_TOLERANCE = 2.0
+#: After the profile ends, Present Position must come this close to the goal within the settle time (ours: the
+#: In-Position window is "a predefined value" the e-manual does not give).
+IN_POSITION_PULSES, POSITION_SETTLE_S = 20, 0.3
+
+#: Registers a motion check or a mode change may alter, put back in this order (EEPROM first, torque last).
+_MOTION_REGISTERS = ("operating_mode", "drive_mode", "velocity_i_gain", "velocity_p_gain", "position_d_gain",
+                     "position_i_gain", "position_p_gain", "feedforward_2nd_gain", "feedforward_1st_gain",
+                     "goal_pwm", "goal_current", "goal_velocity", "profile_acceleration", "profile_velocity",
+                     "goal_position", "torque_enable")
+
+
+@dataclass(frozen=True)
+class _Sample:
+    """One READ while the shaft turns: when it was sent and answered (s after the reference), the values."""
+
+    sent_s: float
+    answered_s: float
+    values: dict[str, int]
+
+
+def _one_per_model(ctx: Context2, wanted=lambda m: True) -> list[int]:
+    """The first ID of each model under test that ``wanted`` accepts."""
+    seen: dict[str, int] = {}
+    for servo_id in ctx.ids:
+        found = ctx.models[servo_id]
+        if found.key not in seen and wanted(found):
+            seen[found.key] = servo_id
+    return list(seen.values())
+
+
+def _lowest_rating(found: ServoModel):
+    return min(found.physical.ratings, key=lambda r: r.voltage_v)
+
+
+def _sampler(ctx: Context2, servo: int, names: tuple[str, ...]):
+    """A function reading ``names`` (adjacent registers) in one READ, timed against a reference."""
+    entries = [ctx.entry(servo, name) for name in names]
+    start = min(e.address for e in entries)
+    length = max(e.end for e in entries) - start
+
+    def sample(reference_s: float) -> _Sample:
+        sent = time.perf_counter()
+        data = bytes(start) + ctx.read(servo, start, length)
+        answered = time.perf_counter()
+        return _Sample(sent - reference_s, answered - reference_s, {e.name: e.value_in(data) for e in entries})
+
+    return sample
+
+
+def _timed_put(ctx: Context2, servo: int, name: str, value: int) -> tuple[float, float]:
+    """WRITE that must succeed; (sent, answered) perf_counter times: the servo took the value in between."""
+    sent = time.perf_counter()
+    ctx.must_put(servo, name, value)
+    return sent, time.perf_counter()
+
+
+def _in_motion(ctx: Context2, servos: list[int], setup: dict[str, int], body) -> list[str]:
+    """Run ``body(servo)`` on each servo with the EEPROM ``setup`` written (torque off), then put everything back."""
+    for servo in servos:
+        if ctx.torque_on(servo):
+            raise Skipped(f"ID {servo}: torque is on (the servo may be holding a load; the check changes EEPROM registers)")
+    figures = []
+    for servo in servos:
+        names = [n for n in _MOTION_REGISTERS if n in ctx.layout(servo).by_name]
+        saved = {name: ctx.get(servo, name) for name in names}
+        refused: list[str] = []
+        try:
+            for name, value in setup.items():
+                ctx.must_put(servo, name, value)
+            figures.append(f"{servo} {ctx.models[servo].name}: " + body(servo))
+        finally:
+            ctx.put(servo, "torque_enable", 0)
+            for name in names:
+                if ctx.get(servo, name) != saved[name] and ctx.put(servo, name, saved[name]):
+                    refused.append(name)
+        expect(not refused, f"ID {servo}: could not put back " + ", ".join(refused))
+    return figures
+
+
+def _velocity_body(ctx: Context2, servo: int) -> str:
+    found = ctx.models[servo]
+    rating = _lowest_rating(found)
+    goal = round(SPEED_FRACTION * rating.no_load_speed_rpm / RPM_PER_UNIT)
+    limit = ctx.get(servo, "velocity_limit")
+    if 0 < limit < goal:
+        goal = limit
+    tolerance = max(2.0, VELOCITY_TOLERANCE * goal)
+    sample = _sampler(ctx, servo, ("velocity_trajectory", "present_velocity", "present_position"))
+    ctx.must_put(servo, "goal_velocity", 0)
+    ctx.must_put(servo, "torque_enable", 1)
+    start = time.perf_counter()
+    _timed_put(ctx, servo, "goal_velocity", goal)
+    close = 0
+    reached_s = None
+    while reached_s is None:
+        row = sample(start)
+        close = close + 1 if abs(row.values["present_velocity"] - goal) <= tolerance else 0
+        if close >= 3:
+            reached_s = row.answered_s
+        elif row.sent_s > VELOCITY_SETTLE_S:
+            raise Failed(f"ID {servo}: Present Velocity {row.values['present_velocity']} {_ms(row.sent_s)} after Goal "
+                         f"Velocity {goal}, not within {tolerance:.0f}")
+    window = [sample(start)]
+    while window[-1].sent_s - window[0].answered_s < VELOCITY_WINDOW_S:
+        window.append(sample(start))
+    ctx.must_put(servo, "goal_velocity", 0)
+    mean = statistics.fmean(r.values["present_velocity"] for r in window)
+    trajectory = {r.values["velocity_trajectory"] for r in window}
+    travelled = window[-1].values["present_position"] - window[0].values["present_position"]
+    # The shaft's rate, bounded by when the first and last READs can have been served.
+    low = travelled / (window[-1].answered_s - window[0].sent_s)
+    high = travelled / (window[-1].sent_s - window[0].answered_s)
+    goal_rate = goal * RPM_PER_UNIT * PULSES_PER_REV / 60.0
+    figure = (f"goal {goal} ({goal * RPM_PER_UNIT:.1f} rpm, {SPEED_FRACTION:.0%} of {rating.no_load_speed_rpm:g} rpm at "
+              f"{rating.voltage_v:g} V): within {tolerance:.0f} after {_ms(reached_s)}; Present Velocity {mean:.1f}, "
+              f"Velocity Trajectory {sorted(trajectory)}, position {low:.0f}..{high:.0f} pulses/s (goal {goal_rate:.0f})")
+    expect(trajectory == {goal}, f"ID {servo}: Velocity Trajectory not at Goal Velocity: {figure}")
+    expect(abs(mean - goal) <= tolerance, f"ID {servo}: {figure}")
+    expect(low * (1 - VELOCITY_TOLERANCE) <= goal_rate <= high * (1 + VELOCITY_TOLERANCE), f"ID {servo}: position rate: {figure}")
+    return figure
+
+
+def check_velocity_mode(ctx: Context2) -> str:
+    """[CT] Goal Velocity(104): "used to set the target velocity when in the Velocity Control Mode", unit
+    0.229 rpm; Velocity Trajectory(136): in Velocity Control Mode, "When the generated Profile reaches it's
+    endpoint, [Velocity Trajectory(136)] becomes equal to [Goal Velocity(104)]"; Present Position(132)
+    counts 4096 pulses a turn.  With Profile Acceleration 0 ("an infinite maximum acceleration") and a goal of
+    a third of the data sheet's no-load speed, Present Velocity comes within max(2, 10 %) of the goal within
+    1 s, Velocity Trajectory equals it, and over 0.25 s the position advances at that rate (within 10 %,
+    bounded by when the READs were served)."""
+    setup = {"operating_mode": VELOCITY_MODE, "profile_acceleration": 0}
+    return "; ".join(_in_motion(ctx, _one_per_model(ctx), setup, lambda servo: _velocity_body(ctx, servo)))
+
+
+def _has_current_mode(found: ServoModel) -> bool:
+    entry = found.layout().by_name.get("operating_mode")
+    return (entry is not None and "goal_current" in found.layout().by_name and found.physical.current_unit_ma is not None
+            and (entry.allowed is None or CURRENT_MODE in entry.allowed))
+
+
+def _current_body(ctx: Context2, servo: int) -> str:
+    found = ctx.models[servo]
+    rating = _lowest_rating(found)
+    unit_ma = found.physical.current_unit_ma
+    assert unit_ma is not None and rating.stall_current_a is not None
+    goal = min(round(CURRENT_FRACTION * rating.stall_current_a * 1e3 / unit_ma), ctx.get(servo, "current_limit"))
+    tolerance = max(CURRENT_TOLERANCE_MA / unit_ma, CURRENT_TOLERANCE * goal)
+    pwm_limit = abs(ctx.get(servo, "goal_pwm"))
+    sample = _sampler(ctx, servo, ("present_pwm", "present_current", "present_velocity", "present_position"))
+    ctx.must_put(servo, "goal_current", 0)
+    ctx.must_put(servo, "torque_enable", 1)
+    figures = []
+    for sign in (1, -1):
+        target = sign * goal
+        sent, _ = _timed_put(ctx, servo, "goal_current", target)
+        rows = [sample(sent)]
+        while rows[-1].sent_s < CURRENT_PHASE_S:
+            rows.append(sample(sent))
+        judged = [r for r in rows if r.sent_s >= CURRENT_SETTLE_S]
+        tracking = saturated = 0
+        for row in judged:
+            current, pwm = row.values["present_current"], row.values["present_pwm"]
+            if abs(current - target) <= tolerance:
+                tracking += 1
+            elif abs(pwm) >= PWM_SATURATED * pwm_limit and sign * current <= goal + tolerance:
+                saturated += 1
+            else:
+                raise Failed(f"ID {servo}: Goal Current {target}: Present Current {current} at PWM {pwm} "
+                             f"(Goal PWM {pwm_limit}) {_ms(row.sent_s)} after the write")
+        half = [r for r in judged if r.sent_s >= CURRENT_PHASE_S / 2]
+        moved = half[-1].values["present_position"] - half[0].values["present_position"]
+        velocity = half[-1].values["present_velocity"]
+        figure = (f"{target:+d} ({target * unit_ma:+.0f} mA): {tracking} of {len(judged)} READs within {tolerance:.0f}, "
+                  f"{saturated} at the PWM limit; {moved:+d} pulses in the last {_ms(half[-1].sent_s - half[0].sent_s)}, "
+                  f"Present Velocity {velocity:+d}")
+        expect(tracking > 0, f"ID {servo}: Present Current never reached Goal Current: {figure}")
+        expect(moved * sign > 0 and velocity * sign > 0, f"ID {servo}: the shaft did not turn the way of the current: {figure}")
+        figures.append(figure)
+    ctx.must_put(servo, "goal_current", 0)
+    return "; ".join(figures)
+
+
+def check_current_mode(ctx: Context2) -> str:
+    """[CT] Goal Current(102): "In case of Torque Control Mode [Current Control Mode], Goal Current(102) can
+    be used to set a desired current"; Present Current(126) reads it back in the model's unit (1 mA on the
+    XL330/XC330, 2.69 mA on the XM430).  On a free shaft the servo accelerates until back-EMF takes the
+    drive's voltage, then the current falls short of the goal at full PWM: so every READ (after 15 ms) has
+    Present Current within max(20 mA, 15 %) of Goal Current, or Present PWM at 90 % of Goal PWM and the
+    current no larger than the goal; at least one READ tracks, and the shaft turns the way of the current
+    (+15 % of the stall current, then -15 %, 0.3 s each).  Models without Current Control Mode (the
+    XL430-W250's Operating Mode takes 1, 3, 4, 16) are skipped."""
+    servos = _one_per_model(ctx, _has_current_mode)
+    if not servos:
+        raise Skipped("no model under test has Current Control Mode: " + ", ".join(sorted({m.name for m in ctx.models.values()})))
+    setup = {"operating_mode": CURRENT_MODE}
+    return "; ".join(_in_motion(ctx, servos, setup, lambda servo: _current_body(ctx, servo)))
+
+
+def _trapezoid_pulses(t_ms: float, t1_ms: float, t3_ms: float, travel: float) -> float:
+    """Where the e-manual's trapezoid is ``t_ms`` after the goal: accelerate over t1, cruise, decelerate over t1, stop at t3."""
+    if t_ms <= 0.0:
+        return 0.0
+    if t_ms >= t3_ms:
+        return travel
+    peak = travel / (t3_ms - t1_ms)  # per ms: the area under the trapezoid is the travel
+    if t_ms < t1_ms:
+        return peak * t_ms * t_ms / (2.0 * t1_ms)
+    if t_ms <= t3_ms - t1_ms:
+        return peak * (t_ms - t1_ms / 2.0)
+    return travel - peak * (t3_ms - t_ms) ** 2 / (2.0 * t1_ms)
+
+
+def _profile_body(ctx: Context2, servo: int, time_based: bool) -> str:
+    found = ctx.models[servo]
+    low, high = ctx.get(servo, "min_position_limit"), ctx.get(servo, "max_position_limit")
+    if high - low < 2 * PROFILE_TRAVEL_PULSES:
+        raise Skipped(f"ID {servo}: the position limits {low}..{high} leave no room for {PROFILE_TRAVEL_PULSES} pulses")
+    if time_based:
+        velocity, acceleration = TIME_BASED_T3_MS, TIME_BASED_T1_MS
+        t1_ms, t3_ms = float(acceleration), float(velocity)
+        peak_units = PROFILE_TRAVEL_PULSES / (t3_ms - t1_ms) * 60_000.0 / (RPM_PER_UNIT * PULSES_PER_REV)
+    else:
+        velocity = round(SPEED_FRACTION * _lowest_rating(found).no_load_speed_rpm / RPM_PER_UNIT)
+        acceleration = max(1, round(64 * velocity / VELOCITY_BASED_T1_MS))
+        t1_ms = 64.0 * velocity / acceleration
+        t3_ms = t1_ms + 64.0 * PROFILE_TRAVEL_PULSES / velocity
+        peak_units = float(velocity)
+    ctx.must_put(servo, "profile_velocity", velocity)
+    ctx.must_put(servo, "profile_acceleration", acceleration)
+    present = ctx.get(servo, "present_position")
+    if not low <= present <= high:
+        raise Skipped(f"ID {servo}: Present Position {present} is outside the position limits {low}..{high}")
+    ctx.must_put(servo, "goal_position", present)
+    ctx.must_put(servo, "torque_enable", 1)
+    origin = ctx.get(servo, "present_position")  # "ΔPos, the distance ... between desired position and present position"
+    sign = 1 if origin < (low + high) / 2 else -1
+    goal = origin + sign * PROFILE_TRAVEL_PULSES
+    sample = _sampler(ctx, servo, ("moving_status", "present_position", "velocity_trajectory", "position_trajectory"))
+    sent, answered = _timed_put(ctx, servo, "goal_position", goal)
+    late_ms = PROFILE_LATE_FRACTION * t3_ms
+    rows = [sample(sent)]
+    while rows[-1].values["moving_status"] & PROFILE_ONGOING or abs(rows[-1].values["present_position"] - goal) > IN_POSITION_PULSES:
+        if rows[-1].sent_s * 1e3 > t3_ms + late_ms + POSITION_SETTLE_S * 1e3:
+            break
+        rows.append(sample(sent))
+    lag_s = answered - sent  # a READ's times are from the write's sending; the servo took the goal up to lag_s later
+    worst = 0.0
+    for row in rows:
+        earliest_ms, latest_ms = (row.sent_s - lag_s) * 1e3, row.answered_s * 1e3
+        done = sign * (row.values["position_trajectory"] - origin)
+        low_plan = _trapezoid_pulses(earliest_ms - late_ms, t1_ms, t3_ms, PROFILE_TRAVEL_PULSES) - PROFILE_PULSES_TOLERANCE
+        high_plan = _trapezoid_pulses(latest_ms + PROFILE_EARLY_MS, t1_ms, t3_ms, PROFILE_TRAVEL_PULSES) + PROFILE_PULSES_TOLERANCE
+        worst = max(worst, low_plan - done, done - high_plan)
+        expect(low_plan <= done <= high_plan,
+               f"ID {servo}: Position Trajectory {done:+.0f} pulses into the move {_ms(row.sent_s)} after the goal; the plan "
+               f"(t1 {t1_ms:.0f} ms, t3 {t3_ms:.0f} ms) allows {low_plan:.0f}..{high_plan:.0f}")
+    ongoing = [r for r in rows if r.values["moving_status"] & PROFILE_ONGOING]
+    kinds = {r.values["moving_status"] & PROFILE_TYPE_MASK for r in ongoing}
+    expect(kinds == {TRAPEZOIDAL}, f"ID {servo}: Moving Status profile type {sorted(hex(k) for k in kinds)} during the move, not 0x30")
+    peak = max(sign * r.values["velocity_trajectory"] for r in rows)
+    expect(abs(peak - peak_units) <= 2.0, f"ID {servo}: Velocity Trajectory peaks at {peak}, the plan's {peak_units:.1f}")
+    finished = next((i for i, r in enumerate(rows) if not r.values["moving_status"] & PROFILE_ONGOING), None)
+    expect(finished is not None and finished > 0, f"ID {servo}: Profile Ongoing never cleared ({_ms(rows[-1].sent_s)})")
+    assert finished is not None
+    end_low_ms = (rows[finished - 1].sent_s - lag_s) * 1e3
+    end_high_ms = rows[finished].answered_s * 1e3
+    expect(end_low_ms <= t3_ms + late_ms and end_high_ms >= t3_ms - PROFILE_EARLY_MS,
+           f"ID {servo}: the profile ended {end_low_ms:.0f}..{end_high_ms:.0f} ms after the goal, t3 is {t3_ms:.0f} ms")
+    settled = abs(rows[-1].values["present_position"] - goal)
+    expect(settled <= IN_POSITION_PULSES, f"ID {servo}: Present Position {settled} pulses from the goal {_ms(rows[-1].sent_s)} after it")
+    return (f"{PROFILE_TRAVEL_PULSES * sign:+d} pulses, Profile Velocity {velocity}, Acceleration {acceleration}: t1 {t1_ms:.0f} ms, "
+            f"t3 {t3_ms:.0f} ms; ended {end_low_ms:.0f}..{end_high_ms:.0f} ms; Velocity Trajectory peak {peak} "
+            f"(plan {peak_units:.1f}); Position Trajectory within the plan over {len(rows)} READs; "
+            f"{settled} pulses from the goal after {_ms(rows[-1].sent_s)}")
+
+
+def check_velocity_profile(ctx: Context2) -> str:
+    """[CT] "What is the Profile": with a Velocity-based Profile (Drive Mode(10) bit 2 = 0), Profile Velocity(112)
+    "sets the maximum velocity of the Profile" and Profile Acceleration(108) its acceleration; "Acceleration time
+    (t1) ... t1 = 64 * {Profile Velocity(112) / Profile Acceleration(108)}" ms; the travel time (the older pages'
+    step 7, https://emanual.robotis.com/docs/en/dxl/x/xm430-w210/#what-is-the-profile) "t3 = t1 + t2" with
+    "t2 = 64 * ΔPos / Profile Velocity"; "The desired velocity trajectory and desired position trajectory from the
+    Profile are stored at [Velocity Trajectory(136)] and [Position Trajectory(140)]"; Moving Status(123) bits
+    4-5 = 11 for a trapezoid, bit 1 while the profile is in progress.  A 400-pulse move in Position Control
+    Mode at a third of the no-load speed, t1 ~150 ms: every Position Trajectory READ lies on the trapezoid
+    (no more than 2 ms early, 10 % of t3 late: the e-manual's jerk control may lengthen it), Velocity
+    Trajectory peaks at Profile Velocity, Profile Ongoing clears at t3, and the shaft comes within 20 pulses."""
+    def body(servo: int) -> str:
+        return _profile_body(ctx, servo, time_based=False)
+
+    figures = []
+    for servo in _one_per_model(ctx):
+        drive = ctx.get(servo, "drive_mode") & ~TIME_BASED_BIT
+        figures += _in_motion(ctx, [servo], {"operating_mode": POSITION_MODE, "drive_mode": drive}, body)
+    return "; ".join(figures)
+
+
+def check_time_profile(ctx: Context2) -> str:
+    """[CT] Drive Mode(10) bit 2 = 1, Time-based Profile: "Profile Velocity(112) is used to set the time span of
+    the Profile(t3), while Profile Acceleration(108) sets allowed accelerating time(t1) in millisecond[ms]" ("What
+    is the Profile"; "Time-based Profiles are available from firmware V42" on the X430, always on the X330).
+    A 400-pulse move with Profile Velocity 500 and Profile Acceleration 120: the trapezoid of t1 120 ms and
+    t3 500 ms, judged as the velocity-based check judges its own."""
+    def body(servo: int) -> str:
+        return _profile_body(ctx, servo, time_based=True)
+
+    figures = []
+    for servo in _one_per_model(ctx):
+        drive = ctx.get(servo, "drive_mode") | TIME_BASED_BIT
+        figures += _in_motion(ctx, [servo], {"operating_mode": POSITION_MODE, "drive_mode": drive}, body)
+    return "; ".join(figures)
+
+
 CHECKS2: tuple[Check, ...] = (
     Check("ping", check_ping),
     Check("absent ID is silent", check_absent_id),
@@ -928,10 +1329,15 @@ CHECKS2: tuple[Check, ...] = (
     Check("BULK_READ", check_bulk_read),
     Check("BULK_WRITE", check_bulk_write),
     Check("broadcast PING", check_broadcast_ping),
+    Check("broadcast PING timing", check_broadcast_ping_timing),
     Check("broadcast READ/WRITE", check_broadcast_read_write),
     Check("status return levels", check_status_return_level),
     Check("return delay", check_return_delay),
     Check("alert bit", check_alert),
+    Check("velocity mode", check_velocity_mode, motion=True),
+    Check("current mode", check_current_mode, motion=True),
+    Check("velocity-based profile", check_velocity_profile, motion=True),
+    Check("time-based profile", check_time_profile, motion=True),
     Check("ID change", check_id_change, destructive=True),
     Check("baud change", check_baud_change, destructive=True),
     Check("REBOOT", check_reboot, destructive=True),

@@ -6,7 +6,7 @@ import pytest
 from emu_testkit import CONFORMANCE_TIMEOUT_S
 
 from ax12emu import conformance
-from ax12emu.conformance.checks2 import _runs, model_for_number, table_differences2
+from ax12emu.conformance.checks2 import _runs, _trapezoid_pulses, model_for_number, table_differences2
 from ax12emu.protocol.servo_models import model, model_names
 
 
@@ -76,7 +76,8 @@ def test_protocol_2_suite_passes_against_served_x_series(transport, emulator):
     report = conformance.run(served.port, MIXED_IDS, protocol="2.0", baud=57_600, timeout_s=SERVED_TIMEOUT_S,
                              destructive=destructive)
     assert report.passed, report.table()
-    expected = {c.name: conformance.PASS if destructive or not c.destructive else conformance.SKIP for c in conformance.CHECKS2}
+    expected = {c.name: conformance.SKIP if c.motion or (c.destructive and not destructive) else conformance.PASS
+                for c in conformance.CHECKS2}
     expected["read of an undefined address"] = conformance.NOTE  # the e-manual leaves it open: a note always
     assert {r.name: r.outcome for r in report.results} == {**expected, "table unchanged": conformance.PASS}, report.table()
 
@@ -95,3 +96,56 @@ def test_cli_protocol_2_starts_at_the_x_series_factory_baud(emulator):
     )
     assert result.returncode == 0, result.stdout + result.stderr
     assert "Protocol 2.0" in result.stdout and "XL330-M288 (1200)" in result.stdout
+
+
+def test_the_trapezoid_is_the_e_manuals():
+    """Velocity-based: t1 = 64 V / A ms and t3 = t1 + 64 dPos / V ms make the cruise speed V / 64 pulses a ms
+    (0.229 rpm = 4096 * 0.229 / 60000 ~ 1/64 pulse a ms); the curve is continuous and symmetric, and ends at t3."""
+    velocity, acceleration, travel = 62, 26, 400
+    t1 = 64 * velocity / acceleration
+    t3 = t1 + 64 * travel / velocity
+    at = lambda t: _trapezoid_pulses(t, t1, t3, travel)  # noqa: E731
+    cruise = (at(t3 / 2 + 1) - at(t3 / 2 - 1)) / 2
+    assert cruise == pytest.approx(velocity / 64)
+    assert at(t1) == pytest.approx(cruise * t1 / 2)  # the ramp covers half its time at cruise speed
+    assert at(t3 - t1) == pytest.approx(travel - cruise * t1 / 2)
+    assert at(t3 / 3) + at(t3 - t3 / 3) == pytest.approx(travel)
+    assert (at(0), at(t3), at(t3 + 50)) == (0, travel, travel)
+    assert all(at(t + 1) >= at(t) for t in range(0, round(t3)))
+
+
+#: The Koch arm's pair of models on six IDs: each motion check runs once per model (IDs 1 and 3).
+MOTION = "1-2:xl430-w250,3-6:xl330-m288"
+
+
+@pytest.mark.wallclock
+def test_motion_checks_pass_against_served_x_series(emulator):
+    """Velocity and current modes and both profiles, over the pty in real time, pass on the XL430-W250 and the
+    XL330-M288 (current mode on the XL330 only), and every register is put back."""
+    served = emulator("--servo", MOTION)
+    motion = [c.name for c in conformance.CHECKS2 if c.motion]
+    report = conformance.run(served.port, [1, 2, 3, 4, 5, 6], protocol="2.0", baud=57_600, timeout_s=SERVED_TIMEOUT_S,
+                             motion=True, only=motion)
+    assert report.passed, report.table()
+    assert {r.name: r.outcome for r in report.results} == {**dict.fromkeys(motion, conformance.PASS),
+                                                           "table unchanged": conformance.PASS}, report.table()
+    figures = {r.name: r.figure for r in report.results}
+    assert all("XL430-W250" in figures[name] and "XL330-M288" in figures[name] for name in motion if name != "current mode")
+    assert "XL330-M288" in figures["current mode"] and "XL430-W250" not in figures["current mode"]
+
+
+@pytest.mark.wallclock
+def test_cli_motion_flag_runs_the_motion_checks_and_says_why_one_skips(emulator):
+    """``--motion`` runs the motion group; without Current Control Mode (the XL430-W250) its check skips, saying so."""
+    import subprocess
+    import sys
+
+    served = emulator("--servo", "xl430-w250", "--ids", "1")
+    result = subprocess.run(
+        [sys.executable, "-m", "ax12emu", "conformance", served.port, "--protocol", "2.0", "--motion",
+         "--timeout-ms", str(round(SERVED_TIMEOUT_S * 1e3)), "--only", "current mode", "--only", "time-based profile"],
+        capture_output=True, text=True, timeout=60,
+    )
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "no model under test has Current Control Mode: XL430-W250" in result.stdout
+    assert "motion sets included" in result.stdout and "t3 500 ms" in result.stdout
