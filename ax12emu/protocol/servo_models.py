@@ -43,6 +43,10 @@ The format (``models/ax-12a.toml`` is the worked example)::
     ratings = [ { voltage_v = 12.0, stall_torque_nm = 1.5, stall_current_a = 1.4, no_load_speed_rpm = 61 } ]
     current_unit_ma = 2.69       # optional: Goal/Present Current's unit, where the table has them
 
+    [controller]                 # optional: how a real unit's control loop departs from the e-manual
+    source = "..."               # the measurement that shows it
+    position_output_scale = 0.5  # the position PID's output per the e-manual's gain conversion, times this
+
 Entry keys: ``address``, ``size`` (1, 2 or 4), ``name`` (snake_case, unique), ``access`` ("R" or "RW"),
 ``area`` ("EEPROM" or "RAM"; EEPROM entries come before the first RAM one), ``default`` (absent: the
 e-manual gives none, "-", and 0 is used), ``min``/``max`` (absent: the full span of the size, signed or
@@ -73,7 +77,7 @@ if sys.version_info >= (3, 11):
 else:  # Python 3.10: the same parser, from PyPI
     import tomli as tomllib
 
-__all__ = ["Rating", "Physical", "ServoModel", "parse_model", "load_model_file", "model", "model_names", "MODELS_PACKAGE_DIR"]
+__all__ = ["Rating", "Physical", "Controller", "ServoModel", "parse_model", "load_model_file", "model", "model_names", "MODELS_PACKAGE_DIR"]
 
 #: Where the shipped model files live (package data).
 MODELS_PACKAGE_DIR = "models"
@@ -90,6 +94,7 @@ _OVERRIDE_KEYS = {"default": "default", "min": "minimum", "max": "maximum"}
 _PHYSICAL_KEYS = {"source", "gear_ratio", "weight_g", "resolution_deg", "position_range_deg", "operating_voltage_v",
                   "recommended_voltage_v", "ratings", "current_unit_ma"}
 _RATING_KEYS = {"voltage_v", "stall_torque_nm", "stall_current_a", "no_load_speed_rpm", "note"}
+_CONTROLLER_KEYS = {"source", "position_output_scale"}
 
 
 @dataclass(frozen=True)
@@ -134,6 +139,15 @@ class Physical:
 
 
 @dataclass(frozen=True)
+class Controller:
+    """Where a real unit's control loop was measured to depart from the e-manual's description (absent: it does not)."""
+
+    source: str = ""
+    #: Factor on the position controller's output after the e-manual's gain conversion (1: as the e-manual reads).
+    position_output_scale: float = 1.0
+
+
+@dataclass(frozen=True)
 class ServoModel:
     """One servo model, as its data file states it."""
 
@@ -153,6 +167,8 @@ class ServoModel:
     #: Bit rate for each Baud Rate register value (index = value); empty where the file gives none
     #: (the Protocol 1.0 models compute theirs: 2 Mbps / (value + 1)).
     baud_rates_bps: tuple[int, ...] = ()
+    #: Measured departures of the control loop from the e-manual (``[controller]``).
+    controller: Controller = Controller()
     _layouts: dict[str, Layout] = field(default_factory=dict, compare=False, repr=False)
 
     @property
@@ -403,6 +419,16 @@ def _baud_rates(where: _Where, raw: Any, register: Entry | None) -> tuple[int, .
     return rates
 
 
+def _controller(where: _Where, raw: Any) -> Controller:
+    if raw is None:
+        return Controller()
+    raw = where.table(raw, "controller", _CONTROLLER_KEYS, {"source"})
+    scale = where.number(raw.get("position_output_scale", 1.0), "controller.position_output_scale")
+    if not scale > 0:
+        raise where.error("controller.position_output_scale", f"must be positive, got {scale}")
+    return Controller(source=where.text(raw["source"], "controller.source"), position_output_scale=scale)
+
+
 def parse_model(text: str, key: str, path: str) -> ServoModel:
     """A model from the text of its file; ``ValueError`` naming ``path`` and the field on any mistake."""
     where = _Where(path)
@@ -410,7 +436,7 @@ def parse_model(text: str, key: str, path: str) -> ServoModel:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ValueError(f"{path}: not valid TOML: {exc}") from None
-    where.table(data, "top level", {"model", "table", "profiles", "physical"}, {"model", "table", "physical"})
+    where.table(data, "top level", {"model", "table", "profiles", "physical", "controller"}, {"model", "table", "physical"})
     info = where.table(data["model"], "model", _MODEL_KEYS, {"name", "model_number", "protocols", "source"})
     protocols = info["protocols"]
     if not isinstance(protocols, list) or not protocols:
@@ -449,6 +475,7 @@ def parse_model(text: str, key: str, path: str) -> ServoModel:
         physical=_physical(where, data["physical"]),
         path=path,
         baud_rates_bps=bauds,
+        controller=_controller(where, data.get("controller")),
     )
 
 

@@ -1,7 +1,8 @@
 """X-series firmware models built from a servo model's data file.
 
 Why it exists: the firmware and physics of an X-series servo (:mod:`firmware_model.xseries`) take
-plain numbers, the data sheet's gear ratio and ratings and the current unit; the model files
+plain numbers, the data sheet's gear ratio and ratings, the current unit and any measured
+departure of the control loop from the e-manual; the model files
 (:mod:`ax12emu.protocol.servo_models`) hold them.  This reads one into the other, so the bus builds
 one firmware model per servo from whichever model each ID is, with no code per model.
 """
@@ -48,7 +49,8 @@ def build_x_firmware(spec: ServoModel, choice: XModelChoice = XModelChoice()) ->
     unit_ma = physical.current_unit_ma
     firmware = build_x_servo(gear_ratio=physical.gear_ratio, ratings=ratings,
                              current_unit_a=None if unit_ma is None else unit_ma * 1e-3,
-                             supply_v=supply_v, angle_rad=START_ANGLE_RAD)
+                             supply_v=supply_v, angle_rad=START_ANGLE_RAD,
+                             position_output_scale=spec.controller.position_output_scale)
     if choice.external_torque_nm:
         firmware.set_external_torque(choice.external_torque_nm)
     return firmware

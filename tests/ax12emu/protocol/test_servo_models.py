@@ -239,3 +239,24 @@ def test_ranges_when_and_values_are_read_and_checked():
         bad = f'{{ address = 4, size = 1, name = "x", access = "RW", area = "RAM", values = {values} }},'
         with pytest.raises(ValueError, match=message):
             parse_model(_minimal(extra=bad), "t", "bad.toml")
+
+
+@pytest.mark.parametrize(
+    ("controller", "message"),
+    [
+        ('[controller]\nposition_output_scale = 0.5', r"controller: missing key 'source'|controller.*source"),
+        ('[controller]\nsource = "s"\nposition_output_scale = 0', r"controller.position_output_scale: must be positive"),
+        ('[controller]\nsource = "s"\ngain = 2', r"controller: unknown key"),
+    ],
+)
+def test_bad_controller_sections_are_refused(controller, message):
+    with pytest.raises(ValueError, match=message):
+        parse_model(_minimal() + "\n" + controller + "\n", "t", "bad.toml")
+
+
+def test_controller_departures_are_read_where_measured_and_absent_elsewhere():
+    text = _minimal() + '\n[controller]\nsource = "a measurement"\nposition_output_scale = 0.5\n'
+    assert parse_model(text, "t", "t.toml").controller.position_output_scale == 0.5
+    assert parse_model(_minimal(), "t", "t.toml").controller.position_output_scale == 1.0
+    assert model("xl330-m288").controller.position_output_scale == 0.5
+    assert model("xl430-w250").controller.position_output_scale == 1.0

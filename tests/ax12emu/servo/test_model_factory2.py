@@ -28,3 +28,20 @@ def test_an_external_torque_turns_a_limp_shaft():
     firmware.command(XCommands(torque_enable=0))
     firmware.step_to(0.5)
     assert firmware.sense().present_position > 2048 + 10
+
+
+def test_the_xl330_position_loop_drives_half_the_emanual_reading_as_measured():
+    # Same error, same gain: the XL330's measured controller puts out half the PWM the XL430's e-manual reading does.
+    def pwm_after_goal_step(key: str) -> int:
+        firmware = build_x_firmware(model(key))
+        firmware.command(XCommands(torque_enable=1, operating_mode=3, goal_position=2048, position_p_gain=100,
+                                   pwm_limit=885, goal_pwm=885, current_limit=5000, goal_current=5000))
+        firmware.step_to(0.01)
+        firmware.command(XCommands(torque_enable=1, operating_mode=3, goal_position=2048 + 200, position_p_gain=100,
+                                   pwm_limit=885, goal_pwm=885, current_limit=5000, goal_current=5000), goal_written=True)
+        firmware.step_to(0.012)
+        return firmware.sense().present_pwm
+
+    assert model("xl330-m288").controller.position_output_scale == 0.5
+    ratio = pwm_after_goal_step("xl330-m288") / pwm_after_goal_step("xl430-w250")
+    assert ratio == pytest.approx(0.5, abs=0.08)
