@@ -149,3 +149,16 @@ def test_cli_motion_flag_runs_the_motion_checks_and_says_why_one_skips(emulator)
     assert result.returncode == 0, result.stdout + result.stderr
     assert "no model under test has Current Control Mode: XL430-W250" in result.stdout
     assert "motion sets included" in result.stdout and "t3 500 ms" in result.stdout
+
+
+@pytest.mark.wallclock
+def test_velocity_mode_fails_against_a_shaft_held_back():
+    """The check can fail: a torque near the XL430-W250's stall torque against the shaft keeps it from Goal Velocity."""
+    from ax12emu import VirtualBus
+
+    with VirtualBus([1], servo="xl430-w250") as bus:
+        bus.set_external_torque(1, -1.3)
+        report = conformance.run(bus.port, [1], protocol="2.0", baud=57_600, timeout_s=SERVED_TIMEOUT_S, motion=True,
+                                 only=["velocity mode"])
+    result = next(r for r in report.results if r.name == "velocity mode")
+    assert result.outcome == conformance.FAIL and "Present Velocity" in result.figure, report.table()
