@@ -984,6 +984,8 @@ PWM_SATURATED = 0.9
 #: The profile checks' travel, pulses, and the time-based profile's t3 and t1, ms.
 PROFILE_TRAVEL_PULSES = 400
 TIME_BASED_T3_MS, TIME_BASED_T1_MS = 500, 120
+#: [CT] Profile Velocity(112): "Time-based Profiles are available from firmware V42" (not said of the X330).
+TIME_BASED_FIRMWARE = 42
 #: Velocity-based acceleration time t1 the check asks for (ours), ms.
 VELOCITY_BASED_T1_MS = 150
 #: Position Trajectory may be this late against the plan: [CT] "What is the Profile" NOTE (older pages):
@@ -1300,6 +1302,9 @@ def check_time_profile(ctx: Context2) -> str:
 
     figures = []
     for servo in _one_per_model(ctx):
+        firmware = ctx.get(servo, "firmware_version")
+        if "330" not in ctx.models[servo].name and firmware < TIME_BASED_FIRMWARE:
+            raise Skipped(f"ID {servo}: firmware {firmware}; Time-based Profiles need V{TIME_BASED_FIRMWARE} on the X430")
         drive = ctx.get(servo, "drive_mode") | TIME_BASED_BIT
         figures += _in_motion(ctx, [servo], {"operating_mode": POSITION_MODE, "drive_mode": drive}, body)
     return "; ".join(figures)
