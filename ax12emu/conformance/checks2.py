@@ -18,6 +18,21 @@ the device did.  The sources, by the shorthand the docstrings use:
   (registered_instruction.md @ b1b86dc0c7cfe4d798f319538556c5b793d3dc32), Min/Max Position Limit
   (position_limit.md @ f9dea50c62a09efd77bc81a90fb8646f3a0c4596).
 
+The motion checks (``Check.motion``, run only when asked: ``--motion``) turn the shaft and rest on
+[CT] "What is the Profile" (``_includes/en/dxl/profile_description.md`` @
+07d929f298ddcec4c3d4d9683afe21a667a466b2: t1 = 64 * Profile Velocity / Profile Acceleration, the
+trajectory registers; the travel time t3 = t1 + 64 * dPos / Profile Velocity is on the older pages,
+e.g. the XM430-W210 page of 2018), Profile Velocity/Acceleration (``x/profile_velocity.md`` @
+048ec0de57bc856b9f127ef854243fb44c86d428, ``x/profile_acceleration.md`` @
+53247968642942cbbdb3fb52e47d5aef4269267a), Goal Velocity (``x/goal_velocity.md`` @
+9d6b128d8a83a030ec6e602b120fc143ae12b241), Velocity Trajectory (``x/velocity_trajectory.md`` @
+d45c8b26749e6d7ac870734a9c85bb5a8f35497d), Moving Status (``x/moving_status.md`` @
+53247968642942cbbdb3fb52e47d5aef4269267a), Goal Current (``control_table_goal_current.md`` @
+0bb26122f28260b4e8cf9a35cb86bae3d45a2415) and Operating Mode (``x/operating_mode_xl.md`` @
+27b439141aeeb8f0adae5240c95030e0231fac47: a mode change resets the gains, the profile and Goal PWM).
+Their tolerances are meant for a real servo on a USB adapter: each READ's time is bounded by when it
+was sent and answered rather than taken as a point, so latency widens a window instead of failing.
+
 The device's control table comes from the model file whose model number its
 Ping reports (``ax12emu/protocol/models/*.toml``), so the suite knows each
 register's address, size, range and area without being told the model.
