@@ -144,6 +144,8 @@ class Session:
         self.latencies: list[float] = []
         self.failures = 0
         self.elapsed_s = 0.0
+        #: CPU seconds the server used during the timed runs, where the caller measures it.
+        self.server_cpu_s = 0.0
         self.warm_up(200)
 
     def warm_up(self, count: int) -> None:
@@ -175,6 +177,7 @@ class Session:
             "p99_us": latencies[int(len(latencies) * 0.99)] * 1e6,
             "failures": self.failures,
             "count": len(latencies),
+            "server_cpu_s": self.server_cpu_s,
         }
 
 
@@ -206,7 +209,9 @@ def measure_interleaved(targets: dict[str, tuple[subprocess.Popen, Session]], se
                 process.send_signal(signal.SIGCONT)
                 begin_s = time.monotonic()
                 session.warm_up(50)
+                cpu_before_s = cpu_s(process.pid)
                 session.run(slice_s)
+                session.server_cpu_s += cpu_s(process.pid) - cpu_before_s
                 process.send_signal(signal.SIGSTOP)
                 if spans is not None:
                     spans.setdefault(name, []).append((begin_s, time.monotonic()))
@@ -313,13 +318,23 @@ def measure_protocol2(emulator: list[str], model: str, seconds: float) -> None:
             ("emulator", emulator + ["--servo", model, "--ids", f"1-{len(SYNC_IDS)}", "--baud", "1000000"],
              {**loop, "setup": configure2}),
         ], seconds)
-    bare = result["bare"]
+    bare, emulated = result["bare"], result["emulator"]
     what = f"GroupSyncRead + GroupSyncWrite x {len(SYNC_IDS)}, RDT 0"
     print(row("reference: bare Protocol 2.0 responder", bare))
-    print(row(f"ax12emu --servo {model}", result["emulator"], bare["rate"]))
+    warn_if_loaded(bare)
+    print(row(f"ax12emu --servo {model}", emulated, bare["rate"]))
     print()
-    print(f"{what}: {result['emulator']['rate'] / bare['rate']:.1%} of bare (goal >= 80 %), "
-          f"p99 {result['emulator']['p99_us']:.0f} us")
+    print(f"{what}: {emulated['rate'] / bare['rate']:.1%} of bare (goal >= 80 %), p99 {emulated['p99_us']:.0f} us")
+    # Less at the mercy of the machine's load than the rates (the physics steps and the waiting spins count too).
+    print("server CPU per cycle in the timed turns: " + ", ".join(
+        f"{name} {result[name]['server_cpu_s'] / result[name]['count'] * 1e6:.0f} us" for name in ("bare", "emulator")))
+
+
+def warn_if_loaded(bare: dict) -> None:
+    """Say so when the bare responder itself was slow: the machine is too loaded for a comparison."""
+    if bare["p99_us"] >= 1000:
+        print(f"warning: the bare responder's own p99 is {bare['p99_us'] / 1000:.1f} ms: this machine is too loaded "
+              "for the comparison to mean much (an emulator, doing more per read, loses more); rerun when it is quieter")
 
 
 def transaction_times(trace: Path) -> list[float]:
@@ -504,9 +519,7 @@ def main(argv: list[str] | None = None) -> int:
         ], args.seconds * args.rounds)
     bare = fast.pop("bare")
     print(row("reference: bare pty responder", bare))
-    if bare["p99_us"] >= 1000:
-        print(f"warning: the bare responder's own p99 is {bare['p99_us'] / 1000:.1f} ms: this machine is too loaded "
-              "for the comparison to mean much (an emulator, doing more per read, loses more); rerun when it is quieter")
+    warn_if_loaded(bare)
     for servos, result in fast.items():
         print(row(f"ax12emu, {servos:2d} servo(s) moving, RDT   0", result, bare["rate"]))
     slow = {}
