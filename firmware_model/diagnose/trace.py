@@ -34,14 +34,45 @@ Values are raw control-table units as a client reads them::
   the next one, and the workflow fits when as a property of the recording
   (:mod:`.nuisance`), never as an effect.
 
-Blank lines and lines starting with ``#`` are ignored (comments).  Any other
-problem raises :class:`TraceFormatError` naming the line and the column.
+Blank lines and lines starting with ``#`` are ignored (comments), except
+``#@ key = value`` lines: metadata (:attr:`Trace.meta`), the value in JSON.
+Any other problem raises :class:`TraceFormatError` naming the line and the
+column.
+
+X-series traces (Protocol 2.0)
+------------------------------
+A trace whose metadata says ``#@ servo = "x"`` is an X-series servo's, in
+its own control table's units (e-manual, X-series "Control Table"): the same
+layout with the X registers' columns (:data:`X_COLUMNS`):
+
+* ``goal_position``, ``present_position`` (required): pulses, 4096 per turn
+  (signed 32-bit: extended position mode counts turns);
+* ``present_velocity`` (0.229 rpm), ``present_current`` (the model's current
+  unit: 1 mA on the XL330) or ``present_pwm`` (0.113 %, 885 = full duty): the
+  load column is whichever of the two the recording read;
+* ``profile_velocity``, ``profile_acceleration``, ``torque_enable``,
+  ``voltage``, ``external_torque_nm``, ``command_t``: as above, commands in
+  effect from ``t`` (or ``command_t``) on.
+
+What does not change within a recording is metadata (:data:`X_META`): the
+operating mode and the gains, the data sheet the physics is built from (gear
+ratio, ratings, current unit) and what was on the horn.  Example::
+
+    #@ servo = "x"
+    #@ model = "XL330-M288"
+    #@ gear_ratio = 288.4
+    #@ ratings = [[5.0, 0.52, 1.47, 103]]
+    #@ current_unit_a = 0.001
+    #@ operating_mode = 3
+    #@ position_p_gain = 400
+    t,goal_position,present_position,present_velocity,present_pwm,command_t
 """
 
 from __future__ import annotations
 
 import csv
 import io
+import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -49,7 +80,7 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["Trace", "TraceFormatError", "read_trace", "write_trace", "REQUIRED", "OPTIONAL", "COLUMNS",
-           "COMMAND_COLUMNS", "command_time_errors"]
+           "COMMAND_COLUMNS", "command_time_errors", "TraceColumns", "FORMATS", "X_COLUMNS", "X_META"]
 
 #: Columns every trace has, in the order the writer uses.
 REQUIRED = ("t", "goal_position", "moving_speed", "present_position")
@@ -64,6 +95,54 @@ _INT_RANGES = {
 _FLOAT_COLUMNS = ("t", "external_torque_nm", "command_t")
 #: Columns that are commands (a change in any of them is a command change).
 COMMAND_COLUMNS = ("goal_position", "moving_speed", "torque_limit", "voltage", "external_torque_nm")
+
+_INT32 = (-(2**31), 2**31 - 1)
+
+
+@dataclass(frozen=True)
+class TraceColumns:
+    """One servo family's columns: required, optional, integer ranges, and which are commands."""
+
+    required: tuple[str, ...]
+    optional: tuple[str, ...]
+    int_ranges: dict[str, tuple[int, int]]
+    commands: tuple[str, ...]
+
+    @property
+    def columns(self) -> tuple[str, ...]:
+        return self.required + self.optional
+
+
+#: X-series columns (e-manual, X-series control table: Goal Position(116) within +-1,048,575 in extended
+#: position mode, Present Position(132) a signed 4-byte count, Present PWM(124) within +-885, Profile
+#: Velocity/Acceleration(112, 108) 0..32767).
+X_COLUMNS = TraceColumns(
+    required=("t", "goal_position", "present_position"),
+    optional=("present_velocity", "present_current", "present_pwm", "profile_velocity", "profile_acceleration",
+              "torque_enable", "voltage", "external_torque_nm", "command_t"),
+    int_ranges={"goal_position": (-1_048_575, 1_048_575), "present_position": _INT32, "present_velocity": _INT32,
+                "present_current": (-32768, 32767), "present_pwm": (-885, 885), "profile_velocity": (0, 32767),
+                "profile_acceleration": (0, 32767), "torque_enable": (0, 1), "voltage": (0, 255)},
+    commands=("goal_position", "profile_velocity", "profile_acceleration", "torque_enable", "voltage",
+              "external_torque_nm"),
+)
+#: Column sets by the ``servo`` metadata value (absent: the AX-12's).
+FORMATS = {"ax": TraceColumns(REQUIRED, OPTIONAL, _INT_RANGES, COMMAND_COLUMNS), "x": X_COLUMNS}
+#: X-series metadata keys, what each means (the values are JSON).
+X_META = {
+    "servo": '"x"',
+    "model": "the model's name, for the report",
+    "gear_ratio": "the data sheet's gear ratio",
+    "ratings": "the data sheet's [[voltage_v, stall_torque_nm, stall_current_a, no_load_speed_rpm], ...]",
+    "current_unit_a": "Present Current's unit, A (null: no current sensing, the XL430)",
+    "position_output_scale": "the position controller's output against the e-manual's (0.5 measured on the XL330)",
+    "operating_mode": "Operating Mode(11): 3 position, 4 extended position, 5 current-based position",
+    "position_p_gain": "and position_i_gain, position_d_gain, feedforward_1st_gain, feedforward_2nd_gain, "
+                       "pwm_limit, current_limit, velocity_limit, drive_mode: the registers as set",
+    "supply_v": "the supply, V, where the trace has no voltage column",
+    "load_inertia_kg_m2": "an inertia on the horn",
+    "gravity_moment_nm": "a pendulum on the horn (m g l), hanging down at gravity_zero_pulses (default 2048)",
+}
 
 
 class TraceFormatError(ValueError):
@@ -82,9 +161,13 @@ class Trace:
     columns: dict[str, np.ndarray]
     #: Comment lines (without ``#``) kept from the file, e.g. the tool that made it.
     comments: list[str] = field(default_factory=list)
+    #: Metadata (``#@ key = value`` lines): the servo family and what does not change within the recording.
+    meta: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        missing = [c for c in REQUIRED if c not in self.columns]
+        if self.meta.get("servo", "ax") not in FORMATS:
+            raise TraceFormatError(f"unknown servo {self.meta['servo']!r} (known: {', '.join(FORMATS)})")
+        missing = [c for c in self.format.required if c not in self.columns]
         if missing:
             raise TraceFormatError(f"missing required column(s) {', '.join(missing)}")
         lengths = {len(v) for v in self.columns.values()}
@@ -94,6 +177,16 @@ class Trace:
 
     def __len__(self) -> int:
         return len(self.columns["t"])
+
+    @property
+    def servo(self) -> str:
+        """The servo family (``"ax"``, ``"x"``), from the metadata."""
+        return str(self.meta.get("servo", "ax"))
+
+    @property
+    def format(self) -> TraceColumns:
+        """This trace's column set."""
+        return FORMATS[self.servo]
 
     def __getitem__(self, name: str) -> np.ndarray:
         return self.columns[name]
@@ -116,17 +209,17 @@ class Trace:
         """Rows whose commands differ from the row before (row 0 included), shape (m,)."""
         changed = np.zeros(len(self), dtype=bool)
         changed[0] = True
-        for name in COMMAND_COLUMNS:
+        for name in self.format.commands:
             if name in self.columns:
                 changed[1:] |= self.columns[name][1:] != self.columns[name][:-1]
         return np.flatnonzero(changed)
 
     def with_columns(self, **columns: np.ndarray) -> "Trace":
         """A copy with some columns replaced or added (e.g. simulated sensed values)."""
-        return Trace({**self.columns, **columns}, list(self.comments))
+        return Trace({**self.columns, **columns}, list(self.comments), dict(self.meta))
 
 
-def _parse(text: str, name: str, line: int, source: str) -> float | int:
+def _parse(text: str, name: str, line: int, source: str, fmt: TraceColumns = FORMATS["ax"]) -> float | int:
     """One cell, checked against its column's type and range."""
     text = text.strip()
     if name in _FLOAT_COLUMNS:
@@ -141,7 +234,7 @@ def _parse(text: str, name: str, line: int, source: str) -> float | int:
         value = int(text)
     except ValueError:
         raise TraceFormatError(f"{text!r} is not an integer", line, name, source) from None
-    low, high = _INT_RANGES[name]
+    low, high = fmt.int_ranges[name]
     if not low <= value <= high:
         raise TraceFormatError(f"{value} is outside {low}..{high}", line, name, source)
     return value
@@ -160,12 +253,27 @@ def read_trace(path: str | Path) -> Trace:
 def parse_trace(text: str, source: str = "trace") -> Trace:
     """:func:`read_trace` on a string (``source`` names it in errors)."""
     comments: list[str] = []
+    meta: dict = {}
+    fmt = FORMATS["ax"]
     header: list[str] | None = None
     rows: list[list[float | int]] = []
     data_lines: list[int] = []
     for line_no, raw in enumerate(io.StringIO(text), start=1):
         stripped = raw.strip()
         if not stripped:
+            continue
+        if stripped.startswith("#@"):
+            key, sep, value = stripped[2:].partition("=")
+            try:
+                if not sep or header is not None:
+                    raise ValueError("metadata is '#@ key = JSON value', before the header")
+                meta[key.strip()] = json.loads(value)
+            except ValueError as exc:
+                raise TraceFormatError(f"bad metadata: {exc}", line_no, None, source) from None
+            if meta.get("servo", "ax") not in FORMATS:
+                raise TraceFormatError(f"unknown servo {meta['servo']!r} (known: {', '.join(FORMATS)})", line_no, None,
+                                       source)
+            fmt = FORMATS[meta.get("servo", "ax")]
             continue
         if stripped.startswith("#"):
             comments.append(stripped[1:].strip())
@@ -174,18 +282,18 @@ def parse_trace(text: str, source: str = "trace") -> Trace:
         if header is None:
             header = [c.strip() for c in cells]
             for col in header:
-                if col not in COLUMNS:
-                    raise TraceFormatError(f"unknown column (known: {', '.join(COLUMNS)})", line_no, col, source)
+                if col not in fmt.columns:
+                    raise TraceFormatError(f"unknown column (known: {', '.join(fmt.columns)})", line_no, col, source)
             dup = {c for c in header if header.count(c) > 1}
             if dup:
                 raise TraceFormatError("column appears twice", line_no, sorted(dup)[0], source)
-            for col in REQUIRED:
+            for col in fmt.required:
                 if col not in header:
                     raise TraceFormatError("required column missing from the header", line_no, col, source)
             continue
         if len(cells) != len(header):
             raise TraceFormatError(f"expected {len(header)} values, got {len(cells)}", line_no, None, source)
-        row = [_parse(cell, name, line_no, source) for cell, name in zip(cells, header)]
+        row = [_parse(cell, name, line_no, source, fmt) for cell, name in zip(cells, header)]
         t = row[header.index("t")]
         if rows and not t > rows[-1][header.index("t")]:
             raise TraceFormatError(f"time {t} does not increase", line_no, "t", source)
@@ -196,7 +304,7 @@ def parse_trace(text: str, source: str = "trace") -> Trace:
     if len(rows) < 2:
         raise TraceFormatError("need at least two rows", source=source)
     data = np.array(rows, dtype=float)
-    trace = Trace({name: data[:, i] for i, name in enumerate(header)}, comments)
+    trace = Trace({name: data[:, i] for i, name in enumerate(header)}, comments, meta)
     bad = command_time_errors(trace)
     if len(bad):
         row = int(bad[0])
@@ -219,10 +327,12 @@ def command_time_errors(trace: Trace) -> np.ndarray:
 
 def write_trace(trace: Trace, path: str | Path) -> None:
     """Write ``trace`` in the format above (known columns in canonical order, comments first)."""
-    names = [c for c in COLUMNS if trace.has(c)]
+    names = [c for c in trace.format.columns if trace.has(c)]
     out = io.StringIO()
     for comment in trace.comments:
         out.write(f"# {comment}\n")
+    for key, value in trace.meta.items():
+        out.write(f"#@ {key} = {json.dumps(value)}\n")
     out.write(",".join(names) + "\n")
     cols = [trace[c] for c in names]
     for i in range(len(trace)):

@@ -31,6 +31,7 @@ from collections.abc import Callable
 import numpy as np
 
 from .bam_log import PWM_FULL_SCALE, PendulumLog
+from .closed_loop import Write, run_closed_loop
 from .interface import OperatingMode, XCommands, XServoModel
 from .physics import GRAVITY_M_S2, XPhysics, XPhysicsParams
 
@@ -103,21 +104,17 @@ def replay(
     model = make_model(physics)
     # The model's clock starts at 0; the log's first goal is written GOAL_LEAD_S before its first stamp.
     origin_s = float(log.time_s[0]) - GOAL_LEAD_S - model.step_s
-    out = np.empty(len(log.time_s))
-    pwm = np.empty(len(log.time_s), dtype=np.int64)
+    writes: list[Write] = []
     last: tuple[int, bool] | None = None
     for k, stamp in enumerate(log.time_s):
         enable = bool(log.torque_enable[k])
-        goal = float(log.goal_position_rad[k])
-        model.step_to(stamp - GOAL_LEAD_S - origin_s)
-        commands = recorder_commands(log.kp, goal, enable)
+        commands = recorder_commands(log.kp, float(log.goal_position_rad[k]), enable)
         key = (commands.goal_position, enable)
         if key != last:
             # The recorder writes the goal only with torque on (and Torque Enable when it changes).
-            model.command(commands, goal_written=enable)
+            writes.append(Write(stamp - GOAL_LEAD_S - origin_s, commands, goal_written=enable))
             last = key
-        model.step_to(stamp - READ_LEAD_S - origin_s)
-        sensed = model.sense()
-        out[k] = (sensed.present_position - MIDDLE_PULSES) * _RAD_PER_PULSE
-        pwm[k] = sensed.present_pwm
+    sensed = run_closed_loop(model, writes, [stamp - READ_LEAD_S - origin_s for stamp in log.time_s])
+    out = np.array([(s.present_position - MIDDLE_PULSES) * _RAD_PER_PULSE for s in sensed])
+    pwm = np.array([s.present_pwm for s in sensed], dtype=np.int64)
     return out, pwm
