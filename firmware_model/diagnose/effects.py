@@ -12,10 +12,10 @@ base model bit for bit (a test checks each one).
 residual is not smooth in (delay, hold period, play, dead band; ``starts``
 fits from several grid points, for Stribeck friction, whose stick-slip makes
 the cost surface rough);
-``extra_inertia``'s grid starts at 0.0005 kg m**2 because a load on the horn is often a small share
-of the 4-6e-3 the model already has (the shared real recordings' bars add 0.73e-3 and 1.0e-3, 12-17 % of
-a fitted twin's); a grid starting at 0.002 screened them at two to three times their size, worse
-than no effect, so extra_inertia was never fitted there;
+``extra_inertia``'s grid starts at 0.002 kg m**2, about half the model's own: a grid from 0.0005 made
+the real bars (0.73e-3 and 1.0e-3 kg m**2) screenable, but named 3.3e-4 on a clean live recording, whose
+timing a small inertia absorbs; a bar of 12-17 % is not identified from one step anyway (see the
+diagnosis page, "Against a real AX-12A");
 ``fd_step`` is the finite-difference step of the fit (a position unit's worth
 for the quantised ones).  ``tested`` names the parameters whose joint 95 %
 confidence region must exclude the null for the effect to be accepted.
@@ -176,7 +176,7 @@ LIBRARY: dict[str, Effect] = {e.name: e for e in (
         "extra_inertia",
         "More mass on the shaft than the model has (a horn, a wheel, a link): slower to accelerate and brake.",
         "Lag while accelerating, overshoot when braking and settling; cruise speed unchanged.",
-        (Param("extra_inertia_kg_m2", 0.0, -0.002, 0.06, (0.0005, 0.001, 0.002, 0.005, 0.01, 0.02, 0.035), 0.0005,
+        (Param("extra_inertia_kg_m2", 0.0, -0.002, 0.06, (0.002, 0.005, 0.01, 0.02, 0.035), 0.0005,
                (0.004, 0.02)),),
         lambda v, k: {"extra_inertia_kg_m2": _add("extra_inertia_kg_m2", v["extra_inertia_kg_m2"], k)},
         ("extra_inertia_kg_m2",)),
