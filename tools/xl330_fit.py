@@ -19,7 +19,11 @@ not fitted on positions at all.
 
 Usage::
 
-    python tools/xl330_fit.py [--data DIR] [--fit-kp 100] [--max-evaluations 400]
+    python tools/xl330_fit.py [--data DIR] [--fit-kp 100] [--max-evaluations 400] [--plot tools/figures/xl330_fit.png]
+
+``--plot`` writes a figure of the predictions (the logs at the other gains): per log, the measured
+Present Position, the model's and the baseline's closed-loop replays (position fits), each fit's MAE in
+the legend, torque-off stretches shaded (matplotlib, Agg; no display needed).
 
 Exit status 2 with a message if the data folder or its logs at the fitting gain are missing.
 """
@@ -38,6 +42,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from ax12emu.protocol.servo_models import model as servo_model  # noqa: E402
 from firmware_model.diagnose.bam_fit import BASELINE, MODEL, fit, initial_values, physics_from, position_mae  # noqa: E402
 from firmware_model.xseries.bam_log import PendulumLog, read_bam_log  # noqa: E402
+from firmware_model.xseries.bam_replay import replay_positions  # noqa: E402
 from firmware_model.xseries.firmware import XFirmware  # noqa: E402
 from firmware_model.xseries.physics import XPhysics, XPhysicsParams  # noqa: E402
 
@@ -77,11 +82,45 @@ def _row(name: str, base: float, model: float) -> str:
     return f"{name:<40} {1e3 * base:>9.1f} {1e3 * model:>9.1f} {model / base:>7.2f}"
 
 
+def _plot(held: list[PendulumLog], fits: dict, out: Path):
+    """The held-out logs, measured against each fit's replay (``fits``: label to its ``FitResult``); returns the figure."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    styles = {"model": dict(color="tab:blue", lw=1.3), "baseline": dict(color="tab:red", lw=1.0, ls="--")}
+    names = {"model": "model (load-dependent friction)", "baseline": "baseline (Coulomb + viscous)"}
+    fig, axes = plt.subplots(len(held), 1, figsize=(9, 2.7 * len(held)), squeeze=False, sharex=True)
+    for ax, log in zip(axes[:, 0], held):
+        t = log.time_s - log.time_s[0]
+        off = ~log.torque_enable.astype(bool)
+        if off.any():
+            ax.fill_between(t, 0, 1, where=off, color="0.9", transform=ax.get_xaxis_transform(), label="torque off")
+        ax.plot(t, log.goal_position_rad, color="0.6", lw=0.8, ls=":", label="goal")
+        ax.plot(t, log.position_rad, "k", lw=1.6, label="real XL330 (measured)")
+        for label, result in fits.items():
+            replayed = replay_positions(log, result.params, make_firmware, gravity_zero_rad=result.gravity_zero_rad)
+            mae_mrad = 1e3 * float(np.mean(np.abs(replayed - log.position_rad)))
+            ax.plot(t, replayed, **styles[label], label=f"{names[label]}: MAE {mae_mrad:.0f} mrad")
+        ax.set_title(f"{log.trajectory}, kp = {log.kp} (predicted: fitted at another gain)", fontsize=9)
+        ax.set_ylabel("position, rad")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7, loc="best")
+    axes[-1, 0].set_xlabel("s")
+    fig.tight_layout()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=100)
+    plt.close(fig)
+    return fig
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--data", type=Path, default=DEFAULT_DATA, help="folder of BAM XL330 logs")
     parser.add_argument("--fit-kp", type=int, default=100, help="fit on the logs at this Position P Gain")
     parser.add_argument("--max-evaluations", type=int, default=400, help="cap on replays of the fitting set per model")
+    parser.add_argument("--plot", type=Path, default=None, help="write a figure of the predicted logs (needs matplotlib)")
     args = parser.parse_args(argv)
     if not args.data.is_dir():
         print(f"no XL330 logs: {args.data} is not a folder (see ../shared/reference/real-xl330/README.md)", file=sys.stderr)
@@ -132,6 +171,9 @@ def main(argv: list[str] | None = None) -> int:
         values = ", ".join(f"{k} {v:.4g}" for k, v in r.values.items())
         print(f"{label}: {values}; k_t {r.params.torque_constant_nm_a:.4g} N m/A, R {r.params.resistance_ohm:.4g} ohm "
               f"(data sheet); {r.evaluations} evaluations, {results[label]['seconds']:.0f} s")
+    if args.plot is not None:
+        _plot(held, {label: results[label]["result"] for label in ("model", "baseline")}, args.plot)
+        print(f"wrote {args.plot}")
     return 0
 
 
