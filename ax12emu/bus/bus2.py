@@ -42,10 +42,11 @@ each servo measures the silence since the last instruction packet it heard.
 EEPROM areas persist in a :class:`~ax12emu.bus.state_store.StateStore` as on the 1.0 bus (by
 register name, keyed by the ID a servo was launched with).
 
-Faults: the wire's (``bus.faults``, :class:`ax12emu.faults.WireFaults`): a status packet dropped,
+Faults (``bus.faults``, :class:`ax12emu.faults.Faults2`): the wire's, a status packet dropped,
 corrupted or delayed, a servo unplugged (it hears nothing, and a Sync/Bulk Read's chain breaks at
-it).  Not modelled: faults of a servo's own (alarms, a blocked shaft,
-pinned readings), the reply cache, the live view (the Protocol 1.0 bus has them), a servo's busy
+it); a servo's own (an error, a blocked shaft, pinned readings) act inside its firmware model, so
+the bus only shows what the firmware reports.  Not modelled: two servos answering one ID at once
+(replies here are laid one after another, never collided), the reply cache, the live view (the Protocol 1.0 bus has them), a servo's busy
 time after a write to its EEPROM, and the time a rebooting servo is deaf.
 """
 
@@ -135,8 +136,8 @@ class Bus2:
         self.reindex()
         #: How far behind the clock physics may be when a packet is served (see ``Bus.request_lag_s``).
         self.request_lag_s = 0.0
-        #: Injected wire faults (``ax12emu.faults.WireFaults``: replies dropped, corrupted or delayed,
-        #: servos unplugged); None costs one test per packet.
+        #: Injected faults (``ax12emu.faults.Faults2``: replies dropped, corrupted or delayed,
+        #: servos unplugged; the servos' own act in their firmware); None costs one test per packet.
         self.faults: Interceptor | None = None
         self._closed = False
 

@@ -171,9 +171,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 #: Serve options that shape Protocol 1.0 servos only; with --servo each must keep its default.
-#: (--trace and the wire's faults, --drop --corrupt --delay --vanish, serve both.)
+#: (--trace and the faults, --drop --corrupt --delay --vanish --alarm --stall, serve both; --duplicate
+#: not: the Protocol 2.0 bus lays simultaneous answers one after another instead of colliding them.)
 _PROTOCOL1_ONLY = ("web", "monitor", "params", "arm", "model", "controller", "profile",
-                   "broadcast_ping", "reset_reply_id", "goal_torque", "eeprom_busy_ms", "duplicate", "alarm", "stall")
+                   "broadcast_ping", "reset_reply_id", "goal_torque", "eeprom_busy_ms", "duplicate")
 
 
 def _check_servo_spec(parser: argparse.ArgumentParser, args: argparse.Namespace, argv: list[str]) -> None:

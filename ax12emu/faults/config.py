@@ -12,7 +12,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from .injection import Faults, faults_for, parse_alarm_bits
+from .injection import HW_ERROR_NAMES, Faults, faults_for, parse_alarm_bits
 
 if TYPE_CHECKING:
     from ax12emu.bus.bus import Bus
@@ -45,11 +45,21 @@ def _vanish(text: str) -> tuple[int, float | None, float | None]:
     raise ValueError(f"expected ID or ID:EVERY_S:FOR_S, got {text!r}")
 
 
-def _alarm(text: str) -> tuple[int, int]:
+def _alarm(text: str) -> tuple[int, int | str]:
+    """"ID:NAMES": the bits when every name means the same on both protocols, else the names.
+
+    Why not always bits: an X series name (electrical_shock, encoder) is a Hardware Error Status
+    bit whose number is another error on the AX-12 (0x10 its Checksum Error), so it is kept as a
+    name for the bus to refuse or take; a name neither knows is refused here.
+    """
     slot, sep, names = text.partition(":")
     if not sep:
         raise ValueError(f"expected ID:ALARMS (e.g. 1:overload), got {text!r}")
-    return int(slot), parse_alarm_bits(names)
+    try:
+        return int(slot), parse_alarm_bits(names)
+    except ValueError:
+        parse_alarm_bits(names, HW_ERROR_NAMES)  # ValueError naming the X series' names too
+        return int(slot), names.strip().lower()
 
 
 def _ids(text: str) -> tuple[int, ...]:
@@ -75,8 +85,8 @@ class FaultConfig:
     vanish: tuple[tuple[int, float | None, float | None], ...] = ()
     #: (slot, as_id): a servo answering to another's ID.
     duplicate: tuple[tuple[int, int], ...] = ()
-    #: (slot, bits): forced alarm bits.
-    alarm: tuple[tuple[int, int], ...] = ()
+    #: (slot, bits or names): forced alarms (an X-series name such as "electrical_shock" stays a name).
+    alarm: tuple[tuple[int, int | str], ...] = ()
     #: Slots whose shaft is blocked.
     stall: tuple[int, ...] = ()
 
@@ -88,7 +98,8 @@ class FaultConfig:
     def install(self, bus: "Bus | Bus2") -> Faults:
         """Attach a :class:`Faults` with this configuration to ``bus`` and return it.
 
-        On a Protocol 2.0 bus: :class:`~.injection.WireFaults`, which refuses ``alarm`` and ``stall`` with a ValueError.
+        On a Protocol 2.0 bus: :class:`~.injection.Faults2` (its firmware acts out ``alarm``,
+        ``stall`` and ``hold``; ``duplicate`` is refused with a ValueError).
         """
         faults = faults_for(bus, seed=self.seed)
         faults.set_reply_faults(

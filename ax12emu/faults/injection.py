@@ -41,14 +41,12 @@ What a client sees, fault by fault (dynamixel-sdk's names):
 Servos are named by *slot*, the ID they were launched with (``--ids``), so a
 fault stays on the same servo when a client changes its ID.
 
-A Protocol 2.0 bus (:class:`~ax12emu.bus.bus2.Bus2`) takes :class:`WireFaults`: the
-faults of the wire (``drop``, ``corrupt``, ``delay``, ``vanish``), which
-bend packets and presence alike on either protocol (``duplicate`` waits for the
-2.0 wire to collide simultaneous answers).  A corrupt Protocol 2.0 status
-packet has a wrong CRC (its last byte flipped) -> ``COMM_RX_CORRUPT``.  The faults of
-a servo's own (``alarm``, ``stall``, ``hold``) act on the AX-12's alarm bits and its
-model's shaft, which an X-series servo reports otherwise (Hardware Error Status and
-the Alert bit), so they are refused there with the reason.
+A Protocol 2.0 bus (:class:`~ax12emu.bus.bus2.Bus2`) takes :class:`Faults2`: the
+wire's faults (``drop``, ``corrupt``, ``delay``, ``vanish``) as here (a corrupt Protocol 2.0
+status packet has a wrong CRC, its last byte flipped -> ``COMM_RX_CORRUPT``), and the faults of
+a servo's own (``alarm``, ``stall``, ``hold``) acted out by its firmware model, which reports
+them otherwise: Hardware Error Status, the Alert bit, Shutdown latching until REBOOT (see
+:class:`Faults2`).  ``duplicate`` is refused there with the reason.
 """
 
 from __future__ import annotations
@@ -63,13 +61,22 @@ from typing import TYPE_CHECKING
 from ax12emu.protocol.packets import StatusError
 from firmware_model.interface import AngleSettable, Blockable
 from firmware_model.units import RAD_PER_POSITION_UNIT
+from firmware_model.xseries.interface import (
+    HW_ERROR_ELECTRICAL_SHOCK,
+    HW_ERROR_INPUT_VOLTAGE,
+    HW_ERROR_MOTOR_ENCODER,
+    HW_ERROR_OVERHEATING,
+    HW_ERROR_OVERLOAD,
+    XFaultable,
+)
 
 if TYPE_CHECKING:
     from ax12emu.bus import Bus, Reply
     from ax12emu.bus.bus2 import Bus2
+    from ax12emu.servo.servo2 import Servo2
     from ax12emu.servo.virtual_servo import VirtualServo
 
-__all__ = ["Faults", "WireFaults", "ALARM_NAMES", "parse_alarm_bits", "faults_for"]
+__all__ = ["Faults", "Faults2", "ALARM_NAMES", "HW_ERROR_NAMES", "parse_alarm_bits", "faults_for"]
 
 log = logging.getLogger(__name__)
 
@@ -84,17 +91,18 @@ ALARM_NAMES: Mapping[str, int] = {
 _FULL_LOAD = 1023
 
 
-def parse_alarm_bits(text: str) -> int:
-    """"overload,overheating" (or a number) to status-byte bits."""
+def parse_alarm_bits(text: str, names: Mapping[str, int] | None = None) -> int:
+    """"overload,overheating" (or a number) to status-byte bits; ``names``: the table (default :data:`ALARM_NAMES`)."""
+    names = ALARM_NAMES if names is None else names
     bits = 0
     for name in text.replace("+", ",").split(","):
         name = name.strip().lower()
         if name.isdigit() or name.startswith("0x"):
             value = int(name, 0)
-        elif name in ALARM_NAMES:
-            value = ALARM_NAMES[name]
+        elif name in names:
+            value = names[name]
         else:
-            raise ValueError(f"unknown alarm {name!r}; use {', '.join(ALARM_NAMES)} or a number")
+            raise ValueError(f"unknown alarm {name!r}; use {', '.join(names)} or a number")
         if not 0 < value < 0x80:
             raise ValueError(f"alarm bits must be 1..127, got {value}")
         bits |= value
@@ -392,27 +400,135 @@ def _held_alarms(servo: "VirtualServo") -> int:
     return bits
 
 
-class WireFaults(Faults):
-    """The wire's faults alone, for a bus of servos whose own faults this layer cannot raise (Protocol 2.0)."""
+#: Hardware Error Status (70) bits by name (e-manual, X series "Hardware Error Status(70)"); the three
+#: the AX-12 has too (overload, overheating, input voltage) sit at the same bits as its alarms.
+HW_ERROR_NAMES: Mapping[str, int] = {
+    "overload": HW_ERROR_OVERLOAD,
+    "overheating": HW_ERROR_OVERHEATING,
+    "input_voltage": HW_ERROR_INPUT_VOLTAGE,
+    "voltage": HW_ERROR_INPUT_VOLTAGE,
+    "electrical_shock": HW_ERROR_ELECTRICAL_SHOCK,
+    "motor_encoder": HW_ERROR_MOTOR_ENCODER,
+    "encoder": HW_ERROR_MOTOR_ENCODER,
+}
+_HW_ERROR_BITS = HW_ERROR_OVERLOAD | HW_ERROR_OVERHEATING | HW_ERROR_INPUT_VOLTAGE | HW_ERROR_ELECTRICAL_SHOCK | HW_ERROR_MOTOR_ENCODER
 
-    def _own(self, what: str) -> ValueError:
-        return ValueError(f"{what}: not available on a Protocol 2.0 bus yet; its faults are the wire's "
-                          "(drop, corrupt, delay, vanish)")
+
+class Faults2(Faults):
+    """The faults of a Protocol 2.0 bus: the wire's, and the X-series servos' own through their firmware.
+
+    The wire's (``drop``, ``corrupt``, ``delay``, ``vanish``) act as on the AX-12 bus.  A servo's own
+    act inside its firmware model (:class:`firmware_model.xseries.interface.XFaultable`), so the
+    firmware's rules follow, which differ from the AX-12's:
+
+    * ``alarm``: the firmware detects the errors now.  Only those Shutdown(63) selects are detected
+      (e-manual: "when 0x05 is defined as Shutdown, DYNAMIXEL can detect both Input Voltage Error
+      and Overheating Error"), so asking for another is a ValueError.  A detected error latches in
+      Hardware Error Status, sets the Alert bit (0x80) of every status packet and turns the torque
+      off, and only REBOOT clears it: an event, not a lasting condition as on the AX-12.
+      :meth:`clear_alarm` reboots the servo as the REBOOT instruction does.
+    * ``stall``: the shaft is held still while the firmware keeps driving, so Present Velocity
+      reads 0, the current rises to the stall current and the overload protection trips after
+      the firmware's own overload time (Overload, torque off, if Shutdown selects it).
+    * ``hold``: a sensed register pinned as a stuck sensor would pin it; a pinned Present
+      Temperature or Present Input Voltage outside its limits raises the error as a real reading does.
+    * ``duplicate`` is refused: the Protocol 2.0 bus lays the replies to one packet one after
+      another (``Bus2.replies_in_sequence``, for broadcast Ping's slots and Sync Read's chain), so
+      two servos answering at once would reach the client whole, one after the other, instead of
+      AND-ed on the wire as a collision would be.
+    """
+
+    def _servo2(self, slot: int) -> "Servo2":
+        return self.bus.servos[self._index(slot)]  # type: ignore[return-value]
+
+    def _firmware(self, slot: int, what: str) -> XFaultable:
+        firmware = self._servo2(slot).plant.firmware
+        if not isinstance(firmware, XFaultable):
+            raise ValueError(f"{what}: {type(firmware).__name__} (ID {slot}) cannot be made to fail (no XFaultable methods)")
+        return firmware
 
     def force_alarm(self, slot: int, bits: int | str) -> None:
-        raise self._own("alarm")
+        """The servo's firmware detects Hardware Error Status ``bits`` (int or names, e.g. "overload,electrical_shock") now."""
+        value = parse_alarm_bits(bits, HW_ERROR_NAMES) if isinstance(bits, str) else int(bits)
+        if not value or value & ~_HW_ERROR_BITS:
+            raise ValueError(f"Hardware Error Status bits are {', '.join(f'{k} {v:#04x}' for k, v in HW_ERROR_NAMES.items())}; "
+                             f"got {value:#04x}")
+        servo = self._servo2(slot)
+        firmware = self._firmware(slot, "alarm")
+        shutdown = servo.table.get("shutdown")
+        if value & ~shutdown:
+            unselected = [name for name, bit in HW_ERROR_NAMES.items() if bit & value & ~shutdown and name != "voltage"]
+            raise ValueError(f"alarm: ID {slot}'s Shutdown(63) is {shutdown:#04x}, which does not select {', '.join(unselected)}: "
+                             "the firmware detects only the errors Shutdown selects (write Shutdown first)")
+        firmware.raise_error(value)
+        servo.plant.write_back()
+        index = self._index(slot)
+        self._alarms[index] = self._alarms.get(index, 0) | value
 
-    def stall(self, slot: int, *, overload_after_s: float = 1.0) -> None:
-        raise self._own("stall")
+    def clear_alarm(self, slot: int) -> None:
+        """A latched error clears only by REBOOT: the servo reboots, as the REBOOT instruction does."""
+        index = self._index(slot)
+        self._alarms.pop(index, None)
+        self._servo2(slot).reboot()
+
+    def stall(self, slot: int, *, overload_after_s: float | None = None) -> None:
+        """Block the shaft where it is; the overload follows after the firmware's own overload time."""
+        if overload_after_s is not None:
+            raise ValueError("stall: an X-series servo trips on overload after its firmware's overload time "
+                             "(XFirmware.overload_time_s), not a time given here")
+        self._firmware(slot, "stall").set_blocked(True)
+        self._blocked.add(self._index(slot))
+
+    def release(self, slot: int) -> None:
+        """Free the shaft (a latched Overload stays until REBOOT, as on a real servo)."""
+        index = self._index(slot)
+        if index in self._blocked:
+            self._firmware(slot, "stall").set_blocked(False)
+            self._blocked.discard(index)
 
     def hold(self, slot: int, name: str, value: int | None) -> None:
-        raise self._own("hold")
+        """Pin a sensed register (the model's table's name, e.g. present_temperature) at ``value``; None frees it."""
+        from ax12emu.servo.plant2 import SENSED_REGISTERS  # loaded with the Protocol 2.0 bus, not before
+
+        servo = self._servo2(slot)
+        if name not in servo.table.layout.by_name:
+            raise KeyError(f"{servo.spec.name} has no register {name!r}")
+        field = next((field for field, names in SENSED_REGISTERS.items() if name in names), None)
+        if field is None:
+            raise ValueError(f"hold: {name!r} is not a register the firmware senses; those are "
+                             f"{', '.join(n for names in SENSED_REGISTERS.values() for n in names if n in servo.table.layout.by_name)}")
+        self._firmware(slot, "hold").hold_reading(field, value)
+        servo.plant.write_back()
+        index = self._index(slot)
+        held = self._held.setdefault(index, {})
+        if value is None:
+            held.pop(name, None)
+            if not held:
+                del self._held[index]
+        else:
+            held[name] = int(value)
+
+    def clear(self) -> None:
+        """Lift every fault (a servo with a forced alarm reboots: see :meth:`clear_alarm`)."""
+        super().clear()
+        for index in list(self._blocked):
+            self.release(self.bus.slots[index])
 
     def duplicate(self, slot: int, as_id: int) -> None:
-        # The Protocol 2.0 bus lays the replies to one packet one after another (Bus2.replies_in_sequence),
-        # so two servos answering at once would reach the client whole instead of AND-ed on the wire.
-        raise ValueError("duplicate: not available on a Protocol 2.0 bus yet (its wire does not collide "
-                         "simultaneous answers); its faults are drop, corrupt, delay and vanish")
+        raise ValueError("duplicate: not available on a Protocol 2.0 bus (its bus lays the answers to one packet "
+                         "one after another and does not collide them); its faults are drop, corrupt, delay, "
+                         "vanish, alarm, stall and hold")
+
+    def admit(self, servo: "VirtualServo") -> bool:  # type: ignore[override]
+        """Before ``servo`` handles a packet: False if it is unplugged (its other faults live in its firmware)."""
+        vanished = self._vanished.get(servo.index)
+        if vanished is None:
+            return True
+        every_s, for_s = vanished
+        return not (every_s is None or self.bus.clock.now_s() % every_s < for_s)  # type: ignore[operator]
+
+    def after_physics(self) -> None:
+        """Nothing: the firmware itself holds a stalled shaft and pinned readings."""
 
 
 def faults_for(bus: "Bus | Bus2", *, seed: int = 0) -> Faults:
@@ -420,5 +536,5 @@ def faults_for(bus: "Bus | Bus2", *, seed: int = 0) -> Faults:
     # A Bus2 exists only once its module is loaded: the AX-12 bus's users do not pay for importing it.
     bus2 = sys.modules.get("ax12emu.bus.bus2")
     if bus2 is not None and isinstance(bus, bus2.Bus2):
-        return WireFaults(bus, seed=seed)  # type: ignore[arg-type]
+        return Faults2(bus, seed=seed)  # type: ignore[arg-type]
     return Faults(bus, seed=seed)  # type: ignore[arg-type]

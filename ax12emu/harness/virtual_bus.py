@@ -22,9 +22,9 @@ reads it: ``VirtualBus([1, 2], servo="xl430-w250")`` or ``VirtualBus(servo="1-5:
 ``options=Servo2Options(...)`` for the behaviours the e-manual leaves open.
 Each servo then has its model's table, and the register methods take that table's names
 (``bus.read(1, "present_position")``).  What the Protocol 1.0 bus has and this one has not yet
-(a pinned temperature or voltage, the live view, a set angle, the faults of a servo's own: alarm,
-stall) is refused with the reason; the wire's faults work (``bus.faults.set_reply_faults(drop=0.5)``,
-``vanish``: :class:`~ax12emu.faults.injection.WireFaults`).
+(the live view, a set angle, duplicate IDs) is refused with the reason; the faults work
+(:class:`~ax12emu.faults.injection.Faults2`: the wire's, and alarm, stall, hold and pinned
+temperature or voltage acted out by each servo's firmware).
 """
 
 from __future__ import annotations
@@ -391,13 +391,23 @@ class VirtualBus:
         return self.read(servo_id, "present_temperature")
 
     def set_temperature(self, servo_id: int, celsius: float | None) -> None:
-        """Pin Present Temperature (above Temperature Limit: Overheating); None releases it."""
-        self._protocol1_only("set_temperature")
+        """Pin Present Temperature (above Temperature Limit: Overheating); None releases it.
+
+        On an X-series servo the firmware judges the pinned reading: Overheating latches if Shutdown
+        selects it, and stays until REBOOT after the reading is released.
+        """
         self._controls.set_temperature(servo_id, celsius)
 
     def set_voltage(self, servo_id: int, volts: float | None) -> None:
-        """Pin Present Voltage (outside the voltage limits: Input Voltage error); None releases it."""
-        self._protocol1_only("set_voltage")
+        """Pin Present Voltage (outside the voltage limits: Input Voltage error); None releases it.
+
+        On an X-series servo: Present Input Voltage (144), judged by the firmware as
+        :meth:`set_temperature` says.
+        """
+        if isinstance(self.bus, Bus2):
+            tenths = None if volts is None else round(volts * 10)
+            self.call(lambda bus: self._faults(bus).hold(bus.slots[bus.servo(servo_id).index], "present_input_voltage", tenths))
+            return
         self._controls.set_voltage(servo_id, volts)
 
     def set_external_torque(self, servo_id: int, torque_nm: float) -> None:

@@ -166,6 +166,8 @@ class XFirmware:
         self.temperature_c = self.thermal.ambient_c
         self._thermal_capacity_j_k = self.thermal.time_constant_s / self.thermal.thermal_resistance_k_w
         self._cmd = XCommands()
+        #: Sensed registers pinned by a stuck sensor (:meth:`hold_reading`): the world's fault, so a reboot keeps them.
+        self._held_readings: dict[str, int] = {}
         self._reset_firmware()
 
     # ------------------------------------------------------------------ state
@@ -339,7 +341,7 @@ class XFirmware:
             if settles_c <= self._cmd.temperature_limit or not self._cmd.shutdown & HW_ERROR_OVERHEATING:
                 self._relax_temperature(settles_c, n * step_s)
                 self.time_s += n * step_s
-                self._check_voltage()
+                self._check_readings()
                 return
         for _ in range(n):
             self._step_once()
@@ -500,7 +502,7 @@ class XFirmware:
             dt_s * (power_w - (self.temperature_c - thermal.ambient_c) / thermal.thermal_resistance_k_w) / self._thermal_capacity_j_k
         )
         detected = 0
-        if self.temperature_c > self._cmd.temperature_limit:
+        if self._held_readings.get("present_temperature", self.temperature_c) > self._cmd.temperature_limit:
             detected |= HW_ERROR_OVERHEATING
         # Overload: the output held at its limit while the motor draws at least half of what that duty
         # would draw at stall, i.e. a load, not speed, keeps it at the limit.
@@ -513,11 +515,15 @@ class XFirmware:
             self._overload_elapsed_s = 0.0
         if detected:
             self._latch(detected)
-        self._check_voltage()
+        self._check_readings()
 
-    def _check_voltage(self) -> None:
+    def _check_readings(self) -> None:
+        """Input voltage against its limits every step; a pinned temperature too (a real one is checked as it changes)."""
         cmd = self._cmd
-        tenths_v = round(self.physics.supply_v * 10.0)
+        held = self._held_readings
+        if held and held.get("present_temperature", -1e9) > cmd.temperature_limit:
+            self._latch(HW_ERROR_OVERHEATING)
+        tenths_v = held.get("present_input_voltage", round(self.physics.supply_v * 10.0))
         if tenths_v < cmd.min_voltage_limit or tenths_v > cmd.max_voltage_limit:
             self._latch(HW_ERROR_INPUT_VOLTAGE)
 
@@ -551,7 +557,7 @@ class XFirmware:
                 status |= 0x01
             if abs(self._traj_pulses - present) > FOLLOWING_ERROR_PULSES:
                 status |= 0x08
-        return XSensed(
+        sensed = XSensed(
             present_position=_int32(present),
             present_velocity=present_velocity,
             present_current=present_current,
@@ -565,6 +571,9 @@ class XFirmware:
             hardware_error_status=self._hw_error,
             torque_enable=1 if self._torque_on else 0,
         )
+        if self._held_readings:
+            sensed = dataclasses.replace(sensed, **self._held_readings)
+        return sensed
 
     # ------------------------------------------------------------------ instructions and the world
 
@@ -585,6 +594,38 @@ class XFirmware:
         self._profile = None
         self._traj_velocity_pulses_s = 0.0
         self._traj_accel_pulses_s2 = 0.0
+
+    def raise_error(self, bits: int) -> int:
+        """The protections detect the Hardware Error Status ``bits`` now (fault injection); returns those latched.
+
+        As with an error the firmware finds itself, only the bits Shutdown(63) selects are reported
+        and turn the torque off, and only REBOOT clears them.
+        """
+        self._fixed = False
+        latched = bits & self._cmd.shutdown
+        self._latch(bits)
+        return latched
+
+    def set_blocked(self, blocked: bool) -> None:
+        """Hold the output shaft still (or free it): the motor keeps driving into the block, so the
+        current rises to the stall current and the overload protection follows (:meth:`_protect`)."""
+        self._fixed = False
+        self.physics.blocked = bool(blocked)
+
+    def hold_reading(self, name: str, value: int | None) -> None:
+        """Pin a sensed register at ``value`` (register units), as a stuck sensor would; None frees it.
+
+        Present Temperature and Present Input Voltage pinned outside their limits raise Overheating
+        and Input Voltage errors as real readings do (each if Shutdown selects it).
+        """
+        if name not in XSensed.field_names():
+            raise ValueError(f"{name!r} is not a sensed register; the firmware senses {', '.join(XSensed.field_names())}")
+        self._fixed = False
+        if value is None:
+            self._held_readings.pop(name, None)
+        else:
+            self._held_readings[name] = int(value)
+            self._check_readings()
 
     def set_external_torque(self, torque_nm: float) -> None:
         """A torque on the output shaft (N·m, positive = counter-clockwise), passed to the physics."""

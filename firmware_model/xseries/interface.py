@@ -19,7 +19,7 @@ way the firmware does.
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
-from typing import Protocol
+from typing import Protocol, runtime_checkable
 
 __all__ = [
     "HW_ERROR_INPUT_VOLTAGE",
@@ -31,6 +31,7 @@ __all__ = [
     "XCommands",
     "XSensed",
     "XServoModel",
+    "XFaultable",
 ]
 
 #: Hardware Error Status (70) bits (e-manual, X-series "Hardware Error Status").
@@ -149,4 +150,29 @@ class XServoModel(Protocol):
 
     def set_external_torque(self, torque_nm: float) -> None:
         """A torque acting on the output shaft (N·m, positive = counter-clockwise)."""
+        ...
+
+
+@runtime_checkable
+class XFaultable(Protocol):
+    """A model whose servo can be made to fail as a real one does, for fault injection (``ax12emu.faults``).
+
+    Each acts inside the firmware, so what follows is the firmware's own doing: an error it detects
+    latches in Hardware Error Status and turns the torque off only as Shutdown(63) selects, and
+    REBOOT clears it; a blocked shaft draws stall current until the overload protection trips.
+    """
+
+    def raise_error(self, bits: int) -> int:
+        """The firmware detects the Hardware Error Status ``bits`` now; returns those it latched (Shutdown's)."""
+        ...
+
+    def set_blocked(self, blocked: bool) -> None:
+        """Hold the output shaft still (an obstacle, a hand) while the motor keeps driving, or free it."""
+        ...
+
+    def hold_reading(self, name: str, value: int | None) -> None:
+        """Pin a sensed register (an :class:`XSensed` field, register units) as a stuck sensor would; None frees it.
+
+        The firmware's protections judge the pinned temperature and input voltage as they judge real ones.
+        """
         ...

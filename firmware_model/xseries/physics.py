@@ -240,6 +240,8 @@ class XPhysics:
         self._load_inertia_kg_m2 = 0.0
         self._gravity_nm = 0.0
         self._gravity_zero_rad = 0.0
+        #: The output shaft is held still (an obstacle, a hand): the motor drives into it at zero speed.
+        self.blocked = False
 
     def set_external_torque(self, torque_nm: float) -> None:
         """A torque acting on the output shaft, N m, positive counter-clockwise; stays until changed."""
@@ -309,6 +311,8 @@ class XPhysics:
         elif free < -slip:
             w_new = free + slip
         else:
+            w_new = 0.0
+        if self.blocked:
             w_new = 0.0
         self.velocity_rad_s = w_new
         self.angle_rad += w_new * dt_s

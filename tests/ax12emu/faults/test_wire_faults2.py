@@ -1,8 +1,8 @@
-"""The wire's faults on a Protocol 2.0 bus (WireFaults): what unmodified dynamixel-sdk PacketHandler(2.0) sees.
+"""The wire's faults on a Protocol 2.0 bus (Faults2): what unmodified dynamixel-sdk PacketHandler(2.0) sees.
 
 A client sees COMM_RX_TIMEOUT for a dropped status or an unplugged servo, COMM_RX_CORRUPT for a
-wrong CRC, and a late reply after its timeout; the faults of a servo's own (alarm, stall, hold) and
-duplicate IDs are refused with the reason.
+wrong CRC, and a late reply after its timeout; duplicate IDs are refused with the reason (the
+faults of a servo's own are test_faults2.py's).
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from emu_testkit import UrlPortHandler, ok
 
 import ax12emu  # noqa: F401  (registers the URL handler)
 from ax12emu import FaultConfig, VirtualBus
-from ax12emu.faults import WireFaults
+from ax12emu.faults import Faults2
 from ax12emu.protocol.packets2 import Instruction2, encode_instruction2
 
 BAUD = 57600
@@ -41,7 +41,7 @@ def xl430():
 def test_dropped_replies_time_out_but_the_write_is_done(xl430):
     bus, port, ph = xl430
     bus.faults.set_reply_faults(drop=1.0, ids=[2])
-    assert isinstance(bus.call(lambda b: b.faults), WireFaults)
+    assert isinstance(bus.call(lambda b: b.faults), Faults2)
     assert ph.write1ByteTxRx(port, 2, LED, 1)[0] == COMM_RX_TIMEOUT
     assert bus.read(2, "led") == 1
     assert ok(ph.ping(port, 1)) == XL430  # another ID untouched
@@ -101,12 +101,10 @@ def test_the_same_seed_drops_the_same_replies():
     assert first == run() and 0 in first and 14 in first
 
 
-def test_faults_of_a_servo_own_and_duplicates_are_refused_by_name():
-    with pytest.raises(ValueError, match="alarm: not available on a Protocol 2.0 bus"):
-        VirtualBus([1], servo="xl430-w250", transport="inprocess", faults=FaultConfig(alarm=((1, 0x20),)))
+def test_duplicates_and_unknown_slots_are_refused_by_name():
+    with pytest.raises(ValueError, match="duplicate: not available on a Protocol 2.0 bus"):
+        VirtualBus([1, 2], servo="xl430-w250", transport="inprocess", faults=FaultConfig(duplicate=((2, 1),)))
     with VirtualBus([1, 2], servo="xl430-w250", transport="inprocess") as bus:
-        with pytest.raises(ValueError, match="stall: not available on a Protocol 2.0 bus"):
-            bus.faults.stall(1)
         with pytest.raises(ValueError, match="duplicate: not available on a Protocol 2.0 bus"):
             bus.faults.duplicate(2, 1)
         with pytest.raises(ValueError, match="no servo launched as ID 5"):

@@ -1,0 +1,168 @@
+"""The faults of an X-series servo's own on a Protocol 2.0 bus (Faults2), as dynamixel-sdk PacketHandler(2.0) sees them.
+
+Each acts inside the firmware model, so the e-manual's rules follow: an error is detected only if
+Shutdown(63) selects it, latches in Hardware Error Status with the Alert bit (0x80) in every status
+packet and the torque off, and only REBOOT clears it; a blocked shaft trips Overload after the
+firmware's overload time.  All in virtual time.
+"""
+
+from __future__ import annotations
+
+import pytest
+import serial
+from dynamixel_sdk import COMM_SUCCESS, PacketHandler
+from emu_testkit import UrlPortHandler
+
+import ax12emu  # noqa: F401  (registers the URL handler)
+from ax12emu import FaultConfig, VirtualBus
+from ax12emu.faults.config import _alarm
+from ax12emu.protocol.packets2 import Instruction2, encode_instruction2
+
+BAUD = 57600
+ALERT = 0x80
+TORQUE_ENABLE, HARDWARE_ERROR, GOAL_POSITION, PRESENT_POSITION = 64, 70, 116, 132
+SHUTDOWN = 63
+
+
+@pytest.fixture
+def xl430():
+    with VirtualBus([1, 2], servo="xl430-w250", transport="inprocess", virtual_time=True) as bus:
+        port = UrlPortHandler(bus.port)
+        assert port.openPort() and port.setBaudRate(BAUD)
+        try:
+            yield bus, port, PacketHandler(2.0)
+        finally:
+            port.closePort()
+
+
+def test_a_forced_error_latches_with_the_alert_bit_until_reboot(xl430):
+    bus, port, ph = xl430
+    assert ph.write1ByteTxRx(port, 1, TORQUE_ENABLE, 1) == (COMM_SUCCESS, 0)
+    bus.faults.force_alarm(1, "overheating,electrical_shock")
+    value, comm, error = ph.read1ByteTxRx(port, 1, HARDWARE_ERROR)
+    assert (value, comm, error) == (0x14, COMM_SUCCESS, ALERT)
+    assert ph.ping(port, 1)[2] == ALERT and ph.ping(port, 2)[2] == 0  # every packet of that servo, no other
+    assert bus.read(1, "torque_enable") == 0  # Shutdown turned it off
+    ph.write1ByteTxRx(port, 1, TORQUE_ENABLE, 1)
+    bus.step(0.01)
+    assert bus.read(1, "torque_enable") == 0  # only REBOOT lets it on again
+    assert bus.faults.active(1) == ["alarm 0x14"]
+    ph.reboot(port, 1)
+    assert ph.read1ByteTxRx(port, 1, HARDWARE_ERROR) == (0, COMM_SUCCESS, 0)
+    assert ph.write1ByteTxRx(port, 1, TORQUE_ENABLE, 1) == (COMM_SUCCESS, 0)
+    bus.step(0.01)
+    assert bus.read(1, "torque_enable") == 1
+
+
+def test_an_error_shutdown_does_not_select_is_refused_until_selected(xl430):
+    bus, port, ph = xl430
+    with pytest.raises(ValueError, match=r"Shutdown\(63\) is 0x34, which does not select input_voltage"):
+        bus.faults.force_alarm(1, "input_voltage")
+    assert ph.read1ByteTxRx(port, 1, HARDWARE_ERROR) == (0, COMM_SUCCESS, 0)
+    assert ph.write1ByteTxRx(port, 1, SHUTDOWN, 0x35) == (COMM_SUCCESS, 0)
+    bus.faults.force_alarm(1, 0x01)
+    assert ph.read1ByteTxRx(port, 1, HARDWARE_ERROR) == (0x01, COMM_SUCCESS, ALERT)
+    with pytest.raises(ValueError, match="Hardware Error Status bits"):
+        bus.faults.force_alarm(1, 0x02)  # no such bit on the X series
+
+
+def test_clear_alarm_reboots_the_servo(xl430):
+    bus, port, ph = xl430
+    bus.faults.force_alarm(2, "overload")
+    assert ph.ping(port, 2)[2] == ALERT
+    bus.faults.clear_alarm(2)
+    assert ph.ping(port, 2)[2] == 0 and bus.faults.active(2) == []
+
+
+def test_a_blocked_shaft_trips_overload_after_the_firmware_overload_time(xl430):
+    bus, port, ph = xl430
+    start = ph.read4ByteTxRx(port, 1, PRESENT_POSITION)[0]
+    for servo_id in (1, 2):
+        ph.write1ByteTxRx(port, servo_id, TORQUE_ENABLE, 1)
+    bus.faults.stall(1)
+    for servo_id in (1, 2):
+        ph.write4ByteTxRx(port, servo_id, GOAL_POSITION, start + 1000)
+    bus.step(0.5)
+    assert ph.read4ByteTxRx(port, 1, PRESENT_POSITION)[0] == start
+    assert bus.read(1, "present_velocity") == 0
+    assert bus.read(1, "present_load") > 900  # 0.1 % of the stall current: the motor drives into the block
+    assert bus.read(1, "moving_status") & 0x08  # following error: the trajectory went on without the shaft
+    assert bus.read(1, "hardware_error_status") == 0
+    assert abs(ph.read4ByteTxRx(port, 2, PRESENT_POSITION)[0] - (start + 1000)) < 20  # the free one got there
+    bus.step(0.4)
+    assert bus.read(1, "hardware_error_status") == 0  # not yet: 0.9 s of the firmware's 1 s
+    bus.step(0.3)
+    assert ph.read1ByteTxRx(port, 1, HARDWARE_ERROR) == (0x20, COMM_SUCCESS, ALERT)
+    assert bus.read(1, "torque_enable") == 0 and bus.read(1, "present_load") == 0
+    assert bus.faults.active(1) == ["stalled"]
+    bus.faults.release(1)
+    assert ph.read1ByteTxRx(port, 1, HARDWARE_ERROR)[0] == 0x20  # freed, but latched until REBOOT
+    ph.reboot(port, 1)
+    ph.write1ByteTxRx(port, 1, TORQUE_ENABLE, 1)
+    ph.write4ByteTxRx(port, 1, GOAL_POSITION, start + 1000)
+    bus.step(1.0)
+    assert abs(ph.read4ByteTxRx(port, 1, PRESENT_POSITION)[0] - (start + 1000)) < 20
+
+
+def test_stall_takes_no_overload_time_of_its_own(xl430):
+    bus, _, _ = xl430
+    with pytest.raises(ValueError, match="overload time"):
+        bus.faults.stall(1, overload_after_s=0.5)
+
+
+def test_a_pinned_temperature_is_judged_by_the_firmware(xl430):
+    bus, port, ph = xl430
+    bus.set_temperature(1, 70)  # below Temperature Limit (72 on the XL430)
+    assert ph.read1ByteTxRx(port, 1, 146) == (70, COMM_SUCCESS, 0)
+    bus.step(1.0)
+    assert bus.read(1, "present_temperature") == 70  # held against the thermal model
+    bus.set_temperature(1, 90)
+    assert ph.read1ByteTxRx(port, 1, 146) == (90, COMM_SUCCESS, ALERT)
+    assert bus.read(1, "hardware_error_status") == 0x04
+    bus.set_temperature(1, None)
+    bus.step(0.01)
+    assert bus.read(1, "present_temperature") < 40 and bus.read(1, "hardware_error_status") == 0x04
+    assert bus.faults.active(1) == []
+
+
+def test_a_pinned_voltage_raises_input_voltage_only_where_shutdown_selects_it(xl430):
+    bus, port, ph = xl430
+    bus.set_voltage(1, 5.0)
+    assert ph.read2ByteTxRx(port, 1, 144) == (50, COMM_SUCCESS, 0)  # Shutdown 0x34: not detected
+    ph.write1ByteTxRx(port, 1, SHUTDOWN, 0x35)
+    bus.step(0.01)
+    assert ph.read2ByteTxRx(port, 1, 144) == (50, COMM_SUCCESS, ALERT)
+    assert bus.read(1, "hardware_error_status") == 0x01
+
+
+def test_hold_pins_sensed_registers_only(xl430):
+    bus, _, _ = xl430
+    bus.faults.hold(2, "present_position", 100)
+    bus.step(0.1)
+    assert bus.read(2, "present_position") == 100
+    bus.faults.hold(2, "present_position", None)
+    assert bus.read(2, "present_position") != 100
+    with pytest.raises(ValueError, match="not a register the firmware senses"):
+        bus.faults.hold(2, "goal_position", 5)
+    with pytest.raises(KeyError, match="no register 'present_voltage'"):
+        bus.faults.hold(2, "present_voltage", 5)
+
+
+def test_the_same_faults_from_a_config_and_a_url():
+    config = FaultConfig.from_options({"alarm": ["1:electrical_shock"], "stall": ["2"]})
+    assert config.alarm == ((1, "electrical_shock"),)
+    with VirtualBus([1, 2], servo="xl430-w250", transport="inprocess", virtual_time=True, faults=config) as bus:
+        assert bus.read(1, "hardware_error_status") == 0x10
+        assert bus.faults.active(2) == ["stalled"]
+    with serial.serial_for_url("ax12emu://?servo=xl430-w250&alarm=1:overload&virtual_time=1", baudrate=BAUD, timeout=0.5) as link:
+        link.write(encode_instruction2(1, Instruction2.PING))
+        status = link.read(14)
+        assert len(status) == 14 and status[8] == ALERT  # the ERROR field of the status packet
+
+
+def test_an_x_series_alarm_name_is_refused_on_the_ax12_bus():
+    assert _alarm("1:overload") == (1, 0x20)  # one meaning on both protocols: bits
+    with pytest.raises(ValueError, match="unknown alarm 'electrical_shock'"):
+        VirtualBus([1], transport="inprocess", faults=FaultConfig(alarm=((1, "electrical_shock"),)))
+    with pytest.raises(ValueError, match="unknown alarm 'hot'"):
+        _alarm("1:hot")
