@@ -9,7 +9,8 @@ works out case by case (a stuffed 2.0 packet can hold a 1.0 header that makes th
 for bytes until their silence timeout; a 1.0 packet is never a 2.0 header).
 
 IDs are per protocol: a 1.0 packet to ID 1 reaches the 1.0 servo with ID 1 and no 2.0 servo, so
-both may have ID 1.  Both buses keep one clock.  The 1.0 bus's reply cache is bypassed (a cached
+both may have ID 1; :meth:`MixedBus.servo` therefore takes the protocol, and refuses an ID both
+protocols have without it.  Both buses keep one clock.  The 1.0 bus's reply cache is bypassed (a cached
 answer would skip the 2.0 framer's view of the bytes); faults and the live view are the 1.0
 bus's alone and not offered here.
 """
@@ -17,12 +18,16 @@ bus's alone and not offered here.
 from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
+from typing import Any
 
 from .bus import Bus
 from .bus2 import Bus2
 from .reply import Reply
 
-__all__ = ["MixedBus"]
+__all__ = ["MixedBus", "PROTOCOLS"]
+
+#: The protocols of a mixed wire, as ``protocol=`` names them.
+PROTOCOLS = (1.0, 2.0)
 
 
 class _Framers:
@@ -57,6 +62,44 @@ class MixedBus:
     @property
     def servos(self) -> list:
         return [*self.bus1.servos, *self.bus2.servos]
+
+    @property
+    def slots(self) -> list[int]:
+        """The IDs the servos were launched with, 1.0's then 2.0's (an ID may appear once per protocol)."""
+        return [*self.bus1.slots, *self.bus2.slots]
+
+    def bus_of(self, protocol: float) -> Bus | Bus2:
+        """The bus of one protocol (1.0 or 2.0); ValueError for another."""
+        if protocol not in PROTOCOLS:
+            raise ValueError(f"protocol must be 1.0 or 2.0, got {protocol!r}")
+        return self.bus1 if protocol == 1.0 else self.bus2
+
+    def servo(self, servo_id: int, protocol: float | None = None) -> Any:
+        """The servo answering to ``servo_id`` on ``protocol`` now; without it, the only one with that ID.
+
+        KeyError if no servo has the ID (on that protocol), ValueError if both protocols have it and
+        ``protocol`` is not given.
+        """
+        if protocol is not None:
+            return self.bus_of(protocol).servo(servo_id)
+        found = []
+        for bus in (self.bus1, self.bus2):
+            try:
+                found.append(bus.servo(servo_id))
+            except KeyError:
+                pass
+        if not found:
+            raise KeyError(f"no servo with ID {servo_id} on this wire (Protocol 1.0 IDs now: {sorted(self.bus1.ids)}, "
+                           f"Protocol 2.0: {sorted(self.bus2.ids)})")
+        if len(found) > 1:
+            raise ValueError(f"ID {servo_id} answers on both protocols of this wire (an AX-12A on 1.0, "
+                             f"{found[1].spec.name} on 2.0): give protocol=1.0 or protocol=2.0")
+        return found[0]
+
+    def reindex(self) -> None:
+        """Look servos up by the IDs in their tables again, on both buses."""
+        self.bus1.reindex()
+        self.bus2.reindex()
 
     @property
     def ids(self) -> list[int]:

@@ -19,7 +19,10 @@ Servos are addressed by their present ID in the state methods, and by their
 
 ``servo=`` serves Protocol 2.0 servos instead (the X series), read as ``ax12emu serve --servo``
 reads it: ``VirtualBus([1, 2], servo="xl430-w250")`` or ``VirtualBus(servo="1-5:xm430-w350,6:xl330-m077")``,
-``options=Servo2Options(...)`` for the behaviours the e-manual leaves open.
+``options=Servo2Options(...)`` for the behaviours the e-manual leaves open.  AX-12As in the text
+(``servo="1-2:ax-12a,3-6:xl430-w250"``) share the wire on Protocol 1.0; IDs are per protocol there,
+so an ID both protocols have needs ``protocol=1.0`` or ``2.0`` in the state methods (a ValueError
+says so), and ``bus.faults`` is not offered on such a wire yet.
 Each servo then has its model's table, and the register methods take that table's names
 (``bus.read(1, "present_position")``).  What the Protocol 1.0 bus has and this one has not yet
 (the live view, a set angle, duplicate IDs) is refused with the reason; the faults work
@@ -39,6 +42,7 @@ from typing import Any
 from ax12emu.bus.bus import Bus
 from ax12emu.bus.bus2 import Bus2
 from ax12emu.bus.clock import VirtualClock, WallClock
+from ax12emu.bus.mixed import MixedBus
 from ax12emu.faults.config import FaultConfig
 from ax12emu.faults.injection import Faults
 from ax12emu.live.controls import ServedControls
@@ -50,7 +54,7 @@ from firmware_model.interface import AngleSettable, ServoModel
 from firmware_model.params import ServoParams
 
 from .inprocess import InProcessLink, register, unregister
-from .servos2 import build_bus2, servo_list
+from .servos2 import build_wire, servo_list
 
 __all__ = ["VirtualBus", "TRANSPORTS"]
 
@@ -85,9 +89,25 @@ def _web_address(web: str | tuple[str, int] | bool | None) -> tuple[str, int] | 
     return (str(host), int(port))
 
 
-def _servo_with(bus: Bus | Bus2, servo_id: int, name: str):
+def _lookup(bus: Bus | Bus2 | MixedBus, servo_id: int, protocol: float | None):
+    """The servo answering to ``servo_id`` (on ``protocol``, which a bus of one protocol checks)."""
+    if isinstance(bus, MixedBus):
+        return bus.servo(servo_id, protocol)
+    if protocol is not None and protocol != (2.0 if isinstance(bus, Bus2) else 1.0):
+        raise ValueError(f"protocol={protocol}: this bus's servos all speak Protocol {2.0 if isinstance(bus, Bus2) else 1.0}")
+    return bus.servo(servo_id)
+
+
+def _sub_bus(bus: Bus | Bus2 | MixedBus, servo) -> Bus | Bus2:
+    """The bus of the servo's own protocol (on a mixed wire, one of its two)."""
+    if isinstance(bus, MixedBus):
+        return bus.bus2 if isinstance(servo, Servo2) else bus.bus1
+    return bus
+
+
+def _servo_with(bus: Bus | Bus2 | MixedBus, servo_id: int, name: str, protocol: float | None = None):
     """The servo answering to ``servo_id``; KeyError naming the register its model's table lacks."""
-    servo = bus.servo(servo_id)
+    servo = _lookup(bus, servo_id, protocol)
     if name not in servo.table.layout.by_name:
         model = servo.spec.name if isinstance(servo, Servo2) else f"the {servo.table.layout.profile.name} table"
         raise KeyError(f"{model} has no register {name!r} (ID {servo_id}); table(ID) lists its registers")
@@ -139,7 +159,7 @@ class VirtualBus:
         self.transport_name = transport
         self.virtual_time = virtual_time
         clock = VirtualClock() if virtual_time else WallClock(time_scale)
-        self.bus: Bus | Bus2
+        self.bus: Bus | Bus2 | MixedBus
         if servo is not None:
             refused = [name for name, given in (
                 ("options", not isinstance(options, Servo2Options) and options != ServoOptions()),
@@ -149,7 +169,10 @@ class VirtualBus:
             if refused:
                 raise ValueError(f"{', '.join(refused)}: not available with servo= (the Protocol 2.0 bus has no such option yet)")
             options2 = options if isinstance(options, Servo2Options) else Servo2Options()
-            self.bus = build_bus2(servo, None if ids is None else list(ids), clock=clock, baud_bps=baud_bps, options=options2)
+            self.bus = build_wire(servo, None if ids is None else list(ids), clock=clock, baud_bps=baud_bps, options=options2)
+            if isinstance(self.bus, MixedBus) and faults is not None and faults.active:
+                raise ValueError("faults: not available on a wire mixing AX-12As and X-series servos yet "
+                                 "(faults name servos by launch ID, which both protocols may share)")
         else:
             if isinstance(options, Servo2Options):
                 raise ValueError("Servo2Options apply with servo= (Protocol 2.0 servos); the AX-12A bus takes ServoOptions")
@@ -181,7 +204,11 @@ class VirtualBus:
         self._link: InProcessLink | None = None
         self._thread: threading.Thread | None = None
         #: The control methods shared with the live view of ``ax12emu serve`` (one body for both).
-        self._controls = ServedControls(self.call, servos=len(self.bus.slots), seed=seed)
+        if isinstance(self.bus, MixedBus):  # the AX-12As' controls act on their own bus
+            self._controls = ServedControls(lambda fn: self.call(lambda bus: fn(bus.bus1)),
+                                            servos=len(self.bus.bus1.slots), seed=seed)
+        else:
+            self._controls = ServedControls(self.call, servos=len(self.bus.slots), seed=seed)
         self._closed = False
         self._started = False
 
@@ -218,7 +245,7 @@ class VirtualBus:
         return self
 
     def _open_trace(self, path: str) -> TraceWriter:
-        if isinstance(self.bus, Bus2):
+        if isinstance(self.bus, (Bus2, MixedBus)):
             return TraceWriter(path, servos=servo_list(self.bus))
         return TraceWriter(path, profile=self.bus.options.profile)
 
@@ -300,11 +327,14 @@ class VirtualBus:
         return fn(self.bus)
 
     def _faults(self, bus: Bus) -> Faults:
+        if isinstance(bus, MixedBus):
+            raise NotImplementedError("bus.faults: not available on a wire mixing AX-12As and X-series servos yet "
+                                      "(faults name servos by launch ID, which both protocols may share)")
         return self._controls.faults_of(bus)
 
     def _protocol1_only(self, what: str) -> None:
         """A clear refusal of what the Protocol 2.0 bus does not offer yet."""
-        if isinstance(self.bus, Bus2):
+        if isinstance(self.bus, (Bus2, MixedBus)):
             raise NotImplementedError(f"{what}: not available on a Protocol 2.0 bus (servo=) yet")
 
     @property
@@ -331,15 +361,18 @@ class VirtualBus:
         return self.bus.clock.now_s()
 
     # -- servo state ---------------------------------------------------------------------------
-    def read(self, servo_id: int, name: str) -> int:
-        """A register by name (the servo model's table's names), as a client would read it now."""
-        return self.call(lambda bus: _servo_with(bus, servo_id, name).table.get(name))
+    def read(self, servo_id: int, name: str, *, protocol: float | None = None) -> int:
+        """A register by name (the servo model's table's names), as a client would read it now.
 
-    def write(self, servo_id: int, name: str, value: int) -> None:
+        ``protocol``: 1.0 or 2.0, needed on a mixed wire for an ID both protocols have.
+        """
+        return self.call(lambda bus: _servo_with(bus, servo_id, name, protocol).table.get(name))
+
+    def write(self, servo_id: int, name: str, value: int, *, protocol: float | None = None) -> None:
         """Set a register as the firmware would (no access or range check); an ``id`` write moves the servo."""
 
         def _write(bus: Bus) -> None:
-            servo = _servo_with(bus, servo_id, name)
+            servo = _servo_with(bus, servo_id, name, protocol)
             servo.table.set(name, value)  # a 1.0 plant hears of it (ControlTable.on_set)
             if isinstance(servo, Servo2):  # a 2.0 firmware takes its commands when told
                 servo.plant.command(goal_written=name in GOAL_REGISTERS)
@@ -348,11 +381,16 @@ class VirtualBus:
 
         self.call(_write)
 
-    def table(self, servo_id: int) -> dict[str, int]:
+    def table(self, servo_id: int, *, protocol: float | None = None) -> dict[str, int]:
         """Every register by name."""
-        return self.call(lambda bus: {e.name: bus.servo(servo_id).table.get(e.name) for e in bus.servo(servo_id).table.layout.entries})
 
-    def angle_deg(self, servo_id: int) -> float:
+        def _table(bus: Bus) -> dict[str, int]:
+            table = _lookup(bus, servo_id, protocol).table
+            return {e.name: table.get(e.name) for e in table.layout.entries}
+
+        return self.call(_table)
+
+    def angle_deg(self, servo_id: int, *, protocol: float | None = None) -> float:
         """The simulated shaft angle in degrees from the CW end (0..300 over positions 0..1023).
 
         On a Protocol 2.0 servo: the output shaft's angle as its physics counts it (turns included;
@@ -360,13 +398,14 @@ class VirtualBus:
         """
 
         def _angle(bus: Bus) -> float:
-            if isinstance(bus, Bus2):
-                firmware = bus.servo(servo_id).plant.firmware
+            servo = _lookup(bus, servo_id, protocol)
+            if isinstance(servo, Servo2):
+                firmware = servo.plant.firmware
                 physics = getattr(firmware, "physics", None)
                 if physics is None:
                     raise NotImplementedError(f"{type(firmware).__name__} does not show its shaft angle (no physics)")
                 return float(physics.angle_rad) * _DEG_PER_RAD
-            return float(bus.model.angle_rad[bus.servo(servo_id).index]) * _DEG_PER_RAD
+            return float(_sub_bus(bus, servo).model.angle_rad[servo.index]) * _DEG_PER_RAD
 
         return self.call(_angle)
 
@@ -386,33 +425,48 @@ class VirtualBus:
 
         self.call(_set)
 
-    def temperature_c(self, servo_id: int) -> int:
+    def temperature_c(self, servo_id: int, *, protocol: float | None = None) -> int:
         """Present Temperature, degrees C."""
-        return self.read(servo_id, "present_temperature")
+        return self.read(servo_id, "present_temperature", protocol=protocol)
 
-    def set_temperature(self, servo_id: int, celsius: float | None) -> None:
+    def _hold(self, servo_id: int, protocol: float | None, names: tuple[str, str], value: int | None) -> None:
+        """Pin a reading through the faults of the servo's own bus: ``names`` is (AX-12 register, X-series register)."""
+
+        def _pin(bus: Bus) -> None:
+            servo = _lookup(bus, servo_id, protocol)
+            sub = _sub_bus(bus, servo)
+            name = names[1] if isinstance(servo, Servo2) else names[0]
+            self._controls.faults_of(sub).hold(sub.slots[servo.index], name, value)
+
+        self.call(_pin)
+
+    def set_temperature(self, servo_id: int, celsius: float | None, *, protocol: float | None = None) -> None:
         """Pin Present Temperature (above Temperature Limit: Overheating); None releases it.
 
         On an X-series servo the firmware judges the pinned reading: Overheating latches if Shutdown
         selects it, and stays until REBOOT after the reading is released.
         """
-        self._controls.set_temperature(servo_id, celsius)
+        value = None if celsius is None else round(celsius)
+        self._hold(servo_id, protocol, ("present_temperature", "present_temperature"), value)
 
-    def set_voltage(self, servo_id: int, volts: float | None) -> None:
+    def set_voltage(self, servo_id: int, volts: float | None, *, protocol: float | None = None) -> None:
         """Pin Present Voltage (outside the voltage limits: Input Voltage error); None releases it.
 
         On an X-series servo: Present Input Voltage (144), judged by the firmware as
         :meth:`set_temperature` says.
         """
-        if isinstance(self.bus, Bus2):
-            tenths = None if volts is None else round(volts * 10)
-            self.call(lambda bus: self._faults(bus).hold(bus.slots[bus.servo(servo_id).index], "present_input_voltage", tenths))
-            return
-        self._controls.set_voltage(servo_id, volts)
+        value = None if volts is None else round(volts * 10)
+        self._hold(servo_id, protocol, ("present_voltage", "present_input_voltage"), value)
 
-    def set_external_torque(self, servo_id: int, torque_nm: float) -> None:
+    def set_external_torque(self, servo_id: int, torque_nm: float, *, protocol: float | None = None) -> None:
         """A torque on the output shaft (N m, positive CCW), through the model's ``set_external_torque``."""
-        if isinstance(self.bus, Bus2):
-            self.call(lambda bus: bus.servo(servo_id).plant.firmware.set_external_torque(torque_nm))
-            return
-        self._controls.set_external_torque(servo_id, torque_nm)
+
+        def _x_series(bus: Bus) -> bool:
+            servo = _lookup(bus, servo_id, protocol)
+            if isinstance(servo, Servo2):
+                servo.plant.firmware.set_external_torque(torque_nm)
+                return True
+            return False
+
+        if not self.call(_x_series):
+            self._controls.set_external_torque(servo_id, torque_nm)

@@ -20,7 +20,8 @@
 #                     fault injection, as the serve flags (see ax12emu.faults.injection)
 #   servo=SPEC        Protocol 2.0 servos instead of AX-12As, as `ax12emu serve --servo` takes them:
 #                     MODEL for every ID of ids= (default 1), or IDS:MODEL,... alone
-#                     (e.g. servo=xl430-w250&ids=1-6, servo=1-5:xm430-w350,6:xl330-m077)
+#                     (e.g. servo=xl430-w250&ids=1-6, servo=1-5:xm430-w350,6:xl330-m077);
+#                     AX-12As among them share the wire on Protocol 1.0 (servo=1-2:ax-12a,3-6:xl430-w250)
 #   baud=BPS          with servo=: every servo starts at this bit rate (default: each model's factory
 #                     rate, 57600 on the X series); the port must be opened at the same rate
 #                     With servo=, the faults apply but duplicate (the 2.0 bus does not collide answers);
@@ -45,9 +46,10 @@ from serial.serialutil import PortNotOpenError, SerialBase, SerialException, to_
 from ax12emu.bus import Bus
 from ax12emu.bus.bus2 import Bus2
 from ax12emu.bus.clock import VirtualClock, WallClock
+from ax12emu.bus.mixed import MixedBus
 from ax12emu.faults.config import FAULT_OPTIONS, FaultConfig
 from ax12emu.harness.inprocess import InProcessLink, LinkBusy, lookup
-from ax12emu.harness.servos2 import build_bus2, servo_list
+from ax12emu.harness.servos2 import build_wire, servo_list
 from ax12emu.protocol.ids import parse_ids
 from ax12emu.servo.model_factory import ModelChoice, build_model
 from ax12emu.servo.virtual_servo import ServoOptions
@@ -193,7 +195,9 @@ class Serial(SerialBase):
             except ValueError:
                 raise ValueError(f"baud must be a bit rate, got {baud_text!r}") from None
             faults = FaultConfig.from_options({name: texts for name, texts in options.items() if name in FAULT_OPTIONS})
-            bus = build_bus2(spec, ids, clock=VirtualClock() if virtual == "1" else WallClock(), baud_bps=baud_bps)
+            bus = build_wire(spec, ids, clock=VirtualClock() if virtual == "1" else WallClock(), baud_bps=baud_bps)
+            if faults.active and isinstance(bus, MixedBus):
+                raise ValueError("fault options apply to a wire of Protocol 2.0 servos alone, not beside AX-12As yet")
             if faults.active:
                 faults.install(bus)
         except ValueError as exc:
@@ -203,7 +207,7 @@ class Serial(SerialBase):
         trace = TraceWriter(trace_path, servos=servos) if trace_path else None
         self._private = (bus, trace)
         if self.logger:
-            self.logger.info("private Protocol 2.0 bus: %s", servos)
+            self.logger.info("private Protocol 2.0 bus: %s%s", servos, " beside AX-12As" if isinstance(bus, MixedBus) else "")
         return InProcessLink(bus, trace=trace)
 
     def _reconfigure_port(self) -> None:
