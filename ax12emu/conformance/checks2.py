@@ -1232,6 +1232,10 @@ def _profile_body(ctx: Context2, servo: int, time_based: bool) -> str:
         peak_units = PROFILE_TRAVEL_PULSES / (t3_ms - t1_ms) * 60_000.0 / (RPM_PER_UNIT * PULSES_PER_REV)
     else:
         velocity = round(SPEED_FRACTION * _lowest_rating(found).no_load_speed_rpm / RPM_PER_UNIT)
+        # A trapezoid, not a triangle, needs the deceleration to start after the acceleration ends: t2 >= t1,
+        # i.e. 64 * travel / V >= t1.  Twice t1, so the cruise is as long as a ramp (a fast model, the
+        # XL330-M077, would otherwise make a triangle).
+        velocity = min(velocity, int(64 * PROFILE_TRAVEL_PULSES / (2 * VELOCITY_BASED_T1_MS)))
         acceleration = max(1, round(64 * velocity / VELOCITY_BASED_T1_MS))
         t1_ms = 64.0 * velocity / acceleration
         t3_ms = t1_ms + 64.0 * PROFILE_TRAVEL_PULSES / velocity
@@ -1293,7 +1297,7 @@ def check_velocity_profile(ctx: Context2) -> str:
     "t2 = 64 * ΔPos / Profile Velocity"; "The desired velocity trajectory and desired position trajectory from the
     Profile are stored at [Velocity Trajectory(136)] and [Position Trajectory(140)]"; Moving Status(123) bits
     4-5 = 11 for a trapezoid, bit 1 while the profile is in progress.  A 400-pulse move in Position Control
-    Mode at a third of the no-load speed, t1 ~150 ms: every Position Trajectory READ lies on the trapezoid
+    Mode at a third of the no-load speed (at most 85, so the cruise lasts as long as a ramp), t1 ~150 ms: every Position Trajectory READ lies on the trapezoid
     (no more than 2 ms early, 10 % of t3 late: the e-manual's jerk control may lengthen it), Velocity
     Trajectory peaks at Profile Velocity, Profile Ongoing clears at t3, and the shaft comes within 20 pulses."""
     def body(servo: int) -> str:
