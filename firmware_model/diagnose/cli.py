@@ -30,7 +30,8 @@ from pathlib import Path
 
 from ..params import ServoParams
 from .batch import null_knobs
-from .effects import LIBRARY
+from .effects import LIBRARY, X_LIBRARY
+from .families import family_of
 from .nuisance import first_movement_onset, first_movement_row, locate_onset
 from .output import verdict_json, verdict_text, write_outputs
 from .search import Diagnosis, diagnose
@@ -69,7 +70,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     p.add_argument("--out", required=True, metavar="DIR", help="where report.md, plots and params.toml go")
     p.add_argument("--json", action="store_true", help="print the verdict as one JSON object")
     p.add_argument("--params", metavar="FILE", help="start from these ServoParams (TOML; its [effects] are simulated too) instead of the defaults")
-    p.add_argument("--effects", metavar="LIST", help=f"comma-separated subset of: {', '.join(LIBRARY)}")
+    p.add_argument("--effects", metavar="LIST", help=f"comma-separated subset of: {', '.join(LIBRARY)} "
+                                                      f"(X-series traces: {', '.join(X_LIBRARY)})")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
     w = p.add_argument_group("what a Wizard 2 export does not record (only for such files)")
     w.add_argument("--goal", type=int, metavar="UNITS",
@@ -171,10 +173,7 @@ def _wizard_input(ex: WizardExport, args: argparse.Namespace, params: ServoParam
 
 
 def _recording_notes(d: Diagnosis, trace: Trace) -> list[str]:
-    from .schedule import compile_schedule
-
-    nominal = compile_schedule(trace).nominal_onsets()
-    out = [f"recording traits fitted with the base model (not effects): {d.nuisance.describe(1e-3, nominal)}"]
+    out = [f"recording traits fitted with the base model (not effects): {d.recording}"]
     out += [f"not offered: {name} ({why})" for name, why in d.not_offered.items()]
     return out
 
@@ -201,7 +200,18 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     for note in data.notes:
         say(note)
-    d = diagnose(data.trace, params, progress=say, effects=args.effects.split(",") if args.effects else None)
+    family = family_of(data.trace)
+    wanted = args.effects.split(",") if args.effects else None
+    missing = [e for e in wanted or () if e not in family.library]
+    if missing:
+        print(f"error: {', '.join(missing)} not in the {family.name} servos' library ({', '.join(family.library)})",
+              file=sys.stderr)
+        return 2
+    if family.name != "ax" and args.params:
+        print("error: --params holds an AX-12's ServoParams; an X-series trace's model comes from its metadata",
+              file=sys.stderr)
+        return 2
+    d = diagnose(data.trace, params if family.name == "ax" else None, progress=say, effects=wanted)
     notes = data.notes + _recording_notes(d, data.trace)
     write_outputs(data.trace, d, args.out, source=args.trace, params=params)
     _insert_input_section(Path(args.out) / "report.md", notes)

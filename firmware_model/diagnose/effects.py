@@ -54,7 +54,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-__all__ = ["Param", "Effect", "LIBRARY", "BASE_PARAMS", "apply_effects"]
+__all__ = ["Param", "Effect", "LIBRARY", "BASE_PARAMS", "apply_effects", "X_LIBRARY", "X_BASE_PARAMS"]
 
 
 @dataclass(frozen=True)
@@ -199,9 +199,79 @@ LIBRARY: dict[str, Effect] = {e.name: e for e in (
 )}
 
 
-def apply_effects(knobs: dict[str, float], chosen: dict[str, dict[str, float]]) -> dict[str, float]:
-    """``knobs`` with each chosen effect (identifier -> parameter values) applied in turn."""
+def apply_effects(knobs: dict[str, float], chosen: dict[str, dict[str, float]],
+                  library: dict[str, Effect] | None = None) -> dict[str, float]:
+    """``knobs`` with each chosen effect (identifier -> parameter values, of ``library``: default the AX-12's) applied in turn."""
     out = dict(knobs)
     for name, values in chosen.items():
-        out.update(LIBRARY[name].knobs(values, out))
+        out.update((library or LIBRARY)[name].knobs(values, out))
     return out
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# X-series servos (Protocol 2.0): the same effects where they map onto the X-series physics, as data.
+#
+# The simulator is the X-series firmware over its physics (:mod:`.xreplay`), whose knobs are physics
+# parameters and set-up: each effect below says which.  Scales are an XL330's (stall torque about 0.5 N m,
+# rotor and gears 1.8e-3 kg m**2 at the output, Coulomb friction 0.012 N m, 4096 pulses per turn).
+#
+# Effects of the AX-12 library not offered here, and why:
+# * ``backlash``: the X-series physics has one rigid shaft (its encoder and motor see the same angle); play
+#   needs a second body, which it does not have.
+# * ``sample_hold``: an X-series servo reads every register fresh (no 10 Hz hold of velocity or load).
+# * ``compliance_deadband``: the AX-12's compliance control; the X-series firmware is a PID.
+
+def _x_add(knob: str, value: float, base: dict[str, float]) -> float:
+    return base[knob] + value if value else base[knob]
+
+
+#: The shared base parameter of X-series servos: the gearbox's efficiency k_t / k_e (unit-to-unit strength).
+X_BASE_PARAMS = (Param("gearbox_efficiency", 0.884, 0.4, 1.0, (0.884,), 0.01, (0.85, 0.92)),)
+
+#: X-series effects by identifier (the descriptions are the AX-12 library's where the mechanism is the same).
+X_LIBRARY: dict[str, Effect] = {e.name: e for e in (
+    Effect(
+        "coulomb_friction", LIBRARY["coulomb_friction"].physics, LIBRARY["coulomb_friction"].signature,
+        (Param("extra_coulomb_nm", 0.0, -0.011, 0.3, (0.005, 0.01, 0.02, 0.04, 0.08), 0.002, (0.02, 0.08)),),
+        lambda v, k: {"coulomb_friction_nm": _x_add("coulomb_friction_nm", v["extra_coulomb_nm"], k)},
+        ("extra_coulomb_nm",)),
+    Effect(
+        "stribeck_friction", LIBRARY["stribeck_friction"].physics, LIBRARY["stribeck_friction"].signature,
+        (Param("extra_static_nm", 0.0, -0.005, 0.3, (0.01, 0.02, 0.04, 0.08), 0.002, (0.03, 0.1)),
+         Param("stribeck_velocity_rad_s", 1.0, 0.05, 3.0, (0.1, 0.3, 1.0), 0.05, (0.1, 0.5))),
+        lambda v, k: {"stribeck_friction_nm": _x_add("stribeck_friction_nm", v["extra_static_nm"], k),
+                      "stribeck_velocity_rad_s": v["stribeck_velocity_rad_s"]},
+        ("extra_static_nm",), starts=3, effort=2),
+    Effect(
+        "delay", LIBRARY["delay"].physics, LIBRARY["delay"].signature,
+        (Param("delay_s", 0.0, -0.01, 0.15, (0.005, 0.01, 0.02, 0.04, 0.08), 0.002, (0.01, 0.05)),),
+        lambda v, k: {"delay_s": _x_add("delay_s", v["delay_s"], k)}, ("delay_s",), needs_command_times=True),
+    Effect(
+        "torque_saturation",
+        "The drive tops out below full: a lower PWM Limit than the metadata says, a weak supply or a current-limited driver.",
+        LIBRARY["torque_saturation"].signature,
+        (Param("drive_ceiling", 1.0, 0.1, 1.0, (0.3, 0.5, 0.7, 0.85), 0.01, (0.3, 0.7)),),
+        lambda v, k: {"drive_ceiling": min(v["drive_ceiling"], k["drive_ceiling"])}, ("drive_ceiling",)),
+    Effect(
+        "gravity_load",
+        "An arm's weight on the horn, hanging down at gravity_zero_pulses (default 2048): torque -m g L sin(angle - hanging).",
+        "Position-dependent offset at rest growing with the distance from where the arm hangs; PWM / current offset "
+        "that varies with position; asymmetric up and down moves.",
+        (Param("arm_weight_nm", 0.0, -0.4, 0.6, (0.02, 0.05, 0.1, 0.2, 0.35), 0.005, (0.05, 0.25)),),
+        lambda v, k: {"arm_weight_nm": _x_add("arm_weight_nm", v["arm_weight_nm"], k)}, ("arm_weight_nm",), effort=2),
+    Effect(
+        "extra_inertia", LIBRARY["extra_inertia"].physics, LIBRARY["extra_inertia"].signature,
+        (Param("extra_inertia_kg_m2", 0.0, -0.0015, 0.05, (0.0005, 0.001, 0.002, 0.004, 0.008, 0.015), 0.0002,
+               (0.002, 0.01)),),
+        lambda v, k: {"extra_inertia_kg_m2": _x_add("extra_inertia_kg_m2", v["extra_inertia_kg_m2"], k)},
+        ("extra_inertia_kg_m2",)),
+    Effect(
+        "sensor_offset_gain",
+        "The reported position is offset/scaled against the shaft's (a horn mounted off its spline, an external encoder).",
+        LIBRARY["sensor_offset_gain"].signature,
+        (Param("position_offset_units", 0.0, -200.0, 200.0, (-20.0, -10.0, -5.0, 0.0, 5.0, 10.0, 20.0), 0.5, (5.0, 30.0)),
+         Param("position_gain", 1.0, 0.85, 1.15, (0.97, 1.0, 1.03), 0.002, (0.01, 0.04))),
+        lambda v, k: {"position_offset_units": _x_add("position_offset_units", v["position_offset_units"], k),
+                      "position_gain": k["position_gain"] * v["position_gain"]},
+        ("position_offset_units", "position_gain"), sensing=True),
+)}

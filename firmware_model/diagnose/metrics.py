@@ -23,9 +23,11 @@ from .trace import Trace
 
 __all__ = ["CHANNELS", "F_SCALE", "channel_scales", "robust_cost", "effective_count", "gaps", "QUANT_STEP", "trimmed_rms"]
 
-CHANNELS = ("present_position", "present_speed", "present_load")
-#: Effective quantisation step of each channel, raw units (see the module docstring).
-QUANT_STEP = {"present_position": 1.0, "present_speed": 4.4, "present_load": 31.0}
+CHANNELS = ("present_position", "present_speed", "present_load", "present_velocity", "present_current", "present_pwm")
+#: Effective quantisation step of each channel, raw units (see the module docstring).  X-series servos read
+#: every register fresh each time (no hold), so their channels' steps are one register unit each.
+QUANT_STEP = {"present_position": 1.0, "present_speed": 4.4, "present_load": 31.0, "present_velocity": 1.0,
+              "present_current": 1.0, "present_pwm": 1.0}
 #: Robust loss scale, in channel sd: residuals beyond it count linearly (soft L1), so glitches do not dominate.
 F_SCALE = 3.0
 

@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from ..params import EFFECT_NULLS, EFFECT_RANGES, ServoEffects, ServoParams
-from .effects import LIBRARY
+from .families import FAMILIES
 from .phases import PHASES
 from .search import Diagnosis
 from .trace import Trace
@@ -158,7 +158,7 @@ def _report(trace: Trace, d: Diagnosis, files: list[str], source: str) -> str:
     if not d.accepted:
         md.append("None.")
     for c in d.accepted:
-        e = LIBRARY[c.effect]
+        e = FAMILIES[d.servo].library[c.effect]
         md += [f"### `{c.effect}` ({c.confidence})", "", f"*Physics:* {e.physics}", "", f"*Signature:* {e.signature}", "",
                "| parameter | fitted | ± 95 % | null |", "|---|---|---|---|"]
         md += [f"| {k} | {v:.5g} | {c.uncertainty.get(k, math.nan):.2g} | {e.param(k).null:g} |" for k, v in c.values.items()]
@@ -178,9 +178,7 @@ def _report(trace: Trace, d: Diagnosis, files: list[str], source: str) -> str:
            ("Unexplained residual: " + d.unexplained_detail) if d.unexplained else
            "Residual at noise level: " + ", ".join(f"{ch} {v:.2f} sd" for ch, v in d.residual_rms_sd.items()), ""]
     md += ["## Plots", ""] + [f"![{f}]({f})" for f in files]
-    md += ["", "## Files", "",
-           "* `params.toml`: the fitted twin, base parameters and named effects (`[effects]`); serve it with "
-           "`ax12emu serve --params params.toml`.", "",
+    md += ["", "## Files", "", _PARAM_FILES[d.servo][0], "",
            f"{d.simulations} batched simulations, {d.seconds:.1f} s."]
     return "\n".join(md) + "\n"
 
@@ -192,8 +190,35 @@ def write_outputs(trace: Trace, d: Diagnosis, out: str | Path, source: str = "tr
     out.mkdir(parents=True, exist_ok=True)
     files = _plots(trace, d, out)
     (out / "report.md").write_text(_report(trace, d, files, source), encoding="utf-8")
+    _PARAM_FILES[d.servo][1](d, out, source, params)
+    (out / "verdict.json").write_text(json.dumps(verdict_json(d), indent=2), encoding="utf-8")
+
+
+def _write_servo_params(d: Diagnosis, out: Path, source: str, params: ServoParams) -> None:
     notes = fitted_effects(d.named, d.knobs, params.effects)[1]
     header = (f"fitted by firmware_model.diagnose from {source}; named effects: {', '.join(d.named) or 'none'}",
               *notes)
     fitted_params(d, params).to_toml(out / "params.toml", comments=header)
-    (out / "verdict.json").write_text(json.dumps(verdict_json(d), indent=2), encoding="utf-8")
+
+
+#: Knobs of the X-series replay that are its set-up, not physics parameters (written beside the physics).
+_X_SETUP_KNOBS = ("arm_weight_nm", "drive_ceiling", "delay_s", "position_offset_units", "position_gain")
+
+
+def _write_x_physics(d: Diagnosis, out: Path, source: str, params: object) -> None:
+    from dataclasses import asdict
+
+    from .xreplay import physics_with
+
+    doc = {"source": source, "named": d.named, "physics": asdict(physics_with(d.start, d.knobs)),
+           "set_up": {k: d.knobs[k] for k in _X_SETUP_KNOBS}}
+    (out / "x_physics.json").write_text(json.dumps(doc, indent=2), encoding="utf-8")
+
+
+#: Per servo family: the report's line about its parameter file, and the writer.
+_PARAM_FILES = {
+    "ax": ("* `params.toml`: the fitted twin, base parameters and named effects (`[effects]`); serve it with "
+           "`ax12emu serve --params params.toml`.", _write_servo_params),
+    "x": ("* `x_physics.json`: the fitted X-series physics (XPhysicsParams fields) and the set-up the named effects "
+          "add (an arm's weight, a PWM ceiling, a reading latency, a sensor offset and gain).", _write_x_physics),
+}

@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..params import ServoParams
-from .effects import LIBRARY
+from ..xseries.physics import XPhysicsParams
 from .metrics import gaps
 from .nuisance import Nuisance
 from .selection import Selection, shortlist
@@ -87,6 +87,12 @@ class Diagnosis:
     nuisance: Nuisance = field(default_factory=Nuisance)
     #: Effects not offered on this trace, with the reason.
     not_offered: dict[str, str] = field(default_factory=dict)
+    #: The servo family the trace is from (:mod:`.families`), whose library named the effects.
+    servo: str = "ax"
+    #: The starting parameters of the model (ServoParams, or XPhysicsParams for an X-series servo).
+    start: object = None
+    #: The recording's fitted traits in one line.
+    recording: str = ""
 
     @property
     def named(self) -> list[str]:
@@ -107,7 +113,7 @@ def _round(sel: Selection, current_z: np.ndarray, remaining: list[str], round_no
     """
     current = sel.score(current_z)
     screened = sel.screen(remaining, round_no)
-    smooth, rough = shortlist(screened, current.cost_train)
+    smooth, rough = shortlist(screened, current.cost_train, sel.library)
     if smooth:
         sel.progress(f"round {round_no}: fitting {', '.join(smooth)} by least squares")
     fits, base_fit = sel.fit_shortlist(screened, smooth, with_base=round_no == 1)
@@ -116,12 +122,17 @@ def _round(sel: Selection, current_z: np.ndarray, remaining: list[str], round_no
         sel.base, current_z, current = base_fit.base, base_fit.z, base_fit.score
         sel.progress("round 1: base re-fit " + ", ".join(f"{k}={v:.4g}" for k, v in sel.base.items()))
     fits += [sel.grid_fit(screened[name]) for name in rough]
-    return [judge(LIBRARY[f.effect], f, current) for f in fits], current_z
+    return [judge(sel.library[f.effect], f, current) for f in fits], current_z
 
 
-def diagnose(trace: Trace, params: ServoParams = ServoParams(), progress: Callable[[str], None] | None = None,
-             effects: list[str] | None = None) -> Diagnosis:
-    """Run the whole workflow on a measured trace (``effects``: restrict the library, default all)."""
+def diagnose(trace: Trace, params: ServoParams | XPhysicsParams | None = None,
+             progress: Callable[[str], None] | None = None, effects: list[str] | None = None) -> Diagnosis:
+    """Run the whole workflow on a measured trace (``effects``: restrict the library, default all).
+
+    ``params``: the model to start from (default: the AX-12's defaults; for an X-series trace, the physics
+    its metadata's data sheet gives).  The simulator and the effect library are the trace's servo
+    family's (:mod:`.families`).
+    """
     t0 = time.perf_counter()
     say = progress or (lambda msg: log.info(msg))
     sel = Selection(trace, params, say)
@@ -133,12 +144,16 @@ def diagnose(trace: Trace, params: ServoParams = ServoParams(), progress: Callab
     z_before = sel.residual()
     sim_before = ev.measured + z_before * ev.sd
     z = z_before
-    remaining = list(effects or LIBRARY)
+    library = sel.library
+    unknown = [n for n in effects or () if n not in library]
+    if unknown:
+        raise ValueError(f"effect(s) {', '.join(unknown)} not in this servo's library ({', '.join(library)})")
+    remaining = list(effects or library)
     not_offered = {}
     if not ev.schedule.onsets_known:
         not_offered = {n: "the trace does not record when commands were sent (no command_t), so this effect cannot "
                           "be told from when they took effect, which the base fit estimates"
-                       for n in remaining if LIBRARY[n].needs_command_times}
+                       for n in remaining if library[n].needs_command_times}
         remaining = [n for n in remaining if n not in not_offered]
         if not_offered:
             say(f"not offered: {', '.join(not_offered)} (the trace does not record when commands were sent)")
@@ -179,4 +194,6 @@ def diagnose(trace: Trace, params: ServoParams = ServoParams(), progress: Callab
         gaps_after=gaps(trace, as_dict(sim_after), ev.phases),
         unexplained=residual.unexplained, unexplained_detail=residual.detail, residual_rms_sd=residual.rms_sd,
         seconds=time.perf_counter() - t0, simulations=ev.simulations, nuisance=sel.nuisance, not_offered=not_offered,
+        servo=trace.servo, start=sel.params,
+        recording=sel.nuisance.describe(ev.schedule.step_s, ev.schedule.nominal_onsets()),
     )

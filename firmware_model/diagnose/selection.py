@@ -33,8 +33,9 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..params import ServoParams
-from .effects import BASE_PARAMS, LIBRARY, Effect, Param, apply_effects
-from .evaluate import Evaluator, Lockstep
+from .effects import LIBRARY, Effect, Param, apply_effects
+from .evaluate import Lockstep
+from .families import Family, family_of
 from .metrics import F_SCALE, effective_count
 from .nuisance import PROFILERS, Nuisance, fit_onsets, profile_hold_phase
 from .trace import Trace
@@ -115,12 +116,17 @@ class Fit:
 class Selection:
     """The current model of one trace (base, chosen effects, recording traits) and how to fit changes to it."""
 
-    def __init__(self, trace: Trace, params: ServoParams, progress: Callable[[str], None]) -> None:
-        self.ev = Evaluator(trace, params)
-        self.params = params
+    def __init__(self, trace: Trace, params: ServoParams | None, progress: Callable[[str], None],
+                 family: Family | None = None) -> None:
+        family = family or family_of(trace)
+        #: The effects this trace's servo family can be diagnosed with (:mod:`.families`).
+        self.library = family.library
+        self.ev = family.evaluator(trace, family.default_params() if params is None else params)
+        self.params = self.ev.params
         self.progress = progress
-        self.base_params = tuple(Param(p.name, getattr(params, p.name), p.low, p.high, (getattr(params, p.name),),
-                                       p.fd_step, p.hidden) for p in BASE_PARAMS)
+        start = self.ev.params
+        self.base_params = tuple(Param(p.name, getattr(start, p.name), p.low, p.high, (getattr(start, p.name),),
+                                       p.fd_step, p.hidden) for p in family.base_params)
         self.base = {p.name: p.null for p in self.base_params}
         self.chosen: dict[str, dict[str, float]] = {}
         self.nuisance = Nuisance(onsets_fitted=not self.ev.schedule.onsets_known)
@@ -132,7 +138,7 @@ class Selection:
         k.update(base)
         k.update(self.nuisance.knobs())
         k.update(nuisance or {})
-        return apply_effects(k, chosen)
+        return apply_effects(k, chosen, self.library)
 
     def fit_nuisance(self) -> None:
         """Re-fit the recording's traits to the current model (see :mod:`.nuisance`): onsets, then the hold phase."""
@@ -157,7 +163,7 @@ class Selection:
         grid_reqs, owners = [], []
         profiled: dict[tuple[str, tuple], dict[str, float]] = {}  # (effect, grid point) -> its re-fitted traits
         for name in remaining:
-            e = LIBRARY[name]
+            e = self.library[name]
             for combo in itertools.product(*(p.grid for p in e.params)):
                 vals = dict(zip([p.name for p in e.params], combo))
                 req = self.knobs(self.base, {**self.chosen, name: vals})
@@ -192,8 +198,8 @@ class Selection:
         simulation, so extra starts cost columns, not passes).
         """
         lock = Lockstep(self.ev.run)
-        starts = [(n, vals) for n in smooth for vals in screened[n].starts(LIBRARY[n].starts)]
-        jobs = [lambda n=n, v=v: self.fit(LIBRARY[n], v, lock, screened[n].nuisance[tuple(v.values())])
+        starts = [(n, vals) for n in smooth for vals in screened[n].starts(self.library[n].starts)]
+        jobs = [lambda n=n, v=v: self.fit(self.library[n], v, lock, screened[n].nuisance[tuple(v.values())])
                 for n, v in starts]
         if with_base:  # the shared base parameters alone, in the same batches
             jobs.append(lambda: self.fit(_BASE_ONLY, {}, lock))
@@ -225,7 +231,7 @@ class Selection:
         earlier fit.
         """
         owners = [(effect.name, p) for p in effect.params]
-        owners += [(name, p) for name in self.chosen if LIBRARY[name].smooth for p in LIBRARY[name].params]
+        owners += [(name, p) for name in self.chosen if self.library[name].smooth for p in self.library[name].params]
         owners += [("base", p) for p in self.base_params]
         names = [p.name for _, p in owners]
         lo = np.array([p.low for _, p in owners])
@@ -280,13 +286,15 @@ class Selection:
         return Fit(effect.name, values, base, chosen, self.score(z), z, linear=Linearisation(names, r0, jac))
 
 
-def shortlist(screened: dict[str, Screened], current_cost: float) -> tuple[list[str], list[str]]:
+def shortlist(screened: dict[str, Screened], current_cost: float,
+              library: dict[str, Effect] | None = None) -> tuple[list[str], list[str]]:
     """(smooth effects to fit by least squares, grid-only effects to judge at their optimum), best first.
 
     Only effects whose best grid point already beats the current model
     (training cost ``current_cost``) are worth a fit.
     """
+    library = library or LIBRARY
     ranked = sorted((s.best_cost, n) for n, s in screened.items() if s.best_cost < current_cost)
-    smooth = [n for _, n in ranked if LIBRARY[n].smooth][:FIT_TOP]
-    rough = [n for _, n in ranked if not LIBRARY[n].smooth][:1]
+    smooth = [n for _, n in ranked if library[n].smooth][:FIT_TOP]
+    rough = [n for _, n in ranked if not library[n].smooth][:1]
     return smooth, rough
