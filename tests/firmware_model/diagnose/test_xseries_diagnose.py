@@ -8,6 +8,7 @@ it, where the interval is too narrow: see the test), and nothing on a clean trac
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -129,3 +130,37 @@ def test_real_xl330_log_runs_and_names_physics(tmp_path):
     d = diagnose(short, effects=["extra_inertia", "coulomb_friction", "gravity_load", "sensor_offset_gain"])
     assert set(d.named) <= set(X_LIBRARY)
     assert d.gaps_after["present_position"]["rms"] <= d.gaps_before["present_position"]["rms"]
+
+
+@pytest.fixture(scope="module")
+def fonts_loaded():
+    """Matplotlib keeps the font files it loads open for the life of the process (a cache, not a leak): load them
+    before the per-test leak check looks (module scope is set up first), as test_output does."""
+    import io
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots()
+    ax.plot([0, 1], [0, 1], label="x")
+    ax.legend()
+    fig.savefig(io.BytesIO(), format="png")
+    plt.close(fig)
+
+
+def test_command_line_on_an_x_trace(tmp_path, capsys, fonts_loaded):
+    from firmware_model.diagnose.cli import main
+
+    write_trace(measured({"extra_inertia": {"extra_inertia_kg_m2": 0.004}}), tmp_path / "x.csv")
+    assert main([str(tmp_path / "x.csv"), "--out", str(tmp_path / "out"), "--json", "-q",
+                 "--effects", "extra_inertia,delay"]) == 0
+    verdict = json.loads(capsys.readouterr().out)
+    assert [n["effect"] for n in verdict["named"]] == ["extra_inertia"]
+    physics = json.loads((tmp_path / "out" / "x_physics.json").read_text())
+    assert physics["physics"]["inertia_kg_m2"] == pytest.approx(0.0018142 + 0.004, rel=0.01)
+    assert (tmp_path / "out" / "report.md").exists() and not (tmp_path / "out" / "params.toml").exists()
+    # an AX-12 effect the X-series library does not have is refused by name
+    assert main([str(tmp_path / "x.csv"), "--out", str(tmp_path / "o2"), "-q", "--effects", "backlash"]) == 2
+    assert "backlash" in capsys.readouterr().err
