@@ -45,8 +45,11 @@ register name, keyed by the ID a servo was launched with).
 Faults (``bus.faults``, :class:`ax12emu.faults.Faults2`): the wire's, a status packet dropped,
 corrupted or delayed, a servo unplugged (it hears nothing, and a Sync/Bulk Read's chain breaks at
 it); a servo's own (an error, a blocked shaft, pinned readings) act inside its firmware model, so
-the bus only shows what the firmware reports.  Not modelled: two servos answering one ID at once
-(replies here are laid one after another, never collided), the reply cache, the live view (the Protocol 1.0 bus has them), a servo's busy
+the bus only shows what the firmware reports.  Two servos with one ID (``duplicate``) both act and
+answer at once; replies that overlap on the wire collide (``reply.merge_replies``).  In a Sync or
+Bulk Read both answer in the ID's turn; in a Fast Sync/Bulk Read only the first sends its share
+(a second servo's colliding share is not modelled).
+Not modelled: the reply cache, the live view (the Protocol 1.0 bus has them), a servo's busy
 time after a write to its EEPROM, and the time a rebooting servo is deaf.
 """
 
@@ -293,13 +296,19 @@ class Bus2:
             return []  # malformed: no listed servo can tell it is listed
         fast = INSTRUCTION_SPECS[packet.instruction].broadcast is Broadcast.REQUIRED_COMBINED_ANSWER
         answered: list[tuple[Servo2, int, bytes]] = []
+        #: Servos answering at once to an ID another servo also has (a fault): k in answered -> their answers.
+        twins: dict[int, list[tuple[Servo2, int, bytes]]] = {}
         for servo_id, address, length in reads:
-            found = self._by_id.get(servo_id)
+            found = self._by_id.get(servo_id, ())
             servo = found[0] if found else None
             if (servo is None or not self._hears(servo, line_bps) or not answers(servo, packet.instruction)
                     or (self.faults is not None and not self.faults.admit(servo))):
                 break
             error, data = listed_read(servo, address, length)
+            if len(found) > 1 and not fast:
+                twins[len(answered)] = [(twin, *listed_read(twin, address, length)) for twin in found[1:]
+                                        if self._hears(twin, line_bps) and answers(twin, packet.instruction)
+                                        and (self.faults is None or self.faults.admit(twin))]
             answered.append((servo, error, data))
         if not answered:
             return []
@@ -318,10 +327,13 @@ class Bus2:
                 at_s += len(piece) * BITS_PER_BYTE / servo.baud_bps
             return replies
         at_s = 0.0
-        for servo, error, data in answered:
+        for k, (servo, error, data) in enumerate(answered):
             status = encode_status2(servo.id, status_byte(servo, error), data)
             at_s += servo.return_delay_s
             replies.append(Reply(servo.id, status, at_s, servo.baud_bps))
+            for twin, twin_error, twin_data in twins.get(k, ()):  # the same slot: they collide on the wire
+                replies.append(Reply(twin.id, encode_status2(twin.id, status_byte(twin, twin_error), twin_data),
+                                     at_s + twin.return_delay_s - servo.return_delay_s, twin.baud_bps))
             at_s += len(status) * BITS_PER_BYTE / servo.baud_bps
         return replies
 

@@ -171,10 +171,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 #: Serve options that shape Protocol 1.0 servos only; with --servo each must keep its default.
-#: (--trace and the faults, --drop --corrupt --delay --vanish --alarm --stall, serve both; --duplicate
-#: not: the Protocol 2.0 bus lays simultaneous answers one after another instead of colliding them.)
+#: (--trace and the faults, --drop --corrupt --delay --vanish --duplicate --alarm --stall, serve both.)
 _PROTOCOL1_ONLY = ("web", "monitor", "params", "arm", "model", "controller", "profile",
-                   "broadcast_ping", "reset_reply_id", "goal_torque", "eeprom_busy_ms", "duplicate")
+                   "broadcast_ping", "reset_reply_id", "goal_torque", "eeprom_busy_ms")
 
 
 def _check_servo_spec(parser: argparse.ArgumentParser, args: argparse.Namespace, argv: list[str]) -> None:

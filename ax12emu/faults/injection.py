@@ -46,7 +46,7 @@ wire's faults (``drop``, ``corrupt``, ``delay``, ``vanish``) as here (a corrupt 
 status packet has a wrong CRC, its last byte flipped -> ``COMM_RX_CORRUPT``), and the faults of
 a servo's own (``alarm``, ``stall``, ``hold``) acted out by its firmware model, which reports
 them otherwise: Hardware Error Status, the Alert bit, Shutdown latching until REBOOT (see
-:class:`Faults2`).  ``duplicate`` is refused there with the reason.
+:class:`Faults2`); ``duplicate`` as here, replies overlapping on the wire colliding.
 """
 
 from __future__ import annotations
@@ -432,10 +432,10 @@ class Faults2(Faults):
       the firmware's own overload time (Overload, torque off, if Shutdown selects it).
     * ``hold``: a sensed register pinned as a stuck sensor would pin it; a pinned Present
       Temperature or Present Input Voltage outside its limits raises the error as a real reading does.
-    * ``duplicate`` is refused: the Protocol 2.0 bus lays the replies to one packet one after
-      another (``Bus2.replies_in_sequence``, for broadcast Ping's slots and Sync Read's chain), so
-      two servos answering at once would reach the client whole, one after the other, instead of
-      AND-ed on the wire as a collision would be.
+    * ``duplicate``: as on the AX-12 bus, both servos act on every packet to the ID and answer at
+      once; the bus lays replies one after another, but replies that overlap on the wire collide
+      (``merge_replies``), so equal answers look clean and different ones fail the CRC.  In a Sync
+      or Bulk Read both answer in the ID's turn; in a Fast Sync/Bulk Read only the first does.
     """
 
     def _servo2(self, slot: int) -> "Servo2":
@@ -515,9 +515,12 @@ class Faults2(Faults):
             self.release(self.bus.slots[index])
 
     def duplicate(self, slot: int, as_id: int) -> None:
-        raise ValueError("duplicate: not available on a Protocol 2.0 bus (its bus lays the answers to one packet "
-                         "one after another and does not collide them); its faults are drop, corrupt, delay, "
-                         "vanish, alarm, stall and hold")
+        """Give the servo launched as ``slot`` the ID ``as_id`` (0..252 on Protocol 2.0, normally another servo's)."""
+        from ax12emu.protocol.packets2 import MAX_ID2  # loaded with the Protocol 2.0 bus, not before
+
+        if not 0 <= as_id <= MAX_ID2:
+            raise ValueError(f"ID {as_id} is outside 0..{MAX_ID2} (Protocol 2.0)")
+        super().duplicate(slot, as_id)
 
     def admit(self, servo: "VirtualServo") -> bool:  # type: ignore[override]
         """Before ``servo`` handles a packet: False if it is unplugged (its other faults live in its firmware)."""

@@ -24,8 +24,8 @@
 #                     AX-12As among them share the wire on Protocol 1.0 (servo=1-2:ax-12a,3-6:xl430-w250)
 #   baud=BPS          with servo=: every servo starts at this bit rate (default: each model's factory
 #                     rate, 57600 on the X series); the port must be opened at the same rate
-#                     With servo=, the faults apply but duplicate (the 2.0 bus does not collide answers);
-#                     alarm and stall act through the X-series firmware (ax12emu.faults.injection.Faults2).
+#                     With servo=, the same faults apply; alarm and stall act through the X-series
+#                     firmware (ax12emu.faults.injection.Faults2).
 # Options of any URL:
 #   logging=debug|info|warning|error   per-handler logger "ax12emu.harness.urlhandler"
 #
@@ -68,7 +68,7 @@ LOGGER_LEVELS = {"debug": logging.DEBUG, "info": logging.INFO, "warning": loggin
 BUS_OPTIONS = ("ids", "profile", "virtual_time", "goal_torque", "eeprom_busy_ms", "trace", "params", "servo", "baud")
 #: Options a Protocol 2.0 bus (servo=) takes; the others shape AX-12As only.
 SERVO_OPTIONS = ("ids", "virtual_time", "trace", "servo", "baud",
-                 "drop", "corrupt", "delay", "delay_s", "fault_ids", "seed", "vanish", "alarm", "stall")
+                 "drop", "corrupt", "delay", "delay_s", "fault_ids", "seed", "vanish", "duplicate", "alarm", "stall")
 
 
 class UrlError(SerialException, ValueError):

@@ -32,7 +32,7 @@ def test_a_model_for_every_id_and_per_id_models():
         (["--servo", "1-3:xl430-w250,3:xm430-w350"], "ID 3 is given two models"),
         (["--servo", "xl430-w250", "--ids", "253"], "outside 0..252"),
         (["--servo", "xl430-w250", "--web", "127.0.0.1:0"], "--web is not available with --servo"),
-        (["--servo", "xl430-w250", "--duplicate", "1:2"], "--duplicate is not available with --servo"),
+        (["--servo", "xl430-w250", "--monitor"], "--monitor is not available with --servo"),
         (["--servo", "1:ax-12a,2:xl430-w250", "--drop", "0.5"], "fault flags apply to a wire of Protocol 2.0 servos alone"),
         (["--servo", "xl430-w250", "--voltage", "30"], "runs on 6.5..12 V, not 30 V"),
         (["--baud", "1000000"], "--baud applies with --servo"),
@@ -50,15 +50,18 @@ def test_mistakes_are_one_line_and_exit_2(args, message):
 
 
 def test_servo_faults_from_the_flags(emulator):
-    """--alarm and --stall are taken with --servo: Overload latched on ID 2 (Alert in its status), ID 1 untouched."""
-    from dynamixel_sdk import COMM_SUCCESS, PacketHandler
+    """--alarm, --stall and --duplicate are taken with --servo: Overload latched on ID 2 (Alert in its status),
+    ID 1 untouched, the servo launched as 3 answering as ID 1."""
+    from dynamixel_sdk import COMM_RX_TIMEOUT, COMM_SUCCESS, PacketHandler
     from emu_testkit import PatientPortHandler
 
-    port = PatientPortHandler(emulator("--servo", "xl430-w250", "--ids", "1-2", "--alarm", "2:overload", "--stall", "1").port)
+    port = PatientPortHandler(emulator("--servo", "xl430-w250", "--ids", "1-3", "--alarm", "2:overload", "--stall", "1",
+                                       "--duplicate", "3:1").port)
     assert port.openPort() and port.setBaudRate(57600)
     try:
         ph = PacketHandler(2.0)
         assert ph.read1ByteTxRx(port, 2, 70) == (0x20, COMM_SUCCESS, 0x80)  # Hardware Error Status, Alert bit
-        assert ph.read1ByteTxRx(port, 1, 70) == (0, COMM_SUCCESS, 0)
+        assert ph.read1ByteTxRx(port, 1, 70) == (0, COMM_SUCCESS, 0)  # both servos on ID 1 answer the same
+        assert ph.ping(port, 3)[1] == COMM_RX_TIMEOUT
     finally:
         port.closePort()

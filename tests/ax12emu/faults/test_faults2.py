@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import pytest
 import serial
-from dynamixel_sdk import COMM_SUCCESS, PacketHandler
-from emu_testkit import UrlPortHandler
+from dynamixel_sdk import COMM_RX_CORRUPT, COMM_SUCCESS, GroupSyncRead, PacketHandler
+from emu_testkit import UrlPortHandler, ok
 
 import ax12emu  # noqa: F401  (registers the URL handler)
 from ax12emu import FaultConfig, VirtualBus
@@ -146,6 +146,32 @@ def test_hold_pins_sensed_registers_only(xl430):
         bus.faults.hold(2, "goal_position", 5)
     with pytest.raises(KeyError, match="no register 'present_voltage'"):
         bus.faults.hold(2, "present_voltage", 5)
+
+
+def test_two_servos_on_one_id_both_act_and_their_answers_collide(xl430):
+    bus, port, ph = xl430
+    bus.faults.duplicate(2, 1)
+    assert ok(ph.ping(port, 1)) == 1060  # equal answers AND to themselves: clean
+    assert ph.ping(port, 2)[1] != COMM_SUCCESS
+    assert ph.write1ByteTxRx(port, 1, 65, 1) == (COMM_SUCCESS, 0)
+    assert bus.call(lambda b: [servo.table.get("led") for servo in b.servos]) == [1, 1]  # both acted
+    assert ok(ph.read4ByteTxRx(port, 1, PRESENT_POSITION)) == 2048  # same readings: clean
+    bus.faults.hold(2, "present_position", 100)  # now they differ
+    assert ph.read4ByteTxRx(port, 1, PRESENT_POSITION)[1] == COMM_RX_CORRUPT
+    read = GroupSyncRead(port, ph, PRESENT_POSITION, 4)
+    read.addParam(1)
+    assert read.txRxPacket() == COMM_RX_CORRUPT  # both answer in ID 1's turn
+    assert bus.faults.active(2) == ["answers as ID 1", "present_position held at 100"]
+    bus.faults.unduplicate(2)
+    assert ok(ph.read4ByteTxRx(port, 1, PRESENT_POSITION)) == 2048
+    assert ok(ph.read4ByteTxRx(port, 2, PRESENT_POSITION)) == 100
+
+
+def test_duplicate_from_a_config_and_its_id_range():
+    with VirtualBus([1, 2], servo="xl430-w250", transport="inprocess", faults=FaultConfig(duplicate=((2, 1),))) as bus:
+        assert bus.call(lambda b: b.ids) == [1, 1]
+        with pytest.raises(ValueError, match="outside 0..252"):
+            bus.faults.duplicate(1, 253)
 
 
 def test_the_same_faults_from_a_config_and_a_url():

@@ -1,8 +1,8 @@
 """The wire's faults on a Protocol 2.0 bus (Faults2): what unmodified dynamixel-sdk PacketHandler(2.0) sees.
 
 A client sees COMM_RX_TIMEOUT for a dropped status or an unplugged servo, COMM_RX_CORRUPT for a
-wrong CRC, and a late reply after its timeout; duplicate IDs are refused with the reason (the
-faults of a servo's own are test_faults2.py's).
+wrong CRC, and a late reply after its timeout (duplicate IDs and the faults of a servo's own are
+test_faults2.py's).
 """
 
 from __future__ import annotations
@@ -101,12 +101,8 @@ def test_the_same_seed_drops_the_same_replies():
     assert first == run() and 0 in first and 14 in first
 
 
-def test_duplicates_and_unknown_slots_are_refused_by_name():
-    with pytest.raises(ValueError, match="duplicate: not available on a Protocol 2.0 bus"):
-        VirtualBus([1, 2], servo="xl430-w250", transport="inprocess", faults=FaultConfig(duplicate=((2, 1),)))
+def test_unknown_slots_are_refused_by_name():
     with VirtualBus([1, 2], servo="xl430-w250", transport="inprocess") as bus:
-        with pytest.raises(ValueError, match="duplicate: not available on a Protocol 2.0 bus"):
-            bus.faults.duplicate(2, 1)
         with pytest.raises(ValueError, match="no servo launched as ID 5"):
             bus.faults.vanish(5)
 

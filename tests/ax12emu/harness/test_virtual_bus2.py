@@ -174,7 +174,7 @@ def test_url_through_dynamixel_sdk():
         ("ax12emu://?servo=1-2:xl430-w250&ids=3", "give one of them"),
         ("ax12emu://?servo=xl430-w250&baud=fast", "baud must be a bit rate"),
         ("ax12emu://?servo=xl430-w250&baud=1234", "not 1234"),
-        ("ax12emu://?servo=xl430-w250&duplicate=1:2", "duplicate not available with servo="),
+        ("ax12emu://?servo=xl430-w250&duplicate=1:253", "outside 0..252"),
         ("ax12emu://?servo=xl430-w250&alarm=1:input_voltage", "does not select input_voltage"),
         ("ax12emu://?servo=xl430-w250&alarm=1:hot", "unknown alarm 'hot'"),
         ("ax12emu://?servo=xl430-w250&vanish=9", "no servo launched as ID 9"),
