@@ -71,6 +71,8 @@ KOCH = {
     "wrist_roll": (5, "xl330-m288", "m100_100"),
     "gripper": (6, "xl330-m288", "0_100"),
 }
+#: How far from its goal a joint may stop (ticks): an XL330 at Position P Gain 400 within its friction band.
+HOLD_BAND_TICKS = 16
 #: dynamixel.py OperatingMode.
 EXTENDED_POSITION, CURRENT_POSITION = 4, 5
 
@@ -403,8 +405,13 @@ def test_koch_follower_session(emulator):
         for motor in KOCH:
             assert bus.read("Goal_Position", motor) == goal_raw[motor]
         moved = {m: round(observed[m] - start[m], 1) for m in KOCH}
-        # Every joint, the current-based gripper too, went the 10 units (60 to 240 ticks) to within 1.5 units.
-        assert all(abs(observed[m] - goal[m]) < 1.5 for m in KOCH), (start, goal, observed, moved)
+        off_ticks = {m: abs(int(v) - goal_raw[m]) for m, v in bus._unnormalize(observed).items()}
+        # Every joint, the current-based gripper too, went the 10 units (60 to 240 ticks) and stopped within
+        # its hold band: a few ticks, and up to about 12 on an XL330 left at its default Position P Gain
+        # (its position loop drives half the e-manual's reading, measured; the model file's [controller]),
+        # where gear friction outlasts the drive near the goal, as on a real one.
+        assert all(off_ticks[m] <= HOLD_BAND_TICKS for m in KOCH), (start, goal, observed, moved, off_ticks)
+        assert all(abs(moved[m]) > 5.0 for m in KOCH if m != "gripper"), moved
 
         # KochFollower.disconnect -> bus.disconnect(disable_torque=True): clearPort, torque off, closePort.
         bus.port_handler.clearPort()
