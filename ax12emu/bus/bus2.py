@@ -46,7 +46,7 @@ Faults (``bus.faults``, :class:`ax12emu.faults.Faults2`): the wire's, a status p
 corrupted or delayed, a servo unplugged (it hears nothing, and a Sync/Bulk Read's chain breaks at
 it); a servo's own (an error, a blocked shaft, pinned readings) act inside its firmware model, so
 the bus only shows what the firmware reports.  Two servos with one ID (``duplicate``) both act and
-answer at once; replies that overlap on the wire collide (``reply.merge_replies``).  In a Sync or
+answer at once; the bus collides their answers (``reply.collide``: AND-ed as on the wire).  In a Sync or
 Bulk Read both answer in the ID's turn; in a Fast Sync/Bulk Read only the first sends its share
 (a second servo's colliding share is not modelled).
 Not modelled: the reply cache, the live view (the Protocol 1.0 bus has them), a servo's busy
@@ -78,7 +78,7 @@ from firmware_model.xseries.interface import XServoModel
 
 from .bus import BAUD_TOLERANCE, Interceptor
 from .clock import VirtualClock, WallClock
-from .reply import BITS_PER_BYTE, Reply
+from .reply import BITS_PER_BYTE, Reply, collide
 from .state_store import StateStore
 
 __all__ = ["Bus2", "FirmwareFactory"]
@@ -272,6 +272,8 @@ class Bus2:
             outcome = handle2(servo, packet)
             if outcome.reply is not None:
                 replies.append(Reply(outcome.reply_id, outcome.reply, outcome.delay_s, servo.baud_bps))
+        if len(replies) > 1:  # servos sharing an ID (a fault) answer at once: their answers collide
+            return [collide(replies)]
         return replies
 
     def _broadcast_ping(self, packet: InstructionPacket2, targets: list[Servo2]) -> list[Reply]:
@@ -330,10 +332,12 @@ class Bus2:
         for k, (servo, error, data) in enumerate(answered):
             status = encode_status2(servo.id, status_byte(servo, error), data)
             at_s += servo.return_delay_s
-            replies.append(Reply(servo.id, status, at_s, servo.baud_bps))
-            for twin, twin_error, twin_data in twins.get(k, ()):  # the same slot: they collide on the wire
-                replies.append(Reply(twin.id, encode_status2(twin.id, status_byte(twin, twin_error), twin_data),
-                                     at_s + twin.return_delay_s - servo.return_delay_s, twin.baud_bps))
+            reply = Reply(servo.id, status, at_s, servo.baud_bps)
+            if k in twins:  # the same turn: their answers collide on the wire
+                reply = collide([reply, *(Reply(twin.id, encode_status2(twin.id, status_byte(twin, twin_error), twin_data),
+                                                at_s + twin.return_delay_s - servo.return_delay_s, twin.baud_bps)
+                                          for twin, twin_error, twin_data in twins[k])])
+            replies.append(reply)
             at_s += len(status) * BITS_PER_BYTE / servo.baud_bps
         return replies
 

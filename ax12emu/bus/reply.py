@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import NamedTuple
 
-__all__ = ["BITS_PER_BYTE", "Reply", "merge_replies"]
+__all__ = ["BITS_PER_BYTE", "Reply", "collide", "merge_replies"]
 
 #: Bits per byte on the wire: start + 8 data + stop (8N1, e-manual).
 BITS_PER_BYTE = 10
@@ -38,15 +38,10 @@ def merge_replies(replies: Sequence[Reply], start_s: float, *, per_byte: bool,
     (wire pacing); otherwise a single reply goes out whole at its due time.
     ``in_sequence``: the bus timed its replies one after another (Protocol 2.0's
     broadcast Ping slots, Sync Read's answers in list order); without pacing
-    each then goes out whole at its own due time instead of all at the first's,
-    except replies that still overlap on the wire (two servos answering one ID
-    at once): those collide, AND-ed as above, and go out at the first's time.
+    each then goes out whole at its own due time instead of all at the first's.
     """
     if in_sequence and not per_byte:
-        if len(replies) == 1:
-            reply = replies[0]
-            return [(start_s + reply.delay_s, reply.data)]
-        return _in_sequence(replies, start_s)
+        return [(start_s + reply.delay_s, reply.data) for reply in replies]
     if len(replies) == 1 and not per_byte:
         reply = replies[0]
         return [(start_s + reply.delay_s, reply.data)]
@@ -62,24 +57,12 @@ def merge_replies(replies: Sequence[Reply], start_s: float, *, per_byte: bool,
     return [(start_s + ordered[0] * byte_s, bytes(slots[slot] for slot in ordered))]
 
 
-def _in_sequence(replies: Sequence[Reply], start_s: float) -> list[tuple[float, bytes]]:
-    """Replies in time order, each whole at its due time; those overlapping the one before collide.
+def collide(replies: Sequence[Reply]) -> Reply:
+    """Replies sent at once (two servos answering one ID) as the one the wire carries: overlapping bytes AND-ed.
 
-    Overlap counts from half a byte time, so replies laid back to back (a Fast Sync Read's
-    pieces, broadcast Ping's slots at Return Delay Time 0) never collide through rounding.
+    For a bus that lays its replies one after another (``in_sequence``): it collides those it
+    times together itself, so the serving loop's sequence stays untouched.
     """
-    out: list[tuple[float, bytes]] = []
-    group: list[Reply] = []
-    group_end_s = 0.0
-    for reply in sorted(replies, key=lambda r: r.delay_s):
-        byte_s = BITS_PER_BYTE / reply.baud_bps
-        if group and reply.delay_s < group_end_s - 0.5 * byte_s:
-            group.append(reply)
-        else:
-            if group:
-                out.extend(merge_replies(group, start_s, per_byte=False))
-            group = [reply]
-        group_end_s = max(group_end_s, reply.delay_s + len(reply.data) * byte_s) if len(group) > 1 else (
-            reply.delay_s + len(reply.data) * byte_s)
-    out.extend(merge_replies(group, start_s, per_byte=False))
-    return out
+    first = min(replies, key=lambda reply: reply.delay_s)
+    [(at_s, data)] = merge_replies(replies, 0.0, per_byte=False)
+    return Reply(first.servo_id, data, at_s, first.baud_bps)

@@ -433,8 +433,8 @@ class Faults2(Faults):
     * ``hold``: a sensed register pinned as a stuck sensor would pin it; a pinned Present
       Temperature or Present Input Voltage outside its limits raises the error as a real reading does.
     * ``duplicate``: as on the AX-12 bus, both servos act on every packet to the ID and answer at
-      once; the bus lays replies one after another, but replies that overlap on the wire collide
-      (``merge_replies``), so equal answers look clean and different ones fail the CRC.  In a Sync
+      once; the bus lays replies one after another but collides those it times together
+      (``reply.collide``), so equal answers look clean and different ones fail the CRC.  In a Sync
       or Bulk Read both answer in the ID's turn; in a Fast Sync/Bulk Read only the first does.
     """
 
