@@ -16,8 +16,8 @@ from ax12emu.bus.state_store import StateFileError, StateStore
 from ax12emu.protocol.control_table import ControlTable
 from ax12emu.protocol.packets import encode_instruction, encode_status
 
-#: Real time and real ports: the wall-clock tier (CI runs it too).
-pytestmark = pytest.mark.wallclock
+#: Real processes and ports, but nothing here is timed (a reply gets a second, a refusal is an exit code): not the
+#: wall-clock tier, so CI runs these in parallel with the other tests.
 
 
 def run(*args: str, cwd=None, timeout_s: float = 30) -> subprocess.CompletedProcess:
