@@ -243,6 +243,17 @@ X_LIBRARY: dict[str, Effect] = {e.name: e for e in (
                       "stribeck_velocity_rad_s": v["stribeck_velocity_rad_s"]},
         ("extra_static_nm",), starts=3, effort=2),
     Effect(
+        "load_friction",
+        "Gear friction growing with the torque the gears carry: a share of the motor's torque when it drives, of the "
+        "load's when the load back-drives (BAM's load-dependent friction, XPhysicsParams.load_friction_motor/_external).",
+        "A drive that looks weak only under load: slow, short moves against gravity or an inertia being accelerated, "
+        "PWM high for the motion it makes; unloaded cruising nearly unchanged.",
+        (Param("extra_motor_share", 0.0, -0.1, 0.9, (0.05, 0.1, 0.2, 0.4), 0.01, (0.1, 0.4)),
+         Param("extra_external_share", 0.0, -0.1, 0.9, (0.0, 0.1, 0.3), 0.01, (0.05, 0.3))),
+        lambda v, k: {"load_friction_motor": _x_add("load_friction_motor", v["extra_motor_share"], k),
+                      "load_friction_external": _x_add("load_friction_external", v["extra_external_share"], k)},
+        ("extra_motor_share", "extra_external_share")),
+    Effect(
         "delay", LIBRARY["delay"].physics, LIBRARY["delay"].signature,
         (Param("delay_s", 0.0, -0.01, 0.15, (0.005, 0.01, 0.02, 0.04, 0.08), 0.002, (0.01, 0.05)),),
         lambda v, k: {"delay_s": _x_add("delay_s", v["delay_s"], k)}, ("delay_s",), needs_command_times=True),

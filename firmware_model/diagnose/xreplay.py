@@ -48,7 +48,8 @@ REGISTER_DEFAULTS = dict(operating_mode=OperatingMode.POSITION, drive_mode=0, po
 _POSITION_MODES = (OperatingMode.POSITION, OperatingMode.EXTENDED_POSITION, OperatingMode.CURRENT_BASED_POSITION)
 #: Knobs that need a new replay, with their null values (None: from the physics parameters).
 SIM_KNOBS = {"gearbox_efficiency": None, "coulomb_friction_nm": None, "stribeck_friction_nm": None,
-             "stribeck_velocity_rad_s": None, "extra_inertia_kg_m2": 0.0, "arm_weight_nm": 0.0, "drive_ceiling": 1.0,
+             "stribeck_velocity_rad_s": None, "load_friction_motor": None, "load_friction_external": None,
+             "extra_inertia_kg_m2": 0.0, "arm_weight_nm": 0.0, "drive_ceiling": 1.0,
              "delay_s": 0.0}
 #: Knobs that change only the position read.
 SENSING_KNOBS = {"position_offset_units": 0.0, "position_gain": 1.0}
@@ -111,6 +112,8 @@ def physics_with(p: XPhysicsParams, knobs: dict[str, float]) -> XPhysicsParams:
         coulomb_friction_nm=max(knobs["coulomb_friction_nm"], 0.0),
         stribeck_friction_nm=max(knobs["stribeck_friction_nm"], 0.0),
         stribeck_velocity_rad_s=max(knobs["stribeck_velocity_rad_s"], 1e-3),
+        load_friction_motor=max(knobs["load_friction_motor"], 0.0),
+        load_friction_external=max(knobs["load_friction_external"], 0.0),
         inertia_kg_m2=max(p.inertia_kg_m2 + knobs["extra_inertia_kg_m2"], 1e-7))
 
 

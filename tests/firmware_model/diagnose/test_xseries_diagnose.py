@@ -107,6 +107,14 @@ def test_present_current_as_the_load_column():
     assert abs(c.values["extra_coulomb_nm"] - 0.04) <= c.uncertainty["extra_coulomb_nm"]
 
 
+def test_load_dependent_gear_friction_is_named():
+    d = diagnose(measured({"load_friction": {"extra_motor_share": 0.2, "extra_external_share": 0.0}}),
+                 effects=["load_friction", "coulomb_friction", "extra_inertia"])
+    assert d.named[:1] == ["load_friction"]
+    c = d.accepted[0]
+    assert abs(c.values["extra_motor_share"] - 0.2) <= max(c.uncertainty["extra_motor_share"], 0.002)
+
+
 def test_clean_trace_names_nothing():
     d = diagnose(measured({}, seed=3), effects=EFFECTS)
     assert d.named == [] and not d.unexplained, (d.named, d.unexplained_detail)
