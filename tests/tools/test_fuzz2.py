@@ -87,8 +87,10 @@ def test_fuzzer_catches_a_status_packet_with_a_wrong_crc(monkeypatch):
     _finds(monkeypatch, lambda: monkeypatch.setattr(request_handler2, "encode_status2", off_by_one))
 
 
-def test_tool_main_prints_figures(capsys):
+def test_tool_main_prints_figures(capsys, tmp_path):
     """tools/fuzz2.py main: count, rate, what the oracle checked, and no failure for a small budget."""
-    assert fuzz2.main(["--inputs", "300", "--no-coverage", "--seed", "1", "--bus", "mixed"]) == 0
+    failure_file = str(tmp_path / "failure.json")  # written only on a failure, never into the working tree
+    assert fuzz2.main(["--inputs", "300", "--no-coverage", "--seed", "1", "--bus", "mixed",
+                       "--failure-file", failure_file]) == 0
     out = capsys.readouterr().out
     assert "inputs/s" in out and "2.0 packets checked" in out and "failures: 0" in out
