@@ -19,7 +19,8 @@ Protocol 2.0 servos (the X series): the ``ax12_servo`` marker takes the servo te
 ``ax12emu serve --servo`` (``@pytest.mark.ax12_servo("xl430-w250")`` with ``ax12_ids``, or
 ``@pytest.mark.ax12_servo("1-5:xm430-w350,6:xl330-m077")`` alone); ``pytest --ax12-servo SPEC``
 gives every ax12_bus without the marker those servos, so a suite written for one model runs
-against another.
+against another.  AX-12As in the text share the wire on Protocol 1.0 (``"1:ax-12a,1:xl430-w250"``;
+``protocol=`` names an ID both protocols have).
 
 ``pytest --ax12-web`` serves a live page of each bus (see the live-view docs)
 and keeps it up after the test, pass or fail, until Ctrl-C, so a failing

@@ -102,3 +102,10 @@ def test_a_url_builds_a_mixed_wire():
         serial.serial_for_url(f"ax12emu://?servo={MIXED}&drop=0.5", baudrate=1_000_000)
     with pytest.raises(ValueError, match="names no Protocol 2.0 servo"):
         serial.serial_for_url("ax12emu://?servo=1:ax-12a", baudrate=1_000_000)
+
+
+@pytest.mark.ax12_servo("1:ax-12a,1:xl430-w250")
+@pytest.mark.ax12_bus_options(transport="inprocess", baud_bps=1_000_000)
+def test_the_pytest_marker_takes_a_mixed_wire(ax12_bus):
+    assert ax12_bus.read(1, "model_number", protocol=1.0) == AX12
+    assert ax12_bus.read(1, "model_number", protocol=2.0) == XL430
