@@ -366,6 +366,8 @@ class Expected:
     servo_id: int
     error: int
     data: bytes
+    #: Servos sharing the ID answered at once: the wire carries their answers AND-ed, no packet to parse.
+    collided: bool = False
 
 
 class Oracle2:
@@ -555,6 +557,8 @@ class Oracle2:
                         and self.options.reply_on_crc_error:
                     n = min(params[2] | params[3] << 8, shadow.rules.size) if instruction == READ and len(params) == 4 else 0
                     out.append(Expected(k, ids[k], CRC_ERROR | self._alert(shadow.rules, rows[k]), bytes(n)))
+            if len(out) > 1:  # servos sharing an ID answer at once
+                out = [dataclasses.replace(out[0], collided=True)]
             return out, after, boots
         if not broadcast:
             if instruction in BROADCAST_ONLY:
@@ -575,6 +579,8 @@ class Oracle2:
                                                         ram_only=True)
                     if mark:
                         boots[k] = mark
+            if len(out) > 1:  # servos sharing an ID answer at once
+                out = [dataclasses.replace(out[0], collided=True)]
             return out, after, boots
         if instruction in LISTED:
             return self._listed(instruction, params, rows, hearing, ids), after, boots
@@ -603,6 +609,7 @@ class Oracle2:
             reads = [(params[i], params[i + 1] | params[i + 2] << 8, params[i + 3] | params[i + 4] << 8)
                      for i in range(0, len(params), 5)]
         shares: list[tuple[int, int, int, bytes]] = []
+        twins: list[bool] = []
         for servo_id, address, length in reads:
             holders = [k for k in range(len(rows)) if ids[k] == servo_id]
             if not holders or holders[0] not in hearing:
@@ -613,10 +620,12 @@ class Oracle2:
                 break
             error, data = rules.read(rows[k], address, length)
             shares.append((k, servo_id, error | self._alert(rules, rows[k]), data))
+            twins.append(any(t in hearing and self._answers(self.shadows[t].rules, rows[t], instruction)
+                             for t in holders[1:]))
         if not shares:
             return []
-        if instruction in (SYNC_READ, BULK_READ):
-            return [Expected(k, servo_id, error, data) for k, servo_id, error, data in shares]
+        if instruction in (SYNC_READ, BULK_READ):  # a servo sharing the listed ID answers in the same turn
+            return [Expected(k, servo_id, error, data, twin) for (k, servo_id, error, data), twin in zip(shares, twins)]
         if 1 + sum(4 + n for _, _, n in reads) > 0xFFFF:
             return []  # no LENGTH can announce the listed shares: nobody starts the packet
         # A share's data is what its servo read (a read past the table: zeros up to the table's size);
@@ -788,6 +797,11 @@ def _check_record(oracle: Oracle2, record: tuple, stream: bytes, where: str) -> 
                               f"{len(expected)} from IDs {[e.servo_id for e in expected]}")
         last_s = -1.0
         for reply, expect in zip(replies, expected):
+            if expect.collided:
+                if reply.servo_id != expect.servo_id:
+                    raise FuzzFailure(f"{what}: colliding answers carried as ID {reply.servo_id}, not {expect.servo_id}")
+                last_s = reply.delay_s
+                continue
             servo_id, error, data = parse_status(reply.data, what)
             if servo_id != expect.servo_id or reply.servo_id != servo_id:
                 raise FuzzFailure(f"{what}: reply {reply.data.hex()} from ID {servo_id}, expected {expect.servo_id}")
@@ -798,7 +812,7 @@ def _check_record(oracle: Oracle2, record: tuple, stream: bytes, where: str) -> 
             if packet.crc_ok and packet.instruction in LISTED and reply.delay_s <= last_s:  # each after the previous one ended
                 raise FuzzFailure(f"{what}: reply delays {[r.delay_s for r in replies]} are not in order")
             last_s = reply.delay_s
-        if len(replies) == 1 and packet.id != BROADCAST_ID:
+        if len(replies) == 1 and packet.id != BROADCAST_ID and not expected[0].collided:
             rules = oracle.shadows[expected[0].servo].rules
             rdt_s = before[expected[0].servo][rules.address["return_delay_time"]] * 2e-6
             if abs(replies[0].delay_s - rdt_s) > 1e-12:
@@ -916,7 +930,7 @@ def run_case(case: Case2) -> int:
         wire_s += PAUSE_S
         holders = [s for s in bus2.servos if s.id == servo.id]
         got = bus.receive(frame(servo.id, bytes((PING,))), wire_s)
-        if len(got) != len(holders):
+        if len(got) != 1:  # servos sharing an ID answer at once, in one colliding reply
             raise FuzzFailure(f"PING to {servo.id} after the inputs: {len(got)} replies, {len(holders)} servos hold the ID")
         if len(holders) == 1 and servo.status_return_level:
             wire_s += PAUSE_S
