@@ -12,11 +12,12 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from .injection import HW_ERROR_NAMES, Faults, faults_for, parse_alarm_bits
+from .injection import HW_ERROR_NAMES, Faults, MixedFaults, faults_for, parse_alarm_bits
 
 if TYPE_CHECKING:
     from ax12emu.bus.bus import Bus
     from ax12emu.bus.bus2 import Bus2
+    from ax12emu.bus.mixed import MixedBus
 
 __all__ = ["FaultConfig", "FAULT_OPTIONS"]
 
@@ -95,11 +96,12 @@ class FaultConfig:
         """Whether any fault is configured."""
         return any((self.drop, self.corrupt, self.delay, self.vanish, self.duplicate, self.alarm, self.stall))
 
-    def install(self, bus: "Bus | Bus2") -> Faults:
+    def install(self, bus: "Bus | Bus2 | MixedBus") -> "Faults | MixedFaults":
         """Attach a :class:`Faults` with this configuration to ``bus`` and return it.
 
         On a Protocol 2.0 bus: :class:`~.injection.Faults2` (its firmware acts out ``alarm``,
-        ``stall`` and ``hold``; ``duplicate`` is refused with a ValueError).
+        ``stall`` and ``hold``).  On a wire mixing protocols: :class:`~.injection.MixedFaults`, where
+        a slot launched on both protocols is a ValueError (the options cannot name the protocol).
         """
         faults = faults_for(bus, seed=self.seed)
         faults.set_reply_faults(

@@ -73,10 +73,11 @@ from firmware_model.xseries.interface import (
 if TYPE_CHECKING:
     from ax12emu.bus import Bus, Reply
     from ax12emu.bus.bus2 import Bus2
+    from ax12emu.bus.mixed import MixedBus
     from ax12emu.servo.servo2 import Servo2
     from ax12emu.servo.virtual_servo import VirtualServo
 
-__all__ = ["Faults", "Faults2", "ALARM_NAMES", "HW_ERROR_NAMES", "parse_alarm_bits", "faults_for"]
+__all__ = ["Faults", "Faults2", "MixedFaults", "ALARM_NAMES", "HW_ERROR_NAMES", "parse_alarm_bits", "faults_for"]
 
 log = logging.getLogger(__name__)
 
@@ -534,10 +535,80 @@ class Faults2(Faults):
         """Nothing: the firmware itself holds a stalled shaft and pinned readings."""
 
 
-def faults_for(bus: "Bus | Bus2", *, seed: int = 0) -> Faults:
-    """The faults a bus can take: all of them on the AX-12 bus, the wire's on a Protocol 2.0 bus."""
+class MixedFaults:
+    """The faults of a wire mixing AX-12As (Protocol 1.0) and X-series servos (Protocol 2.0).
+
+    Each protocol's bus keeps its own :class:`Faults` or :class:`Faults2` (``bus1.faults``,
+    ``bus2.faults``), both from one seed.  The wire's reply faults apply to both.  A servo is named
+    by its slot; launch IDs are per protocol, so a slot both protocols have needs ``protocol=1.0``
+    or ``2.0`` (a ValueError says so), which the CLI flags and URL options cannot give.
+    """
+
+    def __init__(self, bus: "MixedBus", *, seed: int = 0) -> None:
+        self.bus = bus
+        self.seed = seed
+        self.by_protocol: dict[float, Faults] = {}
+        for protocol, sub in ((1.0, bus.bus1), (2.0, bus.bus2)):
+            if sub.faults is None:
+                sub.faults = faults_for(sub, seed=seed)
+            self.by_protocol[protocol] = sub.faults  # type: ignore[assignment]
+
+    def of(self, slot: int, protocol: float | None = None) -> Faults:
+        """The faults of the protocol whose servo was launched as ``slot``."""
+        if protocol is not None:
+            if protocol not in self.by_protocol:
+                raise ValueError(f"protocol must be 1.0 or 2.0, got {protocol!r}")
+            return self.by_protocol[protocol]
+        have = [faults for faults in self.by_protocol.values() if slot in faults.bus.slots]
+        if not have:
+            raise ValueError(f"no servo launched as ID {slot} (Protocol 1.0 slots: {self.bus.bus1.slots}, "
+                             f"Protocol 2.0: {self.bus.bus2.slots})")
+        if len(have) > 1:
+            raise ValueError(f"ID {slot} was launched on both protocols of this wire: give protocol=1.0 or protocol=2.0")
+        return have[0]
+
+    def set_reply_faults(self, **kwargs: object) -> None:
+        """As :meth:`Faults.set_reply_faults`, on both protocols' replies."""
+        for faults in self.by_protocol.values():
+            faults.set_reply_faults(**kwargs)  # type: ignore[arg-type]
+
+    def clear(self) -> None:
+        for faults in self.by_protocol.values():
+            faults.clear()
+
+    def after_physics(self) -> None:
+        """Nothing: each protocol's bus calls its own faults."""
+
+    @property
+    def dropped(self) -> int:
+        return sum(faults.dropped for faults in self.by_protocol.values())
+
+    @property
+    def corrupted(self) -> int:
+        return sum(faults.corrupted for faults in self.by_protocol.values())
+
+    @property
+    def delayed(self) -> int:
+        return sum(faults.delayed for faults in self.by_protocol.values())
+
+    def __getattr__(self, name: str):
+        """A per-servo method of Faults (vanish, stall, force_alarm, hold, active, ...), routed by slot."""
+        if name.startswith("_") or not callable(getattr(Faults, name, None)):
+            raise AttributeError(name)
+
+        def method(slot: int, *args: object, protocol: float | None = None, **kwargs: object) -> object:
+            return getattr(self.of(slot, protocol), name)(slot, *args, **kwargs)
+
+        return method
+
+
+def faults_for(bus: "Bus | Bus2 | MixedBus", *, seed: int = 0) -> "Faults | MixedFaults":
+    """The faults a bus can take: :class:`Faults` on the AX-12 bus, :class:`Faults2` on a Protocol 2.0 bus, both on a mixed wire."""
     # A Bus2 exists only once its module is loaded: the AX-12 bus's users do not pay for importing it.
     bus2 = sys.modules.get("ax12emu.bus.bus2")
     if bus2 is not None and isinstance(bus, bus2.Bus2):
         return Faults2(bus, seed=seed)  # type: ignore[arg-type]
+    mixed = sys.modules.get("ax12emu.bus.mixed")
+    if mixed is not None and isinstance(bus, mixed.MixedBus):
+        return MixedFaults(bus, seed=seed)
     return Faults(bus, seed=seed)  # type: ignore[arg-type]

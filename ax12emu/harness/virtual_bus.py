@@ -21,8 +21,8 @@ Servos are addressed by their present ID in the state methods, and by their
 reads it: ``VirtualBus([1, 2], servo="xl430-w250")`` or ``VirtualBus(servo="1-5:xm430-w350,6:xl330-m077")``,
 ``options=Servo2Options(...)`` for the behaviours the e-manual leaves open.  AX-12As in the text
 (``servo="1-2:ax-12a,3-6:xl430-w250"``) share the wire on Protocol 1.0; IDs are per protocol there,
-so an ID both protocols have needs ``protocol=1.0`` or ``2.0`` in the state methods (a ValueError
-says so), and ``bus.faults`` is not offered on such a wire yet.
+so an ID both protocols have needs ``protocol=1.0`` or ``2.0`` in the state methods and in
+``bus.faults`` (:class:`~ax12emu.faults.injection.MixedFaults`; a ValueError says so).
 Each servo then has its model's table, and the register methods take that table's names
 (``bus.read(1, "present_position")``).  What the Protocol 1.0 bus has and this one has not yet
 (the live view, a set angle, duplicate IDs) is refused with the reason; the faults work
@@ -170,9 +170,6 @@ class VirtualBus:
                 raise ValueError(f"{', '.join(refused)}: not available with servo= (the Protocol 2.0 bus has no such option yet)")
             options2 = options if isinstance(options, Servo2Options) else Servo2Options()
             self.bus = build_wire(servo, None if ids is None else list(ids), clock=clock, baud_bps=baud_bps, options=options2)
-            if isinstance(self.bus, MixedBus) and faults is not None and faults.active:
-                raise ValueError("faults: not available on a wire mixing AX-12As and X-series servos yet "
-                                 "(faults name servos by launch ID, which both protocols may share)")
         else:
             if isinstance(options, Servo2Options):
                 raise ValueError("Servo2Options apply with servo= (Protocol 2.0 servos); the AX-12A bus takes ServoOptions")
@@ -327,9 +324,6 @@ class VirtualBus:
         return fn(self.bus)
 
     def _faults(self, bus: Bus) -> Faults:
-        if isinstance(bus, MixedBus):
-            raise NotImplementedError("bus.faults: not available on a wire mixing AX-12As and X-series servos yet "
-                                      "(faults name servos by launch ID, which both protocols may share)")
         return self._controls.faults_of(bus)
 
     def _protocol1_only(self, what: str) -> None:

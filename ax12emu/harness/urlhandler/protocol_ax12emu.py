@@ -196,8 +196,6 @@ class Serial(SerialBase):
                 raise ValueError(f"baud must be a bit rate, got {baud_text!r}") from None
             faults = FaultConfig.from_options({name: texts for name, texts in options.items() if name in FAULT_OPTIONS})
             bus = build_wire(spec, ids, clock=VirtualClock() if virtual == "1" else WallClock(), baud_bps=baud_bps)
-            if faults.active and isinstance(bus, MixedBus):
-                raise ValueError("fault options apply to a wire of Protocol 2.0 servos alone, not beside AX-12As yet")
             if faults.active:
                 faults.install(bus)
         except ValueError as exc:

@@ -33,7 +33,7 @@ def test_a_model_for_every_id_and_per_id_models():
         (["--servo", "xl430-w250", "--ids", "253"], "outside 0..252"),
         (["--servo", "xl430-w250", "--web", "127.0.0.1:0"], "--web is not available with --servo"),
         (["--servo", "xl430-w250", "--monitor"], "--monitor is not available with --servo"),
-        (["--servo", "1:ax-12a,2:xl430-w250", "--drop", "0.5"], "fault flags apply to a wire of Protocol 2.0 servos alone"),
+        (["--servo", "1:ax-12a,1:xl430-w250", "--vanish", "1"], "ID 1 was launched on both protocols"),
         (["--servo", "xl430-w250", "--voltage", "30"], "runs on 6.5..12 V, not 30 V"),
         (["--baud", "1000000"], "--baud applies with --servo"),
         (["--servo", "xl430-w250", "--baud", "250000"], "runs at 9600, 57600, 115200, 1000000"),

@@ -1,7 +1,7 @@
 """A wire mixing AX-12As (Protocol 1.0) and X-series servos (Protocol 2.0) from the harness: VirtualBus and the URL.
 
 IDs are per protocol, so an ID both protocols have is named with ``protocol=`` in the state
-methods, and is refused with the reason without it.
+methods and the faults, and is refused with the reason without it.
 """
 
 from __future__ import annotations
@@ -84,12 +84,28 @@ def test_both_kinds_move_and_heat_in_virtual_time(mixed):
     assert ph2.ping(port, 2)[2] == 0x80 and ph2.ping(port, 3)[2] == 0
 
 
-def test_faults_are_refused_on_a_mixed_wire_with_the_reason():
-    with pytest.raises(ValueError, match="faults: not available on a wire mixing"):
-        VirtualBus(servo=MIXED, transport="inprocess", faults=FaultConfig(drop=0.5))
-    with VirtualBus(servo=MIXED, transport="inprocess") as bus:
-        with pytest.raises(NotImplementedError, match="bus.faults: not available on a wire mixing"):
-            bus.faults.vanish(1)
+def test_faults_name_a_servo_by_slot_and_protocol(mixed):
+    bus, port, ph1, ph2 = mixed
+    with pytest.raises(ValueError, match="ID 1 was launched on both protocols of this wire: give protocol=1.0"):
+        bus.faults.vanish(1)
+    bus.faults.vanish(1, protocol=2.0)
+    assert ph2.ping(port, 1)[1] == COMM_RX_TIMEOUT and ok(ph1.ping(port, 1)) == AX12
+    bus.faults.stall(3)  # only an XL430 was launched as 3
+    assert bus.faults.active(3) == ["stalled"] and bus.faults.active(1, protocol=2.0) == ["vanished"]
+    bus.faults.force_alarm(2, "overload", protocol=1.0)  # the AX-12A: its alarm bit, no latch
+    assert ph1.ping(port, 2)[2] == 0x20 and ph2.ping(port, 2)[2] == 0
+    bus.faults.set_reply_faults(drop=1.0)  # the wire's: both protocols
+    assert ph1.ping(port, 1)[1] == COMM_RX_TIMEOUT and ph2.ping(port, 2)[1] == COMM_RX_TIMEOUT
+    assert bus.faults.dropped == 2
+    bus.faults.clear()
+    assert ok(ph2.ping(port, 1)) == XL430 and ph1.ping(port, 2)[2] == 0
+
+
+def test_fault_options_on_a_mixed_wire():
+    with VirtualBus(servo="1:ax-12a,2:xl430-w250", transport="inprocess", faults=FaultConfig(vanish=((2, None, None),))) as bus:
+        assert bus.faults.active(2) == ["vanished"]
+    with pytest.raises(ValueError, match="ID 1 was launched on both protocols"):
+        VirtualBus(servo=MIXED, transport="inprocess", faults=FaultConfig(stall=(1,)))
 
 
 def test_a_url_builds_a_mixed_wire():
@@ -98,8 +114,9 @@ def test_a_url_builds_a_mixed_wire():
         assert len(link.read(6)) == 6
         link.write(encode_instruction2(3, Instruction2.PING))
         assert len(link.read(14)) == 14
-    with pytest.raises(ValueError, match="not beside AX-12As"):
-        serial.serial_for_url(f"ax12emu://?servo={MIXED}&drop=0.5", baudrate=1_000_000)
+    with serial.serial_for_url(f"ax12emu://?servo={MIXED}&baud=1000000&vanish=3", baudrate=1_000_000, timeout=0.05) as link:
+        link.write(encode_instruction2(3, Instruction2.PING))
+        assert link.read(14) == b""
     with pytest.raises(ValueError, match="names no Protocol 2.0 servo"):
         serial.serial_for_url("ax12emu://?servo=1:ax-12a", baudrate=1_000_000)
 
