@@ -509,6 +509,17 @@ class Faults2(Faults):
         else:
             held[name] = int(value)
 
+    def active(self, slot: int) -> list[str]:
+        """As :meth:`Faults.active`; a forced alarm a REBOOT has cleared is no longer listed."""
+        index = self._index(slot)
+        if index in self._alarms:
+            latched = self._alarms[index] & self._servo2(slot).table.get("hardware_error_status")
+            if latched:
+                self._alarms[index] = latched
+            else:
+                del self._alarms[index]
+        return super().active(slot)
+
     def clear(self) -> None:
         """Lift every fault (a servo with a forced alarm reboots: see :meth:`clear_alarm`)."""
         super().clear()

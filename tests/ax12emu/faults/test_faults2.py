@@ -49,6 +49,7 @@ def test_a_forced_error_latches_with_the_alert_bit_until_reboot(xl430):
     assert bus.faults.active(1) == ["alarm 0x14"]
     ph.reboot(port, 1)
     assert ph.read1ByteTxRx(port, 1, HARDWARE_ERROR) == (0, COMM_SUCCESS, 0)
+    assert bus.faults.active(1) == []  # the client's REBOOT cleared it
     assert ph.write1ByteTxRx(port, 1, TORQUE_ENABLE, 1) == (COMM_SUCCESS, 0)
     bus.step(0.01)
     assert bus.read(1, "torque_enable") == 1
