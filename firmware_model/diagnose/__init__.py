@@ -15,7 +15,10 @@ scoring, lockstep fits), :mod:`.search` (forward selection: the round
 loop), :mod:`.selection` (screening and fitting candidates),
 :mod:`.verdict` (the tests and rules that name, reject or mark tentative),
 :mod:`.output` (verdict, report, parameter files), :mod:`.excitation` and
-:mod:`.synthetic` (test data), :mod:`.cli`.
+:mod:`.synthetic` (test data), :mod:`.cli`.  X-series servos (Protocol 2.0): :mod:`.xreplay`
+(an X-series trace through the X firmware over its physics: their simulator), :mod:`.families`
+(which simulator and effect library a trace's servo family takes), :mod:`.bam_trace` (BAM pendulum
+logs as X-series traces), :mod:`.bam_fit` (the XL330 physics fitted to those logs).
 """
 
 from .effects import LIBRARY, Effect, Param
