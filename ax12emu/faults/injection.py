@@ -458,7 +458,8 @@ class Faults2(Faults):
         firmware = self._firmware(slot, "alarm")
         shutdown = servo.table.get("shutdown")
         if value & ~shutdown:
-            unselected = [name for name, bit in HW_ERROR_NAMES.items() if bit & value & ~shutdown and name != "voltage"]
+            first_names = {bit: name for name, bit in reversed(list(HW_ERROR_NAMES.items()))}  # not the aliases
+            unselected = [name for bit, name in sorted(first_names.items()) if bit & value & ~shutdown]
             raise ValueError(f"alarm: ID {slot}'s Shutdown(63) is {shutdown:#04x}, which does not select {', '.join(unselected)}: "
                              "the firmware detects only the errors Shutdown selects (write Shutdown first)")
         firmware.raise_error(value)
