@@ -23,7 +23,7 @@ from typing import Protocol
 
 import numpy as np
 
-from ax12emu.protocol.control_table import TABLE_SIZE
+from ax12emu.protocol.control_table import TABLE_SIZE, Layout
 from ax12emu.protocol.describe import describe_error, describe_instruction
 from ax12emu.protocol.framing import Framer
 from ax12emu.protocol.packets import BROADCAST_ID, MAX_ID, Instruction, InstructionPacket
@@ -80,7 +80,11 @@ class Bus:
         clock: WallClock | VirtualClock | None = None,
         state_store: StateStore | None = None,
         framer: Framer | None = None,
+        table_layout: Layout | None = None,
     ) -> None:
+        """``table_layout``: every servo's table is this Protocol 1.0 model's (e.g. the AX-18A's,
+        ``servo_models.model("ax-18a").layout()``) instead of the AX-12A profile ``options.profile``;
+        ``model`` should then carry that model's physics (one physics model per bus)."""
         slots = list(ids)
         if not slots:
             raise ValueError("a bus needs at least one servo")
@@ -96,7 +100,8 @@ class Bus:
         self.state_store = state_store
         self.rows = np.zeros((len(slots), TABLE_SIZE), dtype=np.uint8)
         self.servos: list[VirtualServo] = [
-            VirtualServo.fresh(slot, options, index=index, row=self.rows[index]) for index, slot in enumerate(slots)
+            VirtualServo.fresh(slot, options, index=index, row=self.rows[index], table_layout=table_layout)
+            for index, slot in enumerate(slots)
         ]
         if state_store is not None:
             for slot, servo in zip(slots, self.servos):

@@ -22,7 +22,7 @@ from ax12emu.bus import Bus
 from ax12emu.bus.clock import WallClock
 from ax12emu.bus.state_store import StateFileError, StateStore
 from ax12emu.cli import hil as cli_hil
-from ax12emu.protocol.control_table import AX12_MODEL, DEFAULT_PROFILE, PROFILES
+from ax12emu.protocol.control_table import AX12_MODEL, DEFAULT_PROFILE, PROFILES, PROTOCOL1_MODELS
 from ax12emu.protocol.ids import parse_ids
 from ax12emu.servo.model_factory import MODELS, ModelChoice, build_model, parse_arm
 from ax12emu.servo.virtual_servo import ServoOptions
@@ -81,9 +81,9 @@ def build_parser() -> argparse.ArgumentParser:
     serve.add_argument("--ids", type=_ids, default=[1], metavar="LIST", help="servo IDs, e.g. 1,2,5 or 1-18 (default 1)")
     serve.add_argument(
         "--servo", metavar="SPEC",
-        help="X-series servos on Protocol 2.0: MODEL for every --ids ID (e.g. xl430-w250), or IDS:MODEL,... "
-        "per ID (e.g. 1-5:xm430-w350,6:xl330-m077; ax-12a IDs beside them share the wire on Protocol 1.0); "
-        "'ax12emu models' lists the models",
+        help="X-series servos on Protocol 2.0, or AX-18As on Protocol 1.0: MODEL for every --ids ID (e.g. xl430-w250, "
+        "ax-18a), or IDS:MODEL,... per ID (e.g. 1-5:xm430-w350,6:xl330-m077; ax-12a or ax-18a IDs beside them share "
+        "the wire on Protocol 1.0, one of the two per wire); 'ax12emu models' lists the models",
     )
     serve.add_argument(
         "--baud", type=_positive_float, metavar="BPS",
@@ -178,16 +178,28 @@ _PROTOCOL1_ONLY = ("web", "monitor", "params", "arm", "model", "controller", "pr
 
 def _check_servo_spec(parser: argparse.ArgumentParser, args: argparse.Namespace, argv: list[str]) -> None:
     """Resolve ``--servo`` into ``args.servo_models`` [(ID, model key)], or exit with the reason."""
+    from ax12emu.protocol.servo_models import model
     from ax12emu.protocol.servo_spec import parse_servo_spec
 
     ids_given = any(a == "--ids" or a.startswith("--ids=") for a in argv)
     try:
         args.servo_models = parse_servo_spec(args.servo, args.ids if ids_given or ":" not in args.servo else None,
-                                             also=(AX12_MODEL,))
+                                             also=PROTOCOL1_MODELS)
     except ValueError as exc:
-        parser.error(f"--servo: {exc}")
+        message = str(exc)
+        if "speaks Protocol 1.0, not 2.0" in message:  # a 1.0 model the 1.0 bus does not serve (the MX series)
+            key = message.split()[0]
+            message = (f"{key} speaks Protocol 1.0, not 2.0, and its 1.0 table is not served: its PID gains (26-28, "
+                       "where the AX series has compliance), goal acceleration and multi-turn offset are not mapped "
+                       f"onto the model; Protocol 1.0 models served: {', '.join(PROTOCOL1_MODELS)}")
+        parser.error(f"--servo: {message}")
     if all(key == AX12_MODEL for _, key in args.servo_models):
         parser.error("--servo: no Protocol 2.0 servo; serve AX-12As without --servo")
+    # One physics model per Protocol 1.0 bus, built from one model's data: one 1.0 model per wire.
+    models1 = sorted({key for _, key in args.servo_models if "2.0" not in model(key).protocols})
+    if len(models1) > 1:
+        parser.error(f"--servo: {' and '.join(models1)} on one wire are not served: the Protocol 1.0 bus runs "
+                     "one model's physics for all its servos; give one of them")
     defaults = parser.parse_args(["serve"])
     for dest in _PROTOCOL1_ONLY:
         if getattr(args, dest) != getattr(defaults, dest):
@@ -246,35 +258,47 @@ def _serve2(args: argparse.Namespace) -> int:
     # Protocol 2.0 servos keep their EEPROM in a directory of their own: IDs are per protocol.
     store2 = StateStore(Path(args.state_dir) / STATE_SUBDIR_2) if args.state_dir else None
     store1 = StateStore(args.state_dir) if args.state_dir else None
-    bus = Bus2(
-        [(servo_id, model(key)) for servo_id, key in args.servo_models if key != AX12_MODEL],
-        lambda spec, index: build_x_firmware(spec, choice),
-        clock=clock,
-        options=Servo2Options(reply_on_crc_error=args.checksum_error == "reply"),
-        state_store=None if args.factory_reset else store2,
-    )
-    bus.state_store = store2
-    if args.baud is not None:
-        for servo in bus.servos:
-            servo.start_at_baud(args.baud)
-    ax_ids = [servo_id for servo_id, key in args.servo_models if key == AX12_MODEL]
+    x_models = [(servo_id, model(key)) for servo_id, key in args.servo_models if "2.0" in model(key).protocols]
+    bus = None
+    if x_models:  # none: AX-18As alone, on Protocol 1.0
+        bus = Bus2(
+            x_models,
+            lambda spec, index: build_x_firmware(spec, choice),
+            clock=clock,
+            options=Servo2Options(reply_on_crc_error=args.checksum_error == "reply"),
+            state_store=None if args.factory_reset else store2,
+        )
+        bus.state_store = store2
+        if args.baud is not None:
+            for servo in bus.servos:
+                servo.start_at_baud(args.baud)
+    ax = [(servo_id, key) for servo_id, key in args.servo_models if "2.0" not in model(key).protocols]
+    ax_ids = [servo_id for servo_id, _ in ax]
     if ax_ids:
         from ax12emu.bus.mixed import MixedBus
+        from ax12emu.servo.model_factory import datasheet_params
         from ax12emu.servo.virtual_servo import baud_value
 
+        key1 = ax[0][1]  # one 1.0 model per wire (_check_servo_spec)
+        # The AX-12A keeps its measured defaults; another AX model runs its data sheet's physics and table.
+        params, table_layout = (None, None) if key1 == AX12_MODEL else (datasheet_params(model(key1)), model(key1).layout())
+        try:
+            physics = build_model(ModelChoice(params=params, voltage_v=args.voltage, external_torque_nm=args.external_torque),
+                                  len(ax_ids))
+        except ValueError as exc:
+            raise SystemExit(f"ax12emu serve: error: --servo: {model(key1).name}: {exc}") from None
         bus1 = Bus(ax_ids, options=ServoOptions(reply_on_checksum_error=args.checksum_error == "reply"), clock=clock,
-                   model=build_model(ModelChoice(voltage_v=args.voltage, external_torque_nm=args.external_torque), len(ax_ids)),
-                   state_store=None if args.factory_reset else store1)
+                   model=physics, state_store=None if args.factory_reset else store1, table_layout=table_layout)
         bus1.state_store = store1
         if args.baud is not None:
             for servo in bus1.servos:
                 servo.table.set("baud_rate", baud_value(args.baud))
-        bus = MixedBus(bus1, bus)
+        bus = MixedBus(bus1, bus) if bus is not None else bus1
     faults = cli_hil.fault_config(args)
     if faults.active:
         faults.install(bus)  # on a mixed wire, a slot both protocols launched is refused (ValueError)
     # The header names the 2.0 servos, so ax12emu decode names their registers.
-    servos2 = ",".join(f"{i}:{k}" for i, k in args.servo_models if k != AX12_MODEL)
+    servos2 = ",".join(f"{i}:{k}" for i, k in args.servo_models if "2.0" in model(k).protocols)
     trace = TraceWriter(args.trace, servos=servos2) if args.trace else None
     transport = _open_transport(args)
     server = BusServer(bus, transport, pace=args.pace, echo=args.echo, trace=trace)
@@ -282,7 +306,7 @@ def _serve2(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGTERM, lambda signum, frame: server.stop())
     print(transport.url, flush=True)  # the first stdout line: the port, which scripts and tests read
     log.info("serving %s on %s (Protocol %s%s%s)", ", ".join(f"{i}:{k}" for i, k in args.servo_models), transport.name,
-             "2.0 and 1.0" if ax_ids else "2.0", ", paced" if args.pace else "", ", echo" if args.echo else "")
+             "/".join((["2.0"] if x_models else []) + (["1.0"] if ax_ids else [])), ", paced" if args.pace else "", ", echo" if args.echo else "")
     try:
         server.serve_forever()
     finally:

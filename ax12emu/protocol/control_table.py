@@ -12,7 +12,8 @@ e-manual gives no range the 2006 manual's table of write ranges fills in.
 
 The bus serves AX-12 tables: :data:`PROFILES` and :func:`layout` are the
 AX-12A model's profiles (other models' tables are in
-:func:`ax12emu.protocol.servo_models.model`).
+:func:`ax12emu.protocol.servo_models.model`); a table of the same shape from
+another Protocol 1.0 model (the AX-18A, :data:`PROTOCOL1_MODELS`) is taken too.
 
 The table's bytes live in one row of a ``numpy`` array owned by the bus (one
 row per servo), so the physics adapter reads commands and writes sensed
@@ -42,6 +43,7 @@ __all__ = [
     "layout",
     "ControlTable",
     "AX12_MODEL",
+    "PROTOCOL1_MODELS",
 ]
 
 #: The model whose tables the bus serves.
@@ -49,6 +51,11 @@ AX12_MODEL = "ax-12a"
 #: The AX-12A's profiles: ``ax12a`` (e-manual) and ``ax12-2006`` (2006 User's Manual).
 PROFILES: Mapping[str, Profile] = model(AX12_MODEL).profiles
 DEFAULT_PROFILE = "ax12a"
+#: Protocol 1.0 models the bus serves: tables laid out as the AX-12A's (same size, same EEPROM
+#: area, same register names, so the plant and the request handler read them alike), with their
+#: own model number and data-sheet physics.  The MX series' 1.0 tables differ (PID gains where the
+#: compliance registers are, goal acceleration, multi-turn offset) and are not served.
+PROTOCOL1_MODELS = (AX12_MODEL, "ax-18a")
 
 
 def layout(profile: str = DEFAULT_PROFILE) -> Layout:
@@ -74,8 +81,13 @@ class ControlTable:
     shared array); a fresh one is made when none is given.
     """
 
-    def __init__(self, row: np.ndarray | None = None, *, profile: str = DEFAULT_PROFILE) -> None:
-        self.layout = layout(profile)
+    def __init__(self, row: np.ndarray | None = None, *, profile: str = DEFAULT_PROFILE,
+                 table_layout: Layout | None = None) -> None:
+        #: ``table_layout``: another Protocol 1.0 model's table (:data:`PROTOCOL1_MODELS`) instead of ``profile``'s.
+        self.layout = layout(profile) if table_layout is None else table_layout
+        if self.layout.table_size != TABLE_SIZE or self.layout.eeprom_end != EEPROM_END:
+            raise ValueError(f"a Protocol 1.0 table here has {TABLE_SIZE} bytes with EEPROM below {EEPROM_END}; "
+                             f"{self.layout.profile.name} has {self.layout.table_size} and {self.layout.eeprom_end}")
         if row is None:
             row = np.zeros(TABLE_SIZE, dtype=np.uint8)
         if row.shape != (TABLE_SIZE,) or row.dtype != np.uint8:

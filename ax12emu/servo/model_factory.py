@@ -8,13 +8,14 @@ with a message fit for one line on stderr.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from os import PathLike
 
+from ax12emu.protocol.servo_models import ServoModel as ServoModelFile
 from firmware_model import KinematicModel, PhysicalModel, ServoParams
 from firmware_model.interface import ServoModel
 
-__all__ = ["ModelChoice", "MODELS", "build_model", "parse_arm"]
+__all__ = ["ModelChoice", "MODELS", "build_model", "datasheet_params", "parse_arm"]
 
 #: Model names accepted by ``--model``.
 MODELS = ("physical", "kinematic")
@@ -79,6 +80,25 @@ def build_model(choice: ModelChoice, n: int) -> ServoModel:
     if choice.arm is not None:
         model.set_arm(*choice.arm)
     return model
+
+
+def datasheet_params(spec: ServoModelFile) -> ServoParams:
+    """The physical model's parameters for a Protocol 1.0 model other than the AX-12A, from its data file.
+
+    Why: the AX-12A's defaults are fitted to measurements; another AX model has only its data sheet,
+    so its motor comes from the sheet's stall torque, stall current and no-load speed at the rated
+    voltage (:meth:`ServoParams.from_datasheet`, friction and inertia scaled from the AX-12A's), and
+    it runs at the file's recommended supply (else the rating's voltage) until told otherwise.
+    """
+    physical = spec.physical
+    rating = physical.ratings[0]
+    low_v, high_v = physical.operating_voltage_v
+    params = ServoParams.from_datasheet(
+        rating.stall_torque_nm, rating.no_load_speed_rad_s, rating.voltage_v, gear_ratio=physical.gear_ratio,
+        min_supply_voltage_v=low_v, max_supply_voltage_v=high_v, stall_current_a=rating.stall_current_a,
+        gearbox_efficiency=None if rating.stall_current_a is not None else ServoParams().gearbox_efficiency)
+    supply_v = physical.recommended_voltage_v or rating.voltage_v
+    return replace(params, supply_voltage_v=supply_v)
 
 
 def _params(choice: ModelChoice) -> ServoParams:

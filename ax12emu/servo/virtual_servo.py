@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ax12emu.protocol.control_table import DEFAULT_PROFILE, PROFILES, ControlTable
+from ax12emu.protocol.control_table import DEFAULT_PROFILE, PROFILES, ControlTable, Layout
 
 __all__ = ["ServoOptions", "VirtualServo", "baud_bps", "baud_value"]
 
@@ -98,9 +98,10 @@ class VirtualServo:
         self.busy_until_s = float("-inf")
 
     @classmethod
-    def fresh(cls, servo_id: int, options: ServoOptions, *, index: int, row: np.ndarray | None = None) -> "VirtualServo":
-        """A servo at factory defaults with its ID set."""
-        servo = cls(ControlTable(row, profile=options.profile), options, index=index)
+    def fresh(cls, servo_id: int, options: ServoOptions, *, index: int, row: np.ndarray | None = None,
+              table_layout: Layout | None = None) -> "VirtualServo":
+        """A servo at factory defaults with its ID set; ``table_layout``: another 1.0 model's table than the profile's."""
+        servo = cls(ControlTable(row, profile=options.profile, table_layout=table_layout), options, index=index)
         servo.table.set("id", servo_id)
         return servo
 

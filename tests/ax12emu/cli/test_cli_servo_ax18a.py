@@ -1,0 +1,60 @@
+"""``serve --servo ax-18a``: AX-18As on Protocol 1.0 from the command line, alone or beside X-series servos."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+from dynamixel_sdk import COMM_RX_TIMEOUT, COMM_SUCCESS, PacketHandler
+
+from ax12emu.cli.main import parse_args
+
+
+def run(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "ax12emu", *args], capture_output=True, text=True, timeout=30)
+
+
+def test_dynamixel_sdk_pings_an_ax18a_and_reads_model_number_18(emulator):
+    from emu_testkit import PatientPortHandler
+
+    port = PatientPortHandler(emulator("--servo", "ax-18a", "--ids", "1,3").port)
+    assert port.openPort() and port.setBaudRate(1_000_000)
+    try:
+        ph = PacketHandler(1.0)
+        assert ph.ping(port, 1) == (18, COMM_SUCCESS, 0)
+        assert ph.read2ByteTxRx(port, 3, 0) == (18, COMM_SUCCESS, 0)
+        assert ph.ping(port, 2)[1] == COMM_RX_TIMEOUT
+    finally:
+        port.closePort()
+
+
+def test_ax18as_beside_x_series_servos(emulator):
+    from emu_testkit import PatientPortHandler
+
+    port = PatientPortHandler(emulator("--servo", "1-2:ax-18a,1:xl430-w250", "--baud", "1000000").port)
+    assert port.openPort() and port.setBaudRate(1_000_000)
+    try:
+        assert PacketHandler(1.0).ping(port, 2) == (18, COMM_SUCCESS, 0)
+        assert PacketHandler(2.0).ping(port, 1) == (1060, COMM_SUCCESS, 0)
+    finally:
+        port.closePort()
+
+
+def test_the_spec_takes_ax18a():
+    assert parse_args(["serve", "--servo", "ax-18a", "--ids", "1-2"]).servo_models == [(1, "ax-18a"), (2, "ax-18a")]
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--servo", "1:ax-12a,2:ax-18a"], "ax-12a and ax-18a on one wire are not served"),
+        (["--servo", "mx-28"], "its 1.0 table is not served: its PID gains"),
+        (["--servo", "ax-18a", "--voltage", "7"], "AX-18A"),
+    ],
+)
+def test_mistakes_are_one_line(args, message):
+    result = run("serve", *args)
+    assert result.returncode != 0, result
+    assert "Traceback" not in result.stderr
+    assert message in result.stderr, result.stderr
