@@ -47,6 +47,11 @@ The format (``models/ax-12a.toml`` is the worked example)::
     source = "..."               # the measurement that shows it
     position_output_scale = 0.5  # the position PID's output per the e-manual's gain conversion, times this
 
+    [mode_change]                # optional: what a write that changes Operating Mode(11) resets
+    source = "..."               # the e-manual's sentence
+    defaults = ["velocity_i_gain", "profile_velocity"]   # back to their table default
+    from_registers = { goal_pwm = "pwm_limit" }          # set to that register's present value
+
 Entry keys: ``address``, ``size`` (1, 2 or 4), ``name`` (snake_case, unique), ``access`` ("R" or "RW"),
 ``area`` ("EEPROM" or "RAM"; EEPROM entries come before the first RAM one), ``default`` (absent: the
 e-manual gives none, "-", and 0 is used), ``min``/``max`` (absent: the full span of the size, signed or
@@ -95,6 +100,7 @@ _PHYSICAL_KEYS = {"source", "gear_ratio", "weight_g", "resolution_deg", "positio
                   "recommended_voltage_v", "ratings", "current_unit_ma"}
 _RATING_KEYS = {"voltage_v", "stall_torque_nm", "stall_current_a", "no_load_speed_rpm", "note"}
 _CONTROLLER_KEYS = {"source", "position_output_scale"}
+_MODE_CHANGE_KEYS = {"source", "defaults", "from_registers"}
 
 
 @dataclass(frozen=True)
@@ -148,6 +154,17 @@ class Controller:
 
 
 @dataclass(frozen=True)
+class ModeChange:
+    """What the firmware resets when a write changes Operating Mode(11) (``[mode_change]``; empty: nothing)."""
+
+    source: str = ""
+    #: Registers put back to their table default.
+    defaults: tuple[str, ...] = ()
+    #: (register, source register): the register takes the source register's present value.
+    from_registers: tuple[tuple[str, str], ...] = ()
+
+
+@dataclass(frozen=True)
 class ServoModel:
     """One servo model, as its data file states it."""
 
@@ -169,6 +186,8 @@ class ServoModel:
     baud_rates_bps: tuple[int, ...] = ()
     #: Measured departures of the control loop from the e-manual (``[controller]``).
     controller: Controller = Controller()
+    #: What a change of Operating Mode(11) resets (``[mode_change]``).
+    mode_change: ModeChange = ModeChange()
     _layouts: dict[str, Layout] = field(default_factory=dict, compare=False, repr=False)
 
     @property
@@ -429,6 +448,32 @@ def _controller(where: _Where, raw: Any) -> Controller:
     return Controller(source=where.text(raw["source"], "controller.source"), position_output_scale=scale)
 
 
+def _mode_change(where: _Where, raw: Any, names: Mapping[str, Entry]) -> ModeChange:
+    if raw is None:
+        return ModeChange()
+    raw = where.table(raw, "mode_change", _MODE_CHANGE_KEYS, {"source"})
+    if "operating_mode" not in names:
+        raise where.error("mode_change", "the table has no operating_mode register")
+
+    def known(name: Any, field_name: str) -> str:
+        name = where.text(name, field_name)
+        if name not in names:
+            raise where.error(field_name, f"no register named {name!r} in the table")
+        return name
+
+    defaults = raw.get("defaults", [])
+    if not isinstance(defaults, list):
+        raise where.error("mode_change.defaults", f"must be a list of register names, got {defaults!r}")
+    pairs = raw.get("from_registers", {})
+    if not isinstance(pairs, dict):
+        raise where.error("mode_change.from_registers", f"must be a table of register = source register, got {pairs!r}")
+    return ModeChange(
+        source=where.text(raw["source"], "mode_change.source"),
+        defaults=tuple(known(name, "mode_change.defaults") for name in defaults),
+        from_registers=tuple((known(name, "mode_change.from_registers"), known(src, "mode_change.from_registers"))
+                             for name, src in pairs.items()))
+
+
 def parse_model(text: str, key: str, path: str) -> ServoModel:
     """A model from the text of its file; ``ValueError`` naming ``path`` and the field on any mistake."""
     where = _Where(path)
@@ -436,7 +481,8 @@ def parse_model(text: str, key: str, path: str) -> ServoModel:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ValueError(f"{path}: not valid TOML: {exc}") from None
-    where.table(data, "top level", {"model", "table", "profiles", "physical", "controller"}, {"model", "table", "physical"})
+    where.table(data, "top level", {"model", "table", "profiles", "physical", "controller", "mode_change"},
+                {"model", "table", "physical"})
     info = where.table(data["model"], "model", _MODEL_KEYS, {"name", "model_number", "protocols", "source"})
     protocols = info["protocols"]
     if not isinstance(protocols, list) or not protocols:
@@ -476,6 +522,7 @@ def parse_model(text: str, key: str, path: str) -> ServoModel:
         path=path,
         baud_rates_bps=bauds,
         controller=_controller(where, data.get("controller")),
+        mode_change=_mode_change(where, data.get("mode_change"), seen),
     )
 
 

@@ -178,8 +178,11 @@ class Servo2:
             return check.error
         if self.ram_only and any(entry.area is Area.EEPROM for entry in check.entries):
             return ErrorNumber.ACCESS  # "The EEPROM area ... cannot be modified with Secondary ID(12)"
-        table.apply(check)
         names = {entry.name for entry in check.entries}
+        mode_before = table.get("operating_mode") if "operating_mode" in names else None
+        table.apply(check)
+        if mode_before is not None and table.get("operating_mode") != mode_before:
+            self._mode_changed()
         goal_written = bool(names & GOAL_REGISTERS)
         if goal_written and self.plant.held and not self.watchdog_error:
             self.plant.release()
@@ -187,6 +190,24 @@ class Servo2:
             self.eeprom_dirty = True
         self.plant.command(goal_written=goal_written)
         return ErrorNumber.NONE
+
+    def _mode_changed(self) -> None:
+        """Operating Mode(11) took a new value: the registers the model's ``[mode_change]`` names are reset.
+
+        e-manual (XL430-W250, Operating Mode(11) NOTE): "When the value of the Operating Mode(11) register
+        changes, the Velocity PI(76, 78); Position PID(80, 82, 84); Feedforward(88, 90), will be reset
+        according to the selected Operating Mode(11) ... Profile Velocity(112) and Profile Acceleration(108)
+        will be set to '0' ... Goal PWM(100) is reset to the value of PWM Limit(36)"; the models with a
+        current loop add "Goal PWM(100), Goal Current(102) : Reset to PWM Limit(36), Current Limit(38)".
+        """
+        table, change = self.table, self.spec.mode_change
+        defaults = table.layout.defaults
+        for name in change.defaults:
+            if table.has(name):
+                table.set(name, table.layout.by_name[name].value_in(defaults))
+        for name, source in change.from_registers:
+            if table.has(name) and table.has(source):
+                table.set(name, table.get(source))
 
     def factory_reset(self, keep: tuple[str, ...]) -> None:
         """FACTORY_RESET: every register to its default except ``keep``; the sensed registers stay the model's."""
