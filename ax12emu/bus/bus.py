@@ -80,11 +80,12 @@ class Bus:
         clock: WallClock | VirtualClock | None = None,
         state_store: StateStore | None = None,
         framer: Framer | None = None,
-        table_layout: Layout | None = None,
+        table_layout: Layout | Sequence[Layout | None] | None = None,
     ) -> None:
         """``table_layout``: every servo's table is this Protocol 1.0 model's (e.g. the AX-18A's,
-        ``servo_models.model("ax-18a").layout()``) instead of the AX-12A profile ``options.profile``;
-        ``model`` should then carry that model's physics (one physics model per bus)."""
+        ``servo_models.model("ax-18a").layout()``), or one per slot (None: the AX-12A profile
+        ``options.profile``), instead of the profile's; ``model`` should then carry each model's
+        physics (``firmware_model.grouped.GroupedModel`` for several)."""
         slots = list(ids)
         if not slots:
             raise ValueError("a bus needs at least one servo")
@@ -99,10 +100,16 @@ class Bus:
         self.framer = framer if framer is not None else Framer()
         self.state_store = state_store
         self.rows = np.zeros((len(slots), TABLE_SIZE), dtype=np.uint8)
+        layouts = [table_layout] * len(slots) if table_layout is None or isinstance(table_layout, Layout) else list(table_layout)
+        if len(layouts) != len(slots):
+            raise ValueError(f"{len(layouts)} table layouts for {len(slots)} servos")
         self.servos: list[VirtualServo] = [
-            VirtualServo.fresh(slot, options, index=index, row=self.rows[index], table_layout=table_layout)
+            VirtualServo.fresh(slot, options, index=index, row=self.rows[index], table_layout=layouts[index])
             for index, slot in enumerate(slots)
         ]
+        # The plant applies one Alarm Shutdown rule for the wire (what a shutdown clears).
+        if len({servo.table.profile.shutdown_clears for servo in self.servos}) > 1:
+            raise ValueError("servos whose Alarm Shutdown clears different registers cannot share this bus")
         if state_store is not None:
             for slot, servo in zip(slots, self.servos):
                 state_store.load(slot, servo.table)

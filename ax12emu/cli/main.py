@@ -83,7 +83,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--servo", metavar="SPEC",
         help="X-series servos on Protocol 2.0, or AX-18As on Protocol 1.0: MODEL for every --ids ID (e.g. xl430-w250, "
         "ax-18a), or IDS:MODEL,... per ID (e.g. 1-5:xm430-w350,6:xl330-m077; ax-12a or ax-18a IDs beside them share "
-        "the wire on Protocol 1.0, one of the two per wire); 'ax12emu models' lists the models",
+        "the wire on Protocol 1.0); 'ax12emu models' lists the models",
     )
     serve.add_argument(
         "--baud", type=_positive_float, metavar="BPS",
@@ -178,7 +178,6 @@ _PROTOCOL1_ONLY = ("web", "monitor", "params", "arm", "model", "controller", "pr
 
 def _check_servo_spec(parser: argparse.ArgumentParser, args: argparse.Namespace, argv: list[str]) -> None:
     """Resolve ``--servo`` into ``args.servo_models`` [(ID, model key)], or exit with the reason."""
-    from ax12emu.protocol.servo_models import model
     from ax12emu.protocol.servo_spec import parse_servo_spec
 
     ids_given = any(a == "--ids" or a.startswith("--ids=") for a in argv)
@@ -195,11 +194,6 @@ def _check_servo_spec(parser: argparse.ArgumentParser, args: argparse.Namespace,
         parser.error(f"--servo: {message}")
     if all(key == AX12_MODEL for _, key in args.servo_models):
         parser.error("--servo: no Protocol 2.0 servo; serve AX-12As without --servo")
-    # One physics model per Protocol 1.0 bus, built from one model's data: one 1.0 model per wire.
-    models1 = sorted({key for _, key in args.servo_models if "2.0" not in model(key).protocols})
-    if len(models1) > 1:
-        parser.error(f"--servo: {' and '.join(models1)} on one wire are not served: the Protocol 1.0 bus runs "
-                     "one model's physics for all its servos; give one of them")
     defaults = parser.parse_args(["serve"])
     for dest in _PROTOCOL1_ONLY:
         if getattr(args, dest) != getattr(defaults, dest):
@@ -276,19 +270,18 @@ def _serve2(args: argparse.Namespace) -> int:
     ax_ids = [servo_id for servo_id, _ in ax]
     if ax_ids:
         from ax12emu.bus.mixed import MixedBus
-        from ax12emu.servo.model_factory import datasheet_params
+        from ax12emu.servo.model_factory import build_protocol1_model
         from ax12emu.servo.virtual_servo import baud_value
 
-        key1 = ax[0][1]  # one 1.0 model per wire (_check_servo_spec)
         # The AX-12A keeps its measured defaults; another AX model runs its data sheet's physics and table.
-        params, table_layout = (None, None) if key1 == AX12_MODEL else (datasheet_params(model(key1)), model(key1).layout())
+        keys1 = [key for _, key in ax]
         try:
-            physics = build_model(ModelChoice(params=params, voltage_v=args.voltage, external_torque_nm=args.external_torque),
-                                  len(ax_ids))
+            physics = build_protocol1_model(keys1, ModelChoice(voltage_v=args.voltage, external_torque_nm=args.external_torque))
         except ValueError as exc:
-            raise SystemExit(f"ax12emu serve: error: --servo: {model(key1).name}: {exc}") from None
+            raise SystemExit(f"ax12emu serve: error: --servo: {exc}") from None
         bus1 = Bus(ax_ids, options=ServoOptions(reply_on_checksum_error=args.checksum_error == "reply"), clock=clock,
-                   model=physics, state_store=None if args.factory_reset else store1, table_layout=table_layout)
+                   model=physics, state_store=None if args.factory_reset else store1,
+                   table_layout=[None if key == AX12_MODEL else model(key).layout() for key in keys1])
         bus1.state_store = store1
         if args.baud is not None:
             for servo in bus1.servos:

@@ -8,14 +8,18 @@ with a message fit for one line on stderr.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from os import PathLike
 
+from ax12emu.protocol.control_table import AX12_MODEL
 from ax12emu.protocol.servo_models import ServoModel as ServoModelFile
+from ax12emu.protocol.servo_models import model as model_file
 from firmware_model import KinematicModel, PhysicalModel, ServoParams
+from firmware_model.grouped import GroupedModel
 from firmware_model.interface import ServoModel
 
-__all__ = ["ModelChoice", "MODELS", "build_model", "datasheet_params", "parse_arm"]
+__all__ = ["ModelChoice", "MODELS", "build_model", "build_protocol1_model", "datasheet_params", "parse_arm"]
 
 #: Model names accepted by ``--model``.
 MODELS = ("physical", "kinematic")
@@ -99,6 +103,34 @@ def datasheet_params(spec: ServoModelFile) -> ServoParams:
         gearbox_efficiency=None if rating.stall_current_a is not None else ServoParams().gearbox_efficiency)
     supply_v = physical.recommended_voltage_v or rating.voltage_v
     return replace(params, supply_voltage_v=supply_v)
+
+
+def build_protocol1_model(keys: Sequence[str], choice: ModelChoice = ModelChoice()) -> ServoModel:
+    """The model behind Protocol 1.0 servos of these models (one key per servo, in bus order).
+
+    The AX-12A runs ``choice`` as :func:`build_model` does; another model runs its data sheet's
+    parameters (:func:`datasheet_params`) with ``choice``'s supply, torque and arm.  Where the
+    models differ each group gets its own model, joined by :class:`GroupedModel`.
+    """
+    groups: dict[str, list[int]] = {}
+    for index, key in enumerate(keys):
+        groups.setdefault(key, []).append(index)
+
+    def one(key: str, n: int) -> ServoModel:
+        if key == AX12_MODEL:
+            return build_model(choice, n)
+        if choice.name != "physical" or choice.params is not None or choice.params_path is not None:
+            raise ValueError(f"{key} runs the physical model from its data sheet: --model kinematic and --params "
+                             "apply to the AX-12A only")
+        spec = model_file(key)
+        try:
+            return build_model(replace(choice, params=datasheet_params(spec)), n)
+        except ValueError as exc:
+            raise ValueError(f"{spec.name}: {exc}") from None
+
+    if len(groups) == 1:
+        return one(keys[0], len(keys))
+    return GroupedModel([(one(key, len(indices)), indices) for key, indices in groups.items()])
 
 
 def _params(choice: ModelChoice) -> ServoParams:

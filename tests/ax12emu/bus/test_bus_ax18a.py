@@ -8,7 +8,8 @@ from ax12emu.bus.bus import Bus
 from ax12emu.bus.clock import VirtualClock
 from ax12emu.protocol.packets import Instruction, encode_instruction
 from ax12emu.protocol.servo_models import model
-from ax12emu.servo.model_factory import ModelChoice, build_model, datasheet_params
+from ax12emu.servo.model_factory import ModelChoice, build_model, build_protocol1_model, datasheet_params
+from firmware_model.grouped import GroupedModel
 
 RPM_PER_POSITION_UNIT_S = (300.0 / 1023.0) / 360.0 * 60.0
 
@@ -21,25 +22,35 @@ def ax18a_bus(ids, voltage_v: float | None = None) -> Bus:
 
 def write(bus: Bus, servo_id: int, address: int, *values: int) -> None:
     replies = bus.receive(encode_instruction(servo_id, Instruction.WRITE, bytes([address, *values])))
-    assert replies and replies[0].data[4] == 0
+    assert [reply.data[4] for reply in replies] == ([] if servo_id == 254 else [0])  # a broadcast is not answered
 
 
-def unloaded_speed_rpm(bus: Bus) -> float:
-    """Output speed over the middle of a full-speed move from 50 to 970 (Moving Speed 0: as fast as it goes)."""
-    servo = bus.servos[0]
-    servo.table.set("goal_position", 50)
-    write(bus, 1, 24, 1)  # torque on
+def full_speed_moves(bus: Bus) -> list[list[tuple[float, int]]]:
+    """Every servo from 50 to 970 at Moving Speed 0 (as fast as it goes): (time, Present Position) per ms, per servo."""
+    for servo in bus.servos:
+        servo.table.set("goal_position", 50)
+    write(bus, 254, 24, 1)  # torque on, all
     bus.clock.advance(2.0)
     bus.advance()
-    write(bus, 1, 30, 970 & 0xFF, 970 >> 8, 0, 0)  # goal 970, Moving Speed 0
-    samples = []
+    write(bus, 254, 30, 970 & 0xFF, 970 >> 8, 0, 0)  # goal 970, Moving Speed 0
+    samples: list[list[tuple[float, int]]] = [[] for _ in bus.servos]
     for _ in range(4000):
         bus.clock.advance(1e-3)
         bus.advance()
-        samples.append((bus.clock.now_s(), servo.table.get("present_position")))
+        for servo, own in zip(bus.servos, samples):
+            own.append((bus.clock.now_s(), servo.table.get("present_position")))
+    return samples
+
+
+def mid_stroke_rpm(samples: list[tuple[float, int]]) -> float:
+    """Output speed over the middle of the move."""
     window = [(t, p) for t, p in samples if 300 <= p <= 700]
     (t0, p0), (t1, p1) = window[0], window[-1]
     return (p1 - p0) / (t1 - t0) * RPM_PER_POSITION_UNIT_S
+
+
+def unloaded_speed_rpm(bus: Bus) -> float:
+    return mid_stroke_rpm(full_speed_moves(bus)[0])
 
 
 def test_pings_and_reads_model_number_18():
@@ -69,3 +80,19 @@ def test_a_state_file_of_another_model_is_refused(tmp_path):
     physics = build_model(ModelChoice(params=datasheet_params(model("ax-18a"))), 1)
     with pytest.raises(ValueError, match="model number 12"):
         Bus([1], clock=VirtualClock(), state_store=store, table_layout=model("ax-18a").layout(), model=physics)
+
+
+def test_ax12as_and_ax18as_on_one_bus_each_run_their_own_physics():
+    """A mixed bus moves each servo exactly as a bus of its model alone does (one model per group, joined)."""
+    keys = ["ax-12a", "ax-18a", "ax-12a"]
+    choice = ModelChoice(voltage_v=12.0)
+    layouts = [None if key == "ax-12a" else model(key).layout() for key in keys]
+    mixed = Bus([1, 2, 3], clock=VirtualClock(), model=build_protocol1_model(keys, choice), table_layout=layouts)
+    assert isinstance(mixed.model, GroupedModel)
+    assert [s.table.get("model_number") for s in mixed.servos] == [12, 18, 12]
+    moves = full_speed_moves(mixed)
+    alone12 = full_speed_moves(Bus([1], clock=VirtualClock(), model=build_protocol1_model(["ax-12a"], choice)))[0]
+    alone18 = full_speed_moves(ax18a_bus([2], voltage_v=12.0))[0]
+    assert moves[0] == alone12 and moves[2] == alone12
+    assert moves[1] == alone18
+    assert mid_stroke_rpm(moves[0]) < mid_stroke_rpm(moves[1])

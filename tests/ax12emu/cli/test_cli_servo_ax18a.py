@@ -41,6 +41,18 @@ def test_ax18as_beside_x_series_servos(emulator):
         port.closePort()
 
 
+def test_ax12as_and_ax18as_on_one_wire(emulator):
+    from emu_testkit import PatientPortHandler
+
+    port = PatientPortHandler(emulator("--servo", "1-2:ax-12a,3:ax-18a").port)
+    assert port.openPort() and port.setBaudRate(1_000_000)
+    try:
+        ph = PacketHandler(1.0)
+        assert [ph.ping(port, i) for i in (1, 2, 3)] == [(12, COMM_SUCCESS, 0), (12, COMM_SUCCESS, 0), (18, COMM_SUCCESS, 0)]
+    finally:
+        port.closePort()
+
+
 def test_the_spec_takes_ax18a():
     assert parse_args(["serve", "--servo", "ax-18a", "--ids", "1-2"]).servo_models == [(1, "ax-18a"), (2, "ax-18a")]
 
@@ -48,7 +60,6 @@ def test_the_spec_takes_ax18a():
 @pytest.mark.parametrize(
     ("args", "message"),
     [
-        (["--servo", "1:ax-12a,2:ax-18a"], "ax-12a and ax-18a on one wire are not served"),
         (["--servo", "mx-28"], "its 1.0 table is not served: its PID gains"),
         (["--servo", "ax-18a", "--voltage", "7"], "AX-18A"),
     ],
