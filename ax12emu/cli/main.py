@@ -188,9 +188,10 @@ def _check_servo_spec(parser: argparse.ArgumentParser, args: argparse.Namespace,
         message = str(exc)
         if "speaks Protocol 1.0, not 2.0" in message:  # a 1.0 model the 1.0 bus does not serve (the MX series)
             key = message.split()[0]
-            message = (f"{key} speaks Protocol 1.0, not 2.0, and its 1.0 table is not served: its PID gains (26-28, "
-                       "where the AX series has compliance), goal acceleration and multi-turn offset are not mapped "
-                       f"onto the model; Protocol 1.0 models served: {', '.join(PROTOCOL1_MODELS)}")
+            message = (f"{key} speaks Protocol 1.0, not 2.0, and its 1.0 table is not served: its positions "
+                       "(0..4095 over 360 degrees; the 1.0 model works in the AX series' 0..1023 over 300), PID gains "
+                       "(26-28, where the AX series has compliance), goal acceleration and multi-turn offset are not "
+                       f"mapped onto the model; Protocol 1.0 models served: {', '.join(PROTOCOL1_MODELS)}")
         parser.error(f"--servo: {message}")
     if all(key == AX12_MODEL for _, key in args.servo_models):
         parser.error("--servo: no Protocol 2.0 servo; serve AX-12As without --servo")
