@@ -65,8 +65,10 @@ def sdk_port(path: str, baud: int = 1_000_000) -> Iterator[tuple[PortHandler, Pa
     ``path`` is a device or a pyserial URL.
     """
     port = UrlPortHandler(path) if "://" in path else PatientPortHandler(path)
+    # openPort opens at the handler's baud rate; setting it first opens the port once rather than
+    # open, close, reopen (pyserial pauses 0.3 s after closing a socket:// port for the server's sake).
+    port.baudrate = baud
     assert port.openPort(), f"could not open {path}"
-    assert port.setBaudRate(baud)
     try:
         yield port, PacketHandler(1.0)
     finally:
