@@ -26,8 +26,12 @@ IDS = [1, 2, 5]
 DYNAMIC = {"present_position", "present_speed", "present_load", "present_voltage", "present_temperature", "goal_position"}
 
 
-#: Wall-clock runs: real processes and real time (CI runs this tier too).
-pytestmark = pytest.mark.wallclock
+#: The wall-clock tier (real time, margins meant for one test at a time; CI runs it on its own) takes the
+#: scenarios whose outcome hangs on how soon something happens: a partial-packet timeout, the Return
+#: Delay Time, motion against a deadline, Moving read within one round trip, the EEPROM's deaf time.
+#: The rest start real processes but time nothing (an expected silence is silence however loaded the
+#: machine), so they run in parallel with the other tests.
+wallclock = pytest.mark.wallclock
 
 
 @pytest.fixture
@@ -186,6 +190,7 @@ def test_erroring_read_still_returns_its_bytes(bus):
         assert value == 0  # byte 49 (Punch high) is 0, byte 50 is past the table
 
 
+@wallclock
 def test_garbage_and_truncated_packets_then_ping(bus):
     """After random garbage, repeated 0xFF and a truncated packet, a valid PING is answered."""
     with sdk_port(bus.port) as (port, ph):
@@ -225,6 +230,7 @@ def test_baud_change_makes_servo_deaf_until_host_follows(bus):
         assert comm == COMM_RX_TIMEOUT
 
 
+@wallclock
 def test_return_delay_time_is_honoured(bus):
     """Return Delay Time 250 (500 us): no PING round trip is shorter than the delay, and 0 is much faster."""
     def fastest_ping_s(port, ph, count=20):
@@ -285,6 +291,7 @@ def test_state_dir_persists_id_and_limits_over_restart(emulator, tmp_path):
         assert ok(ph.ping(port, 1)) == 12
 
 
+@wallclock
 def test_moving_servo_reaches_goal(bus):
     """With torque on, Present Position moves to Goal Position and Moving drops back to 0.
 
@@ -306,6 +313,7 @@ def test_moving_servo_reaches_goal(bus):
         assert ok(ph.read1ByteTxRx(port, 1, 46)) == 0
 
 
+@wallclock
 def test_moving_reads_1_on_the_first_read_after_a_goal(bus):
     """Write a goal, then poll Moving at once: the first read already says 1, every time.
 
@@ -323,6 +331,7 @@ def test_moving_reads_1_on_the_first_read_after_a_goal(bus):
         assert first_reads == [1] * 20
 
 
+@wallclock
 @pytest.mark.parametrize("flags", [(), ("--goal-torque", "unchanged", "--eeprom-busy-ms", "0")], ids=["default", "off"])
 def test_firmware_quirks_through_the_flags(emulator, flags):
     """By default a goal turns torque on and an EEPROM write leaves the servo deaf a while; the flags turn both off.
