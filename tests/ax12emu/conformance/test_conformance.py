@@ -92,15 +92,19 @@ def test_a_misbehaving_device_fails_with_a_figure():
 
 
 def test_cli_conformance_against_served_tcp(emulator):
-    """ax12emu conformance socket://... prints the table and exits 0; a broken device exits 1."""
+    """ax12emu conformance socket://... prints the table and exits 0; a broken device exits 1.
+
+    Two checks (``--only``): the whole suite over a served TCP bus is test_full_suite_passes[tcp]'s;
+    this one checks what the command adds (arguments, the table, the exit status).
+    """
     served = emulator("--tcp", "127.0.0.1:0", "--ids", "1,2", "--model", "kinematic")
     result = subprocess.run(
         [sys.executable, "-m", "ax12emu", "conformance", served.port, "--ids", "1,2",
-         "--timeout-ms", str(round(CONFORMANCE_TIMEOUT_S * 1e3))],
+         "--timeout-ms", str(round(CONFORMANCE_TIMEOUT_S * 1e3)), "--only", "ping", "--only", "return delay"],
         capture_output=True, text=True, timeout=60,
     )
     assert result.returncode == 0, result.stdout + result.stderr
-    assert "return delay" in result.stdout and "0 failed" in result.stdout
+    assert "return delay" in result.stdout and "3 checks, 0 failed" in result.stdout  # the two and "table unchanged"
     bad = subprocess.run(
         [sys.executable, "-m", "ax12emu", "conformance", "ax12emu://?ids=1&corrupt=1", "--only", "ping"],
         capture_output=True, text=True, timeout=60,
