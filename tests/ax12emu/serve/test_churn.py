@@ -25,12 +25,17 @@ def _address(url: str) -> tuple[str, int]:
     return host, int(port)
 
 
-def test_pty_opened_and_closed_300_times(emulator):
-    """300 opens/closes (PINGs, half packets, unread replies) and the bus still answers, dynamixel-sdk too."""
+def test_pty_opened_and_closed_150_times(emulator):
+    """150 opens/closes (PINGs, half packets, unread replies) and the bus still answers, dynamixel-sdk too.
+
+    Each half packet is followed by a pause past the silence timeout, so the count sets most of the
+    test's time; 150 random actions already follow each kind of open by each other kind several times
+    (tools/churn.py runs longer churns).
+    """
     served = emulator()
-    report = churn.pty_churn(served.port, 300, seed=1)
-    assert report.failures == [] and report.cycles == 300
-    assert report.pings_answered > 50 and report.partial_packets > 20
+    report = churn.pty_churn(served.port, 150, seed=1)
+    assert report.failures == [] and report.cycles == 150
+    assert report.pings_answered > 25 and report.partial_packets > 10
     churn.check_alive(served.port, served.process)
     churn._sdk_read(served.port)
 
