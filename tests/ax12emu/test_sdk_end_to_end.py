@@ -113,6 +113,7 @@ def test_action_without_reg_write_is_an_instruction_error(bus):
         assert comm == COMM_SUCCESS and error == StatusError.INSTRUCTION
 
 
+@wallclock  # unanswered EEPROM writes: only the 10 ms pause keeps the next packet out of the deaf time
 def test_status_return_levels(bus):
     """Level 0 answers only PING; level 1 answers PING and READ; level 2 everything."""
     with sdk_port(bus.port) as (port, ph):
