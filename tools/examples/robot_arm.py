@@ -61,9 +61,13 @@ class Arm:
         self._retry(lambda: self.packets.write2ByteTxRx(self.port, joint, GOAL_POSITION, position))
         deadline = time.monotonic() + timeout_s
         time.sleep(0.005)  # Moving is updated by the servo's control loop, not by the write itself
+        still = 0
         while time.monotonic() < deadline:
             moving, _ = self._retry(lambda: self.packets.read1ByteTxRx(self.port, joint, MOVING))
-            if not moving:
+            # Two still readings in a row: an AX-12 that overshoots its goal turns round at zero
+            # speed, and a poll landing on that instant reads Moving 0 a few units past the goal.
+            still = 0 if moving else still + 1
+            if still == 2:
                 return abs(self.read_position(joint) - position) <= POSITION_TOLERANCE
             time.sleep(0.01)
         return False
