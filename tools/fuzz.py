@@ -53,6 +53,7 @@ import signal
 import sys
 import threading
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -598,9 +599,17 @@ def generate_case(c: Any, pieces: int) -> Case:
         eeprom_busy_s_per_byte=c.pick((0.0, 0.0, 0.0, 0.002)),
         line_bps=c.pick((None, None, 1e6)),
     )
+    case.inputs.extend(stream_inputs(c, pieces, piece, PAUSES, PHYSICS_STEPS))
+    return case
+
+
+def stream_inputs(c: Any, pieces: int, make_piece: Callable[[Any], bytes], pauses: Sequence[float],
+                  physics_steps: Sequence[float]) -> list[tuple[bytes, float, float]]:
+    """``pieces`` pieces from ``make_piece``, each fed whole, cut in two, or glued to the next, with a pause and a physics step after each."""
+    inputs: list[tuple[bytes, float, float]] = []
     pending = b""
     for _ in range(pieces):
-        data = pending + piece(c)
+        data = pending + make_piece(c)
         pending = b""
         shape = c.pick(("whole", "whole", "cut", "glue"))
         if shape == "glue":
@@ -611,18 +620,19 @@ def generate_case(c: Any, pieces: int) -> Case:
             at = c.integer(1, len(data) - 1)
             parts = [data[:at], data[at:]]
         for part in parts:
-            case.inputs.append((part, c.pick(PAUSES), c.pick(PHYSICS_STEPS)))
+            inputs.append((part, c.pick(pauses), c.pick(physics_steps)))
     if pending:
-        case.inputs.append((pending, 0.0, 0.0))
-    return case
+        inputs.append((pending, 0.0, 0.0))
+    return inputs
 
 
-def minimise(case: Case, budget: int = 2000) -> Case:
-    """Delta-debug a failing case: drop inputs, then pauses and physics steps, while it still fails."""
+def minimise(case: Any, budget: int = 2000, run: Callable[[Any], object] | None = None) -> Any:
+    """Delta-debug a failing case: drop inputs, then pauses and physics steps, while ``run`` (default :func:`run_case`) still fails."""
+    run = run or run_case
 
-    def fails(candidate: Case) -> bool:
+    def fails(candidate: Any) -> bool:
         try:
-            run_case(candidate)
+            run(candidate)
         except Exception:
             return True
         return False

@@ -341,7 +341,24 @@ class TableRules:
                 return DATA_LIMIT, row
         if ram_only and any(e.area is Area.EEPROM for e in touched):
             return ACCESS, row
+        mode = self.by_name.get("operating_mode")
+        if mode is not None and mode in touched and mode.value_in(image) != mode.value_in(row):
+            image = self._mode_changed(image)
         return 0, image
+
+    def _mode_changed(self, image: bytes) -> bytes:
+        """The model file's [mode_change]: registers back to their defaults, or to another register's value."""
+        out = bytearray(image)
+        change = self.spec.mode_change
+        for name in change.defaults:
+            entry = self.by_name.get(name)
+            if entry is not None:
+                out[entry.address:entry.end] = self.defaults[entry.address:entry.end]
+        for name, source in change.from_registers:
+            entry, origin = self.by_name.get(name), self.by_name.get(source)
+            if entry is not None and origin is not None:
+                out[entry.address:entry.end] = entry.to_bytes(origin.value_in(bytes(out)))
+        return bytes(out)
 
 
 @dataclass
@@ -1165,49 +1182,13 @@ def generate_case(c: Any, pieces: int, bus: str | None = None) -> Case2:
     """A bus and a stream of ``pieces`` pieces, each fed whole, cut in two, or glued to the next."""
     case = Case2(bus=bus or c.pick(("2.0", "2.0", "mixed")), reply_on_crc_error=bool(c.integer(0, 3)),
                  line_bps=c.pick((None, None, float(LINE_BPS))))
-    pending = b""
-    for _ in range(pieces):
-        data = pending + piece2(c)
-        pending = b""
-        shape = c.pick(("whole", "whole", "cut", "glue"))
-        if shape == "glue":
-            pending = data
-            continue
-        parts = [data]
-        if shape == "cut" and len(data) > 1:
-            at = c.integer(1, len(data) - 1)
-            parts = [data[:at], data[at:]]
-        for part in parts:
-            case.inputs.append((part, c.pick(PAUSES), c.pick(PHYSICS_STEPS)))
-    if pending:
-        case.inputs.append((pending, 0.0, 0.0))
+    case.inputs.extend(fuzz1.stream_inputs(c, pieces, piece2, PAUSES, PHYSICS_STEPS))
     return case
 
 
 def minimise(case: Case2, budget: int = 2000) -> Case2:
-    """Delta-debug a failing case: drop inputs, then pauses and physics steps, while it still fails."""
-
-    def fails(candidate: Case2) -> bool:
-        try:
-            run_case(candidate)
-        except Exception:
-            return True
-        return False
-
-    inputs = list(case.inputs)
-    chunk = max(1, len(inputs) // 2)
-    while chunk >= 1 and budget > 0:
-        i, removed = 0, False
-        while i < len(inputs) and budget > 0:
-            trial = inputs[:i] + inputs[i + chunk:]
-            budget -= 1
-            if fails(dataclasses.replace(case, inputs=trial)):
-                inputs, removed = trial, True
-            else:
-                i += chunk
-        if not removed:
-            chunk //= 2
-    return dataclasses.replace(case, inputs=inputs)
+    """Delta-debug a failing case with the Protocol 1.0 fuzzer's minimiser, run by this oracle."""
+    return fuzz1.minimise(case, budget, run=run_case)
 
 
 # -- driver -----------------------------------------------------------------------------
