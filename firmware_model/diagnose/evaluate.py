@@ -35,20 +35,25 @@ class Evaluator:
         self.trace, self.params = trace, params
         self.schedule = compile_schedule(trace, step_s, params.supply_voltage_v)
         self.phases = classify(self.schedule, params)
-        self.channels = [ch for ch in CHANNELS if trace.has(ch)]
-        self.scales = channel_scales(trace, self.phases == 0)
-        self.measured = np.stack([trace[ch].astype(float) for ch in self.channels], axis=1)
-        self.sd = np.array([self.scales[ch] for ch in self.channels])
-        n = len(trace)
-        block = np.arange(n) * 8 // n
-        self.held = np.isin(block, HELD_OUT_BLOCKS)
-        self.train = ~self.held
+        self._measure(trace, [ch for ch in CHANNELS if trace.has(ch)])
         self.null = null_knobs(params)
         #: Each segment's onset step for every simulation (None: where its row puts it); set by the nuisance fit.
         self.onsets: np.ndarray | None = None
         self._records: dict = {}
         self.simulations = 0
         self.columns = 0
+
+
+    def _measure(self, trace: Trace, channels: list[str]) -> None:
+        """The measured ``channels``, their noise scales (from the rows at rest) and the held-out rows."""
+        self.channels = channels
+        self.scales = channel_scales(trace, self.phases == 0)
+        self.measured = np.stack([trace[ch].astype(float) for ch in channels], axis=1)
+        self.sd = np.array([self.scales[ch] for ch in channels])
+        n = len(trace)
+        block = np.arange(n) * 8 // n
+        self.held = np.isin(block, HELD_OUT_BLOCKS)
+        self.train = ~self.held
 
     def run(self, requests: list[dict[str, float]], onsets: np.ndarray | None = None) -> np.ndarray:
         """Simulated channels for each knob set, shape (M, n, C); missing knobs take their null value.

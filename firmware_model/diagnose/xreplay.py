@@ -30,8 +30,8 @@ from ..xseries.firmware import PULSE_RAD, PULSES_PER_REV, XFirmware
 from ..xseries.interface import OperatingMode, XCommands
 from ..xseries.physics import XPhysics, XPhysicsParams
 from ..xseries.profile import VELOCITY_UNIT_PULSES_S
-from .evaluate import HELD_OUT_BLOCKS, Evaluator
-from .metrics import CHANNELS, channel_scales
+from .evaluate import Evaluator
+from .metrics import CHANNELS
 from .phases import classify
 from .schedule import Schedule, Segment
 from .trace import Trace, TraceFormatError
@@ -221,14 +221,7 @@ class XEvaluator(Evaluator):
         # noise scales the channels): at the profile's speed, or the no-load speed where there is no profile (the
         # X-series trajectory then steps to the goal), with no acceleration limit
         self.phases = classify(self.schedule, ServoParams(max_acceleration_rad_s2=1e6))
-        self.channels = [ch for ch in CHANNELS if ch in _X_CHANNELS and trace.has(ch)]
-        self.scales = channel_scales(trace, self.phases == 0)
-        self.measured = np.stack([trace[ch].astype(float) for ch in self.channels], axis=1)
-        self.sd = np.array([self.scales[ch] for ch in self.channels])
-        n = len(trace)
-        block = np.arange(n) * 8 // n
-        self.held = np.isin(block, HELD_OUT_BLOCKS)
-        self.train = ~self.held
+        self._measure(trace, [ch for ch in CHANNELS if ch in _X_CHANNELS and trace.has(ch)])
         self.null = x_null_knobs(self.params)
         self.onsets = None
         self._sims: dict[tuple, dict[str, np.ndarray]] = {}
