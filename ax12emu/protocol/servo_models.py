@@ -52,6 +52,22 @@ The format (``models/ax-12a.toml`` is the worked example)::
     defaults = ["velocity_i_gain", "profile_velocity"]   # back to their table default
     from_registers = { goal_pwm = "pwm_limit" }          # set to that register's present value
 
+    [classic]                    # optional: a classic table (AX/MX/XL-320 registers) run on the X-series
+    source = "..."               # firmware model; what its units are (ax12emu.servo.classic maps them)
+    position_units = 1024        # Goal/Present Position units over position_span_deg ...
+    position_span_deg = 300.0
+    position_centre = 512        # ... and the value at the middle of that span
+    speed_unit_rpm = 0.111       # Moving Speed / Present Speed unit (joint mode)
+    direction_bit = 10           # the sign bit of Moving Speed (wheel), Present Speed and Present Load
+    output_full_scale = 1023     # Torque Limit, wheel-mode Moving Speed and Present Load: 1023 = 100 %
+    wheel_output = "pwm"         # wheel-mode Moving Speed: "pwm" (output share) or "velocity" (speed_unit_rpm)
+    mode_register = "control_mode"  # optional: the register choosing wheel mode (absent: both angle
+    wheel_modes = [1]               # limits 0, the AX/MX rule) and its wheel-mode values
+    p_gain_factor = 0.125        # optional, for tables with P/I/D gains: the e-manual's controller
+    i_gain_factor_s = 0.48828125 # gains per register unit (Kp = P/8, Ki = I*1000/2048 per second,
+    d_gain_factor_s = 0.004      # Kd = D*4/1000 seconds), output in output_full_scale units per position unit
+    errors = { overload = 1, overheating = 2, input_voltage = 4 }  # Shutdown / Hardware Error Status bits
+
 Entry keys: ``address``, ``size`` (1, 2 or 4), ``name`` (snake_case, unique), ``access`` ("R" or "RW"),
 ``area`` ("EEPROM" or "RAM"; EEPROM entries come before the first RAM one), ``default`` (absent: the
 e-manual gives none, "-", and 0 is used), ``min``/``max`` (absent: the full span of the size, signed or
@@ -82,7 +98,7 @@ if sys.version_info >= (3, 11):
 else:  # Python 3.10: the same parser, from PyPI
     import tomli as tomllib
 
-__all__ = ["Rating", "Physical", "Controller", "ServoModel", "parse_model", "load_model_file", "model", "model_names", "MODELS_PACKAGE_DIR"]
+__all__ = ["Rating", "Physical", "Controller", "Classic", "CLASSIC_ERRORS", "ServoModel", "parse_model", "load_model_file", "model", "model_names", "MODELS_PACKAGE_DIR"]
 
 #: Where the shipped model files live (package data).
 MODELS_PACKAGE_DIR = "models"
@@ -101,6 +117,13 @@ _PHYSICAL_KEYS = {"source", "gear_ratio", "weight_g", "resolution_deg", "positio
 _RATING_KEYS = {"voltage_v", "stall_torque_nm", "stall_current_a", "no_load_speed_rpm", "note"}
 _CONTROLLER_KEYS = {"source", "position_output_scale"}
 _MODE_CHANGE_KEYS = {"source", "defaults", "from_registers"}
+_CLASSIC_KEYS = {"source", "position_units", "position_span_deg", "position_centre", "speed_unit_rpm", "direction_bit",
+                 "output_full_scale", "wheel_output", "mode_register", "wheel_modes", "p_gain_factor", "i_gain_factor_s",
+                 "d_gain_factor_s", "errors"}
+#: What a classic table's error bits may name (the X-series firmware's protections).
+CLASSIC_ERRORS = ("input_voltage", "overheating", "overload")
+#: Wheel-mode Moving Speed: a share of the output (AX, XL-320: "only the output control is possible") or a speed.
+CLASSIC_WHEEL_OUTPUTS = ("pwm", "velocity")
 
 
 @dataclass(frozen=True)
@@ -165,6 +188,39 @@ class ModeChange:
 
 
 @dataclass(frozen=True)
+class Classic:
+    """A classic control table's units (``[classic]``), so the X-series firmware model can run it.
+
+    Why data: the XL-320 and the MX series keep the AX series' registers (Goal Position, Moving Speed,
+    Torque Limit, P/I/D gains) with each family's own units; :mod:`ax12emu.servo.classic` translates
+    whichever numbers the file gives.
+    """
+
+    source: str
+    #: Goal/Present Position: ``position_units`` over ``position_span_deg``, ``position_centre`` at its middle.
+    position_units: int
+    position_span_deg: float
+    position_centre: int
+    #: Moving Speed (joint mode) and Present Speed unit, rpm.
+    speed_unit_rpm: float
+    #: Sign bit of wheel-mode Moving Speed, Present Speed and Present Load (set: clockwise).
+    direction_bit: int = 10
+    #: Torque Limit, wheel-mode Moving Speed (where ``wheel_output`` is "pwm") and Present Load: this value is 100 %.
+    output_full_scale: int = 1023
+    #: What wheel-mode Moving Speed sets: "pwm" (a share of the output) or "velocity" (``speed_unit_rpm``).
+    wheel_output: str = "pwm"
+    #: The register choosing wheel mode and its wheel values; None: wheel mode is both angle limits 0.
+    mode_register: str | None = None
+    wheel_modes: tuple[int, ...] = ()
+    #: The e-manual's controller gains per register unit (None: the table has no such gain).
+    p_gain_factor: float | None = None
+    i_gain_factor_s: float | None = None
+    d_gain_factor_s: float | None = None
+    #: (protection, bit) of Shutdown and Hardware Error Status; protections from :data:`CLASSIC_ERRORS`.
+    errors: tuple[tuple[str, int], ...] = ()
+
+
+@dataclass(frozen=True)
 class ServoModel:
     """One servo model, as its data file states it."""
 
@@ -188,6 +244,8 @@ class ServoModel:
     controller: Controller = Controller()
     #: What a change of Operating Mode(11) resets (``[mode_change]``).
     mode_change: ModeChange = ModeChange()
+    #: A classic table's units (``[classic]``); None for X-series tables and the AX-12's own model.
+    classic: Classic | None = None
     _layouts: dict[str, Layout] = field(default_factory=dict, compare=False, repr=False)
 
     @property
@@ -474,6 +532,58 @@ def _mode_change(where: _Where, raw: Any, names: Mapping[str, Entry]) -> ModeCha
                              for name, src in pairs.items()))
 
 
+def _classic(where: _Where, raw: Any, names: Mapping[str, Entry]) -> Classic | None:
+    if raw is None:
+        return None
+    raw = where.table(raw, "classic", _CLASSIC_KEYS, {"source", "position_units", "position_span_deg", "position_centre",
+                                                      "speed_unit_rpm"})
+    units = where.integer(raw["position_units"], "classic.position_units")
+    centre = where.integer(raw["position_centre"], "classic.position_centre")
+    if units < 2 or not 0 <= centre < units:
+        raise where.error("classic", f"position_centre {centre} must lie in 0..position_units-1 ({units - 1})")
+    span = where.number(raw["position_span_deg"], "classic.position_span_deg")
+    if span > 360.0:
+        raise where.error("classic.position_span_deg", f"at most one turn (360), got {span}")
+    bit = where.integer(raw.get("direction_bit", 10), "classic.direction_bit")
+    full = where.integer(raw.get("output_full_scale", 1023), "classic.output_full_scale")
+    if not 1 <= bit <= 15 or not 0 < full < (1 << bit):
+        raise where.error("classic", f"output_full_scale {full} must fit below direction_bit {bit} (1..15)")
+    mode_register = raw.get("mode_register")
+    wheel_modes: tuple[int, ...] = ()
+    if mode_register is not None:
+        mode_register = where.text(mode_register, "classic.mode_register")
+        if mode_register not in names:
+            raise where.error("classic.mode_register", f"no register named {mode_register!r} in the table")
+        modes = raw.get("wheel_modes")
+        if not isinstance(modes, list) or not modes:
+            raise where.error("classic.wheel_modes", f"a mode_register needs its wheel-mode values, got {modes!r}")
+        wheel_modes = tuple(where.integer(v, "classic.wheel_modes") for v in modes)
+    elif "wheel_modes" in raw:
+        raise where.error("classic.wheel_modes", "belongs to a mode_register")
+    gains = {}
+    for key, register in (("p_gain_factor", "p_gain"), ("i_gain_factor_s", "i_gain"), ("d_gain_factor_s", "d_gain")):
+        if key in raw:
+            gains[key] = where.number(raw[key], f"classic.{key}")
+            if register not in names:
+                raise where.error(f"classic.{key}", f"the table has no {register} register")
+    errors_raw = raw.get("errors", {})
+    if not isinstance(errors_raw, dict):
+        raise where.error("classic.errors", f"must be a table of protection = bit, got {errors_raw!r}")
+    errors = []
+    for name, value in errors_raw.items():
+        where.choice(name, "classic.errors", CLASSIC_ERRORS)
+        value = where.integer(value, f"classic.errors.{name}")
+        if value <= 0 or value & (value - 1) or value > 0x80:
+            raise where.error(f"classic.errors.{name}", f"must be one bit of a byte, got {value}")
+        errors.append((name, value))
+    return Classic(
+        source=where.text(raw["source"], "classic.source"), position_units=units, position_span_deg=span,
+        position_centre=centre, speed_unit_rpm=where.number(raw["speed_unit_rpm"], "classic.speed_unit_rpm"),
+        direction_bit=bit, output_full_scale=full,
+        wheel_output=where.choice(raw.get("wheel_output", "pwm"), "classic.wheel_output", CLASSIC_WHEEL_OUTPUTS),
+        mode_register=mode_register, wheel_modes=wheel_modes, errors=tuple(errors), **gains)
+
+
 def parse_model(text: str, key: str, path: str) -> ServoModel:
     """A model from the text of its file; ``ValueError`` naming ``path`` and the field on any mistake."""
     where = _Where(path)
@@ -481,7 +591,7 @@ def parse_model(text: str, key: str, path: str) -> ServoModel:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ValueError(f"{path}: not valid TOML: {exc}") from None
-    where.table(data, "top level", {"model", "table", "profiles", "physical", "controller", "mode_change"},
+    where.table(data, "top level", {"model", "table", "profiles", "physical", "controller", "mode_change", "classic"},
                 {"model", "table", "physical"})
     info = where.table(data["model"], "model", _MODEL_KEYS, {"name", "model_number", "protocols", "source"})
     protocols = info["protocols"]
@@ -523,6 +633,7 @@ def parse_model(text: str, key: str, path: str) -> ServoModel:
         baud_rates_bps=bauds,
         controller=_controller(where, data.get("controller")),
         mode_change=_mode_change(where, data.get("mode_change"), seen),
+        classic=_classic(where, data.get("classic"), seen),
     )
 
 
