@@ -133,6 +133,8 @@ def record(port_name: str, servo_id: int, baud: int, duration_s: float, rate_hz:
             rows.append([t, cmd[0], cmd[1], pos, spd, load, sent_t])
     finally:
         port.closePort()
+    if not rows:
+        raise RuntimeError(f"no reading of servo {servo_id} on {port_name} succeeded in {duration_s:g} s")
     a = np.array(rows, dtype=float)
     comment = f"recorded by tools/record.py on {port_name}" + "".join(f", {k}={v}" for k, v in (writes or {}).items())
     return Trace({c: a[:, i] for i, c in enumerate(_COLUMNS)}, comments=[comment])
@@ -157,7 +159,11 @@ def main(argv: list[str] | None = None) -> int:
         p.error(str(exc))
     if not 0 < args.rate <= 1000 or not args.duration > 0:
         p.error("--rate must be in (0, 1000] and --duration positive")
-    trace = record(args.port, args.id, args.baud, args.duration, args.rate, args.breakaway, writes)
+    try:
+        trace = record(args.port, args.id, args.baud, args.duration, args.rate, args.breakaway, writes)
+    except RuntimeError as exc:  # a set-up write unanswered, or no reading at all: the servo or port is not there
+        print(f"error: {exc}", file=sys.stderr)
+        return 3
     write_trace(trace, args.out)
     print(f"{args.out}: {len(trace)} rows over {trace.t[-1]:.2f} s")
     return 0

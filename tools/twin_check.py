@@ -21,6 +21,10 @@ measured servo recorded a second time gives that floor (``--floor``).
 Usage: ``python tools/twin_check.py [--arm MASS_KG,LENGTH_M] [--hidden-params FILE] [--voltage V]
 [--write NAME=VALUE ...] [--duration 20] [--rate 100] [--breakaway 4] [--out DIR] [--floor]``
 (with no hidden knob given, ``--arm 0.35,0.1``: an arm of 0.34 N m weight moment).
+
+Exit status: 0 goal met, 1 goal missed, 2 a recording that cannot be compared (cut short, e.g. the served
+emulator stopped, or not the same commands as the measurement), 3 the served emulator or the diagnosis
+failed; errors are one line on stderr.
 """
 
 from __future__ import annotations
@@ -29,6 +33,7 @@ import argparse
 import json
 import subprocess
 import sys
+import termios
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -39,7 +44,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from ax12emu.harness.served import start_served  # noqa: E402
-from firmware_model.diagnose.trace import Trace, read_trace, write_trace  # noqa: E402
+from firmware_model.diagnose.trace import Trace, TraceFormatError, read_trace, write_trace  # noqa: E402
 
 #: The hidden effect when none is given: an arm whose weight moment (0.34 N m) is a quarter of the stall torque.
 DEFAULT_ARM = "0.35,0.1"
@@ -48,6 +53,22 @@ GOAL_RATIO = 0.5
 
 #: serve arguments, where the recording goes -> the recorded trace (live: a served emulator and tools/record.py).
 Recorder = Callable[[list[str], dict[str, int], Path], Trace]
+#: A live recording may end this many read periods (or 0.1 s, whichever is longer) short of its duration:
+#: the reads are paced from the start, so only the last one or two can fall past the end.
+SHORT_BY_PERIODS = 3
+
+
+class RecordingError(ValueError):
+    """A recording that cannot be compared: cut short, or not the same commands as the measurement."""
+
+
+def check_complete(trace: Trace, duration_s: float, rate_hz: float, name: str) -> None:
+    """Raise :class:`RecordingError` if ``trace`` stops well before ``duration_s`` (a served emulator that died)."""
+    slack_s = max(SHORT_BY_PERIODS / rate_hz, 0.1)
+    end_s = float(trace.t[-1]) if len(trace) else 0.0
+    if end_s < duration_s - slack_s:
+        raise RecordingError(f"{name}: the recording ends at {end_s:.2f} s of {duration_s:g} s ({len(trace)} rows): "
+                             "cut short (did the served emulator stop?)")
 
 
 # ---------------------------------------------------------------------------------- comparison
@@ -74,12 +95,12 @@ def aligned_gap(measured: Trace, other: Trace) -> float:
     """
     seg_m, seg_o = command_segments(measured), command_segments(other)
     if len(seg_m) != len(seg_o):
-        raise ValueError(f"the recordings sent different numbers of commands ({len(seg_m)} vs {len(seg_o)})")
+        raise RecordingError(f"the recordings sent different numbers of commands ({len(seg_m)} vs {len(seg_o)})")
     errors = []
     for (sent_m, rows_m), (sent_o, rows_o) in zip(seg_m, seg_o):
         goal_m, goal_o = measured["goal_position"][rows_m[0]], other["goal_position"][rows_o[0]]
         if goal_m != goal_o:
-            raise ValueError(f"the recordings sent different commands (goal {goal_m} vs {goal_o})")
+            raise RecordingError(f"the recordings sent different commands (goal {goal_m} vs {goal_o})")
         tau_m, tau_o = measured.t[rows_m] - sent_m, other.t[rows_o] - sent_o
         inside = (tau_m >= tau_o[0]) & (tau_m <= tau_o[-1])
         if len(rows_o) == 1:
@@ -135,16 +156,22 @@ def run_loop(record: Recorder, hidden_args: list[str], writes: dict[str, int], o
     diagnosis = out / "diagnosis"
     run = subprocess.run([sys.executable, "-m", "firmware_model.diagnose", str(out / "measured.csv"), "--out",
                           str(diagnosis), "--json", "-q", *diagnose_args], capture_output=True, text=True, cwd=ROOT)
-    if run.returncode != 0:
-        raise RuntimeError(f"the diagnosis failed: {run.stderr.strip()}")
+    if run.returncode != 0:  # its last line says why (a one-line error, or a traceback's last line)
+        why = (run.stderr.strip().splitlines() or [f"exit status {run.returncode}"])[-1]
+        raise RuntimeError(f"the diagnosis of {out / 'measured.csv'} failed: {why}")
     verdict = json.loads(run.stdout)
     params_file = diagnosis / "params.toml"
     others = {"plain": record([], {}, out / "plain.csv"),
               "twin": record(["--params", str(params_file)], {}, out / "twin.csv")}
     if floor:
         others["again"] = record(hidden_args, writes, out / "measured_again.csv")
-    return Result({k: aligned_gap(measured, v) for k, v in others.items()},
-                  {k: timed_gap(measured, v) for k, v in others.items()}, verdict, params_file)
+    aligned = {}
+    for name, other in others.items():
+        try:
+            aligned[name] = aligned_gap(measured, other)
+        except RecordingError as exc:
+            raise RecordingError(f"{name} recording vs the measurement: {exc} (one was cut short?)") from None
+    return Result(aligned, {k: timed_gap(measured, v) for k, v in others.items()}, verdict, params_file)
 
 
 # ---------------------------------------------------------------------------------- live recording
@@ -156,9 +183,22 @@ def live_recorder(duration_s: float, rate_hz: float, breakaway_s: float) -> Reco
     def _record(serve_args: list[str], writes: dict[str, int], path: Path) -> Trace:
         served = start_served(["--ids", "1", *serve_args], cwd=ROOT)
         try:
-            trace = sdk_record(served.port, 1, 1_000_000, duration_s, rate_hz, breakaway_s, writes)
+            try:
+                trace = sdk_record(served.port, 1, 1_000_000, duration_s, rate_hz, breakaway_s, writes)
+            # "cannot open PORT", a port gone (pyserial's SerialException or termios.error), a write unanswered
+            except (SystemExit, OSError, termios.error, RuntimeError) as exc:
+                failure = exc
+            else:
+                failure = None
+            died = served.process.poll()
         finally:
             served.close()
+        if died is not None:
+            raise RuntimeError(f"{path.name}: the served emulator exited (status {died}) during the recording"
+                               + (f" ({failure})" if failure else ""))
+        if failure is not None:
+            raise RuntimeError(f"{path.name}: {failure}")
+        check_complete(trace, duration_s, rate_hz, path.name)
         write_trace(trace, path)
         return read_trace(path)  # as the diagnosis reads it
 
@@ -212,7 +252,14 @@ def main(argv: list[str] | None = None) -> int:
         hidden += ["--voltage", str(args.voltage)]
     record = live_recorder(args.duration, args.rate, args.breakaway)
     diagnose_args = ("--effects", args.effects) if args.effects else ()
-    result = run_loop(record, hidden, writes, Path(args.out).resolve(), args.floor, diagnose_args)
+    try:
+        result = run_loop(record, hidden, writes, Path(args.out).resolve(), args.floor, diagnose_args)
+    except (RecordingError, TraceFormatError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except (RuntimeError, OSError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 3
     print(f"hidden: {' '.join(hidden) or '-'} {' '.join(args.write)}".rstrip())
     print(result.text())
     return 0 if result.ratio <= GOAL_RATIO else 1

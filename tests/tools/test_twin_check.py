@@ -137,3 +137,65 @@ def test_aligned_gap_ignores_when_commands_went_out():
     with pytest.raises(ValueError, match="different"):
         twin_check.aligned_gap(a, Trace({**{c: a[c] for c in ("t", "moving_speed", "present_position", "command_t")},
                                          "goal_position": np.where(t < 1.0, 600, 300)}))
+
+
+def _cut_short(recorder, which: str, keep_s: float):
+    """``recorder`` with the recording written to ``which``.csv ending at ``keep_s`` (its emulator stopped there)."""
+
+    def _record(serve_args: list[str], writes: dict[str, int], path: Path) -> Trace:
+        trace = recorder(serve_args, writes, path)
+        if path.stem == which:
+            keep = trace.t < keep_s
+            write_trace(Trace({c: v[keep] for c, v in trace.columns.items()}), path)
+            trace = read_trace(path)
+        return trace
+
+    return _record
+
+
+def test_a_recording_cut_short_is_a_one_line_error_with_exit_status_2(tmp_path, monkeypatch, capsys):
+    """The plain emulator's recording stops half way: the loop says which, and exits 2 (no traceback)."""
+    monkeypatch.setattr(twin_check, "live_recorder",
+                        lambda *_: _cut_short(virtual_recorder(seed=11), "plain", DURATION_S / 2))
+    status = twin_check.main(["--duration", str(DURATION_S), "--out", str(tmp_path / "loop"),
+                              "--effects", "gravity_load"])
+    err = capsys.readouterr().err
+    assert status == 2, err
+    assert len(err.strip().splitlines()) == 1 and err.startswith("error: plain recording"), err
+    assert "different numbers of commands" in err
+
+
+def test_check_complete_refuses_a_recording_that_ends_early():
+    t = np.arange(0.0, 6.0, 0.01)
+    trace = Trace({"t": t, "goal_position": np.full(len(t), 512), "moving_speed": np.zeros(len(t)),
+                   "present_position": np.full(len(t), 512)})
+    twin_check.check_complete(trace, 6.0, 100.0, "whole.csv")
+    with pytest.raises(twin_check.RecordingError, match=r"short\.csv: the recording ends at 5\.99 s of 10 s"):
+        twin_check.check_complete(trace, 10.0, 100.0, "short.csv")
+
+
+@pytest.mark.wallclock
+def test_a_served_emulator_that_dies_mid_recording_is_a_one_line_error_with_exit_status_3(tmp_path, monkeypatch,
+                                                                                         capsys):
+    """The measured servo's ``ax12emu serve`` is killed 0.7 s into a 1.5 s recording through dynamixel-sdk."""
+    import os
+    import signal
+    import threading
+
+    timers = []
+
+    def start_and_kill_soon(*args, **kwargs):
+        served = twin_check_start_served(*args, **kwargs)
+        timers.append(threading.Timer(0.7, os.kill, (served.process.pid, signal.SIGKILL)))
+        timers[-1].start()
+        return served
+
+    twin_check_start_served = twin_check.start_served
+    monkeypatch.setattr(twin_check, "start_served", start_and_kill_soon)
+    status = twin_check.main(["--duration", "1.5", "--breakaway", "0", "--out", str(tmp_path / "loop")])
+    for timer in timers:
+        timer.join()
+    err = capsys.readouterr().err
+    assert status == 3, err
+    assert len(err.strip().splitlines()) == 1, err
+    assert err.startswith("error: measured.csv: the served emulator exited (status -9) during the recording"), err
