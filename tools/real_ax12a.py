@@ -32,7 +32,7 @@ Usage::
 
     python tools/real_ax12a.py [--data DIR] [--goal 500] [--plot tools/figures/real_ax12a.png]
 
-Exit status 2 with a message if the data folder is missing.
+Exit status 2 with a message if the data folder is missing or a recording in it cannot be read or is cut short.
 """
 
 from __future__ import annotations
@@ -109,10 +109,22 @@ class Measured:
 
 
 def load(path: Path) -> Measured:
+    """One Wizard export; ValueError (or OSError) naming the file when it cannot be compared.
+
+    A recording cut short before the servo settled has no final value to measure overshoot and dip from.
+    """
     ex = read_wizard(path)
     if "present_position" not in ex.values:
         raise ValueError(f"{path}: no Present Position column")
-    return Measured(ex.t_s * 1000.0, ex.values["present_position"].astype(float))
+    rec = Measured(ex.t_s * 1000.0, ex.values["present_position"].astype(float))
+    try:
+        settle_from_ms = rec.first_move_ms + SETTLED_AFTER_MS
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from None
+    if rec.t_ms[-1] < settle_from_ms:
+        raise ValueError(f"{path}: the recording ends {rec.t_ms[-1] - rec.first_move_ms:.0f} ms after the first "
+                         f"movement; the settled value is read from {SETTLED_AFTER_MS:.0f} ms after it on (cut short?)")
+    return rec
 
 
 def _commands(goal: int) -> Commands:
@@ -206,7 +218,11 @@ def _row(name: str, r: dict, real: dict | None = None) -> str:
 
 
 def run(data: Path, goal: int, plot: Path | None) -> int:
-    recs = {r.file: load(data / r.file) for r in RECORDINGS if (data / r.file).exists()}
+    try:
+        recs = {r.file: load(data / r.file) for r in RECORDINGS if (data / r.file).exists()}
+    except (ValueError, OSError) as exc:  # WizardFormatError is a ValueError
+        print(f"real_ax12a: {exc}", file=sys.stderr)
+        return 2
     if FIT_ON not in recs:
         print(f"real_ax12a: {data / FIT_ON} not found (the recordings live in ../shared/reference/real-ax12a)",
               file=sys.stderr)
