@@ -195,6 +195,9 @@ def main(argv: list[str] | None = None) -> int:
         params = ServoParams.from_toml(args.params) if args.params else ServoParams()
         null_knobs(params)  # the fit simulates the file's [effects] too: refuse one it cannot, before any work
         data = load_input(args, params, say)
+        if Path(args.out).exists() and not Path(args.out).is_dir():  # refused before any work, not after it
+            raise ValueError(f"--out {args.out}: exists and is not a folder")
+        Path(args.out).mkdir(parents=True, exist_ok=True)
     except (TraceFormatError, ValueError, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -211,7 +214,11 @@ def main(argv: list[str] | None = None) -> int:
         print("error: --params holds an AX-12's ServoParams; an X-series trace's model comes from its metadata",
               file=sys.stderr)
         return 2
-    d = diagnose(data.trace, params if family.name == "ax" else None, progress=say, effects=wanted)
+    try:  # an X-series trace's data sheet (#@ gear_ratio, ratings) is read when its model is built
+        d = diagnose(data.trace, params if family.name == "ax" else None, progress=say, effects=wanted)
+    except TraceFormatError as exc:
+        print(f"error: {args.trace}: {exc}", file=sys.stderr)
+        return 2
     notes = data.notes + _recording_notes(d, data.trace)
     write_outputs(data.trace, d, args.out, source=args.trace, params=params)
     _insert_input_section(Path(args.out) / "report.md", notes)

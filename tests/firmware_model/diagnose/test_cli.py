@@ -1,0 +1,49 @@
+"""The command line on input it cannot use: one line on stderr, exit status 2, no traceback, before any work."""
+
+from pathlib import Path
+
+import pytest
+
+from firmware_model.diagnose.cli import main
+
+_AX_HEADER = "t,goal_position,moving_speed,present_position\n"
+_WIZARD_HEADER = "DYNAMIXEL Graph,2\nAX-12A,12\nItemCount,1\nPresent Position,#ffff00,0,1,0\nTime[ms],Present Position\n"
+
+#: name -> (file text, or None for a directory in its place; words the error must hold)
+CASES = {
+    "empty file": ("", "empty file"),
+    "header only": (_AX_HEADER, "need at least two rows"),
+    "non-numeric row": (_AX_HEADER + "0,512,0,512\n0.01,512,0,abc\n", "column 'present_position'"),
+    "trace cut mid-row": (_AX_HEADER + "0,512,0,512\n0.01,512,0", "expected 4 values, got 3"),
+    "Wizard export cut in its header": (_WIZARD_HEADER[:40], "ItemCount"),
+    "Wizard export with no data row whole": (_WIZARD_HEADER + "0,1\n16,", "need at least two readable data rows"),
+    "directory": (None, "Is a directory"),
+    # read whole, but its model cannot be built: the data sheet is missing from the metadata
+    "X-series trace without its data sheet": ('#@ servo = "x"\nt,goal_position,present_position\n0,1,2\n0.1,1,2\n',
+                                              "needs #@ gear_ratio"),
+}
+
+
+@pytest.mark.parametrize("case", CASES)
+def test_unusable_input_exits_2_with_one_line(tmp_path, capsys, case):
+    text, words = CASES[case]
+    path = tmp_path / "measured.csv"
+    if text is None:
+        path.mkdir()
+    else:
+        path.write_text(text, encoding="utf-8")
+    assert main([str(path), "--out", str(tmp_path / "out"), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and err.startswith("error: ") and words in err, err
+    assert not (tmp_path / "out" / "report.md").exists()
+
+
+def test_an_out_that_is_a_file_is_refused_before_any_work(tmp_path, capsys):
+    trace = tmp_path / "measured.csv"
+    trace.write_text(_AX_HEADER + "".join(f"{i / 100},600,0,{512 + min(i, 60)}\n" for i in range(200)),
+                     encoding="utf-8")
+    (tmp_path / "out").write_text("not a folder", encoding="utf-8")
+    assert main([str(trace), "--out", str(tmp_path / "out"), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert err == f"error: --out {tmp_path / 'out'}: exists and is not a folder\n", err
+    assert Path(tmp_path / "out").read_text(encoding="utf-8") == "not a folder"
