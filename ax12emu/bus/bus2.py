@@ -71,7 +71,7 @@ from ax12emu.protocol.packets2 import (
 )
 from ax12emu.protocol.params2 import INSTRUCTION_SPECS, Broadcast, BulkRead, SyncRead, parse_params
 from ax12emu.protocol.servo_models import ServoModel
-from ax12emu.servo.plant2 import Plant2
+from ax12emu.servo.plant2 import plant_for
 from ax12emu.servo.request_handler2 import answers, handle2, listed_read, status_byte
 from ax12emu.servo.servo2 import Servo2, Servo2Options
 from firmware_model.xseries.interface import XServoModel
@@ -127,7 +127,7 @@ class Bus2:
         self.servos: list[Servo2] = []
         for index, (servo_id, spec) in enumerate(slots):
             model = firmware(spec, index)
-            self.servos.append(Servo2(spec, lambda servo, m=model: Plant2(m, servo.table),
+            self.servos.append(Servo2(spec, lambda servo, m=model: plant_for(m, servo.table, servo.spec),
                                       servo_id=servo_id, index=index, options=options))
         #: Where each servo's EEPROM area persists, keyed by the ID it was launched with; None: nowhere.
         self.state_store = state_store

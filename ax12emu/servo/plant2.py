@@ -15,16 +15,19 @@ Shutdown is the firmware's: it reports Torque Enable among the sensed registers.
 
 from __future__ import annotations
 
+import dataclasses
 import operator
 import struct
 from collections.abc import Callable, Iterator
 
 from ax12emu.protocol.registers import Entry
+from ax12emu.protocol.servo_models import ServoModel
 from firmware_model.xseries.interface import OperatingMode, XCommands, XSensed, XServoModel
 
+from .classic import ClassicMap
 from .table2 import Table2
 
-__all__ = ["Plant2", "SENSED_REGISTERS"]
+__all__ = ["ClassicPlant2", "Plant2", "SENSED_REGISTERS", "plant_for"]
 
 #: Where each sensed value goes: the first of these registers the table has (the XL430's
 #: register 126 is Present Load, the current-sensing models' Present Current).
@@ -172,3 +175,61 @@ class Plant2:
         """CLEAR option 0x01: the model drops Present Position's turn count."""
         self.firmware.clear_multi_turn()
         self.write_back()
+
+
+class ClassicPlant2(Plant2):
+    """A classic table (the XL-320's) behind the X-series firmware: its registers go through a :class:`ClassicMap`.
+
+    Why a subclass: the X tables' registers are the firmware's own and are copied by name (the fast
+    path above); a classic table's mean the same things in other units, so each command and reading
+    is translated.  A write to Moving Speed starts a new move as a Goal register write does (in joint
+    mode the new speed takes over from where the trajectory is, as the X firmware's velocity override).
+    """
+
+    def __init__(self, firmware: XServoModel, table: Table2, classic: ClassicMap) -> None:
+        self.classic = classic
+        by_name = table.layout.by_name
+        self._classic_names, self._read_classic = _reader([by_name[name] for name in classic.command_registers])
+        self._classic_slots = [(name, by_name[name]) for name in classic.sensed_registers]
+        self._last_values: dict[str, int] | None = None
+        self._last_commands = XCommands()
+        super().__init__(firmware, table)
+
+    def commands(self) -> XCommands:
+        values = dict(zip(self._classic_names, self._read_classic(self.table.row)))
+        commands = self.classic.commands(values)
+        if self._held is not None:
+            commands = dataclasses.replace(commands, **self._held)
+        return commands
+
+    def command(self, *, goal_written: bool = False) -> None:
+        values = dict(zip(self._classic_names, self._read_classic(self.table.row)))
+        goal_written = goal_written or self.classic.goal_changed(self._last_values, values)
+        self._last_values = values
+        commands = self.classic.commands(values)
+        if self._held is not None:
+            commands = dataclasses.replace(commands, **self._held)
+        self._last_commands = commands
+        self.firmware.command(commands, goal_written=goal_written)
+        self._write_unseen = True
+
+    def hold(self) -> None:
+        """Stop where the shaft is: the firmware's own position (pulses) as the goal, and zero output in wheel mode."""
+        held = {"goal_velocity": 0, "goal_position": self.firmware.sense().present_position}
+        if self._last_commands.operating_mode == OperatingMode.PWM:
+            held["goal_pwm"] = 0
+        self._held = held
+        self.command(goal_written=True)
+
+    def write_back(self) -> None:
+        registers = self.classic.sensed_to_registers(self.firmware.sense(), self._last_commands)
+        row = self.table.row
+        for name, entry in self._classic_slots:
+            row[entry.address : entry.end] = entry.to_bytes(registers[name])
+
+
+def plant_for(firmware: XServoModel, table: Table2, spec: ServoModel) -> Plant2:
+    """The plant for a model's table: the X-series tables' own, or a classic table's (a ``[classic]`` section) translated."""
+    if spec.classic is not None:
+        return ClassicPlant2(firmware, table, ClassicMap.from_model(spec, step_s=firmware.step_s))
+    return Plant2(firmware, table)

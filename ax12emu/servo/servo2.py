@@ -29,8 +29,9 @@ WATCHDOG_ERROR = 0xFF
 WATCHDOG_UNIT_S = 0.020
 #: Goal registers a booting X-series firmware sets to the limit that bounds them (e-manual, X series,
 #: "Goal PWM(100)" and "Goal Current(102)" take PWM Limit and Current Limit at power-up; without it a
-#: default Goal PWM of 0 would allow no output at all).
-BOOT_GOALS = {"goal_pwm": "pwm_limit", "goal_current": "current_limit"}
+#: default Goal PWM of 0 would allow no output at all); on the XL-320's classic table "When the power is turned
+#: on, Torque Limit(35) is reset to the value of Max Torque(15)" (e-manual, _includes/en/dxl/control_table_torque_limit.md).
+BOOT_GOALS = {"goal_pwm": "pwm_limit", "goal_current": "current_limit", "torque_limit": "max_torque"}
 #: The highest active Secondary ID(12); 253..255 switch the function off.
 SECONDARY_ID_MAX = 252
 #: Realtime Tick(120) counts milliseconds from 0 to 32767 and wraps (e-manual, "Realtime Tick(120)").
