@@ -35,10 +35,10 @@ PacketHandler(2.0), a GroupSyncRead of Present Position from six X-series servos
 GroupSyncWrite of their Goal Positions, at Return Delay Time 0, against ``ax12emu serve --servo
 MODEL --ids 1-6`` and a bare Protocol 2.0 responder (a few lines answering each Sync Read with six
 fixed status packets at once and staying silent on the Sync Write), alternated in the same 0.2 s
-turns; goal: >= 80 % of the bare rate.  The emulator lays the six status packets one after another,
-each when the one before it has left the wire at 1 Mbps (150 us each), also without ``--pace``
-(``Bus2``, ``merge_replies(in_sequence=True)``); the bare responder does not, so 750 us of each of
-the emulator's cycles is the modelled bus itself.
+turns; goal: >= 80 % of the bare rate.  Served without ``--pace``, as here, bytes take no time: the
+six status packets go out in list order, each Return Delay Time (0) after the one before it, so
+together, as the bare responder's do (``merge_replies(in_sequence=True)``); with ``--pace`` each
+would wait until the one before it had left the wire (150 us each at 1 Mbps).
 
 Usage: ``python tools/bench_protocol.py [--seconds 2] [--rounds 3] [--web [socket|chromium]] [--protocol 2.0 [--model M]]``
 """

@@ -5,8 +5,9 @@ bus of X-series servos: a 4-byte read of one servo, a Sync Read, a Fast Sync Rea
 Read of all of them, and a Sync Write, each with Return Delay Time 0 (the wire's own time
 without ``--pace`` is nothing) and at the factory 250 (500 us per servo answering), plus the
 time broadcastPing takes to find every servo.  The Sync Read's status packets come one after
-another, each Return Delay Time after the previous one ended, so at RDT 250 it should take
-about 500 us per servo more than at RDT 0; that difference is printed beside its goal.
+another, each Return Delay Time after the previous one (without ``--pace`` bytes take no time, so
+not after it ended), so at RDT 250 it should take about 500 us per servo more than at RDT 0; that
+difference is printed beside its goal.
 
 Usage: ``python tools/bench_protocol2.py [--seconds 2] [--servos 6] [--model xl430-w250]``
 """

@@ -7,7 +7,11 @@ order, for the instructions several servos answer.  It offers the serving loop
 and TCP transports serve it, and it does no I/O.
 
 Who answers, and when (ROBOTIS e-manual, "DYNAMIXEL Protocol 2.0"; times from the end of the
-instruction, byte times at each servo's baud, 10 bits a byte):
+instruction, byte times at each servo's baud, 10 bits a byte; each reply's ``delay_s`` counts the
+wire time of the replies before it, and its ``wire_s`` says how much of it that is.  A serving loop
+with ``--pace`` keeps that wire time; without it bytes take no time, so it sends each reply at
+``delay_s - wire_s``: the same order, each Return Delay Time after the one before, no byte time;
+see ``reply.merge_replies``):
 
 * an instruction to one ID: that servo, Return Delay Time after (2 us units), as on Protocol 1.0;
 * broadcast Ping: "All devices send their Status Packet according to their arranged order".
@@ -283,8 +287,9 @@ class Bus2:
             if outcome.reply is None:
                 continue
             delay_s = servo.return_delay_s
-            slot_s = len(outcome.reply) * BITS_PER_BYTE / servo.baud_bps + delay_s
-            replies.append(Reply(servo.id, outcome.reply, delay_s + servo.id * slot_s, servo.baud_bps))
+            wire_s = len(outcome.reply) * BITS_PER_BYTE / servo.baud_bps
+            replies.append(Reply(servo.id, outcome.reply, delay_s + servo.id * (wire_s + delay_s), servo.baud_bps,
+                                 servo.id * wire_s))
         return replies
 
     def _listed(self, packet: InstructionPacket2, line_bps: float | None) -> list[Reply]:
@@ -324,21 +329,23 @@ class Bus2:
                 parts[k] = FastStatusPart(servo.id, status_byte(servo, error), data)
             pieces = fast_status_pieces(parts)[: len(answered)]
             at_s = answered[0][0].return_delay_s
+            wire_s = 0.0
             for (servo, _, _), piece in zip(answered, pieces):
-                replies.append(Reply(BROADCAST_ID, piece, at_s, servo.baud_bps))
-                at_s += len(piece) * BITS_PER_BYTE / servo.baud_bps
+                replies.append(Reply(BROADCAST_ID, piece, at_s + wire_s, servo.baud_bps, wire_s))
+                wire_s += len(piece) * BITS_PER_BYTE / servo.baud_bps
             return replies
-        at_s = 0.0
+        at_s = wire_s = 0.0
         for k, (servo, error, data) in enumerate(answered):
             status = encode_status2(servo.id, status_byte(servo, error), data)
             at_s += servo.return_delay_s
-            reply = Reply(servo.id, status, at_s, servo.baud_bps)
+            reply = Reply(servo.id, status, at_s + wire_s, servo.baud_bps, wire_s)
             if k in twins:  # the same turn: their answers collide on the wire
                 reply = collide([reply, *(Reply(twin.id, encode_status2(twin.id, status_byte(twin, twin_error), twin_data),
-                                                at_s + twin.return_delay_s - servo.return_delay_s, twin.baud_bps)
+                                                at_s + wire_s + twin.return_delay_s - servo.return_delay_s, twin.baud_bps,
+                                                wire_s)
                                           for twin, twin_error, twin_data in twins[k])])
             replies.append(reply)
-            at_s += len(status) * BITS_PER_BYTE / servo.baud_bps
+            wire_s += len(status) * BITS_PER_BYTE / servo.baud_bps
         return replies
 
     # -- life cycle --------------------------------------------------------------------

@@ -25,6 +25,9 @@ class Reply(NamedTuple):
     delay_s: float
     #: The replying servo's bit rate, for pacing and collision timing.
     baud_bps: float
+    #: Of ``delay_s``, the time on the wire of the replies laid before this one (a bus that lays its
+    #: replies one after another, ``in_sequence``); without pacing bytes take no time, so it is left out.
+    wire_s: float = 0.0
 
 
 def merge_replies(replies: Sequence[Reply], start_s: float, *, per_byte: bool,
@@ -37,11 +40,23 @@ def merge_replies(replies: Sequence[Reply], start_s: float, *, per_byte: bool,
     With ``per_byte`` each byte is released when its last bit has arrived
     (wire pacing); otherwise a single reply goes out whole at its due time.
     ``in_sequence``: the bus timed its replies one after another (Protocol 2.0's
-    broadcast Ping slots, Sync Read's answers in list order); without pacing
-    each then goes out whole at its own due time instead of all at the first's.
+    broadcast Ping slots, Sync Read's answers in list order), each ``delay_s``
+    counting the wire time of those before it (``wire_s``).  With pacing that
+    is the wire as it is: each reply's bytes follow the previous reply's.
+    Without pacing, bytes take no time anywhere else (a lone reply goes out
+    whole at its Return Delay Time), so the same holds here: each reply goes
+    out whole at ``delay_s - wire_s``, which keeps the real bus's order and
+    each servo's Return Delay Time after the reply before it, but no byte
+    time (six Sync Read answers at Return Delay Time 0 go out together, in
+    list order, rather than 150 us apart at 1 Mbps).
     """
     if in_sequence and not per_byte:
-        return [(start_s + reply.delay_s, reply.data) for reply in replies]
+        chunks, at_s = [], start_s
+        for reply in replies:
+            # Never before the reply before it: ``delay_s - wire_s`` may round a hair below it.
+            at_s = max(at_s, start_s + reply.delay_s - reply.wire_s)
+            chunks.append((at_s, reply.data))
+        return chunks
     if len(replies) == 1 and not per_byte:
         reply = replies[0]
         return [(start_s + reply.delay_s, reply.data)]
@@ -65,4 +80,4 @@ def collide(replies: Sequence[Reply]) -> Reply:
     """
     first = min(replies, key=lambda reply: reply.delay_s)
     [(at_s, data)] = merge_replies(replies, 0.0, per_byte=False)
-    return Reply(first.servo_id, data, at_s, first.baud_bps)
+    return Reply(first.servo_id, data, at_s, first.baud_bps, first.wire_s)

@@ -384,14 +384,22 @@ def test_a_protocol_1_model_is_refused():
         Bus2([(1, model("ax-12a"))], lambda spec, index: RecordingFirmware())
 
 
-def test_replies_timed_in_sequence_go_out_each_at_its_own_time():
-    """Without pacing, a broadcast Ping's answers leave at their slots, not all at the first one's."""
+def test_replies_timed_in_sequence_keep_the_wire_paced_and_their_order_and_delays_unpaced():
+    """A broadcast Ping's answers: paced, each byte leaves when its slot on the wire ends (ID n's answer n slots
+    of a status and a Return Delay Time in); unpaced, bytes take no time, so each answer leaves whole, in ID
+    order, its own Return Delay Time after the one before it (ID n: n + 1 Return Delay Times)."""
     bus, _ = recording_bus(ids=(1, 2), key="xl430-w250")
     replies = bus.receive(h("Ping broadcast"))
-    chunks = merge_replies(replies, 10.0, per_byte=False, in_sequence=bus.replies_in_sequence)
-    assert [(t, data) for t, data in chunks] == [(10.0 + r.delay_s, r.data) for r in replies]
-    paced = merge_replies(replies, 10.0, per_byte=True, in_sequence=True)
+    rdt_s, byte_s = 500e-6, BITS_PER_BYTE / 57600
+    status_s = len(replies[0].data) * byte_s
+    paced = merge_replies(replies, 10.0, per_byte=True, in_sequence=bus.replies_in_sequence)
     assert b"".join(data for _, data in paced) == b"".join(r.data for r in replies)
+    for reply, first_byte_s in zip(replies, (rdt_s + status_s + rdt_s, rdt_s + 2 * (status_s + rdt_s))):
+        k = sum(len(r.data) for r in replies if r.servo_id < reply.servo_id)
+        assert paced[k][0] == pytest.approx(10.0 + first_byte_s + byte_s, abs=byte_s / 2)  # on the byte grid
+    chunks = merge_replies(replies, 10.0, per_byte=False, in_sequence=bus.replies_in_sequence)
+    assert [data for _, data in chunks] == [r.data for r in replies]
+    assert [t for t, _ in chunks] == pytest.approx([10.0 + 2 * rdt_s, 10.0 + 3 * rdt_s])
 
 
 def test_requests_too_big_to_answer_do_not_crash_the_bus(xm):
