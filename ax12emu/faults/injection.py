@@ -283,7 +283,8 @@ class Faults:
             self.clear_alarm(self.bus.slots[index])
         for index in list(self._duplicates):
             self.unduplicate(self.bus.slots[index])
-        for index in list(self._stalls):
+        # A stall is held either in the model's mechanics (_blocked) or in the registers (_stalls).
+        for index in sorted(self._blocked | self._stalls.keys()):
             self.release(self.bus.slots[index])
 
     def active(self, slot: int) -> list[str]:
@@ -524,8 +525,6 @@ class Faults2(Faults):
     def clear(self) -> None:
         """Lift every fault (a servo with a forced alarm reboots: see :meth:`clear_alarm`)."""
         super().clear()
-        for index in list(self._blocked):
-            self.release(self.bus.slots[index])
 
     def duplicate(self, slot: int, as_id: int) -> None:
         """Give the servo launched as ``slot`` the ID ``as_id`` (0..252 on Protocol 2.0, normally another servo's)."""

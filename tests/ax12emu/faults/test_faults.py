@@ -177,6 +177,21 @@ def test_stalled_shaft_in_the_physical_model():
         assert comm == COMM_SUCCESS and abs(value - 800) <= 4 and not error & StatusError.OVERLOAD
 
 
+@pytest.mark.parametrize("model", ["physical", "kinematic"])
+def test_clear_lifts_a_stall_and_the_servo_moves_again(model):
+    """clear() frees a blocked shaft whichever way it was blocked (in the model's mechanics or by held registers)."""
+    with VirtualBus([1], transport="inprocess", virtual_time=True, model=model) as vbus:
+        vbus.faults.stall(1)
+        vbus.write(1, "torque_enable", 1)
+        vbus.write(1, "goal_position", 800)
+        vbus.step(0.2)  # pushing against the block, short of the overload
+        assert abs(vbus.read(1, "present_position") - 512) <= 1
+        vbus.faults.clear()
+        assert vbus.faults.active(1) == []
+        vbus.step(1.5)
+        assert abs(vbus.read(1, "present_position") - 800) <= 4
+
+
 def test_same_seed_same_faults():
     """Random faults repeat exactly with the same seed and traffic, and differ with another seed."""
 
