@@ -171,8 +171,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 #: Serve options that shape Protocol 1.0 servos only; with --servo each must keep its default.
-#: (--trace and the faults, --drop --corrupt --delay --vanish --duplicate --alarm --stall, serve both.)
-_PROTOCOL1_ONLY = ("web", "monitor", "params", "arm", "model", "controller", "profile",
+#: (--trace, the live view --web --monitor and the faults, --drop --corrupt --delay --vanish --duplicate
+#: --alarm --stall, serve both.)
+_PROTOCOL1_ONLY = ("params", "arm", "model", "controller", "profile",
                    "broadcast_ping", "reset_reply_id", "goal_torque", "eeprom_busy_ms")
 
 
@@ -296,20 +297,50 @@ def _serve2(args: argparse.Namespace) -> int:
     trace = TraceWriter(args.trace, servos=servos2) if args.trace else None
     transport = _open_transport(args)
     server = BusServer(bus, transport, pace=args.pace, echo=args.echo, trace=trace)
+    live = _open_live(args, server, transport, bus)
     signal.signal(signal.SIGINT, lambda signum, frame: server.stop())
     signal.signal(signal.SIGTERM, lambda signum, frame: server.stop())
     print(transport.url, flush=True)  # the first stdout line: the port, which scripts and tests read
+    if live is not None and live.url:
+        print(live.url, flush=True)
     log.info("serving %s on %s (Protocol %s%s%s)", ", ".join(f"{i}:{k}" for i, k in args.servo_models), transport.name,
              "/".join((["2.0"] if x_models else []) + (["1.0"] if ax_ids else [])), ", paced" if args.pace else "", ", echo" if args.echo else "")
     try:
         server.serve_forever()
     finally:
+        if live is not None:  # first: it reads the bus through the serving thread
+            live.close()
         transport.close()
         bus.close()
         if trace is not None:
             trace.close()
         log.info("stopped; %d packets served", server.packets_in)
     return 0
+
+
+def _open_live(args: argparse.Namespace, server, transport, bus):
+    """``--web``/``--monitor``: the live view of the served bus (AX-12s, X series or both), started; None without them.
+
+    Without the web extra, or when the page's port is taken, the transport and the bus are closed
+    before the error leaves (exit status 2 for the missing extra, with the line to install it).
+    """
+    if not (args.web or args.monitor):
+        return None
+    try:
+        from ax12emu.live import LiveView
+    except ImportError as exc:
+        print(f"ax12emu: --web and --monitor need the web extra: pip install 'ax12emu[web]' ({exc})", file=sys.stderr)
+        transport.close()
+        bus.close()
+        raise SystemExit(2) from None
+    try:
+        return LiveView.for_server(
+            server, seed=args.fault_seed, web=getattr(args, "web_address", None), allow_remote=args.allow_remote, monitor=args.monitor
+        ).start()
+    except BaseException:
+        transport.close()
+        bus.close()
+        raise
 
 
 def _open_transport(args: argparse.Namespace):
@@ -378,23 +409,7 @@ def _serve(args: argparse.Namespace) -> int:
     def _stop(signum: int, frame: object) -> None:
         server.stop()
 
-    live = None
-    if args.web or args.monitor:
-        try:
-            from ax12emu.live import LiveView
-        except ImportError as exc:
-            print(f"ax12emu: --web and --monitor need the web extra: pip install 'ax12emu[web]' ({exc})", file=sys.stderr)
-            transport.close()
-            bus.close()
-            return 2
-        try:
-            live = LiveView.for_server(
-                server, seed=args.fault_seed, web=getattr(args, "web_address", None), allow_remote=args.allow_remote, monitor=args.monitor
-            ).start()
-        except BaseException:
-            transport.close()
-            bus.close()
-            raise
+    live = _open_live(args, server, transport, bus)
 
     signal.signal(signal.SIGINT, _stop)
     signal.signal(signal.SIGTERM, _stop)

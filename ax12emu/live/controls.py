@@ -10,6 +10,13 @@ on a :class:`Controls` object: the ``VirtualBus`` itself, or, for
 Each action's parameters are checked here first (a clear message for a bad
 one, never a half-done change), and :func:`apply` returns the line the
 packet log shows.
+
+Every bus the live view shows takes the same actions: an AX-12 bus (Protocol 1.0), an X-series
+bus (2.0, its servos' own faults acted out by their firmware: :class:`~ax12emu.faults.Faults2`)
+and a wire with both (:class:`~ax12emu.faults.MixedFaults`).  On a mixed wire IDs are per
+protocol, so a servo's action takes ``protocol`` (1.0 or 2.0) where both protocols have its ID;
+what a servo cannot take (an alarm its Shutdown does not select, a push on a model without
+physics) is refused with the faults' or the model's own reason.
 """
 
 from __future__ import annotations
@@ -21,10 +28,18 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from ax12emu.bus import Bus
-from ax12emu.faults.injection import Faults, faults_for, parse_alarm_bits
+from ax12emu.faults.injection import Faults, MixedFaults, faults_for
+
+from .buses import AnyBus, locate, protocols
 
 __all__ = ["Controls", "ServedControls", "ACTIONS", "ControlError", "apply"]
+
+#: The registers ``temperature`` and ``voltage`` pin, the first the servo's table has
+#: (AX-12A and XL-320: Present Voltage; X series: Present Input Voltage), and the count per unit.
+HELD_READINGS: Mapping[str, tuple[tuple[str, ...], float]] = {
+    "temperature": (("present_temperature",), 1.0),
+    "voltage": (("present_voltage", "present_input_voltage"), 10.0),
+}
 
 
 class ControlError(ValueError):
@@ -32,18 +47,18 @@ class ControlError(ValueError):
 
 
 class Controls(Protocol):
-    """The part of VirtualBus's API the live view drives."""
+    """The part of VirtualBus's API the live view drives (``protocol``: only where the wire mixes protocols)."""
 
     @property
     def faults(self) -> Any: ...
 
-    def call(self, fn: Callable[[Bus], Any]) -> Any: ...
+    def call(self, fn: Callable[[AnyBus], Any]) -> Any: ...
 
-    def set_external_torque(self, servo_id: int, torque_nm: float) -> None: ...
+    def set_external_torque(self, servo_id: int, torque_nm: float, **protocol: float) -> None: ...
 
-    def set_temperature(self, servo_id: int, celsius: float | None) -> None: ...
+    def set_temperature(self, servo_id: int, celsius: float | None, **protocol: float) -> None: ...
 
-    def set_voltage(self, servo_id: int, volts: float | None) -> None: ...
+    def set_voltage(self, servo_id: int, volts: float | None, **protocol: float) -> None: ...
 
 
 class _FaultsThroughCall:
@@ -60,33 +75,60 @@ class _FaultsThroughCall:
 
 
 class ServedControls:
-    """VirtualBus's control methods for a bus served by a BusServer (``ax12emu serve``)."""
+    """VirtualBus's control methods for a bus served by a BusServer (``ax12emu serve``), of either protocol or both."""
 
-    def __init__(self, call: Callable[[Callable[[Bus], Any]], Any], *, servos: int, seed: int = 0) -> None:
+    def __init__(self, call: Callable[[Callable[[AnyBus], Any]], Any], *, servos: int = 0, seed: int = 0) -> None:
         self.call = call
         self.seed = seed
-        self._torque_nm = np.zeros(servos)
+        #: External torque on each Protocol 1.0 servo, by index (its bus's model takes them all at once).
+        self._torque_nm: dict[int, float] = {}
 
-    def faults_of(self, bus: Bus) -> Faults:
+    def faults_of(self, bus: AnyBus) -> Faults | MixedFaults:
         if bus.faults is None:
-            bus.faults = faults_for(bus, seed=self.seed)  # a Protocol 2.0 bus takes the wire's faults only
-        return bus.faults
+            bus.faults = faults_for(bus, seed=self.seed)  # type: ignore[assignment]  # Faults2 on 2.0, MixedFaults on a mixed wire
+        return bus.faults  # type: ignore[return-value]
 
     @property
     def faults(self) -> Any:
         return _FaultsThroughCall(self)
 
-    def set_temperature(self, servo_id: int, celsius: float | None) -> None:
-        self.call(lambda bus: self.faults_of(bus).hold(bus.slots[bus.servo(servo_id).index], "present_temperature", None if celsius is None else round(celsius)))
+    def _hold(self, what: str, servo_id: int, value: float | None, protocol: float | None) -> None:
+        names, per_unit = HELD_READINGS[what]
 
-    def set_voltage(self, servo_id: int, volts: float | None) -> None:
-        self.call(lambda bus: self.faults_of(bus).hold(bus.slots[bus.servo(servo_id).index], "present_voltage", None if volts is None else round(volts * 10)))
+        def pin(bus: AnyBus) -> None:
+            self.faults_of(bus)  # the whole wire's faults first: one seed for both protocols
+            _, sub, servo = locate(bus, servo_id, protocol)
+            name = next((n for n in names if n in servo.table.layout.by_name), None)
+            if name is None:
+                raise ControlError(f"{what}: ID {servo_id}'s table has no {' or '.join(names)} register to hold")
+            self.faults_of(sub).hold(sub.slots[servo.index], name, None if value is None else round(value * per_unit))
 
-    def set_external_torque(self, servo_id: int, torque_nm: float) -> None:
-        def _set(bus: Bus) -> None:
-            self._torque_nm[bus.servo(servo_id).index] = torque_nm
-            bus.model.set_external_torque(self._torque_nm.copy())
-            bus.plant.tables_changed()
+        self.call(pin)
+
+    def set_temperature(self, servo_id: int, celsius: float | None, *, protocol: float | None = None) -> None:
+        self._hold("temperature", servo_id, celsius, protocol)
+
+    def set_voltage(self, servo_id: int, volts: float | None, *, protocol: float | None = None) -> None:
+        self._hold("voltage", servo_id, volts, protocol)
+
+    def set_external_torque(self, servo_id: int, torque_nm: float, *, protocol: float | None = None) -> None:
+        def _set(bus: AnyBus) -> None:
+            _, sub, servo = locate(bus, servo_id, protocol)
+            # A Protocol 2.0 servo has a firmware model of its own; the AX-12 bus's one model moves all its servos.
+            firmware = getattr(getattr(servo, "plant", None), "firmware", None)
+            if callable(getattr(firmware, "set_external_torque", None)):
+                firmware.set_external_torque(torque_nm)  # type: ignore[union-attr]
+                return
+            model = getattr(sub, "model", None)
+            if not callable(getattr(model, "set_external_torque", None)):
+                what = type(firmware if firmware is not None else model).__name__
+                raise ControlError(f"external_torque: ID {servo_id}'s model ({what}) takes no external torque")
+            self._torque_nm[servo.index] = torque_nm
+            torques = np.zeros(len(sub.servos))
+            for index, nm in self._torque_nm.items():
+                torques[index] = nm
+            model.set_external_torque(torques)  # type: ignore[union-attr]
+            sub.plant.tables_changed()  # type: ignore[union-attr]
 
         self.call(_set)
 
@@ -112,20 +154,37 @@ def _number(name: str, low: float, high: float, *, optional: bool = False) -> Ca
     return check
 
 
-def _alarm(value: Any) -> int:
-    try:
-        return parse_alarm_bits(value) if isinstance(value, str) else _int("bits", 1, 127)(value)
-    except ValueError as exc:
-        raise ControlError(str(exc)) from None
+#: Longest alarm text accepted ("overload,overheating,electrical_shock" is 37 characters).
+_ALARM_TEXT_MAX = 80
+
+
+def _alarm(value: Any) -> int | str:
+    """Alarm names or bits; the servo's faults read the names by its protocol (AX-12 alarms, or Hardware Error Status)."""
+    if isinstance(value, str):
+        if not 0 < len(value) <= _ALARM_TEXT_MAX:
+            raise ControlError(f"bits must be alarm names (at most {_ALARM_TEXT_MAX} characters) or a number 1..255")
+        return value
+    return _int("bits", 1, 255)(value)
+
+
+def _protocol(value: Any) -> float | None:
+    if value is None:
+        return None
+    if isinstance(value, bool) or value not in (1, 2):
+        raise ControlError(f"protocol must be 1.0, 2.0 or null, got {value!r}")
+    return float(value)
 
 
 _ID = _int("id", 0, 253)
+#: Where the wire mixes protocols, a servo's ID is the protocol's own: ``protocol`` says which (None: the only one).
+_PROTOCOL = {"protocol": _protocol}
+_NO_PROTOCOL = {"protocol": None}
 _SLOT = _int("slot", 0, 253)
 _FRACTION = {name: _number(name, 0.0, 1.0) for name in ("drop", "corrupt", "delay")}
 
 
-def _step(seconds: float) -> Callable[[Bus], float]:
-    def run(bus: Bus) -> float:
+def _step(seconds: float) -> Callable[[AnyBus], float]:
+    def run(bus: AnyBus) -> float:
         clock = bus.clock
         if not getattr(clock, "paused", True):  # a virtual clock is always "paused": it moves only when stepped
             raise ControlError("pause first: simulated time can be stepped only while it stands still")
@@ -136,13 +195,13 @@ def _step(seconds: float) -> Callable[[Bus], float]:
     return run
 
 
-def _pause(bus: Bus) -> None:
+def _pause(bus: AnyBus) -> None:
     if not hasattr(bus.clock, "pause"):
         raise ControlError("this bus runs in virtual time: it is always paused; use step")
     bus.clock.pause()  # type: ignore[union-attr]
 
 
-def _resume(bus: Bus) -> None:
+def _resume(bus: AnyBus) -> None:
     if not hasattr(bus.clock, "resume"):
         raise ControlError("this bus runs in virtual time: it moves only when stepped")
     bus.clock.resume()  # type: ignore[union-attr]
@@ -158,6 +217,16 @@ class Action:
     defaults: Mapping[str, Any] = None  # type: ignore[assignment]
 
 
+def _on(p: dict[str, Any]) -> dict[str, float]:
+    """``protocol=`` for the faults and state methods, only where the message gave one (a mixed wire)."""
+    return {} if p["protocol"] is None else {"protocol": p["protocol"]}
+
+
+def _servo_action(params: Mapping[str, Callable[[Any], Any]], run: Callable[[Controls, dict[str, Any]], Any], says: str) -> Action:
+    """An action on one servo: its parameters and an optional ``protocol``."""
+    return Action({**params, **_PROTOCOL}, run, says, _NO_PROTOCOL)
+
+
 #: Every control by name.  Servos are named by ID in the state actions and by slot (the ID
 #: they were launched with) in the fault actions, as in VirtualBus.
 ACTIONS: Mapping[str, Action] = {
@@ -167,26 +236,42 @@ ACTIONS: Mapping[str, Action] = {
         "reply faults: drop {drop:g}, corrupt {corrupt:g}, delay {delay:g} (IDs: {ids})",
         {"drop": 0.0, "corrupt": 0.0, "delay": 0.0, "ids": None},
     ),
-    "vanish": Action({"slot": _SLOT}, lambda c, p: c.faults.vanish(p["slot"]), "servo {slot} vanished"),
-    "reappear": Action({"slot": _SLOT}, lambda c, p: c.faults.reappear(p["slot"]), "servo {slot} back"),
-    "stall": Action({"slot": _SLOT}, lambda c, p: c.faults.stall(p["slot"]), "servo {slot} stalled"),
-    "release": Action({"slot": _SLOT}, lambda c, p: c.faults.release(p["slot"]), "servo {slot} released"),
-    "alarm": Action({"slot": _SLOT, "bits": _alarm}, lambda c, p: c.faults.force_alarm(p["slot"], p["bits"]), "servo {slot}: alarm bits {bits:#04x} forced"),
-    "clear_alarm": Action({"slot": _SLOT}, lambda c, p: c.faults.clear_alarm(p["slot"]), "servo {slot}: forced alarms lifted"),
+    "vanish": _servo_action({"slot": _SLOT}, lambda c, p: c.faults.vanish(p["slot"], **_on(p)), "servo {slot} vanished"),
+    "reappear": _servo_action({"slot": _SLOT}, lambda c, p: c.faults.reappear(p["slot"], **_on(p)), "servo {slot} back"),
+    "stall": _servo_action({"slot": _SLOT}, lambda c, p: c.faults.stall(p["slot"], **_on(p)), "servo {slot} stalled"),
+    "release": _servo_action({"slot": _SLOT}, lambda c, p: c.faults.release(p["slot"], **_on(p)), "servo {slot} released"),
+    "alarm": _servo_action(
+        {"slot": _SLOT, "bits": _alarm}, lambda c, p: c.faults.force_alarm(p["slot"], p["bits"], **_on(p)), "servo {slot}: alarm {bits} forced"
+    ),
+    "clear_alarm": _servo_action({"slot": _SLOT}, lambda c, p: c.faults.clear_alarm(p["slot"], **_on(p)), "servo {slot}: forced alarms lifted"),
     "clear_faults": Action({}, lambda c, p: c.faults.clear(), "every fault lifted"),
-    "external_torque": Action(
-        {"id": _ID, "nm": _number("nm", -10.0, 10.0)}, lambda c, p: c.set_external_torque(p["id"], p["nm"]), "servo {id}: external torque {nm:g} N m"
+    "external_torque": _servo_action(
+        {"id": _ID, "nm": _number("nm", -10.0, 10.0)}, lambda c, p: c.set_external_torque(p["id"], p["nm"], **_on(p)), "servo {id}: external torque {nm:g} N m"
     ),
-    "temperature": Action(
-        {"id": _ID, "celsius": _number("celsius", 0, 255, optional=True)}, lambda c, p: c.set_temperature(p["id"], p["celsius"]), "servo {id}: temperature held at {celsius} C"
+    "temperature": _servo_action(
+        {"id": _ID, "celsius": _number("celsius", 0, 255, optional=True)},
+        lambda c, p: c.set_temperature(p["id"], p["celsius"], **_on(p)),
+        "servo {id}: temperature held at {celsius} C",
     ),
-    "voltage": Action(
-        {"id": _ID, "volts": _number("volts", 0, 25.5, optional=True)}, lambda c, p: c.set_voltage(p["id"], p["volts"]), "servo {id}: voltage held at {volts} V"
+    "voltage": _servo_action(
+        {"id": _ID, "volts": _number("volts", 0, 25.5, optional=True)}, lambda c, p: c.set_voltage(p["id"], p["volts"], **_on(p)), "servo {id}: voltage held at {volts} V"
     ),
     "pause": Action({}, lambda c, p: c.call(_pause), "simulated time paused"),
     "resume": Action({}, lambda c, p: c.call(_resume), "simulated time resumed"),
     "step": Action({"seconds": _number("seconds", 0.0, 10.0)}, lambda c, p: c.call(_step(p["seconds"])), "stepped {seconds:g} s"),
 }
+
+
+def _check_protocol(controls: Controls, params: dict[str, Any]) -> None:
+    """A ``protocol`` the wire does not carry is refused; on a wire of one protocol it is dropped (the ID says it all)."""
+    protocol = params.get("protocol")
+    if protocol is None:
+        return
+    on_wire = controls.call(protocols)
+    if protocol not in on_wire:
+        raise ControlError(f"protocol {protocol:g}: this bus's servos speak Protocol {' and '.join(f'{p:g}' for p in on_wire)}")
+    if len(on_wire) == 1:
+        params["protocol"] = None
 
 
 def apply(controls: Controls, message: Any) -> str:
@@ -210,9 +295,11 @@ def apply(controls: Controls, message: Any) -> str:
         else:
             raise ControlError(f"{name}: missing parameter {key!r}")
     try:
+        _check_protocol(controls, params)
         action.run(controls, params)
     except ControlError:
         raise
     except (ValueError, KeyError, NotImplementedError, RuntimeError) as exc:  # e.g. an ID no servo has
         raise ControlError(f"{name}: {exc}") from None
-    return action.says.format(**params)
+    said = action.says.format(**params)
+    return said if params.get("protocol") is None else f"{said} (Protocol {params['protocol']:.1f})"

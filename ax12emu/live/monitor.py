@@ -23,29 +23,46 @@ from .sampler import Frame, Sampler
 __all__ = ["Monitor", "render"]
 
 #: Columns of a picture printed where there is no terminal.
-PLAIN_WIDTH = 160
+PLAIN_WIDTH = 220
 
-#: Columns of the servo table: heading, how to show one servo.
+def _reading(servo: dict[str, Any], *names: str) -> dict[str, Any] | None:
+    """The first of the named readings the servo has (an X-series servo senses current, an AX-12 load)."""
+    found = {reading["name"]: reading for reading in servo["readings"]}
+    return next((found[name] for name in names if name in found), None)
+
+
+def _show(reading: dict[str, Any] | None, signed: bool = False) -> str:
+    """A reading as 'raw (value unit)', or '-' where the servo has no such register."""
+    if reading is None:
+        return "-"
+    raw = f"{reading['raw']:+d}" if signed else str(reading["raw"])
+    return raw if reading["value"] is None else f"{raw} ({reading['value']:g} {reading['unit']})"
+
+
+def _position(servo: dict[str, Any], name: str) -> str:
+    reading = _reading(servo, name)
+    if reading is None:
+        return "-"
+    return str(reading["raw"]) if reading["value"] is None else f"{reading['raw']} ({reading['value']:.1f}°)"
+
+
+#: Columns of the servo table: heading, how to show one servo (AX-12 and X series alike, from its readings).
 COLUMNS: tuple[tuple[str, Any], ...] = (
     ("ID", lambda s: str(s["id"])),
     ("model", lambda s: f"{s['model']} (P{s['protocol']})"),
-    ("position", lambda s: f"{s['registers']['present_position']:4d}"),
-    ("goal", lambda s: f"{s['registers']['goal_position']:4d}"),
-    ("limits", lambda s: "wheel" if s["wheel_mode"] else f"{s['registers']['cw_angle_limit']}..{s['registers']['ccw_angle_limit']}"),
-    ("speed", lambda s: f"{_signed(s['registers']['present_speed']):+5d}"),
-    ("load", lambda s: f"{_signed(s['registers']['present_load']):+5d}"),
-    ("V", lambda s: f"{s['registers']['present_voltage'] / 10:.1f}"),
-    ("°C", lambda s: str(s["registers"]["present_temperature"])),
-    ("torque", lambda s: "on" if s["registers"]["torque_enable"] else "off"),
-    ("LED", lambda s: "on" if s["registers"]["led"] else "off"),
-    ("alarms", lambda s: ",".join(s["alarm_names"]) or "-"),
+    ("mode", lambda s: s["mode"] + (f" {s['limits'][0]}..{s['limits'][1]}" if s["limits"] else "")),
+    ("position", lambda s: _position(s, "position")),
+    ("goal", lambda s: _position(s, "goal")),
+    ("velocity", lambda s: _show(_reading(s, "velocity"), signed=True)),
+    ("current/load", lambda s: _show(_reading(s, "current", "load"), signed=True)),
+    ("PWM", lambda s: _show(_reading(s, "pwm"), signed=True)),
+    ("V", lambda s: "-" if (r := _reading(s, "voltage")) is None or r["value"] is None else f"{r['value']:.1f}"),
+    ("°C", lambda s: "-" if (r := _reading(s, "temperature")) is None else str(r["raw"])),
+    ("torque", lambda s: "on" if s["registers"].get("torque_enable") else "off"),
+    ("moving", lambda s: "yes" if s["registers"].get("moving") else "no"),
+    ("errors", lambda s: ",".join(s["alarm_names"]) or (f"{s['alarms']:#04x}" if s["alarms"] else "-")),
     ("faults", lambda s: "; ".join(s["faults"]) or "-"),
 )
-
-
-def _signed(value: int) -> int:
-    """Speed and load registers: bit 10 is the direction (CW), bits 0-9 the magnitude."""
-    return -(value & 0x3FF) if value & 0x400 else value
 
 
 def render(frame: Frame) -> Group:
@@ -55,7 +72,8 @@ def render(frame: Frame) -> Group:
     head = Text(
         f"t={frame['sim_time_s']:.3f} s ({clock})  packets/s {stats['packets_per_s']:.0f}  packets {stats['packets']}  "
         f"status errors {stats['status_errors']}  checksum errors {stats['checksum_errors']}  "
-        f"timeouts injected {stats['timeouts_injected']}  corrupt injected {stats['corrupt_injected']}"
+        f"timeouts injected {stats['timeouts_injected']}  corrupt injected {stats['corrupt_injected']}  "
+        f"Protocol {' + '.join(frame.get('protocols', ['1.0']))}"
     )
     table = Table(expand=False, show_edge=False, pad_edge=False)
     for heading, _ in COLUMNS:

@@ -21,11 +21,12 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from ax12emu.bus import Bus
 from ax12emu.protocol.control_table import DEFAULT_PROFILE
 from ax12emu.protocol.packets import Instruction
+from ax12emu.protocol.packets2 import Instruction2, InstructionPacket2, StatusPacket2
 from ax12emu.tracing.decoder import ECHO, GARBAGE, INSTRUCTION, STATUS, Decoded, Decoder
 
+from .buses import AnyBus
 from .snapshot import take
 from .tap import ByteTap
 
@@ -37,6 +38,7 @@ Frame = dict[str, Any]
 #: What a log line's ``who`` says, by decoded kind.
 _WHO = {INSTRUCTION: "host", STATUS: "servo", ECHO: "echo", GARBAGE: "noise"}
 _INSTRUCTION_NAMES = {int(code): code.name for code in Instruction}
+_INSTRUCTION2_NAMES = {int(code): code.name for code in Instruction2}
 
 
 class Sampler:
@@ -49,12 +51,14 @@ class Sampler:
 
     def __init__(
         self,
-        call: Callable[[Callable[[Bus], Any]], Any],
+        call: Callable[[Callable[[AnyBus], Any]], Any],
         *,
         tap: ByteTap | None = None,
         counters: Callable[[], dict[str, int]] | None = None,
         rate_hz: float = 25.0,
         profile: str = DEFAULT_PROFILE,
+        protocol: str = "1.0",
+        servos: str | None = None,
         log_capacity: int = 500,
         max_chunks: int = 80,
     ) -> None:
@@ -64,8 +68,10 @@ class Sampler:
         self.tap = tap
         self._counters = counters or (lambda: {})
         self.period_s = 1.0 / rate_hz
-        self._decoder = Decoder(profile=profile)
-        self._profile = profile
+        #: The decoder's options: the 1.0 profile, the protocol ("1.0", "2.0" or "both" on a mixed
+        #: wire) and the 2.0 servos by launch ID and model file, so it names their registers.
+        self._decoding = {"profile": profile, "protocol": protocol, "servos": servos}
+        self._decoder = Decoder(**self._decoding)
         self._max_chunks = max_chunks
         #: The newest log lines, for a page that connects late (bounded).
         self.log_lines: collections.deque[dict[str, Any]] = collections.deque(maxlen=log_capacity)
@@ -170,7 +176,7 @@ class Sampler:
         if skipped:
             # The framers were mid-stream: start afresh rather than call the cut packets noise.
             chunks = chunks[-self._max_chunks :]
-            self._decoder = Decoder(profile=self._profile)
+            self._decoder = Decoder(**self._decoding)
             self.stats["log_chunks_skipped"] += skipped
             t = chunks[0].t - self._t0 if chunks else time.monotonic() - self._t0
             lines.append({"t": round(t, 6), "who": "skip", "id": None, "ins": None, "text": f"{skipped} chunk(s) on the line not shown (the log shows at most {self._max_chunks} per frame)"})
@@ -184,12 +190,16 @@ class Sampler:
         packet = item.packet
         if item.kind == GARBAGE:
             self.stats["noise_bytes"] += item.discarded
-        elif item.kind == INSTRUCTION and packet is not None:
-            self._last_request = _INSTRUCTION_NAMES.get(packet.instruction, f"0x{packet.instruction:02X}")
+        elif item.kind == INSTRUCTION and packet is not None and not isinstance(packet, StatusPacket2):
+            names = _INSTRUCTION2_NAMES if isinstance(packet, InstructionPacket2) else _INSTRUCTION_NAMES
+            self._last_request = names.get(packet.instruction, f"0x{packet.instruction:02X}")
         elif item.kind == STATUS and packet is not None:
-            if not packet.checksum_ok:
+            # A 1.0 status packet is decoded as a packet whose instruction byte is the error; a 2.0
+            # one has its own error field and a CRC instead of a checksum.
+            two = isinstance(packet, StatusPacket2)
+            if not (packet.crc_ok if two else packet.checksum_ok):
                 self.stats["checksum_errors"] += 1
-            elif packet.instruction:
+            elif packet.error if two else packet.instruction:
                 self.stats["status_errors"] += 1
         ins = None if packet is None else (self._last_request if item.kind in (STATUS, INSTRUCTION, ECHO) else None)
         text = item.text if item.latency_s is None else f"{item.text}  (+{item.latency_s * 1e6:.0f} us)"

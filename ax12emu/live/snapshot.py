@@ -4,86 +4,290 @@ Why it exists: the bus is not thread-safe, so the live view never reads a
 register from its own thread; :func:`take` runs through the serving
 thread's ``call`` between packets and returns plain data (numbers, strings,
 lists) that the web page, the JSON snapshot and the terminal monitor share.
-It reads registers by name from each servo's table (no raw addresses) and
-costs tens of microseconds for a handful of servos, at the sampler's bounded
-rate.
+
+Every servo is shown the same way whatever it is (an AX-12A on Protocol 1.0, an X-series
+servo on 2.0, both on one wire): its registers by the names its own table has (no raw
+addresses, no list per model), and ``readings``, the quantities a user of either looks for
+(position, goal, velocity, current or load, PWM, voltage, temperature) each with the register
+it came from, the raw value and the value in its unit.  The units are data: those the model
+file states (``[physical]``: ``resolution_deg`` for positions, ``current_unit_ma`` for
+currents) and, per register name, those the e-manual gives every model with that register
+(:data:`REGISTER_UNITS`).  A new model file is shown with no code here.
 """
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 from typing import Any
 
-from ax12emu.bus import Bus
+from ax12emu.faults.injection import ALARM_NAMES, HW_ERROR_NAMES
 from ax12emu.protocol.packets import StatusError
+from ax12emu.protocol.servo_models import ServoModel, model, model_names
 
-__all__ = ["take", "REGISTERS", "ERROR_BITS", "MODEL_NAMES"]
+from .buses import AnyBus, parts, protocol_name
 
-#: Registers shown per servo, by control-table name (the page and the JSON snapshot use these names).
+__all__ = ["take", "REGISTERS", "ERROR_BITS", "HW_ERROR_BITS", "READINGS", "REGISTER_UNITS", "MODES", "model_of"]
+
+#: Registers shown per servo, by control-table name, where the servo's table has them (the
+#: page and the JSON snapshot use these names).  The union of the AX-12's and the X series'
+#: (and the XL-320's) names for what a user watches; a table without one simply lacks it.
 REGISTERS = (
-    "present_position",
-    "goal_position",
-    "cw_angle_limit",
-    "ccw_angle_limit",
-    "moving_speed",
-    "present_speed",
-    "present_load",
-    "present_voltage",
-    "present_temperature",
-    "temperature_limit",
-    "torque_enable",
-    "torque_limit",
-    "led",
-    "moving",
-    "alarm_led",
-    "shutdown",
     "model_number",
     "firmware_version",
     "return_delay_time",
+    "operating_mode",
+    "control_mode",
+    "drive_mode",
+    "cw_angle_limit",
+    "ccw_angle_limit",
+    "min_position_limit",
+    "max_position_limit",
+    "velocity_limit",
+    "current_limit",
+    "pwm_limit",
+    "temperature_limit",
+    "shutdown",
+    "torque_enable",
+    "led",
+    "hardware_error_status",
+    "bus_watchdog",
+    "goal_pwm",
+    "goal_current",
+    "goal_velocity",
+    "goal_position",
+    "moving_speed",
+    "torque_limit",
+    "moving",
+    "moving_status",
+    "alarm_led",
+    "present_pwm",
+    "present_current",
+    "present_load",
+    "present_velocity",
+    "present_speed",
+    "present_position",
+    "present_input_voltage",
+    "present_voltage",
+    "present_temperature",
 )
-#: Status-packet error bits by name, lowest bit first.
+
+#: Status-packet error bits by name, lowest bit first (Protocol 1.0: the alarms of every status packet).
 ERROR_BITS: Mapping[str, int] = {bit.name.lower(): int(bit) for bit in StatusError if bit}
-#: Model Number register values to names.
-MODEL_NAMES: Mapping[int, str] = {12: "AX-12"}
+#: Hardware Error Status bits by name (Protocol 2.0, e-manual X series "Hardware Error Status(70)"),
+#: without the aliases ``alarm`` accepts.
+HW_ERROR_BITS: Mapping[str, int] = {name: bit for bit, name in sorted({bit: name for name, bit in reversed(list(HW_ERROR_NAMES.items()))}.items())}
+#: What ``alarm`` takes per protocol (the page offers these), without aliases.
+ALARM_CHOICES: Mapping[float, tuple[str, ...]] = {
+    1.0: tuple(dict.fromkeys({bit: name for name, bit in reversed(list(ALARM_NAMES.items()))}.values())),
+    2.0: tuple(HW_ERROR_BITS),
+}
 
 
-def _servo(bus: Bus, index: int, faults_active: Callable[[int], list[str]]) -> dict[str, Any]:
-    servo = bus.servos[index]
+@dataclass(frozen=True)
+class Unit:
+    """A register's unit: ``per_raw`` units per count, or the model file's ``[physical]`` field that gives it."""
+
+    unit: str
+    per_raw: float | None = None
+    physical: str | None = None
+    #: Bit 10 is the direction (CW) and bits 0-9 the magnitude, where the register is unsigned (AX-12, XL-320).
+    direction_bit: bool = False
+
+
+#: Units by register name.  Sources (ROBOTIS e-manual): AX-12A "Present Speed(38)": about 0.111 rpm,
+#: bit 10 the direction, and "Present Load(40)": 0.1 % of the maximum torque, bit 10 the direction,
+#: "Present Voltage(42)": 10 times the volts; XL-320 the same for its Present Speed(39), Load(41) and
+#: Voltage(45) ("the unit is about 0.111rpm"; "10 times larger than the actual voltage"); X series
+#: "Present Velocity(128)": 0.229 rpm, "Present Load(126)": 0.1 %, "Present PWM(124)": 0.113 %
+#: ("PWM Limit(36)": 885 = 100 %), "Present Input Voltage(144)": 0.1 V, "Present Temperature(146)": 1 °C.
+#: Positions (0.088 deg on the X series, 0.29 deg on the AX-12A) and currents (1 mA, 2.69 mA) differ
+#: per model: each model file states them.
+REGISTER_UNITS: Mapping[str, Unit] = {
+    "present_position": Unit("deg", physical="resolution_deg"),
+    "goal_position": Unit("deg", physical="resolution_deg"),
+    "present_velocity": Unit("rpm", 0.229),
+    "goal_velocity": Unit("rpm", 0.229),
+    "present_speed": Unit("rpm", 0.111, direction_bit=True),
+    "moving_speed": Unit("rpm", 0.111, direction_bit=True),
+    "present_current": Unit("mA", physical="current_unit_ma"),
+    "goal_current": Unit("mA", physical="current_unit_ma"),
+    "present_load": Unit("%", 0.1, direction_bit=True),
+    "present_pwm": Unit("%", 0.113),
+    "goal_pwm": Unit("%", 0.113),
+    "present_input_voltage": Unit("V", 0.1),
+    "present_voltage": Unit("V", 0.1),
+    "present_temperature": Unit("°C", 1.0),
+}
+
+#: What the page and the monitor show for every servo: (reading, registers that give it, the first the table has).
+READINGS: tuple[tuple[str, tuple[str, ...]], ...] = (
+    ("position", ("present_position",)),
+    ("goal", ("goal_position",)),
+    ("velocity", ("present_velocity", "present_speed")),
+    ("current", ("present_current",)),
+    ("load", ("present_load",)),
+    ("pwm", ("present_pwm",)),
+    ("voltage", ("present_input_voltage", "present_voltage")),
+    ("temperature", ("present_temperature",)),
+)
+
+#: Mode registers: value -> (name, whether the position limits bound the goal in that mode).
+#: e-manual X series "Operating Mode(11)"; XL-320 "Control Mode(11)" (1 wheel, 2 joint).  A table with
+#: neither (the AX-12) is in wheel mode when both angle limits are 0 (e-manual AX-12A "CW/CCW Angle Limit").
+MODES: Mapping[str, Mapping[int, tuple[str, bool]]] = {
+    "operating_mode": {
+        0: ("current", False),
+        1: ("velocity", False),
+        3: ("position", True),
+        4: ("extended position", False),
+        5: ("current-based position", True),
+        16: ("PWM", False),
+    },
+    "control_mode": {1: ("wheel", False), 2: ("joint", True)},
+}
+#: The position-limit register pairs, the first pair the table has.
+LIMITS = (("cw_angle_limit", "ccw_angle_limit"), ("min_position_limit", "max_position_limit"))
+
+
+@functools.cache
+def _models_by_number(protocol: str) -> Mapping[int, ServoModel]:
+    return {spec.model_number: spec for spec in map(model, model_names()) if protocol in spec.protocols}
+
+
+def model_of(servo: Any, protocol: float) -> ServoModel | None:
+    """The model file of a servo: a Protocol 2.0 servo carries it; a 1.0 servo is found by its Model Number."""
+    spec = getattr(servo, "spec", None)
+    if spec is not None:
+        return spec
+    return _models_by_number(protocol_name(protocol)).get(servo.table.get("model_number"))
+
+
+@dataclass(frozen=True)
+class _Plan:
+    """What to read from one kind of servo (a layout and a model file), worked out once: every frame reads it."""
+
+    registers: tuple[tuple[str, Any], ...]
+    #: (reading, register, unit label, units per count or None, whether bit 10 is the direction).
+    readings: tuple[tuple[str, str, str, float | None, bool], ...]
+
+
+#: Plans by (id of the layout, model key); the layout is kept in the value so its id stays its own.
+_PLANS: dict[tuple[int, str | None], tuple[Any, _Plan]] = {}
+
+
+def _plan(layout: Any, spec: ServoModel | None) -> _Plan:
+    key = (id(layout), spec.key if spec is not None else None)
+    found = _PLANS.get(key)
+    if found is not None and found[0] is layout:
+        return found[1]
+    by_name = layout.by_name
+    readings = []
+    for name, candidates in READINGS:
+        register = next((r for r in candidates if r in by_name), None)
+        if register is None:
+            continue
+        unit = REGISTER_UNITS.get(register)
+        per_raw = None
+        if unit is not None:
+            per_raw = unit.per_raw if unit.physical is None else getattr(spec.physical, unit.physical, None) if spec is not None else None
+        direction_bit = unit is not None and unit.direction_bit and not by_name[register].signed
+        readings.append((name, register, unit.unit if per_raw is not None else "", per_raw, direction_bit))  # type: ignore[union-attr]
+    plan = _Plan(tuple((name, by_name[name]) for name in REGISTERS if name in by_name), tuple(readings))
+    _PLANS[key] = (layout, plan)
+    return plan
+
+
+def _readings(plan: _Plan, registers: Mapping[str, int]) -> list[dict[str, Any]]:
+    out = []
+    for name, register, unit, per_raw, direction_bit in plan.readings:
+        raw = registers[register]
+        if direction_bit:
+            raw = -(raw & 0x3FF) if raw & 0x400 else raw & 0x3FF
+        value = None if per_raw is None else round(raw * per_raw, 3)
+        out.append({"name": name, "register": register, "raw": raw, "value": value, "unit": unit})
+    return out
+
+
+def _mode(registers: Mapping[str, int]) -> tuple[str, bool]:
+    for register, names in MODES.items():
+        if register in registers:
+            value = registers[register]
+            return names.get(value, (f"mode {value}", True))
+    cw, ccw = LIMITS[0]
+    wheel = registers.get(cw) == 0 and registers.get(ccw) == 0
+    return ("wheel", False) if wheel else ("joint", True)
+
+
+def _servo(protocol: float, servo: Any, slot: int, faults_active: Callable[[int], list[str]]) -> dict[str, Any]:
     table = servo.table
-    registers = {name: table.get(name) for name in REGISTERS}
-    slot = bus.slots[index]
+    by_name = table.layout.by_name
+    spec = model_of(servo, protocol)
+    plan = _plan(table.layout, spec)
+    row = table.row
+    registers = {name: entry.value_in(row) for name, entry in plan.registers}
+    readings = _readings(plan, registers)
+    mode, limits_apply = _mode(registers)
+    limits = next(([registers[lo], registers[hi]] for lo, hi in LIMITS if lo in registers and hi in registers), None)
+    if "hardware_error_status" in registers:  # Protocol 2.0: the latched errors, shown by the Alert bit
+        alarms, bit_names = registers["hardware_error_status"], HW_ERROR_BITS
+    else:
+        alarms, bit_names = getattr(servo, "alarms", 0), ERROR_BITS
+    goal = by_name.get("goal_position")
+    physical = spec.physical if spec is not None else None
     return {
         "id": servo.id,
         "slot": slot,
-        "protocol": "1.0",
-        "model": MODEL_NAMES.get(registers["model_number"], f"model {registers['model_number']}"),
+        "protocol": protocol_name(protocol),
+        "model": spec.name if spec is not None else f"model {registers.get('model_number')}",
         "profile": table.profile.name,
         "registers": registers,
-        "alarms": servo.alarms,
-        "alarm_names": [name for name, bit in ERROR_BITS.items() if servo.alarms & bit],
-        # Joint mode: both angle limits zero means wheel mode, where the dial shows no limits.
-        "wheel_mode": registers["cw_angle_limit"] == 0 and registers["ccw_angle_limit"] == 0,
+        "readings": readings,
+        "mode": mode,
+        "limits": limits if limits_apply else None,
+        # Dial: the goal register's span covers the model's position range (0..1023 over 300 deg, 0..4095 over 360).
+        "dial": None if goal is None or physical is None or physical.position_range_deg is None
+        else {"max": goal.maximum, "range_deg": physical.position_range_deg},
+        "alarms": alarms,
+        "alarm_names": [name for name, bit in bit_names.items() if alarms & bit],
+        "wheel_mode": not limits_apply,
         "faults": faults_active(slot),
     }
 
 
-def take(bus: Bus, counters: Mapping[str, int] | None = None) -> dict[str, Any]:
+def _faults_figures(bus: AnyBus) -> dict[str, Any]:
+    """The wire's reply faults (set on both protocols at once on a mixed wire) and what they did so far."""
+    every = [sub.faults for _, sub in parts(bus) if sub.faults is not None]
+    first = every[0] if every else None
+    return {
+        "drop": getattr(first, "drop", 0.0),
+        "corrupt": getattr(first, "corrupt", 0.0),
+        "delay": getattr(first, "delay", 0.0),
+        "dropped": sum(getattr(f, "dropped", 0) for f in every),
+        "corrupted": sum(getattr(f, "corrupted", 0) for f in every),
+        "delayed": sum(getattr(f, "delayed", 0) for f in every),
+    }
+
+
+def take(bus: AnyBus, counters: Mapping[str, int] | None = None) -> dict[str, Any]:
     """All servos, the clock and the bus's counters, as plain data (call it on the serving thread)."""
-    faults = bus.faults
-    faults_active: Callable[[int], list[str]] = faults.active if faults is not None and hasattr(faults, "active") else (lambda slot: [])
+    servos = []
+    for protocol, sub in parts(bus):
+        faults = sub.faults
+        active: Callable[[int], list[str]] = faults.active if faults is not None and hasattr(faults, "active") else (lambda slot: [])
+        servos.extend(_servo(protocol, servo, slot, active) for slot, servo in zip(sub.slots, sub.servos))
     clock = bus.clock
     return {
         "sim_time_s": clock.now_s(),
         "paused": bool(getattr(clock, "paused", False)) or not hasattr(clock, "time_scale"),
         "virtual_time": not hasattr(clock, "time_scale"),
-        "servos": [_servo(bus, index, faults_active) for index in range(len(bus.servos))],
+        "protocols": [protocol_name(protocol) for protocol, _ in parts(bus)],
+        # Per protocol: the error bits a servo's card shows (1.0: the status packet's, 2.0: Hardware
+        # Error Status) and the alarm names the ``alarm`` control takes.
+        "alarm_bits": {protocol_name(p): list(HW_ERROR_BITS if p == 2.0 else ERROR_BITS) for p, _ in parts(bus)},
+        "alarm_choices": {protocol_name(p): list(ALARM_CHOICES[p]) for p, _ in parts(bus)},
+        "servos": servos,
         "counters": dict(counters or {}),
-        "faults": {
-            "drop": getattr(faults, "drop", 0.0),
-            "corrupt": getattr(faults, "corrupt", 0.0),
-            "delay": getattr(faults, "delay", 0.0),
-            "dropped": getattr(faults, "dropped", 0),
-            "corrupted": getattr(faults, "corrupted", 0),
-            "delayed": getattr(faults, "delayed", 0),
-        },
+        "faults": _faults_figures(bus),
     }

@@ -12,9 +12,9 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import IO, Any
 
-from ax12emu.bus import Bus
 from ax12emu.serve.server import BusServer
 
+from .buses import AnyBus, decoder_options
 from .controls import Controls, ServedControls
 from .sampler import Sampler
 from .tap import ByteTap
@@ -32,7 +32,7 @@ class LiveView:
 
     def __init__(
         self,
-        call: Callable[[Callable[[Bus], Any]], Any],
+        call: Callable[[Callable[[AnyBus], Any]], Any],
         *,
         controls: Controls | None = None,
         tap: ByteTap | None = None,
@@ -43,8 +43,10 @@ class LiveView:
         monitor_stream: IO[str] | None = None,
         rate_hz: float = 25.0,
         profile: str = "ax12a",
+        protocol: str = "1.0",
+        servos: str | None = None,
     ) -> None:
-        self.sampler = Sampler(call, tap=tap, counters=counters, rate_hz=rate_hz, profile=profile)
+        self.sampler = Sampler(call, tap=tap, counters=counters, rate_hz=rate_hz, profile=profile, protocol=protocol, servos=servos)
         self._web_address = web
         self._allow_remote = allow_remote
         self._controls = controls
@@ -55,7 +57,7 @@ class LiveView:
 
     @classmethod
     def for_server(cls, server: BusServer, *, seed: int = 0, controls: Controls | None = None, **options: Any) -> "LiveView":
-        """A live view of a BusServer's bus (call it before the server runs, or from its thread)."""
+        """A live view of a BusServer's bus of either protocol, or both (call it before the server runs, or from its thread)."""
         tap = ByteTap(server.trace)
         server.trace = tap
         counters = lambda: {"packets_in": server.packets_in, "bytes_dropped": server.bytes_dropped, "collisions": server.collisions}
@@ -63,7 +65,7 @@ class LiveView:
             controls = ServedControls(lambda fn: server.call(fn, CONTROL_TIMEOUT_S), servos=len(server.bus.servos), seed=seed)
         # A short wait: once the server has stopped, a pending sample must not hold the close up.
         sample = lambda fn: server.call(fn, SAMPLE_TIMEOUT_S)
-        return cls(sample, controls=controls, tap=tap, counters=counters, profile=server.bus.options.profile, **options)
+        return cls(sample, controls=controls, tap=tap, counters=counters, **{**decoder_options(server.bus), **options})
 
     @property
     def url(self) -> str | None:

@@ -4,12 +4,11 @@
 const HISTORY_S = 60;          // the longest plot window kept
 const LOG_KEEP = 400;          // lines kept in the page's log
 const LOG_REDRAW_MS = 200;     // how often the log is redrawn when it changed
-const cards = new Map();       // servo slot -> {el, dial, plots, fields, history}
+const cards = new Map();       // "protocol/slot" -> {el, dial, plots, cells, bitEls, history, labels}
 let logLines = [];
 let knownIns = new Set();
 let lastFrame = null;
 
-function signed(v) { return (v & 0x400) ? -(v & 0x3ff) : v; }
 const $ = (id) => document.getElementById(id);
 
 function say(text, ok) {
@@ -29,23 +28,45 @@ async function control(message) {
 }
 
 // -- cards ----------------------------------------------------------------------------------
-const FIELDS = [
-  ["position", (s) => `${s.registers.present_position} → ${s.registers.goal_position}`],
-  ["speed", (s) => signed(s.registers.present_speed)],
-  ["load", (s) => signed(s.registers.present_load)],
-  ["voltage", (s) => `${(s.registers.present_voltage / 10).toFixed(1)} V`],
-  ["temperature", (s) => `${s.registers.present_temperature} °C`],
-  ["torque", (s) => s.registers.torque_enable ? "on" : "off"],
-  ["LED", (s) => s.registers.led ? "on" : "off"],
-  ["limits", (s) => s.wheel_mode ? "wheel mode" : `${s.registers.cw_angle_limit}..${s.registers.ccw_angle_limit}`],
-  ["moving", (s) => s.registers.moving ? "yes" : "no"],
-];
-const ERROR_BITS = ["input_voltage", "angle_limit", "overheating", "range", "checksum", "overload", "instruction"];
+// Every servo, AX-12 or X series, comes with its readings (position, goal, velocity, current or
+// load, PWM, voltage, temperature: register, raw value, value in its unit), so one card fits all.
+function readings(servo) {
+  const out = {};
+  for (const r of servo.readings) out[r.name] = r;
+  return out;
+}
+function shown(r) {
+  if (!r) return "–";
+  return r.value === null ? String(r.raw) : `${+r.value.toFixed(2)} ${r.unit} (${r.raw})`;
+}
+function degrees(r) { return r && r.value !== null ? ` (${r.value.toFixed(1)}°)` : ""; }
+const yesNo = (v) => v ? "yes" : "no";
 
-function makeCard(servo) {
+const FIELDS = [
+  ["position", (s, r) => `${r.position.raw}${degrees(r.position)} → ${r.goal.raw}${degrees(r.goal)}`],
+  ["mode", (s) => s.mode + (s.limits ? ` ${s.limits[0]}..${s.limits[1]}` : "")],
+  ["velocity", (s, r) => shown(r.velocity)],
+  ["current", (s, r) => shown(r.current)],
+  ["load", (s, r) => shown(r.load)],
+  ["PWM", (s, r) => shown(r.pwm)],
+  ["voltage", (s, r) => shown(r.voltage)],
+  ["temperature", (s, r) => shown(r.temperature)],
+  ["torque", (s) => s.registers.torque_enable ? "on" : "off"],
+  ["LED", (s) => "led" in s.registers ? (s.registers.led ? "on" : "off") : "–"],
+  ["moving", (s) => yesNo(s.registers.moving)],
+  ["errors", (s) => "hardware_error_status" in s.registers ? `Hardware Error Status 0x${s.alarms.toString(16).padStart(2, "0")}` : `status 0x${s.alarms.toString(16).padStart(2, "0")}`],
+];
+
+// A mixed wire has one ID per protocol: the card is keyed and named by both.
+function cardKey(servo) { return `${servo.protocol}/${servo.slot}`; }
+function cardId(servo, mixed) { return mixed ? `servo-${servo.slot}-p${servo.protocol.replace(".", "")}` : `servo-${servo.slot}`; }
+
+function makeCard(servo, frame, mixed) {
   const node = $("card-template").content.firstElementChild.cloneNode(true);
-  node.id = `servo-${servo.slot}`;
+  node.id = cardId(servo, mixed);
   node.dataset.slot = servo.slot;
+  node.dataset.protocol = servo.protocol;
+  node.dataset.mixed = mixed ? "1" : "";
   const fields = node.querySelector(".fields");
   const cells = {};
   for (const [name] of FIELDS) {
@@ -55,22 +76,28 @@ function makeCard(servo) {
   }
   const bits = node.querySelector(".bits");
   const bitEls = {};
-  for (const name of ERROR_BITS) {
+  for (const name of frame.alarm_bits[servo.protocol]) {
     const span = document.createElement("span");
     span.textContent = name;
     bits.appendChild(span);
     bitEls[name] = span;
   }
+  const choices = node.querySelector("[data-field=alarm]");
+  for (const name of frame.alarm_choices[servo.protocol]) choices.appendChild(Object.assign(document.createElement("option"), {textContent: name}));
+  const volts = readings(servo).voltage;
+  if (volts && volts.value !== null) node.querySelector("[data-field=volts]").value = volts.value;
   node.querySelectorAll("button[data-act]").forEach((b) => b.addEventListener("click", () => servoAction(node, b.dataset.act)));
   $("cards").appendChild(node);
   const card = {el: node, dial: node.querySelector(".dial"), plots: [...node.querySelectorAll(".plot")], cells, bitEls, history: []};
-  cards.set(servo.slot, card);
+  cards.set(cardKey(servo), card);
   return card;
 }
 
 function servoAction(node, act) {
   const slot = Number(node.dataset.slot);
   const id = Number(node.dataset.id);
+  // Only a mixed wire needs the protocol: there an ID may be taken once per protocol.
+  const on = node.dataset.mixed ? {protocol: Number(node.dataset.protocol)} : {};
   const field = (name) => node.querySelector(`[data-field=${name}]`).value;
   const messages = {
     vanish: {action: "vanish", slot}, reappear: {action: "reappear", slot},
@@ -83,43 +110,56 @@ function servoAction(node, act) {
     voltage: {action: "voltage", id, volts: Number(field("volts"))},
     voltage_off: {action: "voltage", id, volts: null},
   };
-  control(messages[act]);
+  control({...messages[act], ...on});
 }
 
-// The AX-12's 0..1023 covers 300 degrees; 512 points up, the 60-degree dead band down.
-function dialAngle(position) { return (-90 - 150 + position * 300 / 1023) * Math.PI / 180; }
+// The goal register's span covers the model's range (AX-12: 0..1023 over 300 degrees, the dead band
+// down; X series: 0..4095 over the whole turn); the middle points up.  Extended positions wrap.
+function dialAngle(position, dial) {
+  const span = dial.max + 1;
+  const wrapped = ((position % span) + span) % span;
+  return (-90 - dial.range_deg / 2 + wrapped * dial.range_deg / dial.max) * Math.PI / 180;
+}
 
-function drawDial(canvas, servo) {
+function drawDial(canvas, servo, r) {
   const ctx = canvas.getContext("2d");
-  const w = canvas.width, h = canvas.height, cx = w / 2, cy = h / 2, r = Math.min(w, h) / 2 - 8;
-  const reg = servo.registers;
+  const w = canvas.width, h = canvas.height, cx = w / 2, cy = h / 2, radius = Math.min(w, h) / 2 - 8;
+  const dial = servo.dial || {max: 1023, range_deg: 300};
+  const present = r.position.raw, goal = r.goal.raw;
   ctx.clearRect(0, 0, w, h);
   ctx.lineWidth = 6;
   ctx.strokeStyle = "#e0e0e0";
-  ctx.beginPath(); ctx.arc(cx, cy, r, dialAngle(0), dialAngle(1023)); ctx.stroke();
-  if (!servo.wheel_mode) {
+  ctx.beginPath(); ctx.arc(cx, cy, radius, dialAngle(0, dial), dialAngle(0, dial) + dial.range_deg * Math.PI / 180); ctx.stroke();
+  if (servo.limits) {
     ctx.strokeStyle = "#90caf9";
-    ctx.beginPath(); ctx.arc(cx, cy, r, dialAngle(reg.cw_angle_limit), dialAngle(reg.ccw_angle_limit)); ctx.stroke();
+    ctx.beginPath(); ctx.arc(cx, cy, radius, dialAngle(servo.limits[0], dial), dialAngle(servo.limits[1], dial)); ctx.stroke();
   }
   const needle = (pos, color, width, len) => {
-    const a = dialAngle(pos);
+    const a = dialAngle(pos, dial);
     ctx.strokeStyle = color; ctx.lineWidth = width;
-    ctx.beginPath(); ctx.moveTo(cx, cy); ctx.lineTo(cx + Math.cos(a) * r * len, cy + Math.sin(a) * r * len); ctx.stroke();
+    ctx.beginPath(); ctx.moveTo(cx, cy); ctx.lineTo(cx + Math.cos(a) * radius * len, cy + Math.sin(a) * radius * len); ctx.stroke();
   };
-  needle(reg.goal_position, "#e53935", 2, 0.95);
-  needle(reg.present_position, "#263238", 4, 0.8);
+  needle(goal, "#e53935", 2, 0.95);
+  needle(present, "#263238", 4, 0.8);
   ctx.fillStyle = "#263238";
   ctx.font = "12px sans-serif"; ctx.textAlign = "center";
-  ctx.fillText(String(reg.present_position), cx, cy + r * 0.55);
-  canvas.dataset.present = reg.present_position;
-  canvas.dataset.goal = reg.goal_position;
+  ctx.fillText(String(present), cx, cy + radius * 0.55);
+  canvas.dataset.present = present;
+  canvas.dataset.goal = goal;
 }
 
 const PLOTS = {
-  position: {lines: [["pos", "#263238"], ["goal", "#e53935"]], range: () => [0, 1023]},
+  position: {lines: [["pos", "#263238"], ["goal", "#e53935"]], range: (hist, card) => spanOf(hist, ["pos", "goal"], card.positionMax)},
   speed: {lines: [["speed", "#1565c0"]], range: (hist) => symmetric(hist, "speed")},
   load: {lines: [["load", "#6a1b9a"]], range: (hist) => symmetric(hist, "load")},
 };
+
+// Positions past the goal register's span (extended position mode) widen the plot.
+function spanOf(hist, keys, max) {
+  let lo = 0, hi = max;
+  for (const p of hist) for (const k of keys) { lo = Math.min(lo, p[k]); hi = Math.max(hi, p[k]); }
+  return [lo, hi];
+}
 
 function symmetric(hist, key) {
   let m = 16;
@@ -127,24 +167,25 @@ function symmetric(hist, key) {
   return [-m, m];
 }
 
-function drawPlot(canvas, hist, now, windowS) {
+function drawPlot(canvas, card, now, windowS) {
+  const hist = card.history;
   const spec = PLOTS[canvas.dataset.kind];
   const ctx = canvas.getContext("2d");
   const w = canvas.width, h = canvas.height;
-  const [lo, hi] = spec.range(hist);
+  const [lo, hi] = spec.range(hist, card);
   ctx.clearRect(0, 0, w, h);
   ctx.fillStyle = "#999"; ctx.font = "10px sans-serif"; ctx.textAlign = "left";
-  ctx.fillText(`${canvas.dataset.kind} (${lo}..${hi}), last ${windowS} s`, 4, 10);
+  ctx.fillText(`${card.labels[canvas.dataset.kind]} (${lo}..${hi}), last ${windowS} s`, 4, 10);
   const x = (t) => w - (now - t) / windowS * w;
   const y = (v) => h - 2 - (v - lo) / (hi - lo) * (h - 14);
-  let shown = 0;
+  let points = 0;
   for (const [key, color] of spec.lines) {
     ctx.strokeStyle = color; ctx.lineWidth = 1.5; ctx.beginPath();
     let first = true;
     for (const p of hist) {
       if (now - p.t > windowS) continue;
       if (first) { ctx.moveTo(x(p.t), y(p[key])); first = false; } else ctx.lineTo(x(p.t), y(p[key]));
-      shown++;
+      points++;
     }
     ctx.stroke();
   }
@@ -152,25 +193,30 @@ function drawPlot(canvas, hist, now, windowS) {
   if (last) {
     canvas.dataset.last = JSON.stringify({pos: last.pos, goal: last.goal, speed: last.speed, load: last.load});
   }
-  canvas.dataset.points = shown;
+  canvas.dataset.points = points;
 }
 
 function updateCard(card, servo, frame) {
   const node = card.el;
+  const r = readings(servo);
   node.dataset.id = servo.id;
   node.querySelector(".name").textContent = `ID ${servo.id}` + (servo.id !== servo.slot ? ` (slot ${servo.slot})` : "");
   node.querySelector(".model").textContent = `${servo.model} · protocol ${servo.protocol} · ${servo.profile}`;
-  for (const [name, show] of FIELDS) card.cells[name].textContent = show(servo);
-  for (const name of ERROR_BITS) card.bitEls[name].className = servo.alarm_names.includes(name) ? "set" : "";
+  for (const [name, show] of FIELDS) card.cells[name].textContent = show(servo, r);
+  for (const name in card.bitEls) card.bitEls[name].className = servo.alarm_names.includes(name) ? "set" : "";
   const faults = node.querySelector(".faults");
   faults.replaceChildren(...servo.faults.map((text) => Object.assign(document.createElement("span"), {textContent: text})));
   node.classList.toggle("alarm", servo.alarm_names.length > 0 || servo.faults.length > 0);
-  const reg = servo.registers;
-  card.history.push({t: frame.wall_s, pos: reg.present_position, goal: reg.goal_position, speed: signed(reg.present_speed), load: signed(reg.present_load)});
+  // The load plot shows the current where the servo senses it (X series), else its load.
+  const effort = r.current || r.load || {raw: 0, name: "load"};
+  const velocity = r.velocity || {raw: 0, name: "velocity"};
+  card.labels = {position: "position", speed: velocity.name + (velocity.unit ? ` (raw; ${velocity.unit})` : ""), load: effort.name + " (raw)"};
+  card.positionMax = servo.dial ? servo.dial.max : 1023;
+  card.history.push({t: frame.wall_s, pos: r.position.raw, goal: r.goal.raw, speed: velocity.raw, load: effort.raw});
   while (card.history.length && frame.wall_s - card.history[0].t > HISTORY_S) card.history.shift();
-  drawDial(card.dial, servo);
+  drawDial(card.dial, servo, r);
   const windowS = Number($("window-s").value);
-  for (const plot of card.plots) drawPlot(plot, card.history, frame.wall_s, windowS);
+  for (const plot of card.plots) drawPlot(plot, card, frame.wall_s, windowS);
 }
 
 // -- log ------------------------------------------------------------------------------------
@@ -213,12 +259,13 @@ function renderLog() {
 // -- frames ---------------------------------------------------------------------------------
 function onFrame(frame) {
   lastFrame = frame;
+  const mixed = frame.protocols.length > 1;
   for (const servo of frame.servos) {
-    const card = cards.get(servo.slot) || makeCard(servo);
+    const card = cards.get(cardKey(servo)) || makeCard(servo, frame, mixed);
     updateCard(card, servo, frame);
   }
   const s = frame.stats;
-  $("clock").textContent = `t = ${frame.sim_time_s.toFixed(3)} s ${frame.paused ? "(paused)" : ""}`;
+  $("clock").textContent = `t = ${frame.sim_time_s.toFixed(3)} s ${frame.paused ? "(paused)" : ""} · Protocol ${frame.protocols.join(" + ")}`;
   $("stats").textContent = `packets/s ${s.packets_per_s.toFixed(0)} · packets ${s.packets} · status errors ${s.status_errors} · checksum errors ${s.checksum_errors} · timeouts injected ${s.timeouts_injected} · corrupt injected ${s.corrupt_injected}`;
   document.body.dataset.frames = frame.seq;
   if (frame.log.length) addLog(frame.log);

@@ -31,8 +31,6 @@ def test_a_model_for_every_id_and_per_id_models():
         (["--servo", "1-3:xl430-w250", "--ids", "1-3"], "both name the IDs"),
         (["--servo", "1-3:xl430-w250,3:xm430-w350"], "ID 3 is given two models"),
         (["--servo", "xl430-w250", "--ids", "253"], "outside 0..252"),
-        (["--servo", "xl430-w250", "--web", "127.0.0.1:0"], "--web is not available with --servo"),
-        (["--servo", "xl430-w250", "--monitor"], "--monitor is not available with --servo"),
         (["--servo", "1:ax-12a,1:xl430-w250", "--vanish", "1"], "ID 1 was launched on both protocols"),
         (["--servo", "xl430-w250", "--voltage", "30"], "runs on 6.5..12 V, not 30 V"),
         (["--baud", "1000000"], "--baud applies with --servo"),

@@ -70,7 +70,7 @@ def test_a_card_for_every_servo(page):
             card = page.locator(f"#servo-{servo_id}")
             card.wait_for(timeout=5000)
             assert f"ID {servo_id}" in card.locator(".name").inner_text()
-            assert "AX-12 · protocol 1.0" in card.locator(".model").inner_text()
+            assert "AX-12A · protocol 1.0" in card.locator(".model").inner_text()
         assert page.locator(".card").count() == 3
 
 

@@ -54,7 +54,7 @@ def test_monitor_alone_on_a_pty(emulator):
         if select.select([served.process.stderr], [], [], 0.1)[0]:
             err += os.read(served.process.stderr.fileno(), 65536)
     assert served.stop() == 0
-    assert b"AX-12 (P1.0)" in err and b"packets/s" in err
+    assert b"AX-12A (P1.0)" in err and b"packets/s" in err
 
 
 @pytest.mark.parametrize(

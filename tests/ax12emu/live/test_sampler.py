@@ -70,4 +70,4 @@ def test_the_monitor_table_shows_signed_speed_and_load():
     text = console.export_text()
     speed = frame["servos"][0]["registers"]["present_speed"]
     assert speed & 0x400, "moving CW sets the direction bit"
-    assert f"-{speed & 0x3FF}" in text and "AX-12 (P1.0)" in text
+    assert f"-{speed & 0x3FF}" in text and "AX-12A (P1.0)" in text

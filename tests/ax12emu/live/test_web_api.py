@@ -60,7 +60,7 @@ def servos(bus) -> dict[int, dict]:
 def test_snapshot_lists_every_servo_with_its_registers_and_follows_a_write(bus):
     first = wait_for(lambda: servos(bus))
     assert sorted(first) == [1, 2, 7]
-    assert first[7]["model"] == "AX-12" and first[7]["protocol"] == "1.0"
+    assert first[7]["model"] == "AX-12A" and first[7]["protocol"] == "1.0"
     assert first[1]["registers"]["goal_position"] == 512
     bus.write(2, "goal_position", 700)
     assert wait_for(lambda: servos(bus)[2]["registers"]["goal_position"] == 700)
