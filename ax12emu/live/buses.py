@@ -65,7 +65,9 @@ def locate(bus: AnyBus, servo_id: int, protocol: float | None = None) -> tuple[f
 def decoder_options(bus: AnyBus) -> dict[str, Any]:
     """The ``ax12emu decode`` decoder's options for this bus's traffic (protocol, 2.0 servos to name registers by)."""
     on_wire = parts(bus)
-    options: dict[str, Any] = {"protocol": "both" if len(on_wire) > 1 else protocol_name(on_wire[0][0])}
+    # The decoder frames 2.0 traffic in its "both" mode (each byte to both protocols' framers), as
+    # ``ax12emu decode`` reads a 2.0 trace: a 2.0 status packet says itself that it is one.
+    options: dict[str, Any] = {"protocol": "1.0" if [p for p, _ in on_wire] == [1.0] else "both"}
     for protocol, sub in on_wire:
         if protocol == 1.0:
             profile = getattr(getattr(sub, "options", None), "profile", None)  # the AX-12 bus's table profile

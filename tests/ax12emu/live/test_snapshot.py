@@ -1,0 +1,155 @@
+"""The snapshot and the sampler on Protocol 2.0 and mixed buses, in virtual time.
+
+Each servo is shown by its own table's register names and its readings in the units its model
+file (and the e-manual, per register) gives; the packet log decodes 2.0 and mixed traffic.
+"""
+
+from __future__ import annotations
+
+import pytest
+from dynamixel_sdk import COMM_SUCCESS, PacketHandler
+from emu_testkit import UrlPortHandler
+
+from ax12emu import VirtualBus
+from ax12emu.live import ByteTap, Sampler
+from ax12emu.live.buses import decoder_options
+from ax12emu.live.snapshot import REGISTER_UNITS, take
+from ax12emu.protocol.packets import Instruction, InstructionPacket
+from ax12emu.protocol.packets2 import Instruction2, InstructionPacket2, encode_status2
+from ax12emu.protocol.servo_models import model
+from ax12emu.tracing.trace import IN, OUT
+
+BAUD = 1_000_000
+
+
+def readings(servo: dict) -> dict[str, dict]:
+    return {reading["name"]: reading for reading in servo["readings"]}
+
+
+def sampler_of(bus: VirtualBus, **options) -> Sampler:
+    return Sampler(bus.call, **bus.call(decoder_options), **options)
+
+
+def test_x_series_servos_show_their_own_registers_and_units():
+    with VirtualBus(servo="1:xl430-w250,2:xl330-m288", transport="inprocess", virtual_time=True) as bus:
+        bus.write(1, "torque_enable", 1)
+        bus.write(1, "goal_position", 3000)
+        bus.step(0.2)  # mid-move: velocity and load are not zero
+        frame = sampler_of(bus).sample()
+        table = bus.table(1)
+    assert frame["protocols"] == ["2.0"] and frame["virtual_time"]
+    xl430, xl330 = frame["servos"]
+    assert (xl430["model"], xl430["protocol"], xl430["id"]) == ("XL430-W250", "2.0", 1)
+    assert xl330["model"] == "XL330-M288"
+    assert xl430["registers"]["goal_position"] == 3000 and xl430["registers"]["present_position"] == table["present_position"]
+    assert "cw_angle_limit" not in xl430["registers"] and xl430["registers"]["operating_mode"] == 3
+    one = readings(xl430)
+    resolution_deg = model("xl430-w250").physical.resolution_deg
+    assert one["position"]["raw"] == table["present_position"]
+    assert one["position"]["value"] == pytest.approx(table["present_position"] * resolution_deg, abs=1e-3)
+    assert one["goal"]["value"] == pytest.approx(3000 * resolution_deg, abs=1e-3)
+    assert one["velocity"]["register"] == "present_velocity" and one["velocity"]["unit"] == "rpm"
+    assert one["velocity"]["raw"] == table["present_velocity"] > 0  # moving CCW towards 3000
+    assert one["velocity"]["value"] == pytest.approx(table["present_velocity"] * REGISTER_UNITS["present_velocity"].per_raw, abs=1e-3)
+    assert one["pwm"]["raw"] == table["present_pwm"] and one["pwm"]["unit"] == "%"
+    assert one["voltage"]["value"] == pytest.approx(table["present_input_voltage"] / 10)
+    # The XL430 senses no current (its register 126 is Present Load); the XL330 does, in its model's unit.
+    assert "current" not in one and one["load"]["register"] == "present_load"
+    two = readings(xl330)
+    assert "load" not in two and two["current"]["unit"] == "mA" and two["current"]["register"] == "present_current"
+    assert xl430["mode"] == "position" and xl430["limits"] == [table["min_position_limit"], table["max_position_limit"]]
+    assert xl430["dial"] == {"max": 4095, "range_deg": model("xl430-w250").physical.position_range_deg}
+    assert xl430["registers"]["torque_enable"] == 1 and xl430["registers"]["moving"] == 1
+    assert frame["alarm_bits"]["2.0"][:3] == ["input_voltage", "overheating", "motor_encoder"]
+
+
+def test_operating_mode_and_hardware_errors_follow_the_servo():
+    with VirtualBus(servo="1-2:xl430-w250", transport="inprocess", virtual_time=True) as bus:
+        bus.write(1, "operating_mode", 1)  # velocity: the position limits do not bound anything
+        bus.faults.force_alarm(2, "overload")  # latched in Hardware Error Status, torque off
+        bus.faults.vanish(1)
+        frame = sampler_of(bus).sample()
+    one, two = frame["servos"]
+    assert one["mode"] == "velocity" and one["limits"] is None and one["wheel_mode"]
+    assert one["faults"] == ["vanished"]
+    assert two["alarms"] == two["registers"]["hardware_error_status"] == 0x20
+    assert two["alarm_names"] == ["overload"] and "alarm 0x20" in two["faults"]
+
+
+def test_a_mixed_wire_shows_both_protocols_with_one_id_each():
+    with VirtualBus(servo="1:ax-12a,1-2:xl430-w250", transport="inprocess", virtual_time=True, baud_bps=BAUD) as bus:
+        bus.faults.vanish(1, protocol=2.0)
+        bus.set_temperature(1, 80, protocol=1.0)
+        frame = sampler_of(bus).sample()
+    assert frame["protocols"] == ["1.0", "2.0"]
+    ax, x1, x2 = frame["servos"]
+    assert [(s["protocol"], s["id"], s["model"]) for s in frame["servos"]] == [("1.0", 1, "AX-12A"), ("2.0", 1, "XL430-W250"), ("2.0", 2, "XL430-W250")]
+    assert readings(ax)["velocity"]["register"] == "present_speed" and readings(ax)["position"]["value"] == pytest.approx(
+        ax["registers"]["present_position"] * model("ax-12a").physical.resolution_deg, abs=1e-3
+    )
+    assert ax["mode"] == "joint" and ax["limits"] == [0, 1023]
+    assert ax["faults"] == ["present_temperature held at 80"] and readings(ax)["temperature"]["raw"] == 80
+    assert x1["faults"] == ["vanished"] and x2["faults"] == []
+    assert set(frame["alarm_choices"]) == {"1.0", "2.0"} and "electrical_shock" in frame["alarm_choices"]["2.0"]
+    assert "electrical_shock" not in frame["alarm_choices"]["1.0"]
+
+
+def test_an_ax12_speed_register_reads_its_direction_bit_as_a_sign():
+    with VirtualBus([1], transport="inprocess", virtual_time=True) as bus:
+        bus.write(1, "torque_enable", 1)
+        bus.write(1, "goal_position", 100)  # CW
+        bus.step(0.1)
+        raw = bus.read(1, "present_speed")
+        frame = take(bus.bus)
+    assert raw & 0x400
+    assert readings(frame["servos"][0])["velocity"]["raw"] == -(raw & 0x3FF)
+
+
+def test_the_log_decodes_protocol_2_traffic_and_counts_its_errors():
+    with VirtualBus(servo="1:xl430-w250", transport="inprocess", virtual_time=True) as bus:
+        tap = ByteTap()
+        sampler = sampler_of(bus, tap=tap)
+        read = InstructionPacket2(1, Instruction2.READ, bytes([132, 0, 4, 0])).encode()  # Present Position
+        tap.record(IN, read, 1.0)
+        tap.record(OUT, encode_status2(1, 0, bytes(4)), 1.001)
+        tap.record(IN, read, 1.002)
+        tap.record(OUT, encode_status2(1, 0x07, b""), 1.003)  # Access Error
+        corrupt = bytearray(encode_status2(1, 0, bytes(4)))
+        corrupt[-1] ^= 0xFF
+        tap.record(IN, read, 1.004)
+        tap.record(OUT, bytes(corrupt), 1.005)
+        frame = sampler.sample()
+    host = [line for line in frame["log"] if line["who"] == "host"]
+    servo = [line for line in frame["log"] if line["who"] == "servo"]
+    assert len(host) == 3 and all(line["ins"] == "READ" and line["id"] == 1 for line in host)
+    assert "present_position" in host[0]["text"]  # named from the servo's model file
+    assert len(servo) == 3 and all(line["ins"] == "READ" for line in servo)
+    assert frame["stats"]["status_errors"] == 1 and frame["stats"]["checksum_errors"] == 1
+
+
+def test_the_log_of_a_mixed_wire_decodes_both_protocols():
+    with VirtualBus(servo="1:ax-12a,2:xl430-w250", transport="inprocess", virtual_time=True, baud_bps=BAUD) as bus:
+        tap = ByteTap()
+        sampler = sampler_of(bus, tap=tap)
+        tap.record(IN, InstructionPacket(1, Instruction.PING, b"").encode(), 1.0)
+        tap.record(IN, InstructionPacket2(2, Instruction2.PING).encode(), 1.01)
+        frame = sampler.sample()
+    pings = [(line["id"], line["ins"]) for line in frame["log"] if line["who"] == "host"]
+    assert pings == [(1, "PING"), (2, "PING")]
+
+
+def test_real_traffic_from_the_sdk_reaches_the_log():
+    with VirtualBus(servo="3:xl430-w250", transport="inprocess", virtual_time=True, baud_bps=BAUD) as bus:
+        link = bus._link
+        tap = ByteTap(link.trace)
+        link.trace = tap  # as the live view taps a served bus
+        sampler = sampler_of(bus, tap=tap, counters=lambda: {"packets_in": link.packets_in})
+        port = UrlPortHandler(bus.port)
+        assert port.openPort() and port.setBaudRate(BAUD)
+        try:
+            assert PacketHandler(2.0).ping(port, 3)[1] == COMM_SUCCESS
+        finally:
+            port.closePort()
+        frame = sampler.sample()
+    assert [line["ins"] for line in frame["log"] if line["who"] in ("host", "servo")] == ["PING", "PING"]
+    assert frame["stats"]["packets"] == 1
