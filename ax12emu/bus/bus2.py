@@ -51,8 +51,8 @@ corrupted or delayed, a servo unplugged (it hears nothing, and a Sync/Bulk Read'
 it); a servo's own (an error, a blocked shaft, pinned readings) act inside its firmware model, so
 the bus only shows what the firmware reports.  Two servos with one ID (``duplicate``) both act and
 answer at once; the bus collides their answers (``reply.collide``: AND-ed as on the wire).  In a Sync or
-Bulk Read both answer in the ID's turn; in a Fast Sync/Bulk Read only the first sends its share
-(a second servo's colliding share is not modelled).
+Bulk Read both answer in the ID's turn; in a Fast Sync/Bulk Read both send their share in its turn
+and the servos after it run their CRC on over the collided bytes they heard.
 Not modelled: the reply cache, the live view (the Protocol 1.0 bus has them), a servo's busy
 time after a write to its EEPROM, and the time a rebooting servo is deaf.
 """
@@ -62,6 +62,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable, Iterable, Iterator, Sequence
 
+from ax12emu.protocol.crc16 import crc16
 from ax12emu.protocol.framing2 import Framer2
 from ax12emu.protocol.packets import BROADCAST_ID
 from ax12emu.protocol.packets2 import (
@@ -73,10 +74,10 @@ from ax12emu.protocol.packets2 import (
     encode_status2,
     fast_status_pieces,
 )
-from ax12emu.protocol.params2 import INSTRUCTION_SPECS, Broadcast, BulkRead, SyncRead, parse_params
+from ax12emu.protocol.params2 import INSTRUCTION_SPECS, Broadcast, BulkRead, SyncRead
 from ax12emu.protocol.servo_models import ServoModel
 from ax12emu.servo.plant2 import plant_for
-from ax12emu.servo.request_handler2 import answers, handle2, listed_read, status_byte
+from ax12emu.servo.request_handler2 import answers, handle2, listed_read, parsed_params, status_byte
 from ax12emu.servo.servo2 import Servo2, Servo2Options
 from firmware_model.xseries.interface import XServoModel
 
@@ -264,6 +265,11 @@ class Bus2:
                     servo.eeprom_dirty = False
                     if self.state_store is not None:
                         self.state_store.save(slot, servo.table)
+        if not replies and packet.crc_ok:
+            # Nobody answers (a Sync Write): the step a write earns (see ``Plant2.catch_up``) is taken
+            # now, while the host prepares its next packet, rather than when that packet arrives.  The
+            # model takes the same steps either way: that packet's catch-up then has nothing left to do.
+            self.catch_up(now_s)
         if faults is not None and replies:
             replies = faults.on_replies(replies)
         return replies
@@ -294,7 +300,7 @@ class Bus2:
 
     def _listed(self, packet: InstructionPacket2, line_bps: float | None) -> list[Reply]:
         """Sync/Bulk Read and their fast forms: the listed servos answer in list order (see the module docstring)."""
-        params = parse_params(packet.instruction, packet.params)
+        params = parsed_params(packet.instruction, packet.params if type(packet.params) is bytes else bytes(packet.params))
         if isinstance(params, SyncRead):
             reads = [(servo_id, params.address, params.length) for servo_id in params.ids]
         elif isinstance(params, BulkRead):
@@ -312,7 +318,7 @@ class Bus2:
                     or (self.faults is not None and not self.faults.admit(servo))):
                 break
             error, data = listed_read(servo, address, length)
-            if len(found) > 1 and not fast:
+            if len(found) > 1:
                 twins[len(answered)] = [(twin, *listed_read(twin, address, length)) for twin in found[1:]
                                         if self._hears(twin, line_bps) and answers(twin, packet.instruction)
                                         and (self.faults is None or self.faults.admit(twin))]
@@ -328,6 +334,8 @@ class Bus2:
             for k, (servo, error, data) in enumerate(answered):
                 parts[k] = FastStatusPart(servo.id, status_byte(servo, error), data)
             pieces = fast_status_pieces(parts)[: len(answered)]
+            if twins:  # servos sharing an ID (a fault) send their shares in its turn, at once
+                pieces = _fast_shares_on_wire(pieces, parts, answered, twins)
             at_s = answered[0][0].return_delay_s
             wire_s = 0.0
             for (servo, _, _), piece in zip(answered, pieces):
@@ -366,3 +374,25 @@ class Bus2:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _fast_shares_on_wire(pieces: list[bytes], parts: list[FastStatusPart],
+                         answered: list[tuple[Servo2, int, bytes]],
+                         twins: dict[int, list[tuple[Servo2, int, bytes]]]) -> list[bytes]:
+    """A Fast Sync/Bulk Read's shares as the wire carries them when servos share a listed ID (a fault).
+
+    Every servo with the ID sends its share in the ID's turn, at once (a different Return Delay Time of
+    the first share's twin is not modelled), so their bytes collide, AND-ed as ``reply.collide`` does for
+    other answers.  Each servo's CRC is the running CRC of what it heard before its share
+    (``packets2.fast_status_pieces``), so the servos after a collision continue from the collided bytes.
+    """
+    out: list[bytes] = []
+    crc = 0
+    for k, (servo, _, _) in enumerate(answered):
+        sent = [pieces[k], *(fast_status_pieces([*parts[:k], FastStatusPart(twin.id, status_byte(twin, error), data)])[k]
+                             for twin, error, data in twins.get(k, ()))]
+        wire = collide([Reply(BROADCAST_ID, piece[:-2] + crc16(piece[:-2], crc).to_bytes(2, "little"), 0.0,
+                              servo.baud_bps) for piece in sent]).data
+        out.append(wire)
+        crc = crc16(wire, crc)
+    return out

@@ -168,6 +168,35 @@ def test_two_servos_on_one_id_both_act_and_their_answers_collide(xl430):
     assert ok(ph.read4ByteTxRx(port, 2, PRESENT_POSITION)) == 100
 
 
+@pytest.mark.parametrize("instruction", [Instruction2.FAST_SYNC_READ, Instruction2.FAST_BULK_READ])
+def test_two_servos_on_one_id_both_send_their_share_of_a_fast_read(instruction):
+    """Fast Sync/Bulk Read of IDs 1 and 2 with a third servo also on ID 1: ID 1's share is both servos' bytes
+    AND-ed; ID 2, after it, runs its CRC on over what it heard, so the packet's own CRC holds."""
+    from ax12emu.protocol.crc16 import crc16
+    from ax12emu.protocol.packets2 import FastStatusPart, encode_fast_status
+
+    if instruction == Instruction2.FAST_SYNC_READ:
+        params = bytes((PRESENT_POSITION, 0, 4, 0, 1, 2))
+    else:
+        params = bytes((1, PRESENT_POSITION, 0, 4, 0, 2, PRESENT_POSITION, 0, 4, 0))
+    request = encode_instruction2(0xFE, instruction, params)
+    with VirtualBus([1, 2, 3], servo="xl430-w250", transport="inprocess", virtual_time=True) as bus:
+        bus.faults.hold(3, "present_position", 100)
+        bus.faults.hold(2, "present_position", 2000)
+        clean = encode_fast_status([FastStatusPart(1, 0, (2048).to_bytes(4, "little")),
+                                    FastStatusPart(2, 0, (2000).to_bytes(4, "little"))])
+        assert b"".join(r.data for r in bus.call(lambda b: b.receive(request))) == clean
+        bus.faults.duplicate(3, 1)
+        wire = b"".join(r.data for r in bus.call(lambda b: b.receive(request)))
+    header = 8  # FF FF FD 00 FE LEN_L LEN_H 55
+    assert len(wire) == len(clean)
+    assert wire[header:header + 2] == bytes((0, 1))  # error 0, ID 1 from both
+    assert wire[header + 2:header + 6] == (2048 & 100).to_bytes(4, "little")  # the two readings AND-ed
+    share_2 = header + 8
+    assert wire[share_2:share_2 + 6] == clean[share_2:share_2 + 6]  # ID 2's own share
+    assert int.from_bytes(wire[-2:], "little") == crc16(wire[:-2])  # its CRC covers the collided bytes
+
+
 def test_duplicate_from_a_config_and_its_id_range():
     with VirtualBus([1, 2], servo="xl430-w250", transport="inprocess", faults=FaultConfig(duplicate=((2, 1),))) as bus:
         assert bus.call(lambda b: b.ids) == [1, 1]
