@@ -57,6 +57,25 @@ def test_monitor_alone_on_a_pty(emulator):
     assert b"AX-12A (P1.0)" in err and b"packets/s" in err
 
 
+def test_serve_servo_takes_web_and_monitor(emulator):
+    """An X-series bus with an AX-12A beside it: the page lists both, each by its protocol; the monitor draws them."""
+    served = emulator("--servo", "1:ax-12a,1-2:xl430-w250", "--tcp", "127.0.0.1:0", "--web", "127.0.0.1:0", "--monitor")
+    assert served.port.startswith("socket://127.0.0.1:")  # the port stays the first stdout line
+    url = read_line(served.process.stdout)
+    with urllib.request.urlopen(url + "api/servos", timeout=5) as answer:
+        body = json.loads(answer.read())
+    assert body["protocols"] == ["1.0", "2.0"]
+    assert [(s["protocol"], s["id"], s["model"]) for s in body["servos"]] == [("1.0", 1, "AX-12A"), ("2.0", 1, "XL430-W250"), ("2.0", 2, "XL430-W250")]
+    assert served.stop() == 0
+    err = served.process.stderr.read()
+    assert "XL430-W250 (P2.0)" in err and "AX-12A (P1.0)" in err
+
+
+def test_servo_no_longer_refuses_the_live_view():
+    args = parse_args(["serve", "--servo", "xl430-w250", "--web", "127.0.0.1:0", "--monitor"])
+    assert args.web_address == ("127.0.0.1", 0) and args.monitor and args.servo_models == [(1, "xl430-w250")]
+
+
 @pytest.mark.parametrize(
     "argv, says",
     [
