@@ -81,9 +81,9 @@ def build_parser() -> argparse.ArgumentParser:
     serve.add_argument("--ids", type=_ids, default=[1], metavar="LIST", help="servo IDs, e.g. 1,2,5 or 1-18 (default 1)")
     serve.add_argument(
         "--servo", metavar="SPEC",
-        help="X-series servos on Protocol 2.0, or AX-18As on Protocol 1.0: MODEL for every --ids ID (e.g. xl430-w250, "
-        "ax-18a), or IDS:MODEL,... per ID (e.g. 1-5:xm430-w350,6:xl330-m077; ax-12a or ax-18a IDs beside them share "
-        "the wire on Protocol 1.0); 'ax12emu models' lists the models",
+        help="X-series servos on Protocol 2.0, or AX-18As and the MX series on Protocol 1.0: MODEL for every --ids ID "
+        "(e.g. xl430-w250, ax-18a, mx-28), or IDS:MODEL,... per ID (e.g. 1-5:xm430-w350,6:xl330-m077; ax-12a, ax-18a "
+        "or mx-* IDs beside them share the wire on Protocol 1.0); 'ax12emu models' lists the models",
     )
     serve.add_argument(
         "--baud", type=_positive_float, metavar="BPS",
@@ -177,6 +177,13 @@ _PROTOCOL1_ONLY = ("params", "arm", "model", "controller", "profile",
                    "broadcast_ping", "reset_reply_id", "goal_torque", "eeprom_busy_ms")
 
 
+def _protocol1_keys() -> tuple[str, ...]:
+    """Every Protocol 1.0 model served beside the 2.0 ones: the AX-shaped tables and the MX series' (bus1x)."""
+    from ax12emu.protocol.servo_models import model, model_names
+
+    return tuple(key for key in model_names() if "1.0" in model(key).protocols and "2.0" not in model(key).protocols)
+
+
 def _check_servo_spec(parser: argparse.ArgumentParser, args: argparse.Namespace, argv: list[str]) -> None:
     """Resolve ``--servo`` into ``args.servo_models`` [(ID, model key)], or exit with the reason."""
     from ax12emu.protocol.servo_spec import parse_servo_spec
@@ -184,16 +191,9 @@ def _check_servo_spec(parser: argparse.ArgumentParser, args: argparse.Namespace,
     ids_given = any(a == "--ids" or a.startswith("--ids=") for a in argv)
     try:
         args.servo_models = parse_servo_spec(args.servo, args.ids if ids_given or ":" not in args.servo else None,
-                                             also=PROTOCOL1_MODELS)
+                                             also=_protocol1_keys())
     except ValueError as exc:
-        message = str(exc)
-        if "speaks Protocol 1.0, not 2.0" in message:  # a 1.0 model the 1.0 bus does not serve (the MX series)
-            key = message.split()[0]
-            message = (f"{key} speaks Protocol 1.0, not 2.0, and its 1.0 table is not served: its positions "
-                       "(0..4095 over 360 degrees; the 1.0 model works in the AX series' 0..1023 over 300), PID gains "
-                       "(26-28, where the AX series has compliance), goal acceleration and multi-turn offset are not "
-                       f"mapped onto the model; Protocol 1.0 models served: {', '.join(PROTOCOL1_MODELS)}")
-        parser.error(f"--servo: {message}")
+        parser.error(f"--servo: {exc}")
     if all(key == AX12_MODEL for _, key in args.servo_models):
         parser.error("--servo: no Protocol 2.0 servo; serve AX-12As without --servo")
     defaults = parser.parse_args(["serve"])
@@ -256,7 +256,7 @@ def _serve2(args: argparse.Namespace) -> int:
     store1 = StateStore(args.state_dir) if args.state_dir else None
     x_models = [(servo_id, model(key)) for servo_id, key in args.servo_models if "2.0" in model(key).protocols]
     bus = None
-    if x_models:  # none: AX-18As alone, on Protocol 1.0
+    if x_models:  # none: Protocol 1.0 servos alone (AX-18As, the MX series)
         bus = Bus2(
             x_models,
             lambda spec, index: build_x_firmware(spec, choice),
@@ -268,10 +268,13 @@ def _serve2(args: argparse.Namespace) -> int:
         if args.baud is not None:
             for servo in bus.servos:
                 servo.start_at_baud(args.baud)
-    ax = [(servo_id, key) for servo_id, key in args.servo_models if "2.0" not in model(key).protocols]
+    ax = [(servo_id, key) for servo_id, key in args.servo_models if key in PROTOCOL1_MODELS]
     ax_ids = [servo_id for servo_id, _ in ax]
+    # The other Protocol 1.0 models (the MX series) run the X-series firmware behind their own tables (bus1x).
+    mx = [(servo_id, model(key)) for servo_id, key in args.servo_models
+          if "2.0" not in model(key).protocols and key not in PROTOCOL1_MODELS]
+    bus1 = None
     if ax_ids:
-        from ax12emu.bus.mixed import MixedBus
         from ax12emu.servo.model_factory import build_protocol1_model
         from ax12emu.servo.virtual_servo import baud_value
 
@@ -288,8 +291,29 @@ def _serve2(args: argparse.Namespace) -> int:
         if args.baud is not None:
             for servo in bus1.servos:
                 servo.table.set("baud_rate", baud_value(args.baud))
+    if mx:
+        from ax12emu.bus.bus1x import Bus1X
+        from ax12emu.servo.plant1x import build_plant1x
+        from ax12emu.servo.servo1x import Servo1XOptions
+        from ax12emu.servo.virtual_servo import baud_value
+
+        try:
+            bus1 = Bus1X(mx, lambda spec, servo: build_plant1x(spec, servo.table, choice), ax_bus=bus1, clock=clock,
+                         options=Servo1XOptions(reply_on_checksum_error=args.checksum_error == "reply"),
+                         state_store=None if args.factory_reset else store1)
+        except ValueError as exc:
+            raise SystemExit(f"ax12emu serve: error: --servo: {exc}") from None
+        bus1.state_store = store1
+        if args.baud is not None:
+            for servo in bus1.servos_mx:
+                servo.table.set("baud_rate", baud_value(args.baud))
+    if bus1 is not None:
+        from ax12emu.bus.mixed import MixedBus
+
         bus = MixedBus(bus1, bus) if bus is not None else bus1
     faults = cli_hil.fault_config(args)
+    if faults.active and mx:
+        raise SystemExit("ax12emu serve: error: faults (--drop, --alarm, --stall ...) are not available with MX servos yet")
     if faults.active:
         faults.install(bus)  # on a mixed wire, a slot both protocols launched is refused (ValueError)
     # The header names the 2.0 servos, so ax12emu decode names their registers.
@@ -304,7 +328,7 @@ def _serve2(args: argparse.Namespace) -> int:
     if live is not None and live.url:
         print(live.url, flush=True)
     log.info("serving %s on %s (Protocol %s%s%s)", ", ".join(f"{i}:{k}" for i, k in args.servo_models), transport.name,
-             "/".join((["2.0"] if x_models else []) + (["1.0"] if ax_ids else [])), ", paced" if args.pace else "", ", echo" if args.echo else "")
+             "/".join((["2.0"] if x_models else []) + (["1.0"] if ax_ids or mx else [])), ", paced" if args.pace else "", ", echo" if args.echo else "")
     try:
         server.serve_forever()
     finally:

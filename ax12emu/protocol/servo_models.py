@@ -67,6 +67,9 @@ The format (``models/ax-12a.toml`` is the worked example)::
     i_gain_factor_s = 0.48828125 # gains per register unit (Kp = P/8, Ki = I*1000/2048 per second,
     d_gain_factor_s = 0.004      # Kd = D*4/1000 seconds), output in output_full_scale units per position unit
     errors = { overload = 1, overheating = 2, input_voltage = 4 }  # Shutdown / Hardware Error Status bits
+    acceleration_unit_deg_s2 = 8.583  # optional: Goal Acceleration's unit (the MX series)
+    multi_turn_limit = 4095      # optional, with the next: both angle limits at it select multi-turn mode,
+    multi_turn_goal_limit = 28672  # whose Goal Position takes -28,672..28,672 (the MX series)
 
 Entry keys: ``address``, ``size`` (1, 2 or 4), ``name`` (snake_case, unique), ``access`` ("R" or "RW"),
 ``area`` ("EEPROM" or "RAM"; EEPROM entries come before the first RAM one), ``default`` (absent: the
@@ -119,7 +122,7 @@ _CONTROLLER_KEYS = {"source", "position_output_scale"}
 _MODE_CHANGE_KEYS = {"source", "defaults", "from_registers"}
 _CLASSIC_KEYS = {"source", "position_units", "position_span_deg", "position_centre", "speed_unit_rpm", "direction_bit",
                  "output_full_scale", "wheel_output", "mode_register", "wheel_modes", "p_gain_factor", "i_gain_factor_s",
-                 "d_gain_factor_s", "errors"}
+                 "d_gain_factor_s", "errors", "acceleration_unit_deg_s2", "multi_turn_limit", "multi_turn_goal_limit"}
 #: What a classic table's error bits may name (the X-series firmware's protections).
 CLASSIC_ERRORS = ("input_voltage", "overheating", "overload")
 #: Wheel-mode Moving Speed: a share of the output (AX, XL-320: "only the output control is possible") or a speed.
@@ -218,6 +221,12 @@ class Classic:
     d_gain_factor_s: float | None = None
     #: (protection, bit) of Shutdown and Hardware Error Status; protections from :data:`CLASSIC_ERRORS`.
     errors: tuple[tuple[str, int], ...] = ()
+    #: Goal Acceleration's unit, deg/s^2 (the MX series: 8.583); None: the table has no goal acceleration.
+    acceleration_unit_deg_s2: float | None = None
+    #: CW and CCW Angle Limit both at this value select multi-turn mode (the MX series: 4095); None: no such mode.
+    multi_turn_limit: int | None = None
+    #: Goal Position's range in multi-turn mode: -this .. this (the MX series: 28,672).
+    multi_turn_goal_limit: int = 0
 
 
 @dataclass(frozen=True)
@@ -566,6 +575,18 @@ def _classic(where: _Where, raw: Any, names: Mapping[str, Entry]) -> Classic | N
             gains[key] = where.number(raw[key], f"classic.{key}")
             if register not in names:
                 raise where.error(f"classic.{key}", f"the table has no {register} register")
+    extras: dict[str, Any] = {}
+    if "acceleration_unit_deg_s2" in raw:
+        extras["acceleration_unit_deg_s2"] = where.number(raw["acceleration_unit_deg_s2"], "classic.acceleration_unit_deg_s2")
+        if "goal_acceleration" not in names:
+            raise where.error("classic.acceleration_unit_deg_s2", "the table has no goal_acceleration register")
+    if ("multi_turn_limit" in raw) != ("multi_turn_goal_limit" in raw):
+        raise where.error("classic", "multi_turn_limit and multi_turn_goal_limit come together")
+    if "multi_turn_limit" in raw:
+        extras["multi_turn_limit"] = where.integer(raw["multi_turn_limit"], "classic.multi_turn_limit")
+        extras["multi_turn_goal_limit"] = where.integer(raw["multi_turn_goal_limit"], "classic.multi_turn_goal_limit")
+        if extras["multi_turn_goal_limit"] <= 0 or extras["multi_turn_goal_limit"] > 0x7FFF:
+            raise where.error("classic.multi_turn_goal_limit", f"must lie in 1..32767 (a 2-byte signed goal), got {extras['multi_turn_goal_limit']}")
     errors_raw = raw.get("errors", {})
     if not isinstance(errors_raw, dict):
         raise where.error("classic.errors", f"must be a table of protection = bit, got {errors_raw!r}")
@@ -581,7 +602,7 @@ def _classic(where: _Where, raw: Any, names: Mapping[str, Entry]) -> Classic | N
         position_centre=centre, speed_unit_rpm=where.number(raw["speed_unit_rpm"], "classic.speed_unit_rpm"),
         direction_bit=bit, output_full_scale=full,
         wheel_output=where.choice(raw.get("wheel_output", "pwm"), "classic.wheel_output", CLASSIC_WHEEL_OUTPUTS),
-        mode_register=mode_register, wheel_modes=wheel_modes, errors=tuple(errors), **gains)
+        mode_register=mode_register, wheel_modes=wheel_modes, errors=tuple(errors), **gains, **extras)
 
 
 def parse_model(text: str, key: str, path: str) -> ServoModel:

@@ -36,6 +36,26 @@ KPI = I/65536, KPD = D/16, the constants including the sampling time):
   about 0.1%", e-manual XL-320 "Present Speed(39)"); Present Load the motor current as a share of the
   stall current (the firmware's Present Load, 0.1 % of it, on models without current sensing).
 * Shutdown and Hardware Error Status: each family's bits (``errors``) for the firmware's protections.
+
+What only the MX series has (e-manual, MX-28/64/106 Protocol 1.0 pages and their shared texts in
+github ROBOTIS-GIT/emanual _includes/en/dxl/):
+
+* multi-turn mode, both angle limits at ``multi_turn_limit`` ("Condition that Both CW and CCW are
+  4095", control_table_mx_angle_limit.md): Extended Position Control Mode, Goal Position signed within
+  +-``multi_turn_goal_limit``; "Present position = (Real Position / Resolution Divider) + Multi-turn
+  Offset" (control_table_resolution_divider.md), "only available in multi-turn mode": the offset goes
+  to the firmware as Homing Offset (times the divider, in its pulses) and the divider divides what it
+  reports, so the goal is the register value times the divider;
+* Goal Acceleration (``acceleration_unit_deg_s2``: "the unit is approximately 8.583 deg / sec^2 ...
+  When it is set to 0, there is no control over acceleration", control_table_goal_acceleration.md) is
+  Profile Acceleration (214.577 rev/min^2); the X series plans no acceleration without a Profile
+  Velocity, so Moving Speed 0 ("the maximum rpm of the motor is used") with an acceleration takes the
+  data sheet's no-load speed (``no_load_speed_rpm``) as the profile's speed;
+* Torque Control Mode Enable(70) = 1 (MX-64/106: "DYNAMIXEL is controlled by the Goal Torque value ...
+  behaves as if it is in the wheel mode") is Current Control Mode, Goal Torque(71) the goal current in
+  the model's current unit with the direction bit ("the unit is 4.5mA"), bounded by Torque Limit's share
+  of the stall current ("Goal Torque cannot be bigger than Torque Limit"); Current(68) reads
+  ``CURRENT_ZERO`` + the current in that unit ("I = (4.5mA) * (CURRENT - 2048)").
 """
 
 from __future__ import annotations
@@ -52,6 +72,7 @@ from firmware_model.xseries.interface import (
     XCommands,
     XSensed,
 )
+from firmware_model.xseries.profile import ACCEL_UNIT_PULSES_S2
 
 __all__ = ["ClassicMap", "COMMAND_REGISTERS", "SENSED_REGISTERS", "GOAL_REGISTERS", "X_CENTRE_PULSES",
            "X_VELOCITY_UNIT_RPM", "WHEEL_VELOCITY_GAINS"]
@@ -70,12 +91,17 @@ X_ERROR_BITS = {"input_voltage": HW_ERROR_INPUT_VOLTAGE, "overheating": HW_ERROR
 
 #: Classic registers that steer the servo (each read where the table has it).
 COMMAND_REGISTERS = ("torque_enable", "goal_position", "moving_speed", "torque_limit", "cw_angle_limit", "ccw_angle_limit",
-                     "p_gain", "i_gain", "d_gain", "temperature_limit", "min_voltage_limit", "max_voltage_limit", "shutdown")
+                     "p_gain", "i_gain", "d_gain", "temperature_limit", "min_voltage_limit", "max_voltage_limit", "shutdown",
+                     "multi_turn_offset", "resolution_divider", "goal_acceleration", "torque_ctrl_mode_enable", "goal_torque")
 #: Classic registers the firmware's readings go to (each written where the table has it).
 SENSED_REGISTERS = ("present_position", "present_speed", "present_load", "present_voltage", "present_temperature",
-                    "moving", "hardware_error_status", "torque_enable")
+                    "moving", "hardware_error_status", "torque_enable", "current")
 #: Classic registers whose write starts a new move (a new profile in the firmware), besides the X series' Goal registers.
-GOAL_REGISTERS = frozenset({"goal_position", "moving_speed"})
+GOAL_REGISTERS = frozenset({"goal_position", "moving_speed", "goal_acceleration", "goal_torque", "torque_ctrl_mode_enable"})
+#: Current(68) at zero current (MX-64/106: "At an idle state without current flow, this value is 2,048").
+CURRENT_ZERO = 2048
+#: X series Profile Acceleration unit in deg/s^2 (214.577 rev/min^2).
+X_ACCELERATION_UNIT_DEG_S2 = ACCEL_UNIT_PULSES_S2 * 360.0 / PULSES_PER_REV
 
 _WHEEL_X_MODES = (OperatingMode.PWM, OperatingMode.VELOCITY)
 
@@ -96,10 +122,15 @@ class ClassicMap:
     """The translation between one classic table's registers and the X-series firmware's commands and readings."""
 
     def __init__(self, units: Classic, registers: Iterable[str], *, load_per_sensed: float = 1023 / 1000,
-                 step_s: float = 0.001, name: str = "") -> None:
+                 step_s: float = 0.001, name: str = "", no_load_speed_rpm: float = 0.0,
+                 current_limit_units: float = 0.0) -> None:
         """``registers``: the table's register names; ``load_per_sensed``: Present Load units per unit of the
-        firmware's Present Current/Load reading; ``step_s``: the firmware's control step."""
+        firmware's Present Current/Load reading; ``step_s``: the firmware's control step;
+        ``no_load_speed_rpm``: the speed of Moving Speed 0 with a Goal Acceleration; ``current_limit_units``:
+        the current (in the model's current unit) at Torque Limit 100 %, for Goal Torque."""
         self.units = units
+        self.no_load_speed_rpm = no_load_speed_rpm
+        self.current_limit_units = current_limit_units
         names = set(registers)
         self.name = name
         #: The classic registers :meth:`commands` reads and :meth:`sensed_to_registers` writes, those the table has.
@@ -144,8 +175,13 @@ class ClassicMap:
             if stall_a is None:
                 raise ValueError(f"{spec.path}: Present Load needs the rating's stall_current_a")
             load_per_sensed = physical.current_unit_ma * 1e-3 / stall_a * units.output_full_scale
+        rating = physical.rating_at()
+        current_limit = 0.0
+        if physical.current_unit_ma is not None and rating.stall_current_a is not None:
+            current_limit = rating.stall_current_a / (physical.current_unit_ma * 1e-3)
         return cls(units, (entry.name for entry in spec.entries), load_per_sensed=load_per_sensed, step_s=step_s,
-                   name=spec.path or spec.name)
+                   name=spec.path or spec.name, no_load_speed_rpm=rating.no_load_speed_rpm,
+                   current_limit_units=current_limit)
 
     # -- units -----------------------------------------------------------------------------
     def position_to_pulses(self, value: float) -> float:
@@ -170,6 +206,23 @@ class ClassicMap:
             return values.get(units.mode_register) in units.wheel_modes
         return values.get("cw_angle_limit", 1) == 0 and values.get("ccw_angle_limit", 1) == 0
 
+    def is_multi_turn(self, values: Mapping[str, int]) -> bool:
+        """Whether the registers select multi-turn mode (both angle limits at ``multi_turn_limit``)."""
+        limit = self.units.multi_turn_limit
+        return limit is not None and values.get("cw_angle_limit") == limit and values.get("ccw_angle_limit") == limit
+
+    def divider(self, values: Mapping[str, int]) -> int:
+        """Resolution Divider as it applies (multi-turn mode only; 1 otherwise)."""
+        return max(1, values.get("resolution_divider", 1)) if self.is_multi_turn(values) else 1
+
+    def errors_to_classic(self, hardware_error_status: int) -> int:
+        """The firmware's Hardware Error Status bits as the family's own error bits (``errors``)."""
+        error = 0
+        for classic_bit, x_bit in self._x_bits:
+            if hardware_error_status & x_bit:
+                error |= classic_bit
+        return error
+
     # -- registers -> firmware ---------------------------------------------------------------
     def commands(self, values: Mapping[str, int]) -> XCommands:
         """The X commands the classic registers ``values`` (name -> value, as the table holds them) mean."""
@@ -185,6 +238,12 @@ class ClassicMap:
             if name in values:
                 setattr(cmd, name, values[name])  # same units on both (deg C, 0.1 V)
         speed_raw = values.get("moving_speed", 0)
+        if values.get("torque_ctrl_mode_enable", 0) and "goal_torque" in values:
+            cmd.operating_mode = OperatingMode.CURRENT
+            cmd.goal_pwm = cmd.pwm_limit
+            cmd.current_limit = int(round(min(values.get("torque_limit", full), full) / full * self.current_limit_units))
+            cmd.goal_current = _decode_signed(values["goal_torque"], units.direction_bit)
+            return cmd
         if self.is_wheel(values):
             signed = _decode_signed(speed_raw, units.direction_bit)
             cmd.pwm_limit = torque_pwm
@@ -196,6 +255,7 @@ class ClassicMap:
                 cmd.goal_pwm = torque_pwm
                 cmd.goal_velocity = int(round(self.speed_to_x_velocity(signed)))
                 cmd.velocity_p_gain, cmd.velocity_i_gain = WHEEL_VELOCITY_GAINS
+                cmd.profile_acceleration = self._profile_acceleration(values)
             return cmd
         cmd.operating_mode = OperatingMode.POSITION
         cmd.goal_pwm = torque_pwm
@@ -206,11 +266,30 @@ class ClassicMap:
         # Moving Speed 0: "the maximum rpm of the motor is used without controlling the speed" (Profile Velocity 0);
         # any other speed at least one X unit, so a slow one is never read as unlimited.
         cmd.profile_velocity = 0 if speed == 0 else max(1, int(round(self.speed_to_x_velocity(speed))))
+        cmd.profile_acceleration = self._profile_acceleration(values)
+        if cmd.profile_acceleration and cmd.profile_velocity == 0:
+            cmd.profile_velocity = max(1, int(round(self.no_load_speed_rpm / X_VELOCITY_UNIT_RPM)))
+        if self.is_multi_turn(values):
+            divider = self.divider(values)
+            goal = values["goal_position"]
+            goal = goal - 0x10000 if goal & 0x8000 else goal  # two's complement in the 2-byte register
+            limit = units.multi_turn_goal_limit
+            cmd.operating_mode = OperatingMode.EXTENDED_POSITION
+            cmd.homing_offset = values.get("multi_turn_offset", 0) * divider
+            cmd.goal_position = max(-limit, min(limit, goal)) * divider
         gains = self.x_gain_per_register
         cmd.position_p_gain = int(round(values.get("p_gain", 0) * gains["p"]))
         cmd.position_i_gain = int(round(values.get("i_gain", 0) * gains["i"]))
         cmd.position_d_gain = int(round(values.get("d_gain", 0) * gains["d"]))
         return cmd
+
+    def _profile_acceleration(self, values: Mapping[str, int]) -> int:
+        """Goal Acceleration as Profile Acceleration (at least 1 when set, so it is never read as "none")."""
+        unit = self.units.acceleration_unit_deg_s2
+        raw = values.get("goal_acceleration", 0)
+        if unit is None or raw == 0:
+            return 0
+        return max(1, int(round(raw * unit / X_ACCELERATION_UNIT_DEG_S2)))
 
     def goal_changed(self, before: Mapping[str, int] | None, after: Mapping[str, int]) -> bool:
         """Whether a classic goal register (Goal Position, Moving Speed) differs between two sets of values."""
@@ -219,8 +298,10 @@ class ClassicMap:
         return any(before.get(name) != after.get(name) for name in self.goal_registers)
 
     # -- firmware -> registers ---------------------------------------------------------------
-    def sensed_to_registers(self, sensed: XSensed, commands: XCommands) -> dict[str, int]:
-        """The classic registers (those the table has) for the firmware's readings; ``commands`` tell the mode."""
+    def sensed_to_registers(self, sensed: XSensed, commands: XCommands,
+                            values: Mapping[str, int] | None = None) -> dict[str, int]:
+        """The classic registers (those the table has) for the firmware's readings; ``commands`` tell the mode,
+        ``values`` (the command registers, as :meth:`commands` took them) the multi-turn frame."""
         units = self.units
         bit, full = units.direction_bit, units.output_full_scale
         wheel = commands.operating_mode in _WHEEL_X_MODES
@@ -230,12 +311,14 @@ class ClassicMap:
         else:
             speed = sensed.present_velocity * X_VELOCITY_UNIT_RPM / units.speed_unit_rpm
             speed_full = (1 << bit) - 1
-        error = 0
-        for classic_bit, x_bit in self._x_bits:
-            if sensed.hardware_error_status & x_bit:
-                error |= classic_bit
+        error = self.errors_to_classic(sensed.hardware_error_status)
+        if commands.operating_mode == OperatingMode.EXTENDED_POSITION and values is not None:
+            # Real Position / Resolution Divider, the offset (already in the firmware's count) divided with it
+            position = (sensed.present_position // self.divider(values)) & 0xFFFF
+        else:
+            position = self.pulses_to_position(sensed.present_position)
         out = {
-            "present_position": self.pulses_to_position(sensed.present_position),
+            "present_position": position,
             "present_speed": _encode_signed(speed, bit, speed_full),
             "present_load": _encode_signed(sensed.present_current * self.load_per_sensed, bit, full),
             "present_voltage": sensed.present_input_voltage,
@@ -243,5 +326,6 @@ class ClassicMap:
             "moving": sensed.moving,
             "hardware_error_status": error,
             "torque_enable": sensed.torque_enable,
+            "current": min(max(CURRENT_ZERO + sensed.present_current, 0), 0xFFFF),
         }
         return {name: out[name] for name in self.sensed_registers}

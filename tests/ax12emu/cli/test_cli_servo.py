@@ -26,7 +26,6 @@ def test_a_model_for_every_id_and_per_id_models():
 @pytest.mark.parametrize(
     ("args", "message"),
     [
-        (["--servo", "mx-28"], "speaks Protocol 1.0, not 2.0"),
         (["--servo", "xl999"], "unknown servo model 'xl999'"),
         (["--servo", "1-3:xl430-w250", "--ids", "1-3"], "both name the IDs"),
         (["--servo", "1-3:xl430-w250,3:xm430-w350"], "ID 3 is given two models"),

@@ -60,8 +60,6 @@ def test_the_spec_takes_ax18a():
 @pytest.mark.parametrize(
     ("args", "message"),
     [
-        (["--servo", "mx-28"], "its 1.0 table is not served: its positions (0..4095 over 360 degrees"),
-        (["--servo", "1:ax-12a,2:mx-64,3:xl430-w250"], "mx-64 speaks Protocol 1.0, not 2.0, and its 1.0 table is not served"),
         (["--servo", "ax-18a", "--voltage", "7"], "AX-18A"),
     ],
 )

@@ -1,0 +1,251 @@
+"""A Protocol 1.0 wire with MX-series servos (each its own model's table and X-series firmware), AX-12As beside them if any.
+
+Why it exists: the AX-12 bus (:class:`~.bus.Bus`) serves tables of the AX-12's shape from numpy
+rows under one batched plant, and its fast paths (the reply cache, the plant's batched step) are
+what keep a polling host fast (``tools/bench_protocol.py``).  The MX series' 1.0 tables and
+firmware differ (:mod:`ax12emu.servo.servo1x`), so they get their own servos here, and AX-12As
+on the same wire stay on an AX-12 bus held inside: one framer frames the wire's bytes once and each
+packet goes to the AX-12 bus (:meth:`Bus.dispatch`) and to the MX servos, as every servo on a real
+wire hears every packet.  A wire of AX-12As alone stays a plain :class:`~.bus.Bus`, so its speed
+does not change.
+
+Who answers, and when (ROBOTIS e-manual, "Protocol 1.0", https://emanual.robotis.com/docs/en/dxl/protocol1/):
+as on the AX-12 bus (a packet to one ID: that servo after its Return Delay Time; broadcast: executed by
+all, answered by none but PING, whose answers collide), plus Bulk Read (0x92) to the broadcast ID:
+"Dynamixel with ID 2 monitors the status packet being sent from ID 1 ... and when device ID 1's
+status packet transmission is completed, ID 2 sends its own status packet" -- each listed servo
+answers its Return Delay Time after the previous one's status packet ended, in list order; a listed ID
+no MX answers (absent, another baud, an AX-12A, which has no Bulk Read) breaks the chain there, as
+the next servo waits for a status packet that never comes.
+
+Not modelled for MX servos: the busy time after an EEPROM write (the AX-12's measured figure is an
+AX-12's), faults (``ax12emu.faults``) and the live view; state persists as on the other buses.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Iterable, Iterator, Sequence
+
+from ax12emu.protocol.framing import Framer
+from ax12emu.protocol.packets import BROADCAST_ID, MAX_ID, Instruction, InstructionPacket, encode_status
+from ax12emu.protocol.servo_models import ServoModel
+from ax12emu.servo.request_handler1x import handle1x, listed_read, parse_bulk_read, status_byte
+from ax12emu.servo.servo1x import Servo1X, Servo1XOptions
+
+from .bus import BAUD_TOLERANCE, Bus
+from .clock import VirtualClock, WallClock
+from .reply import BITS_PER_BYTE, Reply
+from .state_store import StateStore
+
+__all__ = ["Bus1X", "PlantFactory"]
+
+log = logging.getLogger(__name__)
+
+#: Builds one MX servo's plant (firmware model behind its table) from its model file and the servo.
+PlantFactory = Callable[[ServoModel, Servo1X], object]
+
+
+class Bus1X:
+    """MX-series servos on a Protocol 1.0 wire, and optionally an AX-12 bus sharing it."""
+
+    #: Replies to one packet may collide (broadcast PING): the serving loop merges them.
+    replies_in_sequence = False
+
+    def __init__(
+        self,
+        servos: Iterable[tuple[int, ServoModel]],
+        plant: PlantFactory,
+        *,
+        ax_bus: Bus | None = None,
+        clock: WallClock | VirtualClock | None = None,
+        options: Servo1XOptions = Servo1XOptions(),
+        state_store: StateStore | None = None,
+    ) -> None:
+        slots = list(servos)
+        if not slots:
+            raise ValueError("a bus needs at least one servo")
+        ids = [servo_id for servo_id, _ in slots] + (ax_bus.slots if ax_bus is not None else [])
+        if len(set(ids)) != len(ids):
+            raise ValueError(f"duplicate IDs in {ids}")
+        for servo_id in ids:
+            if not 0 <= servo_id <= MAX_ID:
+                raise ValueError(f"ID {servo_id} is outside 0..{MAX_ID}")
+        if ax_bus is not None and clock is not None and ax_bus.clock is not clock:
+            raise ValueError("the AX-12 bus and the MX servos of one wire must keep one clock")
+        self.clock = ax_bus.clock if ax_bus is not None else (clock if clock is not None else WallClock())
+        self.ax_bus = ax_bus
+        self.slots_mx = [servo_id for servo_id, _ in slots]
+        self.framer = Framer()
+        self.servos_mx: list[Servo1X] = [
+            Servo1X(spec, lambda servo, s=spec: plant(s, servo), servo_id=servo_id, index=index, options=options)
+            for index, (servo_id, spec) in enumerate(slots)
+        ]
+        self.state_store = state_store
+        if state_store is not None:
+            for slot, servo in zip(self.slots_mx, self.servos_mx):
+                if state_store.load(slot, servo.table):
+                    servo.plant.command()
+                    servo.power_on()
+        self._by_id: dict[int, list[Servo1X]] = {}
+        self.reindex()
+        #: How far behind the clock physics may be when a packet is served (see ``Bus.request_lag_s``).
+        self._request_lag_s = 0.0
+        self.faults = None
+        self._closed = False
+
+    # -- lookup ------------------------------------------------------------------------
+    @property
+    def servos(self) -> list:
+        """The MX servos, then the AX-12As."""
+        return [*self.servos_mx, *(self.ax_bus.servos if self.ax_bus is not None else ())]
+
+    @property
+    def slots(self) -> list[int]:
+        return [*self.slots_mx, *(self.ax_bus.slots if self.ax_bus is not None else ())]
+
+    @property
+    def ids(self) -> list[int]:
+        return [servo.id for servo in self.servos]
+
+    def reindex(self) -> None:
+        by_id: dict[int, list[Servo1X]] = {}
+        for servo in self.servos_mx:
+            by_id.setdefault(servo.id, []).append(servo)
+        self._by_id = by_id
+        if self.ax_bus is not None:
+            self.ax_bus.reindex()
+
+    def servo(self, servo_id: int):
+        """The (first) servo answering to ``servo_id`` now, MX or AX-12A."""
+        found = self._by_id.get(servo_id)
+        if found:
+            return found[0]
+        if self.ax_bus is not None:
+            try:
+                return self.ax_bus.servo(servo_id)
+            except KeyError:
+                pass
+        raise KeyError(f"no servo with ID {servo_id} on the bus (IDs now: {sorted(self.ids)})")
+
+    @property
+    def request_lag_s(self) -> float:
+        return self._request_lag_s
+
+    @request_lag_s.setter
+    def request_lag_s(self, lag_s: float) -> None:
+        self._request_lag_s = lag_s
+        if self.ax_bus is not None:
+            self.ax_bus.request_lag_s = lag_s
+
+    @property
+    def physics_step_s(self) -> float:
+        steps = [servo.plant.firmware.step_s for servo in self.servos_mx]
+        if self.ax_bus is not None:
+            steps.append(self.ax_bus.physics_step_s)
+        return min(steps)
+
+    # -- time --------------------------------------------------------------------------
+    def catch_up(self, sim_time_s: float) -> None:
+        for servo in self.servos_mx:
+            if servo.plant.due(sim_time_s):
+                servo.plant.catch_up(sim_time_s)
+
+    def advance(self) -> bool:
+        sim_time_s = self.clock.now_s()
+        due = any(servo.plant.due(sim_time_s) for servo in self.servos_mx)
+        self.catch_up(sim_time_s)
+        if self.ax_bus is not None:
+            due = self.ax_bus.advance() or due
+        return due
+
+    def advance_in_pieces(self) -> Iterator[None]:
+        sim_time_s = self.clock.now_s()
+        for servo in self.servos_mx:
+            yield from servo.plant.tick(sim_time_s)
+        if self.ax_bus is not None:
+            yield from self.ax_bus.advance_in_pieces()
+
+    # -- bytes in, replies out ---------------------------------------------------------
+    def receive(self, data: bytes, now_s: float | None = None, *, line_bps: float | None = None) -> list[Reply]:
+        return [reply for replies in self.answer(data, now_s, line_bps=line_bps) for reply in replies]
+
+    def cached_replies(self, data: bytes, line_bps: float | None = None) -> Sequence[Reply] | None:
+        """No reply cache on this wire: always None."""
+        return None
+
+    def answer(self, data: bytes, now_s: float | None = None, *, line_bps: float | None = None,
+               cache: bool = True, looked_up: bool = False) -> list[Sequence[Reply]]:
+        return [self.dispatch(packet, line_bps=line_bps) for packet in self.framer.feed(data, now_s)]
+
+    def expire(self, now_s: float) -> None:
+        self.framer.expire(now_s)
+
+    def _hears(self, servo: Servo1X, line_bps: float | None) -> bool:
+        baud = servo.baud_bps
+        return line_bps is None or abs(line_bps - baud) <= BAUD_TOLERANCE * baud
+
+    def dispatch(self, packet: InstructionPacket, *, line_bps: float | None = None) -> list[Reply]:
+        """Run one packet on every servo it reaches (AX-12As first); return the replies."""
+        replies = self.ax_bus.dispatch(packet, line_bps=line_bps) if self.ax_bus is not None else []
+        now_s = self.clock.now_s()
+        self.catch_up(now_s - self._request_lag_s)
+        broadcast = packet.id == BROADCAST_ID
+        targets = [s for s in (self.servos_mx if broadcast else self._by_id.get(packet.id, ())) if self._hears(s, line_bps)]
+        if log.isEnabledFor(logging.DEBUG):
+            log.debug("rx id=%d inst=%#04x params=%s -> MX IDs %s", packet.id, packet.instruction, bytes(packet.params).hex(" "),
+                      [s.id for s in targets])
+        for servo in targets:
+            servo.heard(now_s)
+        if broadcast and packet.instruction == Instruction.BULK_READ and packet.checksum_ok:
+            return [*replies, *self._bulk_read(packet, line_bps)]
+        for servo in targets:
+            outcome = handle1x(servo, packet)
+            if outcome.reply is not None:
+                replies.append(Reply(outcome.reply_id, outcome.reply, outcome.delay_s, servo.baud_bps))
+        if targets and packet.checksum_ok and packet.instruction not in (Instruction.PING, Instruction.READ):
+            self.reindex()
+            for slot, servo in zip(self.slots_mx, self.servos_mx):
+                if servo.eeprom_dirty:
+                    servo.eeprom_dirty = False
+                    if self.state_store is not None:
+                        self.state_store.save(slot, servo.table)
+        return replies
+
+    def _bulk_read(self, packet: InstructionPacket, line_bps: float | None) -> list[Reply]:
+        requests = parse_bulk_read(bytes(packet.params))
+        if requests is None:
+            return []  # malformed: no listed servo can tell it is listed
+        replies: list[Reply] = []
+        at_s = 0.0
+        for request in requests:
+            found = self._by_id.get(request.servo_id)
+            servo = found[0] if found else None
+            # Status Return Level 0 answers PING only
+            if servo is None or not self._hears(servo, line_bps) or servo.status_return_level < 1:
+                break
+            error, data = listed_read(servo, request.address, request.length)
+            status = encode_status(servo.id, status_byte(servo, error), data)
+            at_s += servo.return_delay_s
+            replies.append(Reply(servo.id, status, at_s, servo.baud_bps))
+            at_s += len(status) * BITS_PER_BYTE / servo.baud_bps
+        return replies
+
+    # -- life cycle --------------------------------------------------------------------
+    def save_state(self) -> None:
+        if self.state_store is not None:
+            for slot, servo in zip(self.slots_mx, self.servos_mx):
+                self.state_store.save(slot, servo.table)
+
+    def close(self) -> None:
+        if not self._closed:
+            self._closed = True
+            self.save_state()
+            if self.ax_bus is not None:
+                self.ax_bus.close()
+
+    def __enter__(self) -> "Bus1X":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

@@ -1,0 +1,137 @@
+"""The adapter between an MX-series Protocol 1.0 control table and the X-series firmware model.
+
+Why it exists: the MX series (MX-28, MX-64, MX-106 with their Protocol 1.0 firmware) is the X
+series' PID predecessor: a 4096-pulse magnetic encoder, a position PID, speed and acceleration
+limits on the way to a goal, a speed loop in wheel mode and (MX-64/106) a current loop.  So an MX is
+the X-series firmware model (:mod:`firmware_model.xseries`) behind a different table: the registers
+go through the model file's ``[classic]`` numbers (:class:`~.classic.ClassicMap`: units, gains, wheel,
+multi-turn and torque control modes, goal acceleration), and this is the one place that knows both
+the table and the model's seam, as :mod:`.plant2` is for the X series.
+
+What the Protocol 1.0 firmware adds here (ROBOTIS e-manual, MX-28 page, shared text
+_includes/en/dxl/control_table_torque_limit.md): "If the function of Alarm LED(17)/Shutdown(18) is
+triggered, the motor loses its torque because Torque Limit(34) becomes 0. Once error conditions are
+resolved and Torque Limit(34) is changed to the value other than 0, the motor can be operated again."
+So Torque Enable stays the client's (the firmware's torque-off on a shutdown is not copied back), a
+newly latched error sets Torque Limit to 0, and :meth:`clear_alarms` restarts the firmware's
+protections when a client writes it non-zero.  The latched errors are the status packets' alarm bits.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+from ax12emu.protocol.servo_models import ServoModel
+from firmware_model.xseries.interface import XCommands, XServoModel
+
+from .classic import ClassicMap
+from .table2 import Table2
+
+__all__ = ["Plant1X", "build_plant1x"]
+
+
+class Plant1X:
+    """Runs ``firmware`` (an X-series model) behind an MX table through ``classic``; brought to a time by the bus."""
+
+    def __init__(self, firmware: XServoModel, table: Table2, classic: ClassicMap) -> None:
+        self.firmware = firmware
+        self.table = table
+        self.classic = classic
+        by_name = table.layout.by_name
+        self._command_entries = [(name, by_name[name]) for name in classic.command_registers]
+        # Torque Enable stays the client's on Protocol 1.0 (a shutdown acts through Torque Limit: module docstring).
+        self._sensed_entries = [(name, by_name[name]) for name in classic.sensed_registers if name != "torque_enable"]
+        self._values: dict[str, int] = {}
+        self._commands = XCommands()
+        self._write_unseen = False
+        #: Hardware error bits seen at the last copy: a new one is an Alarm Shutdown (Torque Limit to 0).
+        self._errors_seen = 0
+        self.command()
+        self.write_back()
+
+    # -- table -> firmware -----------------------------------------------------------------
+    def values(self) -> dict[str, int]:
+        """The command registers as the table holds them, by name."""
+        row = self.table.row
+        return {name: entry.value_in(row) for name, entry in self._command_entries}
+
+    def command(self, *, goal_written: bool = False) -> None:
+        """Hand the model the table's commands now; the next request sees a step taken after them."""
+        values = self.values()
+        goal_written = goal_written or self.classic.goal_changed(self._values or None, values)
+        self._values = values
+        self._commands = self.classic.commands(values)
+        self.firmware.command(self._commands, goal_written=goal_written)
+        self._write_unseen = True
+
+    # -- time --------------------------------------------------------------------------------
+    def due(self, sim_time_s: float) -> bool:
+        model = self.firmware
+        return self._write_unseen or sim_time_s >= model.time_s + model.step_s
+
+    def catch_up(self, sim_time_s: float) -> None:
+        """Step to ``sim_time_s``, and one step past a client's write, then copy the sensed registers (as ``Plant2``)."""
+        model = self.firmware
+        stepped = False
+        if sim_time_s >= model.time_s + model.step_s:
+            model.step_to(sim_time_s)
+            stepped = True
+        if self._write_unseen and not stepped:
+            model.step_to(model.time_s + model.step_s)
+            stepped = True
+        self._write_unseen = False
+        if stepped:
+            self.write_back()
+
+    def tick(self, sim_time_s: float) -> Iterator[None]:
+        """:meth:`catch_up` in two pieces (step, then the copy), for a serving loop to interleave with packets."""
+        model = self.firmware
+        if sim_time_s < model.time_s + model.step_s:
+            return
+        model.step_to(sim_time_s)
+        yield
+        self._write_unseen = False
+        self.write_back()
+
+    # -- firmware -> table -------------------------------------------------------------------
+    def write_back(self) -> None:
+        """Copy what the firmware senses into the table; a newly latched error is an Alarm Shutdown."""
+        sensed = self.firmware.sense()
+        registers = self.classic.sensed_to_registers(sensed, self._commands, self._values)
+        row = self.table.row
+        for name, entry in self._sensed_entries:
+            row[entry.address : entry.end] = entry.to_bytes(registers[name])
+        new_errors = sensed.hardware_error_status & ~self._errors_seen
+        self._errors_seen = sensed.hardware_error_status
+        if new_errors:
+            self.table.set("torque_limit", 0)
+
+    @property
+    def alarms(self) -> int:
+        """The status packets' alarm bits now: the errors the firmware latched, as Protocol 1.0 bits."""
+        return self.classic.errors_to_classic(self._errors_seen)
+
+    def clear_alarms(self) -> None:
+        """Torque Limit written non-zero after a shutdown: the firmware restarts its protections (the shaft stays)."""
+        if not self._errors_seen:
+            return
+        self.firmware.reboot()
+        self._errors_seen = 0
+        self.command(goal_written=True)
+
+    def reboot(self) -> None:
+        """Power-up (RESET): the firmware restarts; the servo has put the table back."""
+        self.firmware.reboot()
+        self._errors_seen = 0
+        self._values = {}
+        self.write_back()
+        self.command()
+
+
+def build_plant1x(spec: ServoModel, table: Table2, choice=None) -> Plant1X:
+    """One MX's plant from its model file: the X-series firmware from the data sheet (``build_x_firmware``) and
+    the ``[classic]`` map; ``ValueError`` with the reason when the file cannot give one."""
+    from .model_factory2 import XModelChoice, build_x_firmware
+
+    firmware = build_x_firmware(spec, choice if choice is not None else XModelChoice())
+    return Plant1X(firmware, table, ClassicMap.from_model(spec, step_s=firmware.step_s))

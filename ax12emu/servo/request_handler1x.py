@@ -1,0 +1,197 @@
+"""What an MX-series servo on Protocol 1.0 does with one instruction, and what it answers.
+
+Why it exists: the MX's Protocol 1.0 firmware follows the AX-12's policy (:mod:`.request_handler`:
+who answers, the status byte, the reply built before an ID change takes effect) over a different
+table and firmware (:mod:`.servo1x`), and adds Bulk Read (0x92), which the AX-12 lacks.  One small
+handler per instruction, in a table keyed by instruction code; wire errors are values, nothing raises.
+
+Policy, with sources (ROBOTIS e-manual, "Protocol 1.0", https://emanual.robotis.com/docs/en/dxl/protocol1/):
+
+* the status error byte is this instruction's error bits OR'd with the servo's alarm bits (Input
+  Voltage, Overheating, Overload: "Status Packet" > "Error"); bit 7 is never set;
+* Status Return Level 0 answers PING only, 1 PING and READ (and Bulk Read: the reads), 2 everything;
+  "Even if Status Return Level(16) is 0, Dynamixel returns Status Packet all the time for Ping";
+* the broadcast ID is executed by every servo and answered by none ("Status Packet will not be
+  returned if Broadcast ID(0xFE) is used"), except PING (``Servo1XOptions.reply_to_broadcast_ping``);
+* an undefined instruction, or Action "without the reg_write instruction": Instruction Error;
+* malformed parameters (a Read without its two bytes, a Sync Write whose length does not divide): Range Error;
+* Bulk Read (0x92) is answered by the bus (the listed servos answer in list order, each after the one
+  before it: "Bulk Read" > "ID 2 monitors the status packet being sent from ID 1"), from :func:`listed_read`;
+* RESET (0x06, "Factory Reset"): answered from the ID the packet reached (the e-manual's example
+  answers from ID 0), then the factory table.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import NamedTuple
+
+from ax12emu.protocol.packets import BROADCAST_ID, Instruction, InstructionPacket, StatusError, encode_status
+
+from .servo1x import Servo1X
+
+__all__ = ["BulkReadRequest", "HANDLERS", "Outcome1X", "handle1x", "listed_read", "parse_bulk_read", "status_byte"]
+
+#: The largest READ reply that fits in one status packet (LENGTH is one byte).
+MAX_READ_BYTES = 253
+
+
+class Outcome1X(NamedTuple):
+    """What one servo does in answer to one packet."""
+
+    reply: bytes | None
+    reply_id: int
+    delay_s: float
+    error: StatusError = StatusError.NONE
+
+
+Handler = Callable[[Servo1X, InstructionPacket], tuple[StatusError, bytes]]
+
+
+def status_byte(servo: Servo1X, error: int) -> int:
+    """The status packet's error byte: this instruction's bits and the servo's alarms (bit 7 clear)."""
+    return (int(error) | servo.alarms) & 0x7F
+
+
+def listed_read(servo: Servo1X, address: int, length: int) -> tuple[StatusError, bytes]:
+    """A READ's data, always ``length`` bytes (dynamixel-sdk indexes the data of an erroring reply); past the table Range Error."""
+    table = servo.table
+    length = min(length, MAX_READ_BYTES)
+    if address + length > table.size:
+        inside = bytes(table.row[address:table.size]) if address < table.size else b""
+        return StatusError.RANGE, inside.ljust(length, b"\x00")
+    return StatusError.NONE, bytes(table.row[address : address + length])
+
+
+def _ping(servo: Servo1X, packet: InstructionPacket) -> tuple[StatusError, bytes]:
+    return StatusError.NONE, b""
+
+
+def _read(servo: Servo1X, packet: InstructionPacket) -> tuple[StatusError, bytes]:
+    if len(packet.params) != 2:
+        return StatusError.RANGE, b""
+    address, length = packet.params
+    error, data = listed_read(servo, address, length)
+    if length > MAX_READ_BYTES:
+        error |= StatusError.RANGE
+    return error, data
+
+
+def _write(servo: Servo1X, packet: InstructionPacket) -> tuple[StatusError, bytes]:
+    if len(packet.params) < 2:
+        return StatusError.RANGE, b""
+    return servo.write(packet.params[0], bytes(packet.params[1:])), b""
+
+
+def _reg_write(servo: Servo1X, packet: InstructionPacket) -> tuple[StatusError, bytes]:
+    if len(packet.params) < 2:
+        return StatusError.RANGE, b""
+    address, data = packet.params[0], bytes(packet.params[1:])
+    check, error = servo.check_write(address, data)
+    if check is None:
+        return error, b""
+    servo.registered_write = (address, data)
+    servo.table.set("registered", 1)
+    return StatusError.NONE, b""
+
+
+def _action(servo: Servo1X, packet: InstructionPacket) -> tuple[StatusError, bytes]:
+    if servo.registered_write is None:
+        return StatusError.INSTRUCTION, b""
+    address, data = servo.registered_write
+    servo.registered_write = None
+    servo.table.set("registered", 0)
+    return servo.write(address, data), b""
+
+
+def _reset(servo: Servo1X, packet: InstructionPacket) -> tuple[StatusError, bytes]:
+    return StatusError.NONE, b""  # done after the reply is built (handle1x)
+
+
+def _sync_write(servo: Servo1X, packet: InstructionPacket) -> tuple[StatusError, bytes]:
+    """SYNC_WRITE: start address, data length L, then (ID, L bytes) per servo."""
+    params = packet.params
+    if len(params) < 2 or params[1] == 0 or (len(params) - 2) % (params[1] + 1):
+        return StatusError.RANGE, b""
+    address, size = params[0], params[1]
+    for start in range(2, len(params), size + 1):
+        if params[start] == servo.id:
+            return servo.write(address, bytes(params[start + 1 : start + 1 + size])), b""
+    return StatusError.NONE, b""
+
+
+HANDLERS: dict[int, Handler] = {
+    Instruction.PING: _ping,
+    Instruction.READ: _read,
+    Instruction.WRITE: _write,
+    Instruction.REG_WRITE: _reg_write,
+    Instruction.ACTION: _action,
+    Instruction.RESET: _reset,
+    Instruction.SYNC_WRITE: _sync_write,
+}
+
+
+class BulkReadRequest(NamedTuple):
+    """One servo's part of a Bulk Read: (ID, start address, length)."""
+
+    servo_id: int
+    address: int
+    length: int
+
+
+def parse_bulk_read(params: bytes) -> list[BulkReadRequest] | None:
+    """Bulk Read's parameters: 0x00, then (length, ID, address) per servo; None if malformed.
+
+    "If an identical ID is designated multiple times, only the first designated parameter will be
+    processed" (e-manual, "Bulk Read"): later repeats are dropped here.
+    """
+    if len(params) < 4 or (len(params) - 1) % 3 or params[0] != 0x00:
+        return None
+    seen: set[int] = set()
+    out = []
+    for at in range(1, len(params), 3):
+        length, servo_id, address = params[at], params[at + 1], params[at + 2]
+        if servo_id in seen:
+            continue
+        seen.add(servo_id)
+        out.append(BulkReadRequest(servo_id, address, length))
+    return out
+
+
+def answers(servo: Servo1X, packet: InstructionPacket) -> bool:
+    """Whether ``servo`` sends a status packet for ``packet`` (before errors)."""
+    instruction = packet.instruction
+    if packet.id == BROADCAST_ID:
+        return instruction == Instruction.PING and servo.options.reply_to_broadcast_ping
+    if instruction == Instruction.PING:
+        return True
+    level = servo.status_return_level
+    return level >= 2 or (level == 1 and instruction in (Instruction.READ, Instruction.BULK_READ))
+
+
+def _silent_read_length(packet: InstructionPacket) -> int:
+    if packet.instruction == Instruction.READ and len(packet.params) == 2:
+        return min(packet.params[1], MAX_READ_BYTES)
+    return 0
+
+
+def handle1x(servo: Servo1X, packet: InstructionPacket) -> Outcome1X:
+    """Execute ``packet`` on ``servo`` (addressed to it, or broadcast) and build its answer (Bulk Read is the bus's)."""
+    reply_id = servo.id
+    delay_s = servo.return_delay_s
+    talks = answers(servo, packet)
+    if not packet.checksum_ok:
+        error, data = StatusError.CHECKSUM, bytes(_silent_read_length(packet))
+        talks = talks and servo.options.reply_on_checksum_error
+    else:
+        handler = HANDLERS.get(packet.instruction)
+        if handler is None:
+            error, data = StatusError.INSTRUCTION, bytes(_silent_read_length(packet))
+        else:
+            error, data = handler(servo, packet)
+        if error and packet.instruction == Instruction.READ:
+            data = data.ljust(_silent_read_length(packet), b"\x00")
+    reply = encode_status(reply_id, status_byte(servo, error), data) if talks else None
+    if packet.checksum_ok and packet.instruction == Instruction.RESET:
+        servo.reset()
+    return Outcome1X(reply, reply_id, delay_s, error)

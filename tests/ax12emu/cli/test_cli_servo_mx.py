@@ -1,0 +1,44 @@
+"""``serve --servo mx-28`` (MX-64, MX-106): the MX series' Protocol 1.0 firmware from the command line, alone or on a mixed wire."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+from ax12emu.cli.main import parse_args
+
+
+def run(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "ax12emu", *args], capture_output=True, text=True, timeout=30)
+
+
+def test_the_spec_takes_the_mx_series_alone_and_beside_other_models():
+    assert parse_args(["serve", "--servo", "mx-28", "--ids", "1-4"]).servo_models == [(i, "mx-28") for i in range(1, 5)]
+    assert parse_args(["serve", "--servo", "1-2:ax-12a,3:mx-64,4:xl430-w250"]).servo_models == [
+        (1, "ax-12a"), (2, "ax-12a"), (3, "mx-64"), (4, "xl430-w250")]
+    # IDs are per protocol: an MX (1.0) and an XL430 (2.0) may both be ID 1, two 1.0 models may not.
+    assert parse_args(["serve", "--servo", "1:mx-106,1:xl430-w250"]).servo_models == [(1, "mx-106"), (1, "xl430-w250")]
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--servo", "1:ax-12a,1:mx-28"], "ID 1"),
+        (["--servo", "mx-64", "--voltage", "7"], "MX-64 runs on 10..14.8 V, not 7 V"),
+        (["--servo", "mx-28", "--drop", "0.1"], "faults (--drop, --alarm, --stall ...) are not available with MX servos yet"),
+    ],
+)
+def test_mistakes_are_one_line(args, message):
+    result = run("serve", *args)
+    assert result.returncode != 0, result
+    assert "Traceback" not in result.stderr
+    assert message in result.stderr, result.stderr
+
+
+def test_models_lists_the_mx_series_on_protocol_1():
+    out = run("models").stdout
+    rows = {line.split()[0]: line for line in out.splitlines()[1:]}
+    for key in ("mx-28", "mx-64", "mx-106"):
+        assert " 1.0 " in rows[key]
