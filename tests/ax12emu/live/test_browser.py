@@ -140,3 +140,32 @@ def test_a_bad_request_gets_a_clear_error_and_the_bus_keeps_running(page):
         page.wait_for_function(f"Number(document.body.dataset.frames) > {frames + 5}", timeout=2000)  # still streaming
         with sdk_port(bus.port) as (port, ph):
             assert ph.ping(port, 1)[1] == COMM_SUCCESS
+
+
+def test_x_series_cards_on_a_mixed_wire_show_units_and_take_their_own_alarms(page):
+    """AX-12A and XL430 both with ID 1: one card each; the XL430's alarm names are Hardware Error Status bits."""
+    from ax12emu.live import ByteTap, LiveView, ServedControls
+    from ax12emu.live.buses import decoder_options
+
+    with VirtualBus(servo="1:ax-12a,1:xl430-w250", transport="inprocess", virtual_time=True, baud_bps=1_000_000) as bus:
+        tap = ByteTap(bus._link.trace)
+        bus._link.trace = tap
+        with LiveView(bus.call, controls=ServedControls(bus.call), tap=tap, web=("127.0.0.1", 0), **bus.call(decoder_options)) as view:
+            page.goto(view.url)
+            x_card = page.locator("#servo-1-p20")
+            x_card.wait_for(timeout=5000)
+            assert page.locator("#servo-1-p10").count() == 1 and page.locator(".card").count() == 2
+            assert "XL430-W250 · protocol 2.0" in x_card.locator(".model").inner_text()
+            page.wait_for_function("document.querySelector('#servo-1-p20 .dial')?.dataset.present === '2048'", timeout=5000)
+            fields = x_card.locator(".fields").inner_text()
+            assert "2048 (180.2°)" in fields and "rpm" in fields and "11.1 V" in fields and "position 0..4095" in fields
+            x_card.locator("select[data-field=alarm]").select_option("electrical_shock")
+            x_card.locator("button[data-act=alarm]").click()
+            page.wait_for_function(
+                "document.getElementById('message').textContent === 'servo 1: alarm electrical_shock forced (Protocol 2.0)'", timeout=3000
+            )
+            page.wait_for_function(
+                "[...document.querySelectorAll('#servo-1-p20 .bits span.set')].map(s => s.textContent).join() === 'electrical_shock'", timeout=3000
+            )
+            assert bus.read(1, "hardware_error_status", protocol=2.0) == 0x10
+            assert page.locator("#servo-1-p10 .bits span.set").count() == 0
