@@ -116,7 +116,9 @@ def build_parser() -> argparse.ArgumentParser:
     physics = serve.add_argument_group("model behind the servos")
     physics.add_argument("--model", choices=MODELS, default="physical", help="physical (default) or kinematic")
     physics.add_argument("--params", metavar="FILE", help="servo parameters as TOML (e.g. from firmware_model.diagnose)")
-    physics.add_argument("--voltage", type=_positive_float, metavar="V", help="supply voltage, 7-12 V (default 9.6)")
+    physics.add_argument("--voltage", type=_positive_float, metavar="V",
+                         help="supply voltage (default: the AX-12A's 9.6 V, the supply its physics is fitted at; "
+                              "another model's its e-manual's recommended supply)")
     physics.add_argument(
         "--controller", choices=("compliance", "pid"), default="compliance",
         help="position controller: the e-manual's compliance control (default) or the 2008 report's PID",

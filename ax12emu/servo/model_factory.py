@@ -36,7 +36,8 @@ class ModelChoice:
     params_path: str | PathLike[str] | None = None
     #: ServoParams as an object (from Python), instead of ``params_path``.
     params: ServoParams | None = None
-    #: Supply voltage, V; None: the parameters' default (9.6 V).
+    #: Supply voltage, V; None: the parameters' (the AX-12A's 9.6 V, on its own bus or beside X-series servos;
+    #: another AX model's its model file's recommended supply, see datasheet_params).
     voltage_v: float | None = None
     #: Position controller of the physical model: "compliance" (e-manual) or "pid" (the 2008 report).
     controller: str = "compliance"
@@ -71,7 +72,9 @@ def build_model(choice: ModelChoice, n: int) -> ServoModel:
         ) if used]
         if extras:
             raise ValueError(f"{', '.join(extras)} need the physical model (--model physical)")
-        return KinematicModel(n, supply_voltage_v=choice.voltage_v if choice.voltage_v is not None else 9.6)
+        # The AX-12A's one default supply, whichever model runs it: the physics' (ServoParams).
+        return KinematicModel(n, supply_voltage_v=choice.voltage_v if choice.voltage_v is not None
+                              else ServoParams().supply_voltage_v)
     params = _params(choice)
     if choice.arm is not None and params.effects.arm_weight_moment_nm:
         raise ValueError(f"--arm and the parameters' arm (arm_weight_moment_nm = {params.effects.arm_weight_moment_nm:g} "

@@ -45,3 +45,23 @@ def test_one_clock_for_both():
     with pytest.raises(ValueError, match="one clock"):
         MixedBus(Bus([1], clock=VirtualClock()), Bus2([(1, model("xl430-w250"))], lambda s, i: RecordingFirmware(),
                                                       clock=VirtualClock()))
+
+
+@pytest.mark.parametrize(("servo", "default_v"), [("ax-12a", None), ("ax-18a", 11.1)])
+def test_a_protocol_1_servo_has_one_default_supply_alone_and_beside_x_series_servos(servo, default_v):
+    """Present Voltage (0.1 V) of an AX servo on a Protocol 1.0 bus of its own and on a mixed wire: the same,
+    the documented default (the AX-12A's physics' supply, another AX model's recommended supply)."""
+    from ax12emu import VirtualBus
+    from firmware_model import ServoParams
+
+    expected = round(10 * (ServoParams().supply_voltage_v if default_v is None else default_v))
+    seen = {}
+    for name, kwargs in (("alone", {"ids": [1]} if servo == "ax-12a" else {"servo": f"1:{servo}"}),
+                         ("kinematic", {"ids": [1], "model": "kinematic"} if servo == "ax-12a" else None),
+                         ("mixed", {"servo": f"1:{servo},2:xl430-w250"})):
+        if kwargs is None:
+            continue
+        with VirtualBus(transport="inprocess", virtual_time=True, **kwargs) as bus:
+            bus.step(0.05)
+            seen[name] = bus.call(lambda b: getattr(b, "bus1", b).servo(1).table.get("present_voltage"))
+    assert set(seen.values()) == {expected}, seen
