@@ -96,6 +96,13 @@ BROADCAST_PING_SLOT_S = 0.003
 UNDEFINED_INSTRUCTION = 0x50
 #: The largest READ the suite sends while reading a table (a run of adjacent registers).
 _TABLE_READ_MAX = 128
+#: The register choosing the mode, and its modes in which torque on holds a position: the X series' Operating
+#: Mode, or the XL-320's classic Control Mode(11) ("1 Wheel Mode, 2 Joint Mode", e-manual XL-320 page).
+HOLDING_MODE_REGISTERS = {"operating_mode": HOLDING_MODES, "control_mode": frozenset({2})}
+#: Registers the firmware sets at power-up rather than to their table's initial value: the Goal registers
+#: (Goal PWM/Current take PWM/Current Limit, Goal Position the present position) and, on the XL-320's
+#: classic table, Torque Limit(35), "reset to the value of Max Torque(15)" (_includes/en/dxl/control_table_torque_limit.md).
+SET_AT_POWER_UP = frozenset({"goal_position", "goal_velocity", "goal_pwm", "goal_current", "torque_limit"})
 
 
 def model_for_number(number: int) -> ServoModel | None:
@@ -295,9 +302,10 @@ def check_ping(ctx: Context2) -> str:
         status = ctx.status(servo_id, Instruction2.PING)
         number = int.from_bytes(status.params[:2], "little")
         exact(status, servo_id, ErrorNumber.NONE, status.params)
-        table = ctx.read(servo_id, 0, 7)
+        at = ctx.entry(servo_id, "firmware_version").address  # 6 on the X series, 2 on the XL-320
+        table = ctx.read(servo_id, 0, at + 1)
         expect(int.from_bytes(table[:2], "little") == number, f"ID {servo_id}: Model Number {table[:2].hex()} in the table, {number} in Ping")
-        expect(table[6] == status.params[2], f"ID {servo_id}: Firmware Version {table[6]} in the table, {status.params[2]} in Ping")
+        expect(table[at] == status.params[2], f"ID {servo_id}: Firmware Version {table[at]} in the table, {status.params[2]} in Ping")
         figures.append(f"{servo_id}: {ctx.models[servo_id].name} ({number}) fw {status.params[2]}")
     rtts = ctx.ping_rtts(ctx.target, 5)
     return "; ".join(figures) + f"; median {_ms(statistics.median(rtts))}"
@@ -335,23 +343,42 @@ def check_resync(ctx: Context2) -> str:
     return "Ping answered after garbage + a truncated READ (100 ms pause)"
 
 
+#: Where the stuffing check writes FF FF FD 00: 4 bytes whose first register cannot hold what it gets.
+#: The X series: Profile Acceleration(108, 0 ~ 32,767) takes 16,646,143; a classic table (the XL-320):
+#: Goal Position(30, 0 ~ 1,023) takes 65,535 and Moving Speed(32) the rest.
+STUFFING_TARGETS = (("profile_acceleration",), ("goal_position", "moving_speed"))
+
+
+def _stuffing_target(ctx: Context2, servo: int) -> tuple[Entry, ...]:
+    """The first of :data:`STUFFING_TARGETS` the table has as 4 adjacent bytes; skips the check if none."""
+    by_name = ctx.layout(servo).by_name
+    for names in STUFFING_TARGETS:
+        entries = tuple(by_name.get(name) for name in names)
+        if all(entries) and sum(e.size for e in entries) == 4 and all(
+                a.end == b.address for a, b in zip(entries, entries[1:])):
+            return entries
+    raise Skipped(f"{ctx.models[servo].name} has none of {', '.join('+'.join(n) for n in STUFFING_TARGETS)} as 4 adjacent bytes")
+
+
 def check_byte_stuffing(ctx: Context2) -> str:
     """[P2] "Processing Order of Transmission/Reception": parameters holding FF FF FD are sent stuffed
     (FF FF FD FD) and unstuffed by the receiver.  A WRITE of FF FF FD 00 to Profile Acceleration(108,
-    4 bytes, 0 ~ 32,767) is 16,646,143 once unstuffed, out of range: the reply is Data Range, which
-    shows the packet was unstuffed and understood rather than dropped; nothing changes."""
-    entry = ctx.entry(ctx.target, "profile_acceleration")
-    before = ctx.get(ctx.target, "profile_acceleration")
-    packet = encode_instruction2(ctx.target, Instruction2.WRITE, _u16(entry.address) + b"\xff\xff\xfd\x00")
+    4 bytes, 0 ~ 32,767) is 16,646,143 once unstuffed, out of range (on a classic table, Goal Position
+    65,535 of 0 ~ 1,023: :data:`STUFFING_TARGETS`): the reply is Data Range, which shows the packet was
+    unstuffed and understood rather than dropped; nothing changes."""
+    entries = _stuffing_target(ctx, ctx.target)
+    names = [entry.name for entry in entries]
+    before = [ctx.get(ctx.target, name) for name in names]
+    packet = encode_instruction2(ctx.target, Instruction2.WRITE, _u16(entries[0].address) + b"\xff\xff\xfd\x00")
     expect(b"\xff\xff\xfd\xfd" in packet, "the encoder did not stuff")
     response = ctx.transact(packet)
     expect(response.status is not None, "no reply to a stuffed WRITE")
     status = response.status
     assert status is not None
     expect(status.error & ERROR_NUMBER_MASK == ErrorNumber.DATA_RANGE,
-           f"stuffed WRITE of 16,646,143 to Profile Acceleration: {describe_error2(status.error)}, expected DATA_RANGE")
-    expect(ctx.get(ctx.target, "profile_acceleration") == before, "the rejected write changed Profile Acceleration")
-    return "stuffed WRITE answered DATA_RANGE, nothing changed"
+           f"stuffed WRITE of FF FF FD 00 to {'+'.join(names)}: {describe_error2(status.error)}, expected DATA_RANGE")
+    expect([ctx.get(ctx.target, name) for name in names] == before, f"the rejected write changed {'+'.join(names)}")
+    return f"stuffed WRITE to {'+'.join(names)} answered DATA_RANGE, nothing changed"
 
 
 def check_crc(ctx: Context2) -> "str | Note":
@@ -377,31 +404,37 @@ def check_crc(ctx: Context2) -> "str | Note":
 # -- read and write -------------------------------------------------------------------------
 def check_read_sizes(ctx: Context2) -> str:
     """[P2] "Read": the status carries exactly the bytes asked for, LENGTH = 4 + X.  1 byte: ID(7) is
-    the servo's ID; 2 bytes: Model Number(0) is the Ping's; 4 bytes: Max Position Limit(48)."""
+    the servo's ID; 2 bytes: Model Number(0) is the Ping's; 4 bytes: Max Position Limit(48) (a table
+    without 4-byte registers, the XL-320's "1 ~ 2" bytes, is read in the sizes it has)."""
     figures = []
     for servo_id in ctx.ids:
-        for name in ("id", "model_number", "max_position_limit"):
+        names = ["id", "model_number"] + (["max_position_limit"] if "max_position_limit" in ctx.layout(servo_id).by_name else [])
+        for name in names:
             entry = ctx.entry(servo_id, name)
             status = ctx.status(servo_id, Instruction2.READ, _u16(entry.address) + _u16(entry.size))
             expect(len(status.params) == entry.size, f"READ {name} id={servo_id}: {len(status.params)} bytes, not {entry.size}")
             exact(status, servo_id, ErrorNumber.NONE, status.params)
         expect(ctx.get(servo_id, "id") == servo_id, f"ID {servo_id}: ID register reads {ctx.get(servo_id, 'id')}")
         expect(ctx.get(servo_id, "model_number") == ctx.models[servo_id].model_number, f"ID {servo_id}: Model Number differs")
-        figures.append(str(servo_id))
-    return f"1, 2 and 4 bytes on IDs {','.join(figures)}"
+        figures.append(f"{servo_id} ({', '.join(str(ctx.entry(servo_id, n).size) for n in names)} bytes)")
+    return f"IDs {'; '.join(figures)}"
+
+
+#: Registers the write-size check writes, by size, the first the table has: none moves the servo.
+#: A classic table (the XL-320) has Punch(51) for 2 bytes and no 4-byte register.
+WRITE_SIZE_REGISTERS = {1: ("led",), 2: ("indirect_address_1", "punch"), 4: ("profile_acceleration",)}
 
 
 def check_write_sizes(ctx: Context2) -> str:
     """[P2] "Write": the status is FF FF FD 00 ID 04 00 55 00 CRC (the example's, for ID 1: ... A1 0C)
     and the value reads back.  1 byte: LED(65); 2 bytes: Indirect Address 1(168); 4 bytes: Profile
-    Acceleration(108).  None moves the servo; all restored."""
+    Acceleration(108) (or the table's own, :data:`WRITE_SIZE_REGISTERS`; a size it lacks is left out).
+    None moves the servo; all restored."""
     servo = ctx.target
-    saved = {name: ctx.get(servo, name) for name in ("led", "indirect_address_1", "profile_acceleration")}
-    new = {
-        "led": 1 - saved["led"],
-        "indirect_address_1": saved["indirect_address_1"] + 1 if saved["indirect_address_1"] < 600 else 64,
-        "profile_acceleration": saved["profile_acceleration"] + 1 if saved["profile_acceleration"] < 30000 else 0,
-    }
+    by_name = ctx.layout(servo).by_name
+    chosen = [next(n for n in names if n in by_name) for names in WRITE_SIZE_REGISTERS.values() if any(n in by_name for n in names)]
+    saved = {name: ctx.get(servo, name) for name in chosen}
+    new = {name: value + 1 if value < by_name[name].maximum else by_name[name].minimum for name, value in saved.items()}
     figure = ""
     try:
         for name, value in new.items():
@@ -411,28 +444,38 @@ def check_write_sizes(ctx: Context2) -> str:
     finally:
         for name, value in saved.items():
             ctx.put(servo, name, value)
-    return f"led, indirect_address_1, profile_acceleration written and read back; status {figure}"
+    return f"{', '.join(chosen)} written and read back; status {figure}"
 
 
 def check_data_length(ctx: Context2) -> str:
     """[P2] error 0x05 Data Length: "Attempt to write Data that is shorter than the data length of the
     corresponding Address (ex: ... only use 2 bytes of a item that has been defined as 4 bytes)".
-    2 bytes to Profile Acceleration(108, 4 bytes); nothing changes."""
-    entry = ctx.entry(ctx.target, "profile_acceleration")
-    before = ctx.get(ctx.target, "profile_acceleration")
-    figure = error_reply(ctx, ctx.target, Instruction2.WRITE, _u16(entry.address) + _u16((before + 1) & 0xFFFF),
-                         ErrorNumber.DATA_LENGTH, "2 bytes to a 4-byte register")
-    expect(ctx.get(ctx.target, "profile_acceleration") == before, "the rejected write changed Profile Acceleration")
+    2 bytes to Profile Acceleration(108, 4 bytes), or on a table without it 1 byte to Punch(51, 2 bytes,
+    the XL-320's); nothing changes."""
+    by_name = ctx.layout(ctx.target).by_name
+    name = "profile_acceleration" if "profile_acceleration" in by_name else "punch"
+    entry = ctx.entry(ctx.target, name)
+    before = ctx.get(ctx.target, name)
+    short = entry.size // 2
+    data = ((before + 1) & ((1 << (8 * short)) - 1)).to_bytes(short, "little")
+    figure = error_reply(ctx, ctx.target, Instruction2.WRITE, _u16(entry.address) + data,
+                         ErrorNumber.DATA_LENGTH, f"{short} byte(s) to the {entry.size}-byte {name}")
+    expect(ctx.get(ctx.target, name) == before, f"the rejected write changed {name}")
     return figure
 
 
 def check_data_range(ctx: Context2) -> str:
     """[P2] error 0x04 Data Range: "Data to be written ... is outside the range of the minimum/maximum
     value".  [CT] ranges: LED(65) 0 ~ 1, Indirect Address 1(168) 64 ~ 661 (the table's last address).
-    LED = 2 and Indirect Address 1 = 63; nothing changes."""
+    LED = 2 and Indirect Address 1 = 63 (each one past the model file's range: the XL-320's LED(25) takes
+    0 ~ 7, its colours, and it has no indirect addresses); nothing changes."""
     servo = ctx.target
     figures = []
-    for name, bad in (("led", 2), ("indirect_address_1", ctx.entry(servo, "indirect_address_1").minimum - 1)):
+    by_name = ctx.layout(servo).by_name
+    bad_values = [("led", ctx.entry(servo, "led").maximum + 1)]
+    if "indirect_address_1" in by_name:
+        bad_values.append(("indirect_address_1", by_name["indirect_address_1"].minimum - 1))
+    for name, bad in bad_values:
         entry = ctx.entry(servo, name)
         before = ctx.get(servo, name)
         figures.append(error_reply(ctx, servo, Instruction2.WRITE, _u16(entry.address) + entry.to_bytes(bad),
@@ -478,9 +521,13 @@ def _torque_held(ctx: Context2, servo: int) -> Iterator[bool]:
     goal = None
     try:
         if not was_on:
-            mode = ctx.get(servo, "operating_mode")
-            if mode not in HOLDING_MODES:
-                raise Skipped(f"torque off in Operating Mode {mode}: turning it on could move the servo")
+            by_name = ctx.layout(servo).by_name
+            register = next((name for name in HOLDING_MODE_REGISTERS if name in by_name), None)
+            if register is None:
+                raise Skipped(f"{ctx.models[servo].name} has none of {', '.join(HOLDING_MODE_REGISTERS)}")
+            mode = ctx.get(servo, register)
+            if mode not in HOLDING_MODE_REGISTERS[register]:
+                raise Skipped(f"torque off in {register} {mode}: turning it on could move the servo")
             goal = ctx.get(servo, "goal_position")
             present = ctx.get(servo, "present_position")
             if ctx.put(servo, "goal_position", present):
@@ -521,6 +568,8 @@ def check_result_fail(ctx: Context2) -> "str | Note":
     servo = ctx.target
     firmware = ctx.read(servo, ctx.entry(servo, "firmware_version").address, 1)[0]
     series = next((s for s in BACKUP_FIRMWARE if s in ctx.models[servo].name), None)
+    if series is None and ctx.models[servo].classic is not None:
+        raise Skipped(f"{ctx.models[servo].name}: the e-manual gives Control Table Backup to the X430/540 and X330 only")
     with _torque_held(ctx, servo):
         status = ctx.status(servo, Instruction2.CONTROL_TABLE_BACKUP, b"\x01" + BACKUP_KEY)
     number = status.error & ERROR_NUMBER_MASK
@@ -604,33 +653,53 @@ def _replies(ctx: Context2, count: int, timeout_s: float | None = None) -> list[
     return out
 
 
+def _sharing(ctx: Context2, name: str) -> tuple[list[int], list[int]]:
+    """The IDs whose ``name`` register sits where the target's does (one Sync instruction reaches them all), and the others.
+
+    Why: a Sync Read or Write names one address for every listed servo, and a bus may mix tables (the
+    XL-320's ID is at 3, the X series' at 7); a servo of another table is left out, and the figure says so.
+    """
+    entry = ctx.entry(ctx.target, name)
+    same, other = [], []
+    for servo_id in ctx.ids:
+        mine = ctx.layout(servo_id).by_name.get(name)
+        (same if mine is not None and (mine.address, mine.size) == (entry.address, entry.size) else other).append(servo_id)
+    return same, other
+
+
+def _left_out(other: list[int]) -> str:
+    return f" (IDs {','.join(map(str, other))} left out: another table)" if other else ""
+
+
 def check_sync_read(ctx: Context2) -> str:
     """[P2] "Sync Read" (0x82, ID 0xFE): each listed device answers with its own status packet; the
     example's two answer in the listed order.  IDs listed in reverse; each answers with its ID(7)
     byte, byte-exact, in that order."""
-    order = list(reversed(ctx.ids))
+    same, other = _sharing(ctx, "id")
+    order = list(reversed(same))
     entry = ctx.entry(ctx.target, "id")
     ctx.link.send(encode_instruction2(BROADCAST_ID, Instruction2.SYNC_READ, _u16(entry.address) + _u16(1) + bytes(order)))
     replies = _replies(ctx, len(order))
     expect([r.id for r in replies] == order, f"answers from {[r.id for r in replies]}, listed {order}")
     for reply in replies:
         exact(reply, reply.id, ErrorNumber.NONE, bytes((reply.id,)))
-    return f"listed {order}, answered in that order"
+    return f"listed {order}, answered in that order" + _left_out(other)
 
 
 def check_sync_write(ctx: Context2) -> str:
     """[P2] "Sync Write" (0x83, ID 0xFE): writes each listed device; nobody answers (a broadcast WRITE)."""
+    same, other = _sharing(ctx, "led")
     entry = ctx.entry(ctx.target, "led")
-    leds = {i: ctx.get(i, "led") for i in ctx.ids}
-    body = _u16(entry.address) + _u16(1) + b"".join(bytes((i, 1 - leds[i])) for i in ctx.ids)
+    leds = {i: ctx.get(i, "led") for i in same}
+    body = _u16(entry.address) + _u16(1) + b"".join(bytes((i, 1 - leds[i])) for i in same)
     try:
         expect(ctx.silent(encode_instruction2(BROADCAST_ID, Instruction2.SYNC_WRITE, body)), "SYNC_WRITE was answered")
-        for servo_id in ctx.ids:
+        for servo_id in same:
             expect(ctx.get(servo_id, "led") == 1 - leds[servo_id], f"ID {servo_id} not written")
     finally:
         for servo_id, led in leds.items():
             ctx.put(servo_id, "led", led)
-    return f"{len(ctx.ids)} servo(s) written, silent"
+    return f"{len(same)} servo(s) written, silent" + _left_out(other)
 
 
 _BULK_REGISTERS = ("id", "model_number", "max_position_limit")
@@ -655,12 +724,15 @@ def check_bulk_read(ctx: Context2) -> str:
 
 def check_bulk_write(ctx: Context2) -> str:
     """[P2] "Bulk Write" (0x93, ID 0xFE): a different address and length per device; nobody answers.
-    LED(65, 1 byte) and Indirect Address 1(168, 2 bytes) in turn; restored."""
+    LED(65, 1 byte) and Indirect Address 1(168, 2 bytes) in turn (or the table's own 2-byte register of
+    :data:`WRITE_SIZE_REGISTERS`: Punch(51) on the XL-320); restored."""
     plan = {}
     for n, servo_id in enumerate(ctx.ids):
-        name = ("led", "indirect_address_1")[n % 2]
+        by_name = ctx.layout(servo_id).by_name
+        name = "led" if n % 2 == 0 else next((n2 for n2 in WRITE_SIZE_REGISTERS[2] if n2 in by_name), "indirect_address_1")
         old = ctx.get(servo_id, name)
-        plan[servo_id] = (name, old, (1 - old) if name == "led" else (old + 1 if old < 600 else 64))
+        entry = ctx.entry(servo_id, name)
+        plan[servo_id] = (name, old, old + 1 if old < entry.maximum else entry.minimum)
     body = b"".join(
         bytes((i,)) + _u16(ctx.entry(i, name).address) + _u16(ctx.entry(i, name).size) + ctx.entry(i, name).to_bytes(new)
         for i, (name, _, new) in plan.items()
@@ -746,20 +818,32 @@ def check_broadcast_ping_timing(ctx: Context2) -> str:
 def check_broadcast_read_write(ctx: Context2) -> str:
     """[P2] "Packet ID" NOTE: with the Broadcast ID "Status Packet will not be returned for READ and WRITE
     Instructions"; [P2] "Packet ID": 0xFE "makes all connected devices execute the Instruction
-    Packet".  A broadcast WRITE of LED sets every servo, silently; a broadcast READ is not answered."""
+    Packet".  A broadcast WRITE of LED sets every servo, silently; a broadcast READ is not answered.  On a bus
+    mixing tables, servos whose LED is elsewhere are judged unchanged, and the check is skipped where the
+    byte would land on another table's 1-byte register (it would be written)."""
+    same, other = _sharing(ctx, "led")
     entry = ctx.entry(ctx.target, "led")
-    leds = {i: ctx.get(i, "led") for i in ctx.ids}
+    for servo_id in other:
+        layout = ctx.layout(servo_id)
+        owner = int(layout.owner[entry.address]) if entry.address < layout.table_size else -1
+        if owner >= 0 and layout.entries[owner].size == 1:
+            raise Skipped(f"ID {servo_id}'s table has {layout.entries[owner].name} at LED's address {entry.address}")
+    leds = {i: ctx.get(i, "led") for i in same}
+    images = {i: ctx.table(i) for i in other}
     try:
         expect(ctx.silent(encode_instruction2(BROADCAST_ID, Instruction2.WRITE, _u16(entry.address) + b"\x01")),
                "broadcast WRITE answered")
-        for servo_id in ctx.ids:
+        for servo_id in same:
             expect(ctx.get(servo_id, "led") == 1, f"ID {servo_id} not written by the broadcast WRITE")
+        for servo_id, image in images.items():
+            changed = table_differences2(image, ctx.table(servo_id), ctx.layout(servo_id))
+            expect(not changed, f"ID {servo_id} (another table): the broadcast WRITE changed {', '.join(changed)}")
     finally:
         for servo_id, led in leds.items():
             ctx.put(servo_id, "led", led)
     expect(ctx.silent(encode_instruction2(BROADCAST_ID, Instruction2.READ, _u16(entry.address) + _u16(1))),
            "broadcast READ answered")
-    return "WRITE executed by all, silent; READ silent"
+    return "WRITE executed by all, silent; READ silent" + ("" if not other else f" (IDs {','.join(map(str, other))}: another table, unchanged)")
 
 
 def check_status_return_level(ctx: Context2) -> str:
@@ -819,7 +903,7 @@ def check_defaults(ctx: Context2) -> "str | Note":
     firmware or a user's configuration sets excepted); differences are a Note, not a failure."""
     servo = ctx.target
     layout = ctx.layout(servo)
-    ignore = {"id", "firmware_version", "model_information", "goal_position", "goal_velocity", "goal_pwm", "goal_current"}
+    ignore = {"id", "firmware_version", "model_information"} | SET_AT_POWER_UP
     differ = [d for d in table_differences2(layout.defaults, ctx.before[servo], layout) if d.split()[0] not in ignore]
     if differ:
         return Note("differs: " + ", ".join(differ))
@@ -902,8 +986,7 @@ def check_factory_reset(ctx: Context2) -> str:
     took = _wait_for(ctx, servo)
     try:
         after = ctx.table(servo)
-        ignore = {"id", "baud_rate", "firmware_version", "model_information", "goal_position", "goal_velocity", "goal_pwm",
-                  "goal_current"}
+        ignore = {"id", "baud_rate", "firmware_version", "model_information"} | SET_AT_POWER_UP
         differ = [d for d in table_differences2(layout.defaults, after, layout) if d.split()[0] not in ignore]
         expect(not differ, "after Factory Reset 0x02: " + ", ".join(differ))
         kept = layout.by_name["baud_rate"].value_in(after), layout.by_name["id"].value_in(after)
@@ -1013,6 +1096,8 @@ PROFILE_PULSES_TOLERANCE = 2.0
 #: In-Position window is "a predefined value" the e-manual does not give).
 IN_POSITION_PULSES, POSITION_SETTLE_S = 20, 0.3
 
+#: Registers the velocity-mode and profile checks need (the X series').
+_X_MOTION_NEEDS = ("operating_mode", "drive_mode", "goal_velocity", "profile_velocity", "velocity_trajectory")
 #: Registers a motion check or a mode change may alter, put back in this order (EEPROM first, torque last).
 _MOTION_REGISTERS = ("operating_mode", "drive_mode", "velocity_i_gain", "velocity_p_gain", "position_d_gain",
                      "position_i_gain", "position_p_gain", "feedforward_2nd_gain", "feedforward_1st_gain",
@@ -1037,6 +1122,16 @@ def _one_per_model(ctx: Context2, wanted=lambda m: True) -> list[int]:
         if found.key not in seen and wanted(found):
             seen[found.key] = servo_id
     return list(seen.values())
+
+
+def _x_series(ctx: Context2) -> list[int]:
+    """:func:`_one_per_model` of the models with the X series' Operating Mode(11) and profiles (not the XL-320's
+    classic table, whose Control Mode has no velocity mode or profile); skips the check if there are none."""
+    servos = _one_per_model(ctx, lambda found: all(name in found.layout().by_name for name in _X_MOTION_NEEDS))
+    if not servos:
+        raise Skipped(f"no model under test has {', '.join(_X_MOTION_NEEDS)}: "
+                      + ", ".join(sorted({m.name for m in ctx.models.values()})))
+    return servos
 
 
 def _lowest_rating(found: ServoModel):
@@ -1140,7 +1235,7 @@ def check_velocity_mode(ctx: Context2) -> str:
     1 s, Velocity Trajectory equals it, and over 0.25 s the position advances at that rate (within 10 %,
     bounded by when the READs were served)."""
     setup = {"operating_mode": VELOCITY_MODE, "profile_acceleration": 0}
-    return "; ".join(_in_motion(ctx, _one_per_model(ctx), setup, lambda servo: _velocity_body(ctx, servo)))
+    return "; ".join(_in_motion(ctx, _x_series(ctx), setup, lambda servo: _velocity_body(ctx, servo)))
 
 
 def _has_current_mode(found: ServoModel) -> bool:
@@ -1304,7 +1399,7 @@ def check_velocity_profile(ctx: Context2) -> str:
         return _profile_body(ctx, servo, time_based=False)
 
     figures = []
-    for servo in _one_per_model(ctx):
+    for servo in _x_series(ctx):
         drive = ctx.get(servo, "drive_mode") & ~TIME_BASED_BIT
         figures += _in_motion(ctx, [servo], {"operating_mode": POSITION_MODE, "drive_mode": drive}, body)
     return "; ".join(figures)
@@ -1320,7 +1415,7 @@ def check_time_profile(ctx: Context2) -> str:
         return _profile_body(ctx, servo, time_based=True)
 
     figures = []
-    for servo in _one_per_model(ctx):
+    for servo in _x_series(ctx):
         firmware = ctx.get(servo, "firmware_version")
         if "330" not in ctx.models[servo].name and firmware < TIME_BASED_FIRMWARE:
             raise Skipped(f"ID {servo}: firmware {firmware}; Time-based Profiles need V{TIME_BASED_FIRMWARE} on the X430")
