@@ -1,8 +1,8 @@
 """``ax12emu models``: the servo models the emulator knows, with their data-sheet figures.
 
 Why it exists: a model is a data file (:mod:`ax12emu.protocol.servo_models`); this lists what
-the shipped files say, so a user sees which models and protocols there are and what each is
-rated for without opening the files.  ``print`` is allowed here as in ``cli.main``.
+the shipped files say, so a user sees which models and protocols there are, what each is
+rated for and which firmware model serves it without opening the files.  ``print`` is allowed here as in ``cli.main``.
 """
 
 from __future__ import annotations
@@ -20,20 +20,27 @@ def add_command(sub: argparse._SubParsersAction) -> None:
     models.add_argument("--all-ratings", action="store_true", help="one line per rated voltage (default: the recommended one)")
 
 
+def _served_by(servo: ServoModel) -> str:
+    """Which firmware model runs the servo when served: the X series' (its tables, and the classic tables
+    translated by their ``[classic]`` numbers: the MX series, the XL-320) or the AX-12's (the AX-shaped tables)."""
+    return "x-series" if servo.classic is not None or "2.0" in servo.protocols else "ax-12"
+
+
 def _rows(servo: ServoModel, all_ratings: bool) -> list[list[str]]:
     physical = servo.physical
     ratings = physical.ratings if all_ratings else (physical.rating_at(),)
     firmware = "-" if servo.firmware_version is None else str(servo.firmware_version)
     return [
         [servo.key, servo.name, "/".join(servo.protocols), str(servo.model_number), firmware,
-         f"{r.stall_torque_nm:g} N m @ {r.voltage_v:g} V", f"{r.no_load_speed_rpm:g} rpm @ {r.voltage_v:g} V"]
+         f"{r.stall_torque_nm:g} N m @ {r.voltage_v:g} V", f"{r.no_load_speed_rpm:g} rpm @ {r.voltage_v:g} V",
+         _served_by(servo)]
         for r in ratings
     ]
 
 
 def models_table(all_ratings: bool = False) -> str:
     """The listing as aligned text columns."""
-    header = ["key", "name", "protocol", "model number", "firmware", "stall torque", "no-load speed"]
+    header = ["key", "name", "protocol", "model number", "firmware", "stall torque", "no-load speed", "firmware model"]
     rows = [header] + [row for key in model_names() for row in _rows(model(key), all_ratings)]
     widths = [max(len(row[i]) for row in rows) for i in range(len(header))]
     return "\n".join("  ".join(cell.ljust(width) for cell, width in zip(row, widths)).rstrip() for row in rows)

@@ -41,4 +41,5 @@ def test_models_lists_the_mx_series_on_protocol_1():
     out = run("models").stdout
     rows = {line.split()[0]: line for line in out.splitlines()[1:]}
     for key in ("mx-28", "mx-64", "mx-106"):
-        assert " 1.0 " in rows[key]
+        assert " 1.0 " in rows[key] and rows[key].endswith("x-series")
+    assert rows["ax-12a"].endswith("ax-12") and rows["xl430-w250"].endswith("x-series")
