@@ -28,9 +28,11 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from ax12emu.bus import Bus
+from ax12emu.bus.bus2 import Bus2
 from ax12emu.faults.injection import Faults, MixedFaults, faults_for
 
-from .buses import AnyBus, locate, protocols
+from .buses import AnyBus, locate, parts, protocols
 
 __all__ = ["Controls", "ServedControls", "ACTIONS", "ControlError", "apply"]
 
@@ -84,6 +86,11 @@ class ServedControls:
         self._torque_nm: dict[int, float] = {}
 
     def faults_of(self, bus: AnyBus) -> Faults | MixedFaults:
+        # ax12emu.faults knows the AX-12 bus and the Protocol 2.0 bus (and wires of both); another
+        # kind of bus would take faults whose hooks it does not call, or calls wrongly.
+        other = [type(sub).__name__ for _, sub in parts(bus) if not isinstance(sub, (Bus, Bus2))]
+        if other:
+            raise ControlError(f"faults are not available on a {' or '.join(other)} (ax12emu.faults serves the AX-12 and Protocol 2.0 buses)")
         if bus.faults is None:
             bus.faults = faults_for(bus, seed=self.seed)  # type: ignore[assignment]  # Faults2 on 2.0, MixedFaults on a mixed wire
         return bus.faults  # type: ignore[return-value]

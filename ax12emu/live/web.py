@@ -281,6 +281,9 @@ class WebServer:
             return 400, {"error": str(exc)}
         except TimeoutError:
             return 503, {"error": "the bus did not answer in time"}
+        except Exception as exc:  # a fault in the emulator, not in the message: reported, and the page stays up
+            log.exception("live view: the control %r failed", message)
+            return 500, {"error": f"the control failed inside the emulator: {type(exc).__name__}: {exc}"}
         self.sampler.note(said, id=message.get("id", message.get("slot")))
         return 200, {"ok": True, "log": said}
 

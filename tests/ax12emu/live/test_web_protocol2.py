@@ -185,3 +185,20 @@ def test_a_mixed_wire_takes_the_protocol_over_the_socket():
     finally:
         view.close()
         bus.close()
+
+
+def test_a_control_failing_inside_the_emulator_is_a_500_with_the_reason_and_the_page_stays_up():
+    """Controls whose ``call`` hands them no bus (a wiring mistake, not the message's): the error is reported, not raised."""
+    from ax12emu.live import Sampler
+    from ax12emu.live.web import WebServer
+
+    with VirtualBus(servo="1:xl430-w250", transport="inprocess", virtual_time=True) as bus:
+        sampler = Sampler(bus.call, **bus.call(decoder_options)).start()
+        web = WebServer(sampler, ServedControls(lambda fn: fn(None))).start()
+        try:
+            status, body = post(web.url + "api/control", {"action": "external_torque", "id": 1, "nm": 0.1})
+            assert status == 500 and "inside the emulator: AttributeError" in body["error"]
+            assert wait_for(lambda: get(web.url + "api/servos")[0] == 200)
+        finally:
+            web.close()
+            sampler.close()
