@@ -269,3 +269,19 @@ def test_an_ax12a_and_mx_servos_share_one_wire():
     with pytest.raises(ValueError, match="duplicate IDs"):
         Bus1X([(1, model("mx-28"))], lambda spec, servo: build_plant1x(spec, servo.table), ax_bus=Bus([1], clock=clock))
     assert isinstance(bus.framer, Framer)
+
+
+def test_the_eeprom_area_persists_in_a_state_store_and_another_model_is_refused(tmp_path):
+    from ax12emu.bus.state_store import StateFileError, StateStore
+
+    store = StateStore(tmp_path)
+    make = (lambda key: Bus1X([(1, model(key))], lambda spec, servo: build_plant1x(spec, servo.table),
+                              clock=VirtualClock(), state_store=store))
+    with make("mx-28") as bus:
+        assert write2(bus, 1, CW_LIMIT, 4095) == 0 and write2(bus, 1, CCW_LIMIT, 4095) == 0  # multi-turn
+        assert write2(bus, 1, MULTI_TURN_OFFSET, -100 & 0xFFFF) == 0
+    with make("mx-28") as bus:
+        assert read2(bus, 1, CW_LIMIT) == 4095 and read2(bus, 1, MULTI_TURN_OFFSET) == -100 & 0xFFFF
+        assert read2(bus, 1, PRESENT_POSITION) == 2048 - 100  # the offset applies from power-up
+    with pytest.raises((StateFileError, ValueError), match="another model"):
+        make("mx-64")
