@@ -74,10 +74,10 @@ from ax12emu.protocol.packets2 import (
     encode_status2,
     fast_status_pieces,
 )
-from ax12emu.protocol.params2 import INSTRUCTION_SPECS, Broadcast, BulkRead, SyncRead, parse_params
+from ax12emu.protocol.params2 import INSTRUCTION_SPECS, Broadcast, BulkRead, SyncRead
 from ax12emu.protocol.servo_models import ServoModel
 from ax12emu.servo.plant2 import plant_for
-from ax12emu.servo.request_handler2 import answers, handle2, listed_read, status_byte
+from ax12emu.servo.request_handler2 import answers, handle2, listed_read, parsed_params, status_byte
 from ax12emu.servo.servo2 import Servo2, Servo2Options
 from firmware_model.xseries.interface import XServoModel
 
@@ -295,7 +295,7 @@ class Bus2:
 
     def _listed(self, packet: InstructionPacket2, line_bps: float | None) -> list[Reply]:
         """Sync/Bulk Read and their fast forms: the listed servos answer in list order (see the module docstring)."""
-        params = parse_params(packet.instruction, packet.params)
+        params = parsed_params(packet.instruction, packet.params if type(packet.params) is bytes else bytes(packet.params))
         if isinstance(params, SyncRead):
             reads = [(servo_id, params.address, params.length) for servo_id in params.ids]
         elif isinstance(params, BulkRead):

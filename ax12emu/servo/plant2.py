@@ -60,6 +60,42 @@ def _reader(entries: list[Entry]) -> tuple[tuple[str, ...], Callable[[bytearray]
     return names, unpack
 
 
+def _writer(entries: list[Entry]) -> Callable[[bytearray, tuple[int, ...]], None]:
+    """A function storing values (one per entry, in ``entries``' order) into a row as ``Table2.set`` does.
+
+    Why: every step of every servo copies a dozen sensed registers back; one ``struct`` call per run of
+    adjacent registers replaces a slice assignment each.  Values are masked to their size first, as
+    ``Entry.to_bytes`` does (two's complement where signed).
+    """
+    order = sorted(range(len(entries)), key=lambda k: entries[k].address)
+    runs: list[list] = []  # [address, end, format, indices, masks]
+    for k in order:
+        entry = entries[k]
+        code = _CODES.get((entry.size, False))
+        if code is None or (runs and entry.address < runs[-1][1]):  # not a struct size, or overlapping
+            slots = [(entry.address, entry.end, entry.to_bytes) for entry in entries]
+
+            def one_by_one(row: bytearray, values: tuple[int, ...], slots=slots) -> None:
+                for (start, end, to_bytes), value in zip(slots, values):
+                    row[start:end] = to_bytes(value)
+            return one_by_one
+        if runs and entry.address == runs[-1][1]:
+            run = runs[-1]
+            run[1], run[2] = entry.end, run[2] + code
+        else:
+            run = [entry.address, entry.end, "<" + code, [], []]
+            runs.append(run)
+        run[3].append(k)
+        run[4].append((1 << (8 * entry.size)) - 1)
+    packers = [(address, struct.Struct(fmt).pack_into, tuple(zip(indices, masks)))
+               for address, _, fmt, indices, masks in runs]
+
+    def by_runs(row: bytearray, values: tuple[int, ...]) -> None:
+        for address, pack_into, picks in packers:
+            pack_into(row, address, *[values[k] & mask for k, mask in picks])
+    return by_runs
+
+
 class Plant2:
     """Runs ``firmware`` behind ``table``; brought to a time by the bus before each request."""
 
@@ -77,7 +113,7 @@ class Plant2:
         # write_back runs every step of every servo: the sensed fields in one call, and where each goes.
         getter = operator.attrgetter(*(field for field, _ in self._sensed))  # Torque Enable at least (Table2 needs it)
         self._sense_fields = getter if len(self._sensed) > 1 else lambda sensed: (getter(sensed),)
-        self._sense_slots = [(entry.address, entry.end, entry.to_bytes) for _, entry in self._sensed]
+        self._store_sensed = _writer([entry for _, entry in self._sensed])
         #: Goals the firmware holds instead of the table's (Bus Watchdog stop), or None.
         self._held: dict[str, int] | None = None
         #: A client changed the commands since the tables last showed a step (see :meth:`catch_up`).
@@ -158,9 +194,7 @@ class Plant2:
 
     def write_back(self) -> None:
         """Copy what the firmware senses into the table (Torque Enable too, which Shutdown clears)."""
-        row = self.table.row
-        for (start, end, to_bytes), value in zip(self._sense_slots, self._sense_fields(self.firmware.sense())):
-            row[start:end] = to_bytes(value)  # as Table2.set does
+        self._store_sensed(self.table.row, self._sense_fields(self.firmware.sense()))
 
     # -- instructions that reach the firmware ---------------------------------------------
     def reboot(self) -> None:

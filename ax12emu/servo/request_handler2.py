@@ -61,11 +61,12 @@ from ax12emu.protocol.params2 import (
 
 from .servo2 import Servo2
 
-__all__ = ["HANDLERS", "READ_INSTRUCTIONS", "Outcome2", "answers", "handle2", "listed_read", "status_byte"]
+__all__ = ["HANDLERS", "READ_INSTRUCTIONS", "Outcome2", "answers", "handle2", "listed_read", "parsed_params", "status_byte"]
 
 #: ``parse_params`` remembered for the last packets: a broadcast Sync/Bulk Write reaches every servo,
-#: and each would parse the same parameters again (the results are frozen, so sharing them is safe).
-_parsed = functools.lru_cache(maxsize=64)(parse_params)
+#: and each would parse the same parameters again, and a robot sends the same Sync Read every cycle
+#: (the results are frozen, so sharing them is safe).  ``params`` must be ``bytes`` (hashable).
+parsed_params = functools.lru_cache(maxsize=64)(parse_params)
 
 #: Instructions Status Return Level 1 answers besides PING.
 READ_INSTRUCTIONS = frozenset(int(i) for i in (Instruction2.READ, Instruction2.SYNC_READ, Instruction2.BULK_READ,
@@ -262,7 +263,7 @@ def handle2(servo: Servo2, packet: InstructionPacket2, *, secondary: bool = Fals
         error, data = ErrorNumber.CRC, bytes(_read_length(servo, packet))
         talks = talks and servo.options.reply_on_crc_error
     else:
-        params = _parsed(instruction, packet.params if type(packet.params) is bytes else bytes(packet.params))
+        params = parsed_params(instruction, packet.params if type(packet.params) is bytes else bytes(packet.params))
         handler = HANDLERS.get(instruction)
         if handler is None:
             error, data = ErrorNumber.INSTRUCTION, bytes(_read_length(servo, packet))

@@ -67,6 +67,13 @@ class Servo2:
         self._return_delay_at = by_name["return_delay_time"].address
         self._level_at = by_name["status_return_level"].address
         self._eeprom_end = self.table.layout.eeprom_end
+        # The registers the bus consults on every packet, looked up once (None: the model has none):
+        # a Sync Read or Write of six servos reads each of them for every servo.
+        self._secondary = by_name.get("secondary_id")
+        self._hardware_error = by_name.get("hardware_error_status")
+        self._watchdog = by_name.get("bus_watchdog")
+        self._tick = by_name.get("realtime_tick")
+        self._bauds_bps = tuple(float(bps) for bps in spec.baud_rates_bps)
         self.table.set("id", servo_id)
         if spec.firmware_version is not None and self.table.has("firmware_version"):
             self.table.set("firmware_version", spec.firmware_version)
@@ -90,7 +97,7 @@ class Servo2:
 
     @property
     def baud_bps(self) -> float:
-        return float(self.spec.baud_rates_bps[self.table.row[self._baud_at]])
+        return self._bauds_bps[self.table.row[self._baud_at]]
 
     @property
     def return_delay_s(self) -> float:
@@ -104,15 +111,15 @@ class Servo2:
     @property
     def secondary_id(self) -> int | None:
         """Secondary ID(12) when active (0..252), else None (e-manual: "253 or higher ... deactivated")."""
-        if not self.table.has("secondary_id"):
+        if self._secondary is None:
             return None
-        value = self.table.get("secondary_id")
+        value = self._secondary.value_in(self.table.row)
         return value if value <= SECONDARY_ID_MAX else None
 
     @property
     def alert(self) -> bool:
         """The status packets' Alert bit: set while Hardware Error Status(70) is non-zero."""
-        return self.table.has("hardware_error_status") and self.table.get("hardware_error_status") != 0
+        return self._hardware_error is not None and self._hardware_error.value_in(self.table.row) != 0
 
     def start_at_baud(self, bps: float) -> None:
         """Set Baud Rate to the value whose rate is ``bps`` (a bus started at another rate than the factory's)."""
@@ -147,8 +154,9 @@ class Servo2:
         """An instruction packet reached this servo at ``now_s`` (bus clock): the Bus Watchdog's interval restarts."""
         self.check_watchdog(now_s)
         self.last_instruction_s = now_s
-        if self.table.has("realtime_tick"):
-            self.table.set("realtime_tick", int(now_s * 1000.0) % REALTIME_TICK_PERIOD)
+        tick = self._tick
+        if tick is not None:  # as Table2.set does
+            self.table.row[tick.address : tick.end] = tick.to_bytes(int(now_s * 1000.0) % REALTIME_TICK_PERIOD)
 
     def check_watchdog(self, now_s: float) -> None:
         """Bus Watchdog(98): with the torque on, a silence longer than its value x 20 ms stops the servo.
@@ -157,10 +165,10 @@ class Servo2:
         is larger than the set value of Bus Watchdog(98), the DYNAMIXEL will stop. Bus Watchdog(98)
         will be changed to '-1'", and the Goal registers become read-only until it is written 0.
         """
-        table = self.table
-        if not table.has("bus_watchdog") or self.last_instruction_s is None:
+        table, watchdog = self.table, self._watchdog
+        if watchdog is None or self.last_instruction_s is None:
             return
-        value = table.get("bus_watchdog")
+        value = watchdog.value_in(table.row)
         if not 1 <= value < WATCHDOG_ERROR or not table.torque_on:
             return
         if now_s - self.last_instruction_s > value * WATCHDOG_UNIT_S:

@@ -38,6 +38,9 @@ from ax12emu.protocol.registers import Access, Area, Entry, Layout
 __all__ = ["Table2", "WriteCheck"]
 
 _INDIRECT_DATA = "indirect_data_"
+#: More distinct (address, length) writes than a client uses; past it the plans start over.
+MAX_PLANS = 1024
+_UNPLANNED = object()
 _INDIRECT_ADDRESS = "indirect_address_"
 
 
@@ -71,6 +74,11 @@ class Table2:
                 if partner is None or entry.size != 1:
                     raise ValueError(f"{entry.name} needs a 1-byte register and an {_INDIRECT_ADDRESS}n partner")
                 self._indirect[entry.address] = partner.address
+        #: The span of Indirect Data bytes (empty when none): reads and writes clear of it take a short way.
+        self._indirect_lo = min(self._indirect, default=0)
+        self._indirect_hi = max(self._indirect, default=-1) + 1
+        #: (address, length) -> what :meth:`check_write` finds from the layout alone (see ``_plan``).
+        self._plans: dict[tuple[int, int], tuple[int, bool, tuple[Entry, ...]] | None] = {}
 
     # -- firmware side: by name, no checks -----------------------------------------------
     def get(self, name: str) -> int:
@@ -139,7 +147,7 @@ class Table2:
         """
         if address + length > self.size:
             return bytes(min(length, self.size)), ErrorNumber.ACCESS
-        if not self._indirect:
+        if address + length <= self._indirect_lo or address >= self._indirect_hi:
             return bytes(self.row[address : address + length]), ErrorNumber.NONE
         row = self.row
         out = bytearray(row[address : address + length])
@@ -157,6 +165,24 @@ class Table2:
         """
         if not data or address + len(data) > self.size:
             return WriteCheck(ErrorNumber.ACCESS)
+        key = (address, len(data))
+        plan = self._plans.get(key, _UNPLANNED)
+        if plan is _UNPLANNED:
+            if len(self._plans) >= MAX_PLANS:
+                self._plans.clear()
+            plan = self._plans[key] = self._plan(address, len(data))
+        if plan is not None:  # no Indirect Data among the bytes: the layout alone says which registers they are
+            error, eeprom, touched = plan
+            if error == ErrorNumber.DATA_LENGTH and eeprom and self.torque_on:
+                return WriteCheck(ErrorNumber.ACCESS)  # Access Error comes first, as below
+            if error:
+                return WriteCheck(error)
+            if eeprom and self.torque_on:
+                return WriteCheck(ErrorNumber.ACCESS)
+            end = address + len(data)
+            candidate = bytearray(self.row)
+            candidate[address:end] = data
+            return self._judge(dict(zip(range(address, end), data)), touched, candidate, refused)
         layout, row = self.layout, self.row
         changes: dict[int, int] = {}
         for offset, byte in enumerate(data):
@@ -178,6 +204,39 @@ class Table2:
         candidate = bytearray(row)
         for target, byte in changes.items():
             candidate[target] = byte
+        return self._judge(changes, tuple(touched), candidate, refused)
+
+    def _plan(self, address: int, length: int) -> tuple[int, bool, tuple[Entry, ...]] | None:
+        """What :meth:`check_write` finds of a write to ``address``..``+length`` from the layout alone.
+
+        None if an Indirect Data byte is among them (its target depends on the table); else the
+        error the layout gives (Access: undefined or read-only; Data Length: a register in part),
+        whether an EEPROM register is among them (Access Error while the torque is on) and the
+        registers touched, in address order.  Why: a robot writes the same registers every cycle.
+        """
+        if not (address + length <= self._indirect_lo or address >= self._indirect_hi):
+            if any(target in self._indirect for target in range(address, address + length)):
+                return None
+        layout = self.layout
+        touched: list[Entry] = []
+        eeprom = False
+        for target in range(address, address + length):
+            index = int(layout.owner[target])
+            if index < 0:
+                return ErrorNumber.ACCESS, False, ()
+            entry = layout.entries[index]
+            if entry.access is not Access.RW:
+                return ErrorNumber.ACCESS, False, ()
+            eeprom = eeprom or entry.area is Area.EEPROM
+            if not touched or touched[-1] is not entry:
+                touched.append(entry)
+        if touched[0].address < address or touched[-1].end > address + length:
+            return ErrorNumber.DATA_LENGTH, eeprom, ()
+        return ErrorNumber.NONE, eeprom, tuple(touched)
+
+    def _judge(self, changes: dict[int, int], touched: tuple[Entry, ...], candidate: bytearray,
+               refused: frozenset[str]) -> WriteCheck:
+        """The value checks of :meth:`check_write` on the table as it would be after the write."""
         ranges = [self.range_of(entry, candidate) for entry in touched]
         for entry, (minimum, maximum, _) in zip(touched, ranges):
             if entry.name in refused:
@@ -188,7 +247,7 @@ class Table2:
         for entry, (_, _, limits) in zip(touched, ranges):
             if limits and not self._within_limits(entry, candidate):
                 return WriteCheck(ErrorNumber.DATA_LIMIT)
-        return WriteCheck(ErrorNumber.NONE, changes, tuple(touched))
+        return WriteCheck(ErrorNumber.NONE, changes, touched)
 
     def range_of(self, entry: Entry, image: bytearray | None = None) -> tuple[int, int, bool]:
         """The entry's (minimum, maximum, limits apply) in ``image`` (default: the table): a mode's range where one is selected."""

@@ -42,3 +42,30 @@ def test_write_back_puts_what_the_firmware_senses_in_the_table(key):
         present = [name for name in candidates if table.has(name)]
         if present:
             assert table.get(present[0]) == getattr(sensed, field), field
+
+
+@pytest.mark.parametrize("key", model_names())
+def test_sensed_registers_are_stored_as_table_set_stores_them(key):
+    """Plant2's one-struct-call-per-run copy of the sensed registers writes what Table2.set would, values out
+    of range masked as Entry.to_bytes masks them, bytes between the registers untouched; overlapping
+    registers (no model has them) are written one by one, the later winning."""
+    from ax12emu.protocol.registers import Access, Area, Entry
+    from ax12emu.servo.plant2 import _writer
+
+    if "2.0" not in model(key).protocols:
+        pytest.skip(f"{key} is not a Protocol 2.0 model")
+    rng = random.Random(3)
+    by_name = model(key).layout().by_name
+    entries = [by_name[name] for candidates in SENSED_REGISTERS.values() for name in candidates[:1] if name in by_name]
+    for _ in range(50):
+        values = tuple(rng.choice((rng.randrange(-(1 << 33), 1 << 33), rng.randrange(-3, 3))) for _ in entries)
+        fast = bytearray(rng.randbytes(max(entry.end for entry in entries) + 8))
+        slow = bytearray(fast)
+        _writer(entries)(fast, values)
+        for entry, value in zip(entries, values):
+            slow[entry.address : entry.end] = entry.to_bytes(value)
+        assert fast == slow
+    overlapping = [Entry(10, 4, "a", Access.R, 0, 0, 0, Area.RAM), Entry(12, 2, "b", Access.R, 0, 0, 0, Area.RAM)]
+    row = bytearray(16)
+    _writer(overlapping)(row, (0x11223344, -1))
+    assert row[10:14] == bytes((0x44, 0x33, 0xFF, 0xFF))

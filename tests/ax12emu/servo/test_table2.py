@@ -143,3 +143,29 @@ def test_operating_mode_takes_only_the_modes_the_model_lists(table):
         ErrorNumber.NONE]
     xl430 = Table2(model("xl430-w250").layout())
     assert xl430.check_write(11, b"\x05").error == ErrorNumber.DATA_RANGE
+
+
+@pytest.mark.parametrize("key", ["xm430-w350", "xl430-w250", "xl330-m288"])
+def test_writes_judged_from_the_layout_alone_agree_with_the_byte_by_byte_rules(key, monkeypatch):
+    """check_write's short way (what the layout says of an address range, remembered) and its byte-by-byte
+    way give the same outcome for random writes anywhere, with the torque on and off."""
+    import random
+
+    rng = random.Random(7)
+    short, long = Table2(model(key).layout()), Table2(model(key).layout())
+    monkeypatch.setattr(long, "_plan", lambda address, length: None)  # every write the byte-by-byte way
+    outcomes = set()
+    for _ in range(3000):
+        torque = int(rng.random() < 0.3)
+        for table in (short, long):
+            table.row[table._torque_enable] = torque
+        address = rng.choice([rng.randrange(short.size), 64, 65, 84, 104, 108, 112, 116, 7, 11, 12])
+        data = bytes(rng.randrange(256) if rng.random() < 0.5 else rng.choice((0, 1, 255))
+                     for _ in range(rng.choice((1, 2, 4, rng.randrange(1, 12)))))
+        a, b = short.check_write(address, data), long.check_write(address, data)
+        assert (a.error, a.changes, a.entries) == (b.error, b.changes, b.entries), (address, data.hex())
+        outcomes.add(a.error)
+        if not a.error:
+            short.apply(a)
+            long.apply(b)
+    assert {ErrorNumber.NONE, ErrorNumber.ACCESS, ErrorNumber.DATA_LENGTH, ErrorNumber.DATA_RANGE} <= outcomes
