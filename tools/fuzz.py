@@ -59,7 +59,8 @@ from pathlib import Path
 from typing import Any
 
 #: Modules the target exercises, for the coverage figure.
-TARGET_MODULES = ("framing", "packets", "request_handler", "control_table", "servo", "bus", "plant", "clock")
+TARGET_MODULES = ("protocol/framing", "protocol/packets", "protocol/control_table", "servo/request_handler",
+                  "servo/virtual_servo", "servo/plant", "bus/bus", "bus/clock")
 
 
 def _start_coverage() -> Any:
