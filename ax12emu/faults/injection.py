@@ -457,11 +457,13 @@ class Faults2(Faults):
                              f"got {value:#04x}")
         servo = self._servo2(slot)
         firmware = self._firmware(slot, "alarm")
-        shutdown = servo.table.get("shutdown")
+        # Shutdown as the firmware takes it: in its own bits (a classic table's, the XL-320's Shutdown(18), translated).
+        shutdown = servo.plant.commands().shutdown
         if value & ~shutdown:
             first_names = {bit: name for name, bit in reversed(list(HW_ERROR_NAMES.items()))}  # not the aliases
             unselected = [name for bit, name in sorted(first_names.items()) if bit & value & ~shutdown]
-            raise ValueError(f"alarm: ID {slot}'s Shutdown(63) is {shutdown:#04x}, which does not select {', '.join(unselected)}: "
+            raise ValueError(f"alarm: ID {slot}'s Shutdown({servo.table.layout.by_name['shutdown'].address}) is "
+                             f"{servo.table.get('shutdown'):#04x}, which does not select {', '.join(unselected)}: "
                              "the firmware detects only the errors Shutdown selects (write Shutdown first)")
         firmware.raise_error(value)
         servo.plant.write_back()
@@ -515,7 +517,7 @@ class Faults2(Faults):
         """As :meth:`Faults.active`; a forced alarm a REBOOT has cleared is no longer listed."""
         index = self._index(slot)
         if index in self._alarms:
-            latched = self._alarms[index] & self._servo2(slot).table.get("hardware_error_status")
+            latched = self._alarms[index] & self._servo2(slot).plant.firmware.sense().hardware_error_status  # the firmware's bits
             if latched:
                 self._alarms[index] = latched
             else:

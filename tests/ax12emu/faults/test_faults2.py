@@ -222,3 +222,16 @@ def test_an_x_series_alarm_name_is_refused_on_the_ax12_bus():
         VirtualBus([1], transport="inprocess", faults=FaultConfig(alarm=((1, "electrical_shock"),)))
     with pytest.raises(ValueError, match="unknown alarm 'hot'"):
         _alarm("1:hot")
+
+
+def test_an_xl320s_alarm_is_judged_and_shown_in_its_own_shutdown_bits():
+    """The XL-320's Shutdown(18) and Hardware Error Status(50) put Overload at bit 0, OverHeating at 1, Input Voltage
+    at 2 (its e-manual page); its initial Shutdown 3 selects Overload and OverHeating, not Input Voltage."""
+    with VirtualBus([1], servo="xl-320", transport="inprocess", virtual_time=True) as bus:
+        with pytest.raises(ValueError, match=r"Shutdown\(18\) is 0x03, which does not select input_voltage"):
+            bus.faults.force_alarm(1, "input_voltage")
+        bus.faults.force_alarm(1, "overheating")
+        assert bus.read(1, "hardware_error_status") == 0x02
+        assert bus.faults.active(1) == ["alarm 0x04"]  # named in the firmware's bits, as on the X series
+        bus.faults.clear_alarm(1)
+        assert bus.read(1, "hardware_error_status") == 0 and bus.faults.active(1) == []
