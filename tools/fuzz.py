@@ -675,18 +675,23 @@ def _watchdog(signum: int, frame: object) -> None:
     raise TimeoutError(f"one case ran over {HANG_S * 10:.0f} s: a hang")
 
 
-def fuzz(
-    max_inputs: int, *, seconds: float | None = None, seed: int | None = None, pieces: int = 200, batch: int = 100
-) -> Stats:
-    """Run cases until ``max_inputs`` inputs were fed (or ``seconds`` passed) or one fails.
+def drive(stats: Any, make_case: Callable[[int, int], Any], run: Callable[[Any], int], shrink: Callable[[Any], Any],
+          max_inputs: int, *, seconds: float | None = None, round_seed: Callable[[int], int] | None = None,
+          pieces: int = 200, batch: int = 100, counted: Callable[[Any, int], None] | None = None) -> Any:
+    """Run cases until ``max_inputs`` inputs were fed (or ``seconds`` passed) or one fails: both fuzzers' loop.
 
-    Hypothesis draws each case's seed and length; a PRNG with that seed
-    expands the grammar into ``pieces`` pieces.  A failing case is minimised
-    by delta debugging and returned as a JSON reproducer.
+    Hypothesis draws each case's seed and length; ``make_case(seed, length)``
+    expands the fuzzer's grammar into that many pieces and ``run`` feeds the
+    case to its oracle, returning the inputs fed (``counted(case, fed)`` for
+    the fuzzer's own tallies).  ``round_seed(k)`` seeds hypothesis's k-th
+    round of ``batch`` cases (None: random).  The first failing case is
+    minimised by ``shrink`` and kept in ``stats`` as a JSON reproducer, with
+    its first error: hypothesis may report another of the batch's failures.
+    ``stats`` needs ``inputs``, ``cases``, ``failure`` and ``reproducer``.
     """
-    stats = Stats()
     deadline = None if seconds is None else time.monotonic() + seconds
-    failing: list[Case] = []
+    failing: list[Any] = []
+    first_error: list[str] = []
     use_alarm = threading.current_thread() is threading.main_thread()
 
     @settings(max_examples=batch, deadline=None, database=None, phases=(Phase.generate,),
@@ -695,33 +700,38 @@ def fuzz(
     def target(case_seed: int, count: int) -> None:
         if stats.inputs >= max_inputs or (deadline is not None and time.monotonic() > deadline):
             return  # budget spent: let hypothesis finish the batch cheaply
-        case = generate_case(RandomChooser(case_seed), count)
+        case = make_case(case_seed, count)
         if use_alarm:
             signal.setitimer(signal.ITIMER_REAL, HANG_S * 10)
         try:
-            stats.inputs += run_case(case)
-        except BaseException:
-            failing[:] = [case]
+            fed = run(case)
+        except BaseException as exc:
+            if not failing:
+                failing[:] = [case]
+                first_error.append(f"{type(exc).__name__}: {exc}")
             raise
         finally:
             if use_alarm:
                 signal.setitimer(signal.ITIMER_REAL, 0)
+        stats.inputs += fed
+        if counted is not None:
+            counted(case, fed)
         stats.cases += 1
 
     previous = signal.signal(signal.SIGALRM, _watchdog) if use_alarm else None
     rounds = 0
     try:
         while stats.inputs < max_inputs and not (deadline is not None and time.monotonic() > deadline):
-            if seed is not None:
-                hypothesis.seed(seed + rounds)(target)
+            if round_seed is not None:
+                hypothesis.seed(round_seed(rounds))(target)
             rounds += 1
             target()
     except Exception as exc:
-        stats.failure = f"{type(exc).__name__}: {exc}"
+        stats.failure = first_error[0] if first_error else f"{type(exc).__name__}: {exc}"
         if failing:
-            small = minimise(failing[0])
+            small = shrink(failing[0])
             try:
-                run_case(small)
+                run(small)
             except Exception as again:
                 stats.failure += f"\nminimised ({len(small.inputs)} inputs): {type(again).__name__}: {again}"
             stats.reproducer = small.to_json()
@@ -729,6 +739,49 @@ def fuzz(
         if use_alarm:
             signal.signal(signal.SIGALRM, previous)
     return stats
+
+
+def fuzz(
+    max_inputs: int, *, seconds: float | None = None, seed: int | None = None, pieces: int = 200, batch: int = 100
+) -> Stats:
+    """Run Protocol 1.0 cases until ``max_inputs`` inputs were fed (or ``seconds`` passed) or one fails (:func:`drive`).
+
+    A PRNG with each case's seed expands the grammar; a failing case is
+    minimised by delta debugging and returned as a JSON reproducer.
+    """
+    return drive(Stats(), lambda case_seed, count: generate_case(RandomChooser(case_seed), count), run_case, minimise,
+                 max_inputs, seconds=seconds, round_seed=None if seed is None else (lambda k: seed + k),
+                 pieces=pieces, batch=batch)
+
+
+def replay(path: str, load: Callable[[str], Any], run: Callable[[Any], int]) -> int:
+    """Rerun the case written to ``path`` on a failure (``load`` reads its JSON); exit status 1 if it still fails,
+    2 if the file holds no case of this fuzzer."""
+    try:
+        case = load(Path(path).read_text())
+    except (OSError, ValueError, TypeError, KeyError) as exc:  # no file, not JSON, or another fuzzer's case
+        print(f"error: {path}: not a case of this fuzzer ({type(exc).__name__}: {exc})", file=sys.stderr)
+        return 2
+    try:
+        fed = run(case)
+    except Exception as exc:
+        print(f"FAIL: {type(exc).__name__}: {exc}")
+        return 1
+    print(f"ok: {fed} inputs pass")
+    return 0
+
+
+def report_failure(stats: Any, failure_file: str, tool: str) -> int:
+    """Print the run's failure (writing its reproducer to ``failure_file``) and return 1, or "failures: 0" and 0."""
+    if stats.failure:
+        print(f"FAILURE: {stats.failure}")
+        if stats.reproducer:
+            Path(failure_file).write_text(stats.reproducer + "\n")
+            print(f"reproducer written to {failure_file}: python tools/{tool} --replay {failure_file}")
+            print(stats.reproducer)
+        return 1
+    print("failures: 0")
+    return 0
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -743,14 +796,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
 
     if args.replay:
-        case = Case.from_json(Path(args.replay).read_text())
-        try:
-            fed = run_case(case)
-        except Exception as exc:
-            print(f"FAIL: {type(exc).__name__}: {exc}")
-            return 1
-        print(f"ok: {fed} inputs pass")
-        return 0
+        return replay(args.replay, Case.from_json, run_case)
 
     cov = _COVERAGE
     started = time.perf_counter()
@@ -766,15 +812,7 @@ def main(argv: list[str] | None = None) -> int:
         total = cov.report(file=report, show_missing=True, skip_empty=True)
         print(f"coverage, lines and branches of ax12emu/{{{','.join(TARGET_MODULES)}}}.py: {total:.1f} %")
         print(report.getvalue().rstrip())
-    if stats.failure:
-        print(f"FAILURE: {stats.failure}")
-        if stats.reproducer:
-            Path(args.failure_file).write_text(stats.reproducer + "\n")
-            print(f"reproducer written to {args.failure_file}: python tools/fuzz.py --replay {args.failure_file}")
-            print(stats.reproducer)
-        return 1
-    print("failures: 0")
-    return 0
+    return report_failure(stats, args.failure_file, "fuzz.py")
 
 
 if __name__ == "__main__":

@@ -71,9 +71,7 @@ import dataclasses
 import importlib.util
 import io
 import json
-import signal
 import sys
-import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -116,9 +114,6 @@ def _load_fuzz1() -> Any:
 
 fuzz1 = _load_fuzz1()
 
-import hypothesis  # noqa: E402
-from hypothesis import HealthCheck, Phase, given, settings  # noqa: E402
-from hypothesis import strategies as st  # noqa: E402
 
 from ax12emu.bus.bus import Bus  # noqa: E402
 from ax12emu.bus.bus2 import Bus2  # noqa: E402
@@ -1204,63 +1199,19 @@ class Stats:
     reproducer: str | None = None
 
 
-def _watchdog(signum: int, frame_: object) -> None:
-    raise TimeoutError(f"one case ran over {HANG_S * 10:.0f} s: a hang")
-
-
 def fuzz(max_inputs: int, *, seconds: float | None = None, seed: int | None = None, pieces: int = 200,
          batch: int = 100, bus: str | None = None) -> Stats:
-    """Run cases until ``max_inputs`` inputs were fed (or ``seconds`` passed) or one fails (see ``fuzz.fuzz``)."""
+    """Run cases until ``max_inputs`` inputs were fed (or ``seconds`` passed) or one fails (``fuzz.drive``)."""
     stats = Stats()
-    deadline = None if seconds is None else time.monotonic() + seconds
-    failing: list[Case2] = []
-    first_error: list[str] = []
-    use_alarm = threading.current_thread() is threading.main_thread()
 
-    @settings(max_examples=batch, deadline=None, database=None, phases=(Phase.generate,),
-              suppress_health_check=list(HealthCheck))
-    @given(st.integers(0, 2**64 - 1), st.integers(1, pieces))
-    def target(case_seed: int, count: int) -> None:
-        if stats.inputs >= max_inputs or (deadline is not None and time.monotonic() > deadline):
-            return
-        case = generate_case(fuzz1.RandomChooser(case_seed), count, bus)
-        if use_alarm:
-            signal.setitimer(signal.ITIMER_REAL, HANG_S * 10)
-        try:
-            fed = run_case(case)
-        except BaseException as exc:
-            if not failing:
-                failing[:] = [case]
-                first_error.append(f"{type(exc).__name__}: {exc}")
-            raise
-        finally:
-            if use_alarm:
-                signal.setitimer(signal.ITIMER_REAL, 0)
-        stats.inputs += fed
+    def counted(case: Case2, fed: int) -> None:
         stats.by_bus[case.bus] = stats.by_bus.get(case.bus, 0) + fed
-        stats.cases += 1
 
-    previous = signal.signal(signal.SIGALRM, _watchdog) if use_alarm else None
-    rounds = 0
-    try:
-        while stats.inputs < max_inputs and not (deadline is not None and time.monotonic() > deadline):
-            if seed is not None:  # runs with nearby seeds must not share rounds
-                hypothesis.seed(seed * 1_000_000 + rounds)(target)
-            rounds += 1
-            target()
-    except Exception as exc:
-        stats.failure = first_error[0] if first_error else f"{type(exc).__name__}: {exc}"
-        if failing:
-            small = minimise(failing[0])
-            try:
-                run_case(small)
-            except Exception as again:
-                stats.failure += f"\nminimised ({len(small.inputs)} inputs): {type(again).__name__}: {again}"
-            stats.reproducer = small.to_json()
-    finally:
-        if use_alarm:
-            signal.signal(signal.SIGALRM, previous)
-    return stats
+    return fuzz1.drive(stats, lambda case_seed, count: generate_case(fuzz1.RandomChooser(case_seed), count, bus),
+                       run_case, minimise, max_inputs, seconds=seconds,
+                       # runs with nearby seeds must not share rounds
+                       round_seed=None if seed is None else (lambda k: seed * 1_000_000 + k),
+                       pieces=pieces, batch=batch, counted=counted)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -1276,14 +1227,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
 
     if args.replay:
-        case = Case2.from_json(Path(args.replay).read_text())
-        try:
-            fed = run_case(case)
-        except Exception as exc:
-            print(f"FAIL: {type(exc).__name__}: {exc}")
-            return 1
-        print(f"ok: {fed} inputs pass")
-        return 0
+        return fuzz1.replay(args.replay, Case2.from_json, run_case)
 
     cov = _COVERAGE
     started = time.perf_counter()
@@ -1311,15 +1255,7 @@ def main(argv: list[str] | None = None) -> int:
         total = cov.report(file=report, show_missing=True, skip_empty=True)
         print(f"coverage, lines and branches of the Protocol 2.0 modules: {total:.1f} %")
         print(report.getvalue().rstrip())
-    if stats.failure:
-        print(f"FAILURE: {stats.failure}")
-        if stats.reproducer:
-            Path(args.failure_file).write_text(stats.reproducer + "\n")
-            print(f"reproducer written to {args.failure_file}: python tools/fuzz2.py --replay {args.failure_file}")
-            print(stats.reproducer)
-        return 1
-    print("failures: 0")
-    return 0
+    return fuzz1.report_failure(stats, args.failure_file, "fuzz2.py")
 
 
 if __name__ == "__main__":
