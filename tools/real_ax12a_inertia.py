@@ -1,0 +1,156 @@
+#!/usr/bin/env python3
+"""What the real AX-12A steps say about the bars' inertia, through the twin: the figures behind the miss.
+
+Why it exists: from the twin fitted on the unloaded step (``tools/real_ax12a.py``), the
+diagnosis should name ``extra_inertia`` on each loaded step with the bar's J inside its
+interval, and it does not (``tests/tools/test_real_ax12a.py``).  Two explanations compete:
+the model's response to inertia is wrong (its overshoot grows too slowly with J), or these
+recordings do not carry the bar's signature above their own noise.  This tool prints the
+numbers that tell them apart, per AX-12A recording:
+
+1. **Peaks.**  The highest reading of the real step, against the twin's peak with the bar's J
+   added, at 1 ms and as read every reading period (the Wizard reads the servo about every
+   20 ms; the range over every phase of that clock is printed).  A reading that far apart can
+   miss a peak by a few units, so overshoot differences of that size between recordings are
+   not evidence about the model.
+2. **Cost over extra inertia**, as the diagnosis scores it (its evaluator: the rows' rebuilt
+   reading times, whitened soft-L1 cost on the training rows), from the twin plus each value:
+
+   * *write fixed*: the goal write's time (not recorded in a Wizard export, a nuisance the
+     base fit places) held where the twin put it, as the search screens and fits effects
+     without ``nuisances``.  Inertia slows the start, so held there it is charged for a lag
+     the write time would absorb;
+   * *write re-fitted*: the write time re-fitted at each value (:func:`fit_onsets`);
+   * *move rows*: only the rows from the first movement to :data:`AFTER_PEAK_S` after the
+     peak, the write time re-fitted for them; the rows at rest, where the settled level (one
+     unit either way, decided by friction and play as much as by inertia) weighs a hundred
+     rows, are left out.  Its 95 % region (cost rise times ``n_eff / cost`` below the
+     chi-squared quantile, as :func:`firmware_model.diagnose.verdict.grid_profile` reads a
+     grid) says what the move itself pins down.
+
+Usage::
+
+    python tools/real_ax12a_inertia.py [--data DIR] [--goal 500]
+
+Exit status 2 with a message if the data folder is missing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+from pathlib import Path
+
+import numpy as np
+from scipy.stats import chi2
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import real_ax12a  # noqa: E402
+
+from firmware_model.diagnose.cli import load_input, parse_args  # noqa: E402
+from firmware_model.diagnose.metrics import effective_count, robust_cost  # noqa: E402
+from firmware_model.diagnose.nuisance import fit_onsets  # noqa: E402
+from firmware_model.diagnose.selection import Selection  # noqa: E402
+from firmware_model.diagnose.wizard import read_wizard  # noqa: E402
+from firmware_model.params import ServoParams  # noqa: E402
+
+#: Extra inertia profiled, kg m**2 (the bars are 0.73e-3 and 1.02e-3; the twin's own is about 6e-3).
+EXTRA_GRID_KG_M2 = np.round(np.arange(-1.0e-3, 2.001e-3, 0.25e-3), 6)
+#: The move rows run from the first movement to this long after the highest reading (s): the return from the peak.
+AFTER_PEAK_S = 0.12
+#: Confidence level of the move rows' region.
+LEVEL = 0.95
+
+
+def peaks(params: ServoParams, rec: real_ax12a.Measured, extra_kg_m2: float, period_ms: float, goal: int
+          ) -> tuple[float, float, float]:
+    """The twin's peak with ``extra_kg_m2`` added: at 1 ms, and the lowest and highest peak read every ``period_ms``."""
+    loaded = dataclasses.replace(params, load_inertia_kg_m2=params.load_inertia_kg_m2 + extra_kg_m2)
+    sim = real_ax12a.simulate(loaded, int(rec.pos[0]), goal, 900)
+    top = int(np.argmax(sim))
+    step = max(1, int(round(period_ms)))
+    read = [sim[phase::step].max() for phase in range(step)]
+    return float(sim[top]), float(min(read)), float(max(read))
+
+
+def profile(params: ServoParams, path: Path, goal: int) -> dict:
+    """The cost over :data:`EXTRA_GRID_KG_M2` three ways (see the module docstring), and the move rows' region."""
+    args = parse_args([str(path), "--out", "unused", "--goal", str(goal), "--voltage", str(params.supply_voltage_v)])
+    trace = load_input(args, params).trace
+    sel = Selection(trace, params, lambda msg: None)
+    sel.fit_nuisance()
+    ev, onsets = sel.ev, sel.nuisance.onsets.copy()
+    pos = trace["present_position"].astype(float)
+    first = int(np.argmax(np.abs(pos - pos[0]) >= real_ax12a.MOVED_UNITS))
+    top = int(np.argmax(pos))
+    move = (np.arange(len(pos)) >= first - 1) & (trace.t <= trace.t[top] + AFTER_PEAK_S)
+    lo, hi = ev.schedule.bounds()[1]
+    windows = np.arange(lo, hi + 1)
+    fixed, refit, moving = [], [], []
+    for extra in EXTRA_GRID_KG_M2:
+        knobs = sel.knobs(sel.base, {"extra_inertia": {"extra_inertia_kg_m2": float(extra)}})
+        fixed.append(ev.costs(ev.whiten(ev.run([knobs], onsets=onsets[:, None]))[0])[0])
+        best = fit_onsets(ev, knobs, onsets)
+        refit.append(ev.costs(ev.whiten(ev.run([knobs], onsets=best[:, None]))[0])[0])
+        grid = np.repeat(onsets[:, None], len(windows), axis=1)
+        grid[1] = windows
+        z = ev.whiten(ev.run([knobs] * len(windows), onsets=grid))[:, move, :]
+        costs = robust_cost(z).sum(axis=(1, 2))
+        at = int(np.argmin(costs))
+        moving.append((float(costs[at]), effective_count(z[at])))
+    move_cost = np.array([c for c, _ in moving])
+    b = int(np.argmin(move_cost))
+    scale = moving[b][1] / move_cost[b]
+    inside = EXTRA_GRID_KG_M2[(move_cost - move_cost[b]) * scale <= chi2.ppf(LEVEL, 1)]
+    return {"fixed": np.array(fixed), "refit": np.array(refit), "move": move_cost, "move_rows": int(move.sum()),
+            "move_best": float(EXTRA_GRID_KG_M2[b]), "move_region": (float(inside.min()), float(inside.max()))}
+
+
+def run(data: Path, goal: int) -> int:
+    fit_on = data / real_ax12a.FIT_ON
+    if not fit_on.exists():
+        print(f"real_ax12a_inertia: {fit_on} not found (the recordings live in ../shared/reference/real-ax12a)",
+              file=sys.stderr)
+        return 2
+    twin, volts, scale, _ = real_ax12a.fit_twin(ServoParams(), real_ax12a.load(fit_on), goal)
+    print(f"twin ({real_ax12a.FIT_ON}, as tools/real_ax12a.py fits it): {volts:.2f} V, rotor and gear inertia x{scale:.1f} "
+          f"(total {1e3 * (twin.rotor_inertia_reflected_kg_m2 + twin.load_inertia_kg_m2):.2f}e-3 kg m^2)")
+    grid = "  ".join(f"{1e3 * j:+5.2f}" for j in EXTRA_GRID_KG_M2)
+    for r in real_ax12a.RECORDINGS:
+        path = data / r.file
+        if r.servo != "AX-12A" or not path.exists():
+            continue
+        ex = read_wizard(path)
+        period_ms = 1000.0 * (ex.read_period_s or real_ax12a.TICK_MS / 1000.0)
+        rec = real_ax12a.load(path)
+        final = real_ax12a.real_features(rec)["final"]
+        at_1ms, read_lo, read_hi = peaks(twin, rec, r.load_kg_m2, period_ms, goal)
+        print(f"\n{r.file} (bar {1e3 * r.load_kg_m2:.3f}e-3 kg m^2; read every {period_ms:.1f} ms)")
+        print(f"  peak: real {rec.pos.max():.0f} (settles at {final:.0f}); twin + bar {at_1ms:.1f} at 1 ms, "
+              f"{read_lo:.0f}-{read_hi:.0f} read every {period_ms:.0f} ms")
+        p = profile(twin, path, goal)
+        print(f"  extra J (e-3 kg m^2)   {grid}")
+        for label, key in (("write fixed", "fixed"), ("write re-fitted", "refit"), (f"move rows ({p['move_rows']})", "move")):
+            print(f"  {label:<22} " + "  ".join(f"{c:5.0f}" for c in p[key]))
+        lo, hi = p["move_region"]
+        print(f"  move rows: best {1e3 * p['move_best']:+.2f}e-3, {100 * LEVEL:.0f} % region {1e3 * lo:+.2f}..{1e3 * hi:+.2f}e-3 "
+              f"({'holds' if lo <= r.load_kg_m2 <= hi else 'excludes'} the bar, "
+              f"{'holds' if lo <= 0.0 <= hi else 'excludes'} none)")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--data", type=Path, default=real_ax12a.DEFAULT_DATA, help="folder with the Wizard exports")
+    ap.add_argument("--goal", type=int, default=500, help="the Goal Position the step went to (not recorded)")
+    args = ap.parse_args(argv)
+    if not 0 <= args.goal <= 1023:
+        ap.error(f"--goal must be 0..1023, got {args.goal}")
+    return run(args.data, args.goal)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
