@@ -78,10 +78,11 @@ ERROR_BITS: Mapping[str, int] = {bit.name.lower(): int(bit) for bit in StatusErr
 #: Hardware Error Status bits by name (Protocol 2.0, e-manual X series "Hardware Error Status(70)"),
 #: without the aliases ``alarm`` accepts.
 HW_ERROR_BITS: Mapping[str, int] = {name: bit for bit, name in sorted({bit: name for name, bit in reversed(list(HW_ERROR_NAMES.items()))}.items())}
-#: What ``alarm`` takes per protocol (the page offers these), without aliases.
+#: What ``alarm`` takes per protocol (the page offers these), without aliases, highest bit first: Overload,
+#: which every default Shutdown selects, before the errors an X-series Shutdown may not select.
 ALARM_CHOICES: Mapping[float, tuple[str, ...]] = {
-    1.0: tuple(dict.fromkeys({bit: name for name, bit in reversed(list(ALARM_NAMES.items()))}.values())),
-    2.0: tuple(HW_ERROR_BITS),
+    1.0: tuple(name for _, name in sorted({bit: name for name, bit in reversed(list(ALARM_NAMES.items()))}.items(), reverse=True)),
+    2.0: tuple(reversed(HW_ERROR_BITS)),
 }
 
 

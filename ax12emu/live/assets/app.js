@@ -210,7 +210,7 @@ function updateCard(card, servo, frame) {
   // The load plot shows the current where the servo senses it (X series), else its load.
   const effort = r.current || r.load || {raw: 0, name: "load"};
   const velocity = r.velocity || {raw: 0, name: "velocity"};
-  card.labels = {position: "position", speed: velocity.name + (velocity.unit ? ` (raw; ${velocity.unit})` : ""), load: effort.name + " (raw)"};
+  card.labels = {position: "position", speed: velocity.name + " (raw)", load: effort.name + " (raw)"};
   card.positionMax = servo.dial ? servo.dial.max : 1023;
   card.history.push({t: frame.wall_s, pos: r.position.raw, goal: r.goal.raw, speed: velocity.raw, load: effort.raw});
   while (card.history.length && frame.wall_s - card.history[0].t > HISTORY_S) card.history.shift();
