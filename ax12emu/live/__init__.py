@@ -5,7 +5,9 @@ line: :class:`LiveView` samples a served bus through its ``call`` at a
 bounded rate (:mod:`.sampler`, :mod:`.snapshot`), taps its bytes for the
 packet log (:mod:`.tap`), serves the page, the JSON snapshot and the
 controls (:mod:`.web`, :mod:`.controls`, assets in ``assets/``) and draws
-the terminal view (:mod:`.monitor`).  The web part needs the ``web`` extra
+the terminal view (:mod:`.monitor`).  Buses of either protocol and wires of
+both are shown alike (:mod:`.buses`): each servo by its own table's register
+names and in its model file's units.  The web part needs the ``web`` extra
 (aiohttp); the monitor needs rich.
 """
 
