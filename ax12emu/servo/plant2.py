@@ -256,7 +256,7 @@ class ClassicPlant2(Plant2):
         self.command(goal_written=True)
 
     def write_back(self) -> None:
-        registers = self.classic.sensed_to_registers(self.firmware.sense(), self._last_commands)
+        registers = self.classic.sensed_to_registers(self.firmware.sense(), self._last_commands, self._last_values)
         row = self.table.row
         for name, entry in self._classic_slots:
             row[entry.address : entry.end] = entry.to_bytes(registers[name])

@@ -287,3 +287,18 @@ def test_a_stalled_shaft_trips_the_overload_protection():
     assert read(bus, 1, PRESENT_LOAD) == pytest.approx(1023, abs=15)
     run(bus, 2.0)
     assert read(bus, 1, HARDWARE_ERROR_STATUS, 1) == 0x01 and read(bus, 1, TORQUE_ENABLE, 1) == 0
+
+
+def test_the_eeprom_area_persists_and_torque_limit_starts_from_the_saved_max_torque(tmp_path):
+    """A state store keeps the XL-320's EEPROM (CW Angle Limit, Max Torque); the next power-up starts Torque Limit
+    at the saved Max Torque."""
+    from ax12emu.bus.state_store import StateStore
+
+    def bus():
+        return Bus2([(1, SPEC)], lambda spec, index: build_x_firmware(spec), clock=VirtualClock(), state_store=StateStore(tmp_path))
+
+    with bus() as first:
+        assert write(first, 1, CW_ANGLE_LIMIT, 300, 2) == ErrorNumber.NONE
+        assert write(first, 1, MAX_TORQUE, 700, 2) == ErrorNumber.NONE
+    with bus() as second:
+        assert (read(second, 1, CW_ANGLE_LIMIT), read(second, 1, MAX_TORQUE), read(second, 1, TORQUE_LIMIT)) == (300, 700, 700)
