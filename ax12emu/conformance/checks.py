@@ -23,11 +23,12 @@ import statistics
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from enum import IntEnum
+from typing import Any, ClassVar, NamedTuple
 
 from ax12emu.protocol.control_table import EEPROM_END, TABLE_SIZE, Access, Area, layout
 from ax12emu.protocol.describe import describe_error
-from ax12emu.protocol.packets import BROADCAST_ID, Instruction, StatusError, StatusPacket, encode_instruction
+from ax12emu.protocol.packets import BROADCAST_ID, Instruction, StatusError, encode_instruction
 
 from .link import Link, Response
 
@@ -78,8 +79,52 @@ def table_differences(before: bytes, after: bytes, profile: str, ignore: frozens
     return out
 
 
+class Transactions:
+    """The link's transactions as both suites' checks make them: the answer one servo must give, silence, round trips.
+
+    Protocol 1.0's packets here; ``checks2.Context2`` names Protocol 2.0's (class attributes, below).
+    """
+
+    #: The protocol's instruction packet encoder, its instruction names, and the status packet's field and word
+    #: for "its checksum matched".
+    encode_packet: ClassVar[Callable[..., bytes]] = staticmethod(encode_instruction)
+    instructions: ClassVar[type[IntEnum]] = Instruction
+    check_ok: ClassVar[tuple[str, str]] = ("checksum_ok", "checksum")
+    link: Any
+
+    def transact(self, packet: bytes, *, timeout_s: float | None = None) -> Any:
+        """``link.transact``."""
+        return self.link.transact(packet, timeout_s=timeout_s)
+
+    def silent(self, packet: bytes) -> bool:
+        """Send ``packet`` and report whether nothing came back within the timeout."""
+        return self.transact(packet).status is None
+
+    def status(self, servo_id: int, instruction: int, params: bytes = b"", *, timeout_s: float | None = None) -> Any:
+        """A transaction that must be answered by ``servo_id`` with a matching checksum."""
+        response = self.transact(self.encode_packet(servo_id, instruction, params), timeout_s=timeout_s)
+        known = self.instructions._value2member_map_
+        name = known[instruction].name if instruction in known else f"{instruction:#04x}"
+        expect(response.status is not None, f"no reply to {name} id={servo_id}")
+        status = response.status
+        field_name, word = self.check_ok
+        expect(getattr(status, field_name), f"reply to {name} id={servo_id} has a bad {word}")
+        expect(status.id == servo_id, f"reply to {name} id={servo_id} came from id={status.id}")
+        return status
+
+    def ping_rtts(self, servo_id: int, count: int) -> list[float]:
+        """Round trips of ``count`` PINGs."""
+        packet = self.encode_packet(servo_id, self.instructions["PING"])
+        rtts = []
+        for _ in range(count):
+            response = self.link.transact(packet)
+            expect(response.status is not None, f"PING id={servo_id} unanswered")
+            rtts.append(response.rtt_s)
+        return rtts
+
+
 @dataclass
-class Context:
+class Context(Transactions):
     """What the checks share: the link, the IDs under test, the tables found at the start."""
 
     link: Link
@@ -98,18 +143,7 @@ class Context:
         """An ID no servo under test has (counting down from 253)."""
         return next(i for i in range(253, -1, -1) if i not in self.ids)
 
-    # -- transactions ----------------------------------------------------------------
-    def status(self, servo_id: int, instruction: int, params: bytes = b"", *, timeout_s: float | None = None) -> StatusPacket:
-        """A transaction that must be answered by ``servo_id`` with a valid checksum."""
-        response = self.transact(encode_instruction(servo_id, instruction, params), timeout_s=timeout_s)
-        name = Instruction(instruction).name if instruction in Instruction._value2member_map_ else f"{instruction:#04x}"
-        expect(response.status is not None, f"no reply to {name} id={servo_id}")
-        status = response.status
-        assert status is not None
-        expect(status.checksum_ok, f"reply to {name} id={servo_id} has a bad checksum")
-        expect(status.id == servo_id, f"reply to {name} id={servo_id} came from id={status.id}")
-        return status
-
+    # -- transactions (status, silent, ping_rtts: :class:`Transactions`) ----------------
     def transact(self, packet: bytes, *, timeout_s: float | None = None) -> Response:
         """``link.transact``, then, after a WRITE into the EEPROM area, the wait the servo needs."""
         response = self.link.transact(packet, timeout_s=timeout_s)
@@ -120,10 +154,6 @@ class Context:
         """``link.send`` (no reply expected), then the EEPROM wait as :meth:`transact`."""
         self.link.send(packet)
         eeprom_wait(packet)
-
-    def silent(self, packet: bytes) -> bool:
-        """Send ``packet`` and report whether nothing came back within the timeout."""
-        return self.transact(packet).status is None
 
     def read(self, servo_id: int, address: int, length: int) -> bytes:
         """READ that must succeed without error bits."""
@@ -151,16 +181,6 @@ class Context:
     def table(self, servo_id: int) -> bytes:
         """The whole control table."""
         return self.read(servo_id, 0, TABLE_SIZE)
-
-    def ping_rtts(self, servo_id: int, count: int) -> list[float]:
-        """Round trips of ``count`` PINGs."""
-        packet = encode_instruction(servo_id, Instruction.PING)
-        rtts = []
-        for _ in range(count):
-            response = self.link.transact(packet)
-            expect(response.status is not None, f"PING id={servo_id} unanswered")
-            rtts.append(response.rtt_s)
-        return rtts
 
 
 def eeprom_wait(packet: bytes) -> None:
@@ -425,7 +445,12 @@ def check_status_return_level(ctx: Context) -> str:
 
 def check_return_delay(ctx: Context) -> str:
     """Return Delay Time (2 us per unit) shows in the round trip: measured against a delay of 0."""
-    servo = ctx.target
+    return return_delay_figure(ctx, ctx.target)
+
+
+def return_delay_figure(ctx: Any, servo: int) -> str:
+    """The fastest PING round trip at Return Delay Time 250 (or the servo's own, if 100 or more) less the fastest
+    at 0 must be at least 0.6 x the delay (both protocols: 2 us a unit); the register is restored."""
     original = ctx.get(servo, "return_delay_time")
     slow = original if original >= 100 else 250
     count = 30

@@ -79,8 +79,8 @@ from ax12emu.protocol.params2 import BACKUP_KEY
 from ax12emu.protocol.registers import Access, Area, Entry, Layout
 from ax12emu.protocol.servo_models import ServoModel, model, model_names
 
-from .checks import Check, Failed, Note, Skipped, expect
-from .link import Link2, Response2
+from .checks import Check, Failed, Note, Skipped, Transactions, expect, return_delay_figure
+from .link import Link2
 
 __all__ = ["CHECKS2", "Context2", "model_for_number", "table_differences2"]
 
@@ -151,8 +151,15 @@ def _ms(seconds: float) -> str:
 
 
 @dataclass
-class Context2:
-    """What the checks share: the link, the IDs, each ID's model (from its Ping) and first table image."""
+class Context2(Transactions):
+    """What the checks share: the link, the IDs, each ID's model (from its Ping) and first table image.
+
+    Its transactions (status, silent, ping_rtts) are :class:`~.checks.Transactions`' with Protocol 2.0's packets.
+    """
+
+    encode_packet = staticmethod(encode_instruction2)
+    instructions = Instruction2
+    check_ok = ("crc_ok", "CRC")
 
     link: Link2
     ids: list[int]
@@ -202,26 +209,7 @@ class Context2:
             image[address : address + length] = self.read(servo_id, address, length)
         return bytes(image)
 
-    # -- transactions ------------------------------------------------------------------------
-    def transact(self, packet: bytes, *, timeout_s: float | None = None) -> Response2:
-        """``link.transact``."""
-        return self.link.transact(packet, timeout_s=timeout_s)
-
-    def silent(self, packet: bytes) -> bool:
-        """Send ``packet`` and report whether nothing came back within the timeout."""
-        return self.transact(packet).status is None
-
-    def status(self, servo_id: int, instruction: int, params: bytes = b"", *, timeout_s: float | None = None) -> StatusPacket2:
-        """A transaction that must be answered by ``servo_id`` with a matching CRC."""
-        response = self.transact(encode_instruction2(servo_id, instruction, params), timeout_s=timeout_s)
-        name = Instruction2(instruction).name if instruction in Instruction2._value2member_map_ else f"{instruction:#04x}"
-        expect(response.status is not None, f"no reply to {name} id={servo_id}")
-        status = response.status
-        assert status is not None
-        expect(status.crc_ok, f"reply to {name} id={servo_id} has a bad CRC")
-        expect(status.id == servo_id, f"reply to {name} id={servo_id} came from id={status.id}")
-        return status
-
+    # -- transactions (transact, status, silent, ping_rtts: Transactions') ----------------------
     def read(self, servo_id: int, address: int, length: int) -> bytes:
         """READ that must succeed: no error number, exactly ``length`` bytes."""
         status = self.status(servo_id, Instruction2.READ, _u16(address) + _u16(length))
@@ -251,16 +239,6 @@ class Context2:
     def torque_on(self, servo_id: int) -> bool:
         """Torque Enable(64) is 1."""
         return bool(self.get(servo_id, "torque_enable"))
-
-    def ping_rtts(self, servo_id: int, count: int) -> list[float]:
-        """Round trips of ``count`` Pings."""
-        packet = encode_instruction2(servo_id, Instruction2.PING)
-        rtts = []
-        for _ in range(count):
-            response = self.link.transact(packet)
-            expect(response.status is not None, f"Ping id={servo_id} unanswered")
-            rtts.append(response.rtt_s)
-        return rtts
 
 
 def _u16(value: int) -> bytes:
@@ -881,21 +859,7 @@ def check_return_delay(ctx: Context2) -> str:
     servo = ctx.target
     if ctx.torque_on(servo):
         raise Skipped("torque is on: Return Delay Time is in the EEPROM area")
-    original = ctx.get(servo, "return_delay_time")
-    slow = original if original >= 100 else 250
-    count = 30
-    try:
-        ctx.must_put(servo, "return_delay_time", slow)
-        slow_rtt = min(ctx.ping_rtts(servo, count))
-        ctx.must_put(servo, "return_delay_time", 0)
-        fast_rtt = min(ctx.ping_rtts(servo, count))
-    finally:
-        ctx.put(servo, "return_delay_time", original)
-    expected = slow * 2e-6
-    measured = slow_rtt - fast_rtt
-    figure = f"{slow} ({expected * 1e6:.0f} us): {_ms(slow_rtt)}; 0: {_ms(fast_rtt)} (fastest of {count}); difference {measured * 1e6:.0f} us"
-    expect(measured >= 0.6 * expected, figure)
-    return figure
+    return return_delay_figure(ctx, servo)
 
 
 def check_defaults(ctx: Context2) -> "str | Note":
