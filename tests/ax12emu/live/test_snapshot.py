@@ -153,3 +153,23 @@ def test_real_traffic_from_the_sdk_reaches_the_log():
         frame = sampler.sample()
     assert [line["ins"] for line in frame["log"] if line["who"] in ("host", "servo")] == ["PING", "PING"]
     assert frame["stats"]["packets"] == 1
+
+
+def test_an_xl320_is_read_by_its_own_table_names_with_no_code_of_its_own():
+    """The XL-320's 2.0 table has the AX-12's names (Present Speed with its direction bit, Control Mode for joint/wheel)."""
+    with VirtualBus(servo="1:xl-320", transport="inprocess", virtual_time=True) as bus:
+        bus.write(1, "torque_enable", 1)
+        bus.write(1, "goal_position", 100)  # CW
+        bus.step(0.1)
+        speed, voltage = bus.read(1, "present_speed"), bus.read(1, "present_voltage")
+        joint = take(bus.bus)["servos"][0]
+        bus.write(1, "torque_enable", 0)
+        bus.write(1, "control_mode", 1)
+        wheel = take(bus.bus)["servos"][0]
+    assert joint["model"] == "XL-320" and joint["protocol"] == "2.0"
+    assert joint["mode"] == "joint" and joint["limits"] == [0, 1023] and wheel["mode"] == "wheel" and wheel["limits"] is None
+    one = readings(joint)
+    assert speed & 0x400 and one["velocity"]["register"] == "present_speed" and one["velocity"]["raw"] == -(speed & 0x3FF)
+    assert one["voltage"]["value"] == pytest.approx(voltage / 10)
+    assert one["goal"]["value"] == pytest.approx(100 * model("xl-320").physical.resolution_deg)
+    assert joint["dial"] == {"max": 1023, "range_deg": model("xl-320").physical.position_range_deg}
