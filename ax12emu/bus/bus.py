@@ -34,6 +34,7 @@ from ax12emu.servo.virtual_servo import ServoOptions, VirtualServo
 from firmware_model.interface import ServoModel
 
 from .clock import VirtualClock, WallClock
+from .lookup import ServosById
 from .reply import Reply
 from .reply_cache import ReplyCache
 from .state_store import StateStore
@@ -68,7 +69,7 @@ class Interceptor(Protocol):
         ...
 
 
-class Bus:
+class Bus(ServosById[VirtualServo]):
     """Virtual servos on one wire, with their model, in wall-clock or virtual time."""
 
     def __init__(
@@ -132,26 +133,7 @@ class Bus:
         self._busy_until_s = float("-inf")
         self._closed = False
 
-    # -- lookup ------------------------------------------------------------------------
-    def reindex(self) -> None:
-        """Look servos up by the IDs in their tables again (after an ID changed outside a packet)."""
-        by_id: dict[int, list[VirtualServo]] = {}
-        for servo in self.servos:
-            by_id.setdefault(servo.id, []).append(servo)
-        self._by_id = by_id
-
-    def servo(self, servo_id: int) -> VirtualServo:
-        """The (first) servo answering to ``servo_id`` now."""
-        try:
-            return self._by_id[servo_id][0]
-        except KeyError:
-            raise KeyError(f"no servo with ID {servo_id} on the bus (IDs now: {sorted(self._by_id)})") from None
-
-    @property
-    def ids(self) -> list[int]:
-        """Present IDs, in slot order."""
-        return [servo.id for servo in self.servos]
-
+    # -- lookup (reindex, servo, ids: ServosById) ---------------------------------------
     #: Replies to one packet may overlap on the wire (broadcast PING, duplicate IDs): the serving
     #: loop merges them (``merge_replies``) rather than laying them one after another.
     replies_in_sequence = False

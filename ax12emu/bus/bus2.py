@@ -83,6 +83,7 @@ from firmware_model.xseries.interface import XServoModel
 
 from .bus import BAUD_TOLERANCE, Interceptor
 from .clock import VirtualClock, WallClock
+from .lookup import ServosById
 from .reply import BITS_PER_BYTE, Reply, collide
 from .state_store import StateStore
 
@@ -100,7 +101,7 @@ _LISTED_READS = frozenset({Broadcast.REQUIRED_EACH_ANSWERS, Broadcast.REQUIRED_C
 _REQUIRED_BROADCAST = _LISTED_READS | {Broadcast.REQUIRED_SILENT}
 
 
-class Bus2:
+class Bus2(ServosById[Servo2]):
     """Protocol 2.0 servos on one wire, each with its own model file and firmware model."""
 
     #: Several replies to one packet are timed one after another (see the module docstring): the
@@ -149,25 +150,7 @@ class Bus2:
         self.faults: Interceptor | None = None
         self._closed = False
 
-    # -- lookup ------------------------------------------------------------------------
-    def reindex(self) -> None:
-        """Look servos up by the IDs in their tables again."""
-        by_id: dict[int, list[Servo2]] = {}
-        for servo in self.servos:
-            by_id.setdefault(servo.id, []).append(servo)
-        self._by_id = by_id
-
-    def servo(self, servo_id: int) -> Servo2:
-        """The (first) servo answering to ``servo_id`` now."""
-        try:
-            return self._by_id[servo_id][0]
-        except KeyError:
-            raise KeyError(f"no servo with ID {servo_id} on the bus (IDs now: {sorted(self._by_id)})") from None
-
-    @property
-    def ids(self) -> list[int]:
-        return [servo.id for servo in self.servos]
-
+    # -- lookup (reindex, servo, ids: ServosById) ---------------------------------------
     @property
     def physics_step_s(self) -> float:
         """The shortest control step of the servos' firmware models."""

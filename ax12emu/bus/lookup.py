@@ -1,0 +1,45 @@
+"""Servos looked up by the IDs in their tables: what every bus needs to know who a packet is for.
+
+Why a module of its own: the Protocol 1.0 and 2.0 buses look servos up alike (an ID is a
+register, so it changes when a packet or a fault writes it, and two servos may share one).
+"""
+
+from __future__ import annotations
+
+from typing import Generic, Protocol, TypeVar
+
+__all__ = ["ServosById"]
+
+
+class _HasId(Protocol):
+    @property
+    def id(self) -> int: ...
+
+
+S = TypeVar("S", bound=_HasId)
+
+
+class ServosById(Generic[S]):
+    """A bus's servos (``self.servos``, in slot order) by their present IDs; call :meth:`reindex` once set."""
+
+    servos: list[S]
+    _by_id: dict[int, list[S]]
+
+    def reindex(self) -> None:
+        """Look servos up by the IDs in their tables again (after an ID changed outside a packet)."""
+        by_id: dict[int, list[S]] = {}
+        for servo in self.servos:
+            by_id.setdefault(servo.id, []).append(servo)
+        self._by_id = by_id
+
+    def servo(self, servo_id: int) -> S:
+        """The (first) servo answering to ``servo_id`` now."""
+        try:
+            return self._by_id[servo_id][0]
+        except KeyError:
+            raise KeyError(f"no servo with ID {servo_id} on the bus (IDs now: {sorted(self._by_id)})") from None
+
+    @property
+    def ids(self) -> list[int]:
+        """Present IDs, in slot order."""
+        return [servo.id for servo in self.servos]
