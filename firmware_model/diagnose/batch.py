@@ -23,14 +23,17 @@ Sensing knobs (change only what is read, applied afterwards by
 
 from __future__ import annotations
 
+from array import array
 from dataclasses import dataclass
 
 import numpy as np
 
-from ..controller import compliance_plan, symmetric_compliance_drive
-from ..motor import DryFriction, arm_gravity_torque_nm, bridge_current_a, shaft_speed_step
+from ..backend import SCALAR
+from ..controller import compliance_plan
+from ..motor import DryFriction, arm_gravity_torque_nm
 from ..params import ServoParams
 from ..setpoint import apply_dead_zone, setpoint_velocity
+from ..stepping import _clip as clip
 from ..units import RAD_PER_POSITION_UNIT, RAD_S_PER_SPEED_UNIT
 from .replay import DEFAULT_REGISTERS
 from .schedule import Schedule, Segment
@@ -123,6 +126,22 @@ def simulate(schedule: Schedule, params: ServoParams, knobs: dict[str, np.ndarra
     ``onsets``: the step after which each segment's commands start, shape
     (segments,) or (segments, K) (default: each segment's ``first``), for a
     recording that does not say when commands were sent (:mod:`.nuisance`).
+
+    The reference (the setpoint generator's output) depends on the commands
+    and their onsets alone, never on the shaft or a knob, so it is stepped
+    apart, once per distinct onset column, and kept for the next call on the
+    same schedule (:func:`_reference_units`).  Where every shaft rests and
+    neither a command nor the reference changes, a step repeats the one
+    before exactly, so such runs are copied rather than stepped (looked for
+    every :data:`REST_CHECK_EVERY` steps; a fifth to a third of a diagnosis
+    trace's steps).  The shaft's step then runs in
+    place, as :class:`~firmware_model.stepping.FusedNumpySteps` does and for
+    the same reason (a numpy call costs about a microsecond, twice that when
+    it converts a Python float or allocates): every constant broadcast to
+    shape (K,) once, every call writing into a preallocated buffer, the
+    same arithmetic in the same order as the step functions, so the records
+    are those of :func:`~firmware_model.stepping.generic_steps` to the bit
+    (a test compares them with :func:`.replay.replay`).
     """
     p, dt = params, schedule.step_s
     null = null_knobs(p)
@@ -131,10 +150,10 @@ def simulate(schedule: Schedule, params: ServoParams, knobs: dict[str, np.ndarra
     comp = compliance_plan(np.array([regs["ccw_compliance_margin"]]), np.array([regs["ccw_compliance_margin"]]),
                            np.array([regs["ccw_compliance_slope"]]), np.array([regs["ccw_compliance_slope"]]),
                            np.array([regs["punch"]]), np.array([1023]))
+    full = lambda value: np.full(k, float(value))  # noqa: E731
     margin = float(comp.ccw_margin[0]) + kn["extra_margin_units"]
-    gain, punch = float(comp.ccw_gain[0]), float(comp.punch[0])
-    a, inv_unit = p.max_acceleration_rad_s2, 1.0 / _UNIT
-    k_r = p.torque_constant_nm_a / p.winding_resistance_ohm
+    gain, punch = full(comp.ccw_gain[0]), full(comp.punch[0])
+    k_r = full(p.torque_constant_nm_a / p.winding_resistance_ohm)
     eta_k = kn["gearbox_efficiency"] * p.torque_constant_nm_a
     if np.all(kn["gearbox_efficiency"] == p.gearbox_efficiency):
         eta_k = np.full(k, p.gearbox_efficiency * p.torque_constant_nm_a)
@@ -144,71 +163,192 @@ def simulate(schedule: Schedule, params: ServoParams, knobs: dict[str, np.ndarra
     dt_j = np.where(kn["extra_inertia_kg_m2"] == 0, dt / p.total_inertia_kg_m2, dt / inertia)
     eta_k_dv = eta_k * dt_j  # as StepConstants.eta_k_dv
     friction = DryFriction.per_step(ts, tc, vs, dt_j)
+    # motor.shaft_speed_step's constants: viscous keep, Stribeck coefficient and height, Coulomb
     keep = 1.0 - b * dt_j if b else None
+    strib = np.broadcast_to(friction.stribeck_coef_s2_rad2, (k,)).copy()
+    stribeck_dv = np.broadcast_to(friction.static_dv_rad_s - friction.coulomb_dv_rad_s, (k,)).copy()
+    coulomb_dv = np.broadcast_to(friction.coulomb_dv_rad_s, (k,)).copy()
     braking = p.bridge_braking_fraction
+    # motor.bridge_current_a: None passes all braking current, ``zero`` none, else the share (as _NumpyConstants)
+    zero = full(0.0)
+    bridge_share = None if braking == 1.0 else zero if braking == 0.0 else full(braking)
+    bridge_against = full(1.0 - braking)
     half_play = kn["backlash_rad"] / 2.0
     any_play = bool(np.any(half_play != 0))
     weight = kn["arm_weight_nm"]
     any_arm = bool(np.any(weight != 0))
     ceiling = kn["drive_ceiling"]
+    step, inv_unit = full(dt), full(1.0 / _UNIT)
 
     n = schedule.n_steps
-    rec_angle = np.empty((n + 1, k))
-    rec_drive = np.empty((n + 1, k))
-    angle = np.full(k, schedule.initial_position_raw * _UNIT)
-    out = angle.copy()
-    speed, ref, ref_vel, drive = np.zeros(k), angle.copy(), np.zeros(k), np.zeros(k)
-    rec_angle[0], rec_drive[0] = out, drive
-    eps = p.setpoint_eps_rad
     segs = schedule.segments
     if onsets is None:
         on = np.broadcast_to(schedule.nominal_onsets()[:, None], (len(segs), k))
     else:
         on = np.broadcast_to(np.asarray(onsets, dtype=np.int64).reshape(len(segs), -1), (len(segs), k))
-    # each segment's commands start after its onset step, per simulation (the same step for all but a fitted onset)
+    ref_units, next_change = _reference_units(schedule, p, on)
+    rec_angle = np.empty((n + 1, k))
+    rec_drive = np.empty((n + 1, k))
+    angle = np.full(k, schedule.initial_position_raw * _UNIT)
+    out = angle.copy() if any_play else angle
+    speed, drive = np.zeros(k), np.zeros(k)
+    rec_angle[0], rec_drive[0] = out, drive
+    events = _events(segs, on)
+    limit, volts_r, ext = (np.zeros(k) for _ in range(3))
+    ext_dv = None
+    rint, exp, sign, minimum, maximum, heaviside = np.rint, np.exp, np.sign, np.minimum, np.maximum, np.heaviside
+    i, start_speed = 0, speed
+    while i < n:
+        i += 1
+        if not i % REST_CHECK_EVERY and next_change[i - 1] > i and not start_speed.any() and not speed.any():
+            # Step i - 1 started and ended with every shaft still, and nothing changes before step
+            # next_change[i - 1] (no command starts, no reference moves): each step until then repeats
+            # it exactly, its position, error, drive and zero speed, so it is copied, not stepped.
+            stop = next_change[i - 1]
+            rec_angle[i:stop] = out
+            rec_drive[i:stop] = drive
+            i = stop - 1
+            continue
+        start_speed = speed
+        starting = events.get(i - 1)
+        if starting:
+            for seg, mask in starting:
+                new = (seg.limit, seg.supply_v / p.winding_resistance_ohm, seg.external_torque_nm)
+                if mask is None:
+                    limit, volts_r, ext = (np.full(k, v) for v in new)
+                else:
+                    limit, volts_r, ext = (np.where(mask, v, old) for v, old in zip(new, (limit, volts_r, ext)))
+            limit = np.minimum(limit, ceiling)
+            ext_dv = ext * dt_j if np.any(ext != 0) else None
+        angle = angle + speed * step
+        if any_play:  # the sensor's side of the gear play
+            out = minimum(maximum(out, angle - half_play), angle + half_play)
+        else:
+            out = angle
+        # controller.symmetric_compliance_drive, on the error in units; (d > 0) as 0.0 / 1.0 by heaviside
+        error = ref_units[i] - rint(out * inv_unit)
+        beyond = abs(error) - margin
+        drive = minimum((punch + beyond * gain) * heaviside(beyond, zero), limit) * sign(error)
+        current = drive * volts_r - k_r * speed
+        if bridge_share is not None:  # motor.bridge_current_a, as generic_steps: the H-bridge's share of braking
+            passes = heaviside(current * drive, zero)
+            current = current * (passes if bridge_share is zero else bridge_share + bridge_against * passes)
+        applied_dv = current * eta_k_dv
+        if ext_dv is not None:
+            applied_dv = applied_dv + ext_dv
+        if any_arm:
+            applied_dv = applied_dv + load_dv(np, angle, weight, dt_j)
+        # motor.shaft_speed_step: the free speed, then dry friction (at the starting speed);
+        # copysign(minimum(|free|, dry), free) is clip(free, -dry, dry), the same values in fewer calls
+        free = applied_dv + (speed if keep is None else speed * keep)
+        dry = coulomb_dv + stribeck_dv * exp(speed * speed * strib)
+        speed = free - clip(free, -dry, dry)
+        rec_angle[i] = out
+        rec_drive[i] = drive
+    return Record(rec_angle, rec_drive)
+
+
+def _events(segs: tuple[Segment, ...], on: np.ndarray) -> dict[int, list[tuple[Segment, np.ndarray | None]]]:
+    """Step -> the segments whose commands start after it, each with the columns it starts in (None: all)."""
     events: dict[int, list[tuple[Segment, np.ndarray | None]]] = {}
     for j, seg in enumerate(segs):
         for at in np.unique(on[j]):
             mask = on[j] == at
             events.setdefault(int(at), []).append((seg, None if mask.all() else mask))
-    goal, vmax, limit, volts_r, ext = (np.zeros(k) for _ in range(5))
-    ext_dv, any_ext = None, False
-    for step in range(1, n + 1):
-        starting = events.get(step - 1)
-        if starting:
-            for seg, mask in starting:
-                new = (seg.goal_rad, seg.max_speed_rad_s, seg.limit, seg.supply_v / p.winding_resistance_ohm,
-                       seg.external_torque_nm)
-                if mask is None:
-                    goal, vmax, limit, volts_r, ext = (np.full(k, v) for v in new)
-                    if seg.replan:
-                        ref = apply_dead_zone(ref, ref_vel, goal, eps)
-                else:
-                    goal, vmax, limit, volts_r, ext = (np.where(mask, v, old) for v, old in
-                                                       zip(new, (goal, vmax, limit, volts_r, ext)))
-                    if seg.replan:
-                        ref = np.where(mask, apply_dead_zone(ref, ref_vel, goal, eps), ref)
-            limit = np.minimum(limit, ceiling)
-            any_ext = bool(np.any(ext != 0))
-            ext_dv = ext * dt_j if any_ext else None
-        ref_vel = setpoint_velocity(np, ref, ref_vel, goal, vmax, a, dt)
-        ref = ref + ref_vel * dt
-        angle = angle + speed * dt
-        out = np.minimum(np.maximum(out, angle - half_play), angle + half_play) if any_play else angle
-        error = ref * inv_unit - np.rint(out * inv_unit)
-        drive, _ = symmetric_compliance_drive(np, error, margin, gain, punch, limit)
-        current = drive * volts_r - k_r * speed
-        if braking != 1.0:  # as generic_steps: the H-bridge's share of braking current
-            current = bridge_current_a(current, drive, braking)
-        applied_dv = current * eta_k_dv
-        if any_ext:
-            applied_dv = applied_dv + ext_dv
-        if any_arm:
-            applied_dv = applied_dv + load_dv(np, angle, weight, dt_j)
-        speed = shaft_speed_step(np, speed, applied_dv, friction, keep)
-        rec_angle[step] = out
-        rec_drive[step] = drive
-    return Record(rec_angle, rec_drive)
+    return events
+
+
+#: :func:`simulate` looks for a run of repeated resting steps after every this many steps (a check costs
+#: about two numpy calls, a step about thirty).
+REST_CHECK_EVERY = 8
+#: The setpoint generator's path from each state it was started in (see :func:`_reference_path`), for the
+#: next call: (accel, step, ref, ref_vel, goal, max_speed) -> [refs, ref_vels, whether it ends at a fixed point].
+_PATHS: dict = {}
+#: Past this many paths the store is emptied (a diagnosis needs a few hundred; each is at most a segment long).
+_PATHS_KEPT = 2048
+
+
+def _reference_units(schedule: Schedule, params: ServoParams, on: np.ndarray) -> tuple[np.ndarray, list[int]]:
+    """The reference after each step, in position units, shape (n + 1, K): one column per onset column of ``on``;
+    and for each step the next one at which a command starts or any reference moves (n + 1: none).
+
+    Each distinct column of ``on`` (segments, K) is stepped as ``generic_steps``
+    steps it: at each onset the segments starting there set goal and speed in
+    turn (re-planning through the dead zone), then
+    :func:`~firmware_model.setpoint.setpoint_velocity` runs until the next
+    onset.  It runs on plain floats (:data:`~firmware_model.backend.SCALAR`:
+    the same values as numpy's, as IEEE sums, products and square roots round
+    alike), from paths kept across calls: a fit varies the knobs and the
+    onsets, seldom the state a segment starts from.
+    """
+    cols, inverse = np.unique(on, axis=1, return_inverse=True)
+    inverse = np.asarray(inverse).reshape(-1)
+    a, eps, dt = params.max_acceleration_rad_s2, params.setpoint_eps_rad, schedule.step_s
+    n, segs = schedule.n_steps, schedule.segments
+    table = np.empty((n + 1, cols.shape[1]))
+    start = schedule.initial_position_raw * _UNIT
+    for g in range(cols.shape[1]):
+        column = table[:, g]
+        column[0] = start
+        ref, vel, goal, vmax, done = start, 0.0, 0.0, 0.0, 0
+        for j in sorted(range(len(segs)), key=lambda j: cols[j, g]):  # a stable sort: onset, then segment
+            at = int(cols[j, g])
+            if at >= n:  # acts on no step
+                break
+            if at > done:
+                ref, vel = _reference_path(column, done, at, ref, vel, goal, vmax, a, dt)
+                done = at
+            seg = segs[j]
+            goal, vmax = seg.goal_rad, seg.max_speed_rad_s
+            if seg.replan:
+                ref = float(apply_dead_zone(ref, vel, goal, eps))
+        _reference_path(column, done, n, ref, vel, goal, vmax, a, dt)
+    table *= 1.0 / _UNIT
+    changes = np.zeros(n + 2, dtype=bool)
+    changes[1:n + 1] = np.any(table[1:] != table[:-1], axis=1)
+    starts = np.unique(cols) + 1  # a command starting after step ``at`` acts from step ``at + 1``
+    changes[starts[(starts >= 1) & (starts <= n)]] = True
+    changes[n + 1] = True
+    at = np.where(changes, np.arange(n + 2), n + 1)
+    next_change = np.minimum.accumulate(at[::-1])[::-1][1:].tolist()  # [i]: the first change after step i
+    expanded = np.broadcast_to(table, (n + 1, len(inverse))) if table.shape[1] == 1 else table[:, inverse]
+    return expanded, next_change
+
+
+def _reference_path(column: np.ndarray, done: int, stop: int, ref: float, vel: float, goal: float, vmax: float,
+                    a: float, dt: float) -> tuple[float, float]:
+    """Write the reference (rad) after steps ``done + 1 .. stop`` into ``column``; return the state after ``stop``.
+
+    A path that reaches a fixed point (a step that changes neither reference
+    nor velocity: it rests on its goal) is stepped no further, since every
+    step after it repeats it.
+    """
+    key = (a, dt, ref, vel, goal, vmax)
+    path = _PATHS.get(key)
+    if path is None:
+        if len(_PATHS) >= _PATHS_KEPT:
+            _PATHS.clear()
+        path = _PATHS[key] = [array("d"), array("d"), False]
+    refs, vels, fixed = path
+    count = stop - done
+    if len(refs) < count and not fixed:
+        r, v = (refs[-1], vels[-1]) if refs else (ref, vel)
+        while len(refs) < count:
+            v_next = setpoint_velocity(SCALAR, r, v, goal, vmax, a, dt)
+            r_next = r + v_next * dt
+            if r_next == r and v_next == v:
+                path[2] = fixed = True
+                break
+            r, v = r_next, v_next
+            refs.append(r)
+            vels.append(v)
+    have = min(count, len(refs))
+    column[done + 1:done + 1 + have] = np.frombuffer(refs, count=have)
+    if have == count:
+        return (refs[count - 1], vels[count - 1]) if count else (ref, vel)
+    last = (refs[-1], vels[-1]) if refs else (ref, vel)
+    column[done + 1 + have:stop + 1] = last[0]
+    return last
 
 
 def sample(schedule: Schedule, record: Record, params: ServoParams, sensing: dict | None = None,

@@ -100,3 +100,35 @@ def test_batch_equals_replay_with_command_times():
     out = sample(s, simulate(s, p, {}, 1), p)
     for ch in ("present_position", "present_speed", "present_load"):
         np.testing.assert_array_equal(out[ch][:, 0], ref[ch])
+
+
+def test_shortcuts_give_the_records_of_stepping_every_step(monkeypatch):
+    """Copying runs of resting steps and reusing kept reference paths change no value.
+
+    Varied knobs (play, an arm, friction, a drive ceiling) and per-column onsets, simulated with the
+    shortcuts and then with every step stepped and every reference path stepped afresh: equal records.
+    """
+    from firmware_model.diagnose import batch
+
+    tr = _trace(4.0)
+    rows = tr.change_rows()
+    tr = tr.with_columns(external_torque_nm=np.where(np.arange(len(tr)) > rows[5], 0.2, 0.0))
+    s = compile_schedule(tr)
+    p = ServoParams()
+    k = 5
+    knobs = {"backlash_rad": np.array([0.0, 0.01, 0.0, 0.02, 0.005]),
+             "arm_weight_nm": np.array([0.0, 0.0, 0.2, 0.1, 0.0]),
+             "coulomb_friction_nm": np.linspace(0.02, 0.08, k), "drive_ceiling": np.array([1.0, 0.6, 1.0, 1.0, 0.8])}
+    onsets = s.nominal_onsets()[:, None] + np.array([0, 0, 3, 7, 3])
+    onsets[0] = 0
+    fast = [simulate(s, p, knobs, k, onsets=on) for on in (None, onsets, onsets)]  # the last reuses kept paths
+    rests = np.all(fast[0].angle[1:] == fast[0].angle[:-1], axis=1)
+    assert rests.sum() > 4 * batch.REST_CHECK_EVERY  # every shaft rests long enough for runs to be copied
+    monkeypatch.setattr(batch, "REST_CHECK_EVERY", s.n_steps + 1)
+    monkeypatch.setattr(batch, "_PATHS", {})
+    monkeypatch.setattr(batch, "_PATHS_KEPT", 1)
+    slow = [simulate(s, p, knobs, k, onsets=on) for on in (None, onsets)]
+    for a, b in zip(fast, [slow[0], slow[1], slow[1]]):
+        np.testing.assert_array_equal(a.angle, b.angle)
+        np.testing.assert_array_equal(a.drive, b.drive)
+    assert not np.array_equal(fast[0].angle, fast[1].angle)  # the onsets matter
