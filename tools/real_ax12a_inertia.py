@@ -8,12 +8,17 @@ the model's response to inertia is wrong (its overshoot grows too slowly with J)
 recordings do not carry the bar's signature above their own noise.  This tool prints the
 numbers that tell them apart, per AX-12A recording:
 
-1. **Peaks.**  The highest reading of the real step, against the twin's peak with the bar's J
+1. **Timing, model-free.**  When the step crosses :data:`LEVELS_UNITS` on the rows' rebuilt
+   reading times (interpolated between rows), from its crossing of the first: a start slowed
+   by the bar shows in the first intervals, the supply (not recorded, and free to differ from
+   one recording to the next) in the cruise between 200 and 400 units; the twin with the
+   bar's J added, at 1 ms, beside it.
+2. **Peaks.**  The highest reading of the real step, against the twin's peak with the bar's J
    added, at 1 ms and as read every reading period (the Wizard reads the servo about every
    20 ms; the range over every phase of that clock is printed).  A reading that far apart can
    miss a peak by a few units, so overshoot differences of that size between recordings are
    not evidence about the model.
-2. **Cost over extra inertia**, as the diagnosis scores it (its evaluator: the rows' rebuilt
+3. **Cost over extra inertia**, as the diagnosis scores it (its evaluator: the rows' rebuilt
    reading times, whitened soft-L1 cost on the training rows), from the twin plus each value:
 
    * *write fixed*: the goal write's time (not recorded in a Wizard export, a nuisance the
@@ -28,7 +33,7 @@ numbers that tell them apart, per AX-12A recording:
      chi-squared quantile, as :func:`firmware_model.diagnose.verdict.grid_profile` reads a
      grid) says what the move itself pins down.
 
-3. With ``--joint``: a twin fitted on the unloaded step as the diagnosis scores it (the rebuilt
+4. With ``--joint``: a twin fitted on the unloaded step as the diagnosis scores it (the rebuilt
    reading times, the write time re-fitted), over supply, rotor and gear inertia *and* gear
    play together (every real gear train has some; the unloaded step names about 0.01 rad from
    the plain twin), and what the diagnosis names on each step from it.
@@ -67,6 +72,8 @@ from firmware_model.params import ServoEffects, ServoParams  # noqa: E402
 EXTRA_GRID_KG_M2 = np.round(np.arange(-1.0e-3, 2.001e-3, 0.25e-3), 6)
 #: The move rows run from the first movement to this long after the highest reading (s): the return from the peak.
 AFTER_PEAK_S = 0.12
+#: Position levels (units) whose crossing times are compared, the first the origin.
+LEVELS_UNITS = (15, 100, 200, 400, 480)
 #: Confidence level of the move rows' region.
 LEVEL = 0.95
 #: The joint fit's grid: supply (V), rotor and gear inertia added to the default's (kg m**2), gear play (rad).
@@ -103,6 +110,17 @@ def fit_joint(path: Path, goal: int) -> tuple[ServoParams, float]:
                         effects=ServoEffects(backlash_rad=float(play)) if play else ServoEffects())
                     best = (cost, twin)
     return best[1], float(best[0])
+
+
+def crossings_ms(times_ms: np.ndarray, pos: np.ndarray) -> np.ndarray:
+    """When ``pos`` first reaches each of :data:`LEVELS_UNITS` (interpolated between rows), ms after the first."""
+    out = []
+    for level in LEVELS_UNITS:
+        i = int(np.argmax(pos >= level))
+        if i == 0 or pos[i] < level:
+            raise ValueError(f"the step never crosses {level} units from below")
+        out.append(times_ms[i - 1] + (level - pos[i - 1]) * (times_ms[i] - times_ms[i - 1]) / (pos[i] - pos[i - 1]))
+    return np.array(out[1:]) - out[0]
 
 
 def peaks(params: ServoParams, rec: real_ax12a.Measured, extra_kg_m2: float, period_ms: float, goal: int
@@ -188,6 +206,14 @@ def run(data: Path, goal: int, joint: bool = False) -> int:
         final = real_ax12a.real_features(rec)["final"]
         at_1ms, read_lo, read_hi = peaks(twin, rec, r.load_kg_m2, period_ms, goal)
         print(f"\n{r.file} (bar {1e3 * r.load_kg_m2:.3f}e-3 kg m^2; read every {period_ms:.1f} ms)")
+        sim = real_ax12a.simulate(dataclasses.replace(twin, load_inertia_kg_m2=twin.load_inertia_kg_m2 + r.load_kg_m2),
+                                  int(rec.pos[0]), goal, 900)
+        real_ms = crossings_ms(1000.0 * ex.times_s, ex.values["present_position"].astype(float))
+        twin_ms = crossings_ms(np.arange(len(sim), dtype=float), sim)
+        names = ", ".join(str(v) for v in LEVELS_UNITS[1:])
+        print(f"  ms from {LEVELS_UNITS[0]} to {names} units: real " + " ".join(f"{x:5.1f}" for x in real_ms)
+              + "; twin + bar " + " ".join(f"{x:5.1f}" for x in twin_ms)
+              + f"; real cruise {LEVELS_UNITS[2]}-{LEVELS_UNITS[3]} in {real_ms[2] - real_ms[1]:.1f} ms")
         print(f"  peak: real {rec.pos.max():.0f} (settles at {final:.0f}); twin + bar {at_1ms:.1f} at 1 ms, "
               f"{read_lo:.0f}-{read_hi:.0f} read every {period_ms:.0f} ms")
         p = profile(twin, path, goal)
