@@ -88,32 +88,37 @@ ALARM_CHOICES: Mapping[float, tuple[str, ...]] = {
 
 @dataclass(frozen=True)
 class Unit:
-    """A register's unit: ``per_raw`` units per count, or the model file's ``[physical]`` field that gives it."""
+    """A register's unit: the model file's field that gives its size per count where the file has it, else ``per_raw``."""
 
     unit: str
     per_raw: float | None = None
-    physical: str | None = None
-    #: Bit 10 is the direction (CW) and bits 0-9 the magnitude, where the register is unsigned (AX-12, XL-320).
+    #: "section.field" of the model file (``[physical]``, ``[classic]``) giving the units per count.
+    model_field: str | None = None
+    #: An unsigned register whose direction is a bit (bit 10, or the model file's ``[classic]`` ``direction_bit``)
+    #: above the magnitude (AX-12, XL-320, MX series); signed registers (X series) need no such reading.
     direction_bit: bool = False
+    #: In wheel mode where the wheel output is a share of the output (the AX-12A; ``[classic]``
+    #: ``wheel_output = "pwm"``): this unit and its size per count instead.
+    wheel: tuple[str, float] | None = None
 
 
-#: Units by register name.  Sources (ROBOTIS e-manual): AX-12A "Present Speed(38)": about 0.111 rpm,
-#: bit 10 the direction, and "Present Load(40)": 0.1 % of the maximum torque, bit 10 the direction,
-#: "Present Voltage(42)": 10 times the volts; XL-320 the same for its Present Speed(39), Load(41) and
-#: Voltage(45) ("the unit is about 0.111rpm"; "10 times larger than the actual voltage"); X series
-#: "Present Velocity(128)": 0.229 rpm, "Present Load(126)": 0.1 %, "Present PWM(124)": 0.113 %
+#: Units by register name.  Sources (ROBOTIS e-manual): AX-12A "Present Speed(38)": about 0.111 rpm in
+#: joint mode, about 0.1 % of the output in wheel mode, bit 10 the direction; "Present Load(40)": 0.1 %
+#: of the maximum torque, bit 10 the direction; "Present Voltage(42)": 10 times the volts; the XL-320
+#: and the MX series the same, their speed units in their model files' ``[classic]`` (0.111, 0.114 rpm);
+#: X series "Present Velocity(128)": 0.229 rpm, "Present Load(126)": 0.1 %, "Present PWM(124)": 0.113 %
 #: ("PWM Limit(36)": 885 = 100 %), "Present Input Voltage(144)": 0.1 V, "Present Temperature(146)": 1 °C.
 #: Positions (0.088 deg on the X series, 0.29 deg on the AX-12A) and currents (1 mA, 2.69 mA) differ
 #: per model: each model file states them.
 REGISTER_UNITS: Mapping[str, Unit] = {
-    "present_position": Unit("deg", physical="resolution_deg"),
-    "goal_position": Unit("deg", physical="resolution_deg"),
+    "present_position": Unit("deg", model_field="physical.resolution_deg"),
+    "goal_position": Unit("deg", model_field="physical.resolution_deg"),
     "present_velocity": Unit("rpm", 0.229),
     "goal_velocity": Unit("rpm", 0.229),
-    "present_speed": Unit("rpm", 0.111, direction_bit=True),
-    "moving_speed": Unit("rpm", 0.111, direction_bit=True),
-    "present_current": Unit("mA", physical="current_unit_ma"),
-    "goal_current": Unit("mA", physical="current_unit_ma"),
+    "present_speed": Unit("rpm", 0.111, model_field="classic.speed_unit_rpm", direction_bit=True, wheel=("%", 0.1)),
+    "moving_speed": Unit("rpm", 0.111, model_field="classic.speed_unit_rpm", direction_bit=True, wheel=("%", 0.1)),
+    "present_current": Unit("mA", model_field="physical.current_unit_ma"),
+    "goal_current": Unit("mA", model_field="physical.current_unit_ma"),
     "present_load": Unit("%", 0.1, direction_bit=True),
     "present_pwm": Unit("%", 0.113),
     "goal_pwm": Unit("%", 0.113),
@@ -121,6 +126,8 @@ REGISTER_UNITS: Mapping[str, Unit] = {
     "present_voltage": Unit("V", 0.1),
     "present_temperature": Unit("°C", 1.0),
 }
+#: The direction bit where the model file does not name one (e-manual AX-12A: "bit 10").
+DIRECTION_BIT = 10
 
 #: What the page and the monitor show for every servo: (reading, registers that give it, the first the table has).
 READINGS: tuple[tuple[str, tuple[str, ...]], ...] = (
@@ -134,9 +141,9 @@ READINGS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("temperature", ("present_temperature",)),
 )
 
-#: Mode registers: value -> (name, whether the position limits bound the goal in that mode).
-#: e-manual X series "Operating Mode(11)"; XL-320 "Control Mode(11)" (1 wheel, 2 joint).  A table with
-#: neither (the AX-12) is in wheel mode when both angle limits are 0 (e-manual AX-12A "CW/CCW Angle Limit").
+#: Operating Mode(11) values (e-manual X series): (name, whether the position limits bound the goal).
+#: Tables without it (AX-12, XL-320, MX series) are in joint or wheel mode (and the MX series in
+#: multi-turn mode) as their angle limits and the model file's ``[classic]`` mode register say.
 MODES: Mapping[str, Mapping[int, tuple[str, bool]]] = {
     "operating_mode": {
         0: ("current", False),
@@ -146,7 +153,6 @@ MODES: Mapping[str, Mapping[int, tuple[str, bool]]] = {
         5: ("current-based position", True),
         16: ("PWM", False),
     },
-    "control_mode": {1: ("wheel", False), 2: ("joint", True)},
 }
 #: The position-limit register pairs, the first pair the table has.
 LIMITS = (("cw_angle_limit", "ccw_angle_limit"), ("min_position_limit", "max_position_limit"))
@@ -165,13 +171,33 @@ def model_of(servo: Any, protocol: float) -> ServoModel | None:
     return _models_by_number(protocol_name(protocol)).get(servo.table.get("model_number"))
 
 
+def _model_field(spec: ServoModel | None, field: str) -> Any:
+    """``"section.name"`` of a model file (``physical.resolution_deg``), None where the file has no such number."""
+    section, name = field.split(".")
+    return getattr(getattr(spec, section, None), name, None)
+
+
+@dataclass(frozen=True)
+class _Reading:
+    name: str
+    register: str
+    unit: str
+    #: Units per count (None: unknown, the raw value alone is shown).
+    per_raw: float | None
+    #: The direction bit's value, 0 where the register is signed or has none.
+    direction_mask: int
+    #: (unit, per count) in wheel mode, where it differs.
+    wheel: tuple[str, float] | None
+
+
 @dataclass(frozen=True)
 class _Plan:
     """What to read from one kind of servo (a layout and a model file), worked out once: every frame reads it."""
 
     registers: tuple[tuple[str, Any], ...]
-    #: (reading, register, unit label, units per count or None, whether bit 10 is the direction).
-    readings: tuple[tuple[str, str, str, float | None, bool], ...]
+    readings: tuple[_Reading, ...]
+    #: Hardware Error Status or status-packet error bits by name, lowest first.
+    error_bits: Mapping[str, int]
 
 
 #: Plans by (id of the layout, model key); the layout is kept in the value so its id stays its own.
@@ -184,41 +210,61 @@ def _plan(layout: Any, spec: ServoModel | None) -> _Plan:
     if found is not None and found[0] is layout:
         return found[1]
     by_name = layout.by_name
+    classic = getattr(spec, "classic", None)
     readings = []
     for name, candidates in READINGS:
         register = next((r for r in candidates if r in by_name), None)
         if register is None:
             continue
         unit = REGISTER_UNITS.get(register)
-        per_raw = None
-        if unit is not None:
-            per_raw = unit.per_raw if unit.physical is None else getattr(spec.physical, unit.physical, None) if spec is not None else None
-        direction_bit = unit is not None and unit.direction_bit and not by_name[register].signed
-        readings.append((name, register, unit.unit if per_raw is not None else "", per_raw, direction_bit))  # type: ignore[union-attr]
-    plan = _Plan(tuple((name, by_name[name]) for name in REGISTERS if name in by_name), tuple(readings))
+        if unit is None:
+            readings.append(_Reading(name, register, "", None, 0, None))
+            continue
+        from_file = _model_field(spec, unit.model_field) if unit.model_field else None
+        per_raw = from_file if from_file is not None else unit.per_raw
+        direction = (classic.direction_bit if classic is not None else DIRECTION_BIT) if unit.direction_bit and not by_name[register].signed else None
+        # Wheel-mode speed is a share of the output unless the model file says it is a speed (the MX series).
+        wheel = unit.wheel if classic is None or classic.wheel_output == "pwm" else None
+        readings.append(_Reading(name, register, unit.unit if per_raw is not None else "", per_raw, 0 if direction is None else 1 << direction, wheel))
+    if "hardware_error_status" in by_name:  # Protocol 2.0: the latched errors (the classic tables' own bits in their file)
+        errors = dict(sorted(((n, b) for n, b in classic.errors), key=lambda item: item[1])) if classic is not None and classic.errors else HW_ERROR_BITS
+    else:
+        errors = ERROR_BITS
+    plan = _Plan(tuple((name, by_name[name]) for name in REGISTERS if name in by_name), tuple(readings), errors)
     _PLANS[key] = (layout, plan)
     return plan
 
 
-def _readings(plan: _Plan, registers: Mapping[str, int]) -> list[dict[str, Any]]:
+def _readings(plan: _Plan, registers: Mapping[str, int], wheel: bool) -> list[dict[str, Any]]:
     out = []
-    for name, register, unit, per_raw, direction_bit in plan.readings:
-        raw = registers[register]
-        if direction_bit:
-            raw = -(raw & 0x3FF) if raw & 0x400 else raw & 0x3FF
+    for reading in plan.readings:
+        raw = registers[reading.register]
+        mask = reading.direction_mask
+        if mask:
+            raw = -(raw & (mask - 1)) if raw & mask else raw & (mask - 1)
+        unit, per_raw = reading.wheel if wheel and reading.wheel is not None else (reading.unit, reading.per_raw)
         value = None if per_raw is None else round(raw * per_raw, 3)
-        out.append({"name": name, "register": register, "raw": raw, "value": value, "unit": unit})
+        out.append({"name": reading.name, "register": reading.register, "raw": raw, "value": value, "unit": unit})
     return out
 
 
-def _mode(registers: Mapping[str, int]) -> tuple[str, bool]:
+def _mode(registers: Mapping[str, int], spec: ServoModel | None) -> tuple[str, bool]:
+    """The mode's name and whether the position limits bound the goal in it."""
     for register, names in MODES.items():
         if register in registers:
             value = registers[register]
             return names.get(value, (f"mode {value}", True))
+    classic = getattr(spec, "classic", None)
     cw, ccw = LIMITS[0]
-    wheel = registers.get(cw) == 0 and registers.get(ccw) == 0
-    return ("wheel", False) if wheel else ("joint", True)
+    limits = (registers.get(cw), registers.get(ccw))
+    # e-manual AX-12A "CW/CCW Angle Limit": both 0 is wheel mode; the classic tables add a mode register
+    # (XL-320 Control Mode) and the MX series multi-turn at both 4095 (their model files' [classic]).
+    mode_register = classic.mode_register if classic is not None else None
+    if limits == (0, 0) or (mode_register in registers and registers[mode_register] in classic.wheel_modes):  # type: ignore[union-attr]
+        return "wheel", False
+    if classic is not None and classic.multi_turn_limit is not None and limits == (classic.multi_turn_limit,) * 2:
+        return "multi-turn", False
+    return "joint", True
 
 
 def _servo(protocol: float, servo: Any, slot: int, faults_active: Callable[[int], list[str]]) -> dict[str, Any]:
@@ -228,13 +274,11 @@ def _servo(protocol: float, servo: Any, slot: int, faults_active: Callable[[int]
     plan = _plan(table.layout, spec)
     row = table.row
     registers = {name: entry.value_in(row) for name, entry in plan.registers}
-    readings = _readings(plan, registers)
-    mode, limits_apply = _mode(registers)
+    mode, limits_apply = _mode(registers, spec)
+    readings = _readings(plan, registers, wheel=mode == "wheel")
     limits = next(([registers[lo], registers[hi]] for lo, hi in LIMITS if lo in registers and hi in registers), None)
-    if "hardware_error_status" in registers:  # Protocol 2.0: the latched errors, shown by the Alert bit
-        alarms, bit_names = registers["hardware_error_status"], HW_ERROR_BITS
-    else:
-        alarms, bit_names = getattr(servo, "alarms", 0), ERROR_BITS
+    # Protocol 2.0: Hardware Error Status, latched, shown by the Alert bit; 1.0: the status packet's error bits.
+    alarms = registers["hardware_error_status"] if "hardware_error_status" in registers else getattr(servo, "alarms", 0)
     goal = by_name.get("goal_position")
     physical = spec.physical if spec is not None else None
     return {
@@ -251,7 +295,8 @@ def _servo(protocol: float, servo: Any, slot: int, faults_active: Callable[[int]
         "dial": None if goal is None or physical is None or physical.position_range_deg is None
         else {"max": goal.maximum, "range_deg": physical.position_range_deg},
         "alarms": alarms,
-        "alarm_names": [name for name, bit in bit_names.items() if alarms & bit],
+        "alarm_names": [name for name, bit in plan.error_bits.items() if alarms & bit],
+        "alarm_bits": list(plan.error_bits),
         "wheel_mode": not limits_apply,
         "faults": faults_active(slot),
     }
@@ -284,9 +329,7 @@ def take(bus: AnyBus, counters: Mapping[str, int] | None = None) -> dict[str, An
         "paused": bool(getattr(clock, "paused", False)) or not hasattr(clock, "time_scale"),
         "virtual_time": not hasattr(clock, "time_scale"),
         "protocols": [protocol_name(protocol) for protocol, _ in parts(bus)],
-        # Per protocol: the error bits a servo's card shows (1.0: the status packet's, 2.0: Hardware
-        # Error Status) and the alarm names the ``alarm`` control takes.
-        "alarm_bits": {protocol_name(p): list(HW_ERROR_BITS if p == 2.0 else ERROR_BITS) for p, _ in parts(bus)},
+        # Per protocol: the alarm names the ``alarm`` control takes (the faults' names, per protocol).
         "alarm_choices": {protocol_name(p): list(ALARM_CHOICES[p]) for p, _ in parts(bus)},
         "servos": servos,
         "counters": dict(counters or {}),

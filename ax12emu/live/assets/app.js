@@ -76,7 +76,7 @@ function makeCard(servo, frame, mixed) {
   }
   const bits = node.querySelector(".bits");
   const bitEls = {};
-  for (const name of frame.alarm_bits[servo.protocol]) {
+  for (const name of servo.alarm_bits) {
     const span = document.createElement("span");
     span.textContent = name;
     bits.appendChild(span);

@@ -60,7 +60,7 @@ def test_x_series_servos_show_their_own_registers_and_units():
     assert xl430["mode"] == "position" and xl430["limits"] == [table["min_position_limit"], table["max_position_limit"]]
     assert xl430["dial"] == {"max": 4095, "range_deg": model("xl430-w250").physical.position_range_deg}
     assert xl430["registers"]["torque_enable"] == 1 and xl430["registers"]["moving"] == 1
-    assert frame["alarm_bits"]["2.0"][:3] == ["input_voltage", "overheating", "motor_encoder"]
+    assert xl430["alarm_bits"] == ["input_voltage", "overheating", "motor_encoder", "electrical_shock", "overload"]
 
 
 def test_operating_mode_and_hardware_errors_follow_the_servo():
@@ -165,6 +165,10 @@ def test_an_xl320_is_read_by_its_own_table_names_with_no_code_of_its_own():
         joint = take(bus.bus)["servos"][0]
         bus.write(1, "torque_enable", 0)
         bus.write(1, "control_mode", 1)
+        bus.write(1, "torque_enable", 1)
+        bus.write(1, "moving_speed", 1024 + 500)  # wheel mode: half the output, CW
+        bus.step(0.3)
+        wheel_speed = bus.read(1, "present_speed")
         wheel = take(bus.bus)["servos"][0]
     assert joint["model"] == "XL-320" and joint["protocol"] == "2.0"
     assert joint["mode"] == "joint" and joint["limits"] == [0, 1023] and wheel["mode"] == "wheel" and wheel["limits"] is None
@@ -173,3 +177,36 @@ def test_an_xl320_is_read_by_its_own_table_names_with_no_code_of_its_own():
     assert one["voltage"]["value"] == pytest.approx(voltage / 10)
     assert one["goal"]["value"] == pytest.approx(100 * model("xl-320").physical.resolution_deg)
     assert joint["dial"] == {"max": 1023, "range_deg": model("xl-320").physical.position_range_deg}
+    # In wheel mode its Present Speed is a share of the output ("the unit is about 0.1%", its model file's wheel_output).
+    assert readings(wheel)["velocity"]["unit"] == "%" and readings(wheel)["velocity"]["raw"] == -(wheel_speed & 0x3FF)
+    assert readings(wheel)["velocity"]["value"] == pytest.approx(-(wheel_speed & 0x3FF) * 0.1)
+    # Its Hardware Error Status bits are its own (the file's [classic] errors), not the X series'.
+    assert joint["alarm_bits"] == [name for name, _ in sorted(model("xl-320").classic.errors, key=lambda e: e[1])]
+
+
+def test_an_mx_wire_shows_each_model_in_its_files_units_and_modes():
+    """MX-28 (Protocol 1.0, its [classic] speed unit 0.114 rpm, multi-turn at both limits 4095) beside an AX-12A."""
+    from ax12emu.bus import Bus
+    from ax12emu.bus.bus1x import Bus1X
+    from ax12emu.bus.clock import VirtualClock
+    from ax12emu.live import ControlError, ServedControls, apply
+    from ax12emu.servo.plant1x import build_plant1x
+
+    clock = VirtualClock()
+    bus = Bus1X([(1, model("mx-28"))], lambda spec, servo: build_plant1x(spec, servo.table), ax_bus=Bus([2], clock=clock))
+    bus.receive(InstructionPacket(1, Instruction.WRITE, bytes([6, 0xFF, 0x0F, 0xFF, 0x0F])).encode())  # both limits 4095
+    controls = ServedControls(lambda fn: fn(bus))
+    assert apply(controls, {"action": "external_torque", "id": 1, "nm": 0.5}) == "servo 1: external torque 0.5 N m"
+    clock.advance(0.2)
+    bus.advance()
+    frame = take(bus)
+    mx, ax = sorted(frame["servos"], key=lambda s: s["id"])
+    assert (mx["model"], mx["protocol"], ax["model"]) == ("MX-28", "1.0", "AX-12A")
+    assert mx["mode"] == "multi-turn" and mx["limits"] is None and ax["mode"] == "joint"
+    speed = readings(mx)["velocity"]
+    assert speed["register"] == "present_speed" and speed["raw"] > 0  # pushed CCW with the torque off
+    assert speed["value"] == pytest.approx(speed["raw"] * model("mx-28").classic.speed_unit_rpm, abs=1e-3)
+    assert readings(ax)["velocity"]["value"] == 0
+    assert mx["alarm_bits"] == ax["alarm_bits"]  # both answer with Protocol 1.0 status error bits
+    with pytest.raises(ControlError, match="faults are not available on a Bus1X"):
+        apply(controls, {"action": "temperature", "id": 1, "celsius": 80})
