@@ -47,7 +47,11 @@ def test_twin_predicts_the_loaded_steps_with_only_the_bar_inertia(twin, rec):
     assert result["rms"] < 5.0
 
 
-#: What the diagnosis names first on each loaded step from the twin, where it misses (measured 2026-11-23).
+#: What the diagnosis names first on each loaded step from the twin, where it misses (measured 2026-11-23).  Why,
+#: measured by tools/real_ax12a_inertia.py: the loaded steps are no slower than the unloaded (15 -> 480 units in
+#: 370.6, 369.9, 367.6 ms; the twin with the bars 1-3 ms slower, the unrecorded supply moving the cruise by up to
+#: 1.2 %), their peaks read every 20 ms are the twin's (521, 522), and the settled reading, which extra inertia,
+#: play and friction all move, outweighs the move (1e-3 kg m^2 halves the cost on the unloaded step too).
 NAMED_FROM_TWIN_MISSES = {
     "AX12A_LOAD3_1.csv": "names backlash first, 0.0093 +- 0.0064 rad (confident, gap 1.40 -> 0.91), the play it "
                          "also names on the unloaded step; with that play in the twin nothing more is needed "
