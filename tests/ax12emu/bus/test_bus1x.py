@@ -285,3 +285,20 @@ def test_the_eeprom_area_persists_in_a_state_store_and_another_model_is_refused(
         assert read2(bus, 1, PRESENT_POSITION) == 2048 - 100  # the offset applies from power-up
     with pytest.raises((StateFileError, ValueError), match="another model"):
         make("mx-64")
+
+
+def test_input_voltage_and_overheating_are_the_status_packets_bits_as_shutdown_selects_them():
+    """Max Voltage Limit 11.0 V under a 12 V supply, Temperature Limit under the servo's 25 C: each error reaches the
+    status packets once Shutdown(18) selects it (the X-series firmware detects what Shutdown selects), and shuts down."""
+    bus = mx_bus(["mx-64"])
+    assert write(bus, 1, 13, 110) == 0  # Max Voltage Limit 11.0 V
+    run_s(bus, 0.01)
+    assert bus.receive(encode_instruction(1, Instruction.PING, b""))[0].data[4] == 0  # the default 36 does not select it
+    assert write(bus, 1, 18, 36 | 0x01) == 0
+    run_s(bus, 0.01)
+    assert bus.receive(encode_instruction(1, Instruction.PING, b""))[0].data[4] == StatusError.INPUT_VOLTAGE
+    assert read2(bus, 1, TORQUE_LIMIT) == 0
+    hot = mx_bus(["mx-28"])
+    assert write(hot, 1, 11, 20) == 0  # Temperature Limit 20 C
+    run_s(hot, 0.01)
+    assert hot.receive(encode_instruction(1, Instruction.PING, b""))[0].data[4] == StatusError.OVERHEATING
