@@ -17,7 +17,8 @@ https://emanual.robotis.com/docs/en/dxl/protocol1/#status-packet):
   Table2's Access, Data Length, Data Range and Data Limit errors all become this bit;
 * "Angle Limit Error: When Goal Position is written out of the range from CW Angle Limit to CCW Angle
   Limit": in joint mode only (multi-turn mode takes -28,672..28,672, e-manual
-  control_table_mx_goal_position.md; wheel mode ignores Goal Position); nothing is written;
+  control_table_mx_goal_position.md; wheel mode ignores Goal Position); nothing is written, and with
+  Shutdown's Angle Limit bit set "the motor's output will be 0 [%]" (Torque Limit 0, as an Alarm Shutdown);
 * the EEPROM area is writable with the torque on (the Protocol 2.0 firmware's torque lock is not the
   1.0 firmware's; its Lock register freezes the EEPROM instead);
 * Torque Limit(34) written non-zero after an Alarm Shutdown lets the motor run again
@@ -172,6 +173,11 @@ class Servo1X:
         """A client's write, all or nothing, with the firmware's side effects; returns the error bits."""
         check, error = self.check_write(address, data)
         if check is None:
+            if error & StatusError.ANGLE_LIMIT and self.table.get("shutdown") & StatusError.ANGLE_LIMIT:
+                # "providing that Angle Limit Error Bit(0x01) in Alarm LED/Shutdown is set, ... the motor's output
+                # will be 0 [%]" (control_table_mx_goal_position.md; the bit is the status packet's, 0x02)
+                self.table.set("torque_limit", 0)
+                self.plant.command()
             return error
         table = self.table
         torque_limit_before = table.get("torque_limit")

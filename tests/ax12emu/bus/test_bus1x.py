@@ -302,3 +302,13 @@ def test_input_voltage_and_overheating_are_the_status_packets_bits_as_shutdown_s
     assert write(hot, 1, 11, 20) == 0  # Temperature Limit 20 C
     run_s(hot, 0.01)
     assert hot.receive(encode_instruction(1, Instruction.PING, b""))[0].data[4] == StatusError.OVERHEATING
+
+
+def test_an_angle_limit_error_with_shutdowns_angle_bit_drops_the_output_to_zero():
+    bus = mx_bus(["mx-28"])
+    write2(bus, 1, CW_LIMIT, 1000)
+    assert write2(bus, 1, GOAL_POSITION, 500) == StatusError.ANGLE_LIMIT
+    assert read2(bus, 1, TORQUE_LIMIT) == 1023  # the default Shutdown (36) does not select it
+    assert write(bus, 1, 18, 36 | StatusError.ANGLE_LIMIT) == 0
+    assert write2(bus, 1, GOAL_POSITION, 500) == StatusError.ANGLE_LIMIT
+    assert read2(bus, 1, TORQUE_LIMIT) == 0 and read2(bus, 1, GOAL_POSITION) == 2048
