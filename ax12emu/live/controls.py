@@ -128,8 +128,9 @@ class ServedControls:
                 return
             model = getattr(sub, "model", None)
             if not callable(getattr(model, "set_external_torque", None)):
-                what = type(firmware if firmware is not None else model).__name__
-                raise ControlError(f"external_torque: ID {servo_id}'s model ({what}) takes no external torque")
+                holder = firmware if firmware is not None else model
+                what = f"its model ({type(holder).__name__}) takes" if holder is not None else f"its bus ({type(sub).__name__}) has"
+                raise ControlError(f"external_torque: ID {servo_id}: {what} no external torque")
             self._torque_nm[servo.index] = torque_nm
             torques = np.zeros(len(sub.servos))
             for index, nm in self._torque_nm.items():
