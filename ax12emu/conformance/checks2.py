@@ -558,36 +558,48 @@ def check_result_fail(ctx: Context2) -> "str | Note":
     return f"backup store with torque on: RESULT_FAIL (firmware {firmware})"
 
 
+#: The mode register and its values in which Goal Position's limits apply: the X series' Position Control Mode, the
+#: XL-320's joint mode (Control Mode 2; its CW/CCW Angle Limit bound Goal Position, wheel mode uses no goal).
+LIMIT_MODES = {"operating_mode": frozenset({POSITION_MODE}), "control_mode": frozenset({2})}
+
+
 def check_data_limit(ctx: Context2) -> "str | Note":
     """[P2] error 0x06 Data Limit: "Data to be written ... is outside of the Limit value"; [CT] Goal
     Position(116) ranges "Min Position Limit(52) ~ Max Position Limit(48)" in Position Control Mode
-    (position_limit.md).  Goal Position = Max Position Limit + 1 (the limit lowered to 4094 for the
-    check if it is at 4095, an EEPROM write: torque must be off) is refused and not taken.  Data
-    Range instead is a Note: the page prints the limits in its Range column."""
+    (position_limit.md).  Goal Position = Max Position Limit + 1 (the limit lowered by one for the
+    check if it is at its maximum, an EEPROM write: torque must be off) is refused and not taken.  Data
+    Range instead is a Note: the page prints the limits in its Range column.  The limit is the register
+    the model file bounds Goal Position by (``max_from``): CCW Angle Limit(8) on the XL-320, in joint mode."""
     servo = ctx.target
-    if ctx.get(servo, "operating_mode") != POSITION_MODE:
-        raise Skipped("not in Position Control Mode, where the limits apply")
-    limit = ctx.get(servo, "max_position_limit")
-    lowered = limit >= ctx.entry(servo, "max_position_limit").maximum
+    by_name = ctx.layout(servo).by_name
+    target = ctx.entry(servo, "goal_position")
+    limit_name = target.maximum_from
+    register = next((name for name in LIMIT_MODES if name in by_name), None)
+    if limit_name is None or register is None:
+        raise Skipped(f"{ctx.models[servo].name}: no register bounds Goal Position, or no mode register says where one applies")
+    if ctx.get(servo, register) not in LIMIT_MODES[register]:
+        raise Skipped(f"{register} {ctx.get(servo, register)}: not the mode where the limits apply")
+    label = limit_name.replace("_", " ").title().replace("Ccw", "CCW")
+    limit = ctx.get(servo, limit_name)
+    lowered = limit >= min(ctx.entry(servo, limit_name).maximum, target.maximum)
     if lowered and ctx.torque_on(servo):
-        raise Skipped("torque is on and Max Position Limit is 4095: lowering it is an EEPROM write")
+        raise Skipped(f"torque is on and {label} is at its maximum: lowering it is an EEPROM write")
     goal = ctx.get(servo, "goal_position")
     try:
         if lowered:
-            ctx.must_put(servo, "max_position_limit", limit - 1)
+            ctx.must_put(servo, limit_name, limit - 1)
         beyond = (limit - 1 if lowered else limit) + 1
-        target = ctx.entry(servo, "goal_position")
         status = ctx.write(servo, target.address, target.to_bytes(beyond))
         number = status.error & ERROR_NUMBER_MASK
         expect(ctx.get(servo, "goal_position") == goal, f"Goal Position {beyond} beyond the limit was taken ({describe_error2(number)})")
     finally:
         if lowered:
-            ctx.put(servo, "max_position_limit", limit)
+            ctx.put(servo, limit_name, limit)
     if number == ErrorNumber.DATA_RANGE:
-        return Note(f"goal {beyond} > Max Position Limit {beyond - 1}: DATA_RANGE, not taken")
-    expect(number == ErrorNumber.DATA_LIMIT, f"goal {beyond} > Max Position Limit {beyond - 1}: {describe_error2(number)}")
+        return Note(f"goal {beyond} > {label} {beyond - 1}: DATA_RANGE, not taken")
+    expect(number == ErrorNumber.DATA_LIMIT, f"goal {beyond} > {label} {beyond - 1}: {describe_error2(number)}")
     exact(status, servo, ErrorNumber.DATA_LIMIT)
-    return f"goal {beyond} > Max Position Limit {beyond - 1}: DATA_LIMIT, not taken"
+    return f"goal {beyond} > {label} {beyond - 1}: DATA_LIMIT, not taken"
 
 
 def check_instruction_error(ctx: Context2) -> str:

@@ -161,13 +161,21 @@ def test_moving_speed_sets_the_speed_of_the_move():
     assert rpm(positions(bus, 1.0)) < -0.8 * SHEET.no_load_speed_rpm
 
 
-def test_angle_limits_hold_the_goal_inside_them():
+def test_a_goal_beyond_the_angle_limits_is_refused_and_a_goal_left_outside_is_held_inside():
+    """CW/CCW Angle Limit are "the minimum/maximum value of Goal Position(30)": a goal beyond them is refused with
+    Data Limit Error (Protocol 2.0's counterpart of the page's Angle Limit Error bit) and not written; in wheel mode
+    the goal is not used and not judged; a goal written before the limit moved is held inside it."""
     bus = xl320_bus()
+    assert write(bus, 1, GOAL_POSITION, 100, 2) == ErrorNumber.NONE
     assert write(bus, 1, CW_ANGLE_LIMIT, 400, 2) == ErrorNumber.NONE  # EEPROM: with the torque off
+    assert write(bus, 1, GOAL_POSITION, 399, 2) == ErrorNumber.DATA_LIMIT
+    assert read(bus, 1, GOAL_POSITION) == 100
     write(bus, 1, TORQUE_ENABLE, 1)
-    write(bus, 1, GOAL_POSITION, 100, 2)
     run(bus, 1.5)
     assert 400 <= read(bus, 1, PRESENT_POSITION) <= 410
+    write(bus, 1, TORQUE_ENABLE, 0)
+    write(bus, 1, CONTROL_MODE, 1)
+    assert write(bus, 1, GOAL_POSITION, 50, 2) == ErrorNumber.NONE
 
 
 # -- wheel mode ---------------------------------------------------------------------------------

@@ -166,7 +166,6 @@ def test_velocity_mode_fails_against_a_shaft_held_back():
 
 #: What the suite cannot ask of the XL-320's classic table, each skipped with its reason.
 XL320_SKIPS = {
-    "data limit error": "XL-320 has no operating_mode",
     "result fail": "the e-manual gives Control Table Backup to the X430/540 and X330 only",
     "velocity mode": "no model under test has operating_mode",
     "current mode": "no model under test has Current Control Mode: XL-320",
@@ -179,7 +178,8 @@ XL320_SKIPS = {
 def test_protocol_2_suite_adapts_to_the_xl320s_classic_table():
     """Against served XL-320s every check passes on their own registers (ID at 3, LED 0 ~ 7, no 4-byte register:
     Punch for 2 bytes, Goal Position + Moving Speed for the stuffed write, Control Mode 2 to hold with torque on) or
-    skips saying which register or instruction the table lacks; the destructive set runs and puts everything back."""
+    skips saying which register or instruction the table lacks (Goal Position's limit is CCW Angle Limit, in joint
+    mode); the destructive set runs and puts everything back."""
     report = conformance.run("ax12emu://?servo=xl-320&ids=1,2", [1, 2], protocol="2.0", baud=1_000_000,
                              timeout_s=SERVED_TIMEOUT_S, destructive=True, motion=True)
     assert report.passed, report.table()
@@ -191,6 +191,7 @@ def test_protocol_2_suite_adapts_to_the_xl320s_classic_table():
         {c.name for c in conformance.CHECKS2} | {"table unchanged"}) - set(XL320_SKIPS) - notes, report.table()
     assert "goal_position+moving_speed" in outcomes["byte stuffing"][1] and "punch" in outcomes["write 1, 2 and 4 bytes"][1]
     assert "1 (1, 2 bytes)" in outcomes["read 1, 2 and 4 bytes"][1] and "led=8" in outcomes["data range error"][1]
+    assert outcomes["data limit error"][1] == "goal 1023 > CCW Angle Limit 1022: DATA_LIMIT, not taken"
 
 
 @pytest.mark.wallclock
