@@ -11,7 +11,11 @@ register values by name (a Protocol 2.0 :class:`~ax12emu.servo.table2.Table2` or
 
 The translation (X units: e-manual, X series control tables: 4096 pulses per turn with 2048 the
 middle, velocity 0.229 rpm, PWM 885 = 100 %, "Position PID Gain(80, 82, 84)": KPP = P/128,
-KPI = I/65536, KPD = D/16, the constants including the sampling time):
+KPI = I/65536, KPD = D/16, the constants including the sampling time: github ROBOTIS-GIT/emanual
+_includes/en/dxl/control_table_position_pid_gain.md @ 01a2df191e6a2ec17e8265a88bda43659f384e41; the
+classic tables' "Kp : P Gain / 8, Ki : I Gain * 1,000 / 2,048, Kd : D Gain * 4 / 1,000":
+_includes/en/dxl/control_table_mx_pid.md @ 0a1cc01d4c883a2a1276cee8f92ecb0e2abd504b, shared by the
+MX and XL-320 pages):
 
 * Goal/Present Position: ``position_units`` over ``position_span_deg`` with ``position_centre`` at
   the middle, to pulses with 2048 at the middle (XL-320: 1024 units over 300 deg, 3.33 pulses a unit);
