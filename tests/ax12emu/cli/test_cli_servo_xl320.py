@@ -43,3 +43,11 @@ def test_xl320_beside_xl430s(emulator):
         assert [ph.ping(port, i)[0] for i in (1, 2, 3)] == [XL430, XL430, XL320]
     finally:
         port.closePort()
+
+
+def test_models_lists_the_xl320_on_protocol_2_run_by_the_x_series_firmware():
+    from ax12emu.cli.models import models_table
+
+    row = next(line for line in models_table().splitlines() if line.startswith("xl-320 "))
+    assert row.split()[1:4] == ["XL-320", "2.0", "350"]
+    assert "0.39 N m @ 7.4 V" in row and "114 rpm @ 7.4 V" in row and row.split()[-1] == "x-series"
