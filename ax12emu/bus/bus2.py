@@ -181,6 +181,21 @@ class Bus2(ServosById[Servo2]):
             yield from servo.plant.tick(sim_time_s)
             servo.check_watchdog(sim_time_s)
 
+    def settle_in_pieces(self) -> Iterator[None]:
+        """The steps the servos owe, one servo at a time: a client's write earns one (``Plant2.catch_up``).
+
+        For a serving loop, right after a packet: taken while the host reads the reply or, after a
+        packet nobody answers (a Sync Write), prepares its next one, instead of in that packet's
+        catch-up.  The model takes the same steps either way (the packet's catch-up finds nothing
+        left to do); only the host's wait is shorter.
+        """
+        sim_time_s = self._sim_time_s()
+        for servo in self.servos:
+            plant = servo.plant
+            if plant.due(sim_time_s):
+                plant.catch_up(sim_time_s)
+                yield
+
     # -- bytes in, replies out ---------------------------------------------------------
     def receive(self, data: bytes, now_s: float | None = None, *, line_bps: float | None = None) -> list[Reply]:
         """Feed bytes that arrived at wall time ``now_s``; return the replies they cause."""

@@ -111,6 +111,10 @@ class BusServer:
         self._polled_fds: list[int] = []
         #: The physics step under way, in pieces (Bus.advance_in_pieces), or None.
         self._physics: Iterator[None] | None = None
+        #: The steps a bus's servos owe after a packet, in pieces (``Bus2.settle_in_pieces``), if it has them.
+        self._settle: Callable[[], Iterator[None]] | None = getattr(bus, "settle_in_pieces", None)
+        #: A packet was handled since the last settling.
+        self._unsettled = False
         #: Counters for diagnostics and tests.
         self.packets_in = 0
         self.bytes_dropped = 0
@@ -188,6 +192,7 @@ class BusServer:
         for replies in self.bus.answer(data, now, line_bps=line_bps, cache=not self.pace, looked_up=not self.pace):
             self.packets_in += 1
             self._answer(replies, now, end)
+            self._unsettled = True
 
     def _answer(self, replies: Sequence[Reply], now: float, end: float) -> None:
         """Put one packet's replies on the line: now, or queued for their delay (and pace)."""
@@ -276,6 +281,11 @@ class BusServer:
                 self._physics = self.bus.advance_in_pieces()
                 self.bus.expire(now)
                 self._next_physics = self._next_tick_s(now)
+            elif self._physics is None and self._unsettled and self._settle is not None:
+                # The step a client's write earned, taken while the host is busy with the reply or its
+                # next packet rather than when that packet arrives (a Sync Write has no reply to wait for).
+                self._unsettled = False
+                self._physics = self._settle()
             if self._physics is not None and next(self._physics, _DONE) is _DONE:
                 self._physics = None
         if self._calls:

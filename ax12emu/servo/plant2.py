@@ -118,6 +118,9 @@ class Plant2:
         self._held: dict[str, int] | None = None
         #: A client changed the commands since the tables last showed a step (see :meth:`catch_up`).
         self._write_unseen = False
+        #: The command registers last handed to the firmware, and the commands made of them (see :meth:`command`).
+        self._commanded_values: tuple[int, ...] | None = None
+        self._commanded: XCommands | None = None
         self.command()
         self.write_back()
 
@@ -134,7 +137,13 @@ class Plant2:
 
     def command(self, *, goal_written: bool = False) -> None:
         """Hand the model the table's commands now; the next request sees a step taken after them."""
-        self.firmware.command(self.commands(), goal_written=goal_written)
+        values = self._read_commands(self.table.row)
+        if self._held is not None or values != self._commanded_values:
+            # A robot writes the same goals cycle after cycle: equal registers, the same (never mutated) object;
+            # held goals are not the registers', so those commands are never reused.
+            self._commanded_values = values if self._held is None else None
+            self._commanded = self.commands()
+        self.firmware.command(self._commanded, goal_written=goal_written)
         self._write_unseen = True
 
     def hold(self) -> None:

@@ -177,7 +177,7 @@ class Servo2:
 
     @property
     def watchdog_error(self) -> bool:
-        return self.table.has("bus_watchdog") and self.table.get("bus_watchdog") == WATCHDOG_ERROR
+        return self._watchdog is not None and self._watchdog.value_in(self.table.row) == WATCHDOG_ERROR
 
     def write(self, address: int, data: bytes) -> int:
         """A client's write, all or nothing, with the firmware's side effects; returns the error number."""

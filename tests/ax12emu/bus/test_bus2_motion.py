@@ -85,3 +85,27 @@ def test_factory_reset_turns_the_torque_off_in_the_firmware_too():
     bus.clock.advance(0.01)
     assert read(bus, 1, 64, 1) == 0
     assert bus.servo(1).plant.firmware.sense().torque_enable == 0
+
+
+def test_settling_after_a_sync_write_takes_the_steps_the_next_packet_would_have_taken():
+    """settle_in_pieces (a serving loop's idle time after a packet) steps each servo a write reached, one piece
+    each; the packets after it then get the same answers, and the firmware the same time, as without it."""
+    settled, plain = xl430_bus(ids=(1, 2, 3)), xl430_bus(ids=(1, 2, 3))
+    sync_read = encode_instruction2(0xFE, Instruction2.SYNC_READ, bytes((132, 0, 4, 0, 1, 2, 3)))
+    for bus in (settled, plain):
+        for servo_id in (1, 2, 3):
+            request(bus, servo_id, Instruction2.WRITE, bytes((64, 0, 1)))
+    answers = {id(bus): [] for bus in (settled, plain)}
+    for cycle in range(40):
+        goals = b"".join(bytes((i,)) + u32(2048 + (300 if cycle // 10 % 2 else -300) * i) for i in (1, 2, 3))
+        for bus in (settled, plain):
+            assert bus.receive(encode_instruction2(0xFE, Instruction2.SYNC_WRITE, bytes((116, 0, 4, 0)) + goals)) == []
+        pieces = list(settled.settle_in_pieces())
+        assert len(pieces) == 3  # one step per servo written, none for the rest
+        assert list(settled.settle_in_pieces()) == []  # nothing owed twice
+        for bus in (settled, plain):
+            answers[id(bus)].append([reply.data for reply in bus.receive(sync_read)])
+            bus.clock.advance(0.004 * (cycle % 4))  # 0 to 12 ms: no step due, or several
+    assert answers[id(settled)] == answers[id(plain)]
+    assert [s.plant.firmware.time_s for s in settled.servos] == [s.plant.firmware.time_s for s in plain.servos]
+    assert len({tuple(a) for a in answers[id(plain)]}) > 10, "the servos moved"
