@@ -15,9 +15,13 @@ from ax12emu.conformance.checks import EEPROM_WAIT_S_PER_BYTE
 #: SDK then takes the late reply for the next transaction's.  The tests check what the bus
 #: answers; how fast it answers, with the stock port, is tools/bench_protocol.py's job.
 PATIENCE_MS = 250.0
-#: The same for the conformance suite's runs in tests (its 50 ms default suits hardware; a silent
-#: check waits this long, so each run takes about a second more).
+#: The same for the conformance suite's runs in tests (its 50 ms default suits hardware).
 CONFORMANCE_TIMEOUT_S = 0.2
+#: How long those runs listen for a reply that must not come (by default, as long as the reply timeout):
+#: the emulator answers at once, so a wrong reply comes within milliseconds, and one that comes later,
+#: before the next packet, still fails its check (ax12emu/conformance/link.py).  Longer than a USB
+#: adapter's 16 ms latency timer, so the same window would judge a real servo on a quiet host.
+EMULATOR_SILENCE_S = 0.02
 
 
 def wait_eeprom(byte_count: int = 1) -> None:

@@ -90,6 +90,10 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     check.add_argument("--baud", type=int, default=None,
                        help="host bit rate (default 1000000; with --protocol 2.0, 57600: the X series' factory Baud Rate 1)")
     check.add_argument("--timeout-ms", type=float, default=50.0, metavar="MS", help="reply timeout (default 50)")
+    check.add_argument("--silence-ms", type=float, default=None, metavar="MS",
+                       help="how long a packet that must get no reply is listened to (default: the reply timeout, safe "
+                       "behind a USB adapter's 16 ms latency timer; a bus that answers at once, as the emulator does, "
+                       "can take less; a reply that comes later, before the next packet, still fails the check)")
     check.add_argument("--destructive", action="store_true", help="also change ID, baud and RESET (all restored afterwards)")
     check.add_argument("--motion", action="store_true",
                        help="also run the checks that turn the shaft (Protocol 2.0: velocity and current modes, the two "
@@ -129,6 +133,7 @@ def _conformance(args: argparse.Namespace) -> int:
         args.ids,
         baud=args.baud if args.baud is not None else FACTORY_BAUD_BPS[args.protocol],
         timeout_s=args.timeout_ms / 1e3,
+        silence_s=None if args.silence_ms is None else args.silence_ms / 1e3,
         destructive=args.destructive,
         profile=args.profile,
         only=args.only,

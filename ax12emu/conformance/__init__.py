@@ -74,6 +74,7 @@ class Report:
 
 def _run_one(check: Check, ctx: Context | Context2) -> Result:
     start = time.perf_counter()
+    late = len(ctx.link.late)
     try:
         figure = check.run(ctx)
         outcome, text = (NOTE, figure.figure) if isinstance(figure, Note) else (PASS, figure)
@@ -83,6 +84,10 @@ def _run_one(check: Check, ctx: Context | Context2) -> Result:
         outcome, text = SKIP, str(exc)
     except (OSError, ValueError) as exc:  # a port error is this check's failure, not the suite's
         outcome, text = FAIL, f"{type(exc).__name__}: {exc}"
+    if len(ctx.link.late) > late and outcome != FAIL:  # see link.py: a reply after its silence window
+        outcome = FAIL
+        text = (f"a status packet came after the {ctx.link.silence_s * 1e3:g} ms silence window "
+                f"(sent -> received: {'; '.join(ctx.link.late[late:])})")
     return Result(check.name, outcome, text, time.perf_counter() - start)
 
 
@@ -149,18 +154,23 @@ def run(
     *,
     baud: int = 1_000_000,
     timeout_s: float = 0.05,
+    silence_s: float | None = None,
     destructive: bool = False,
     profile: str = DEFAULT_PROFILE,
     only: Sequence[str] | None = None,
     protocol: str = "1.0",
     motion: bool = False,
 ) -> Report:
-    """Open ``port`` (a device path or a pyserial URL), run the ``protocol`` suite, close the port."""
+    """Open ``port`` (a device path or a pyserial URL), run the ``protocol`` suite, close the port.
+
+    ``timeout_s``: how long a reply may take; ``silence_s``: how long a packet that must get no reply is
+    listened to (default ``timeout_s``, safe on any adapter; see :mod:`.link`).
+    """
     if not ids:
         raise ValueError("conformance needs at least one ID")
     if protocol not in PROTOCOLS:
         raise ValueError(f"protocol must be one of {', '.join(PROTOCOLS)}, got {protocol!r}")
-    link = (Link2 if protocol == "2.0" else Link)(open_port(port, baud), timeout_s=timeout_s)
+    link = (Link2 if protocol == "2.0" else Link)(open_port(port, baud), timeout_s=timeout_s, silence_s=silence_s)
     try:
         return run_on_link(link, ids, destructive=destructive, profile=profile, only=only, port_name=port, motion=motion)
     finally:

@@ -293,7 +293,7 @@ def check_absent_id(ctx: Context2) -> str:
     """[P2] "Packet ID": only the addressed device processes a packet; an ID nobody has gets silence."""
     free = ctx.free_id()
     expect(ctx.silent(encode_instruction2(free, Instruction2.PING)), f"ID {free} answered")
-    return f"ID {free} silent for {_ms(ctx.link.timeout_s)}"
+    return f"ID {free} silent for {_ms(ctx.link.silence_s)}"
 
 
 def check_split_packet(ctx: Context2) -> str:
@@ -747,7 +747,8 @@ def check_broadcast_ping(ctx: Context2) -> str:
     replies: list[StatusPacket2] = []
     last_s = 0.0
     while True:
-        response = ctx.link.receive(wait_s)
+        # once every ID under test has answered, only the silence window is left for an answer too many
+        response = ctx.link.receive(ctx.link.silence_s if set(ctx.ids) <= {r.id for r in replies} else wait_s)
         if response.status is None:
             break
         replies.append(response.status)
@@ -790,7 +791,11 @@ def check_broadcast_ping_timing(ctx: Context2) -> str:
     ctx.link.send(ping)
     arrivals: list[tuple[int, float]] = []
     while True:
-        response = ctx.link.receive(wait_s, start=start)
+        if set(ctx.ids) <= {i for i, _ in arrivals}:  # every ID answered: the silence window for one too many
+            response = ctx.link.receive(ctx.link.silence_s)
+            response = response._replace(rtt_s=time.perf_counter() - start)
+        else:
+            response = ctx.link.receive(wait_s, start=start)
         if response.status is None:
             break
         arrivals.append((response.status.id, response.rtt_s))
@@ -851,12 +856,13 @@ def check_status_return_level(ctx: Context2) -> str:
     try:
         ctx.link.transact(encode_instruction2(servo, Instruction2.WRITE, _u16(srl.address) + b"\x01"))
         expect(ctx.silent(write_led), "level 1 answered a WRITE")
-        expect(not ctx.silent(read_led), "level 1 did not answer a READ")
-        expect(not ctx.silent(ping), "level 1 did not answer PING")
-        ctx.link.transact(encode_instruction2(servo, Instruction2.WRITE, _u16(srl.address) + b"\x00"))
+        expect(ctx.answers(read_led), "level 1 did not answer a READ")
+        expect(ctx.answers(ping), "level 1 did not answer PING")
+        # at level 1 this WRITE gets no answer: listened to for the silence window, not the reply timeout
+        ctx.link.transact(encode_instruction2(servo, Instruction2.WRITE, _u16(srl.address) + b"\x00"), timeout_s=ctx.link.silence_s)
         expect(ctx.silent(read_led), "level 0 answered a READ")
         expect(ctx.silent(write_led), "level 0 answered a WRITE")
-        expect(not ctx.silent(ping), "level 0 did not answer PING")
+        expect(ctx.answers(ping), "level 0 did not answer PING")
     finally:
         ctx.link.send(encode_instruction2(servo, Instruction2.WRITE, _u16(srl.address) + bytes((level,))))
         time.sleep(0.005)

@@ -8,6 +8,20 @@ the received bytes into packets.  Reads block on the port with a
 short timeout rather than spinning, so a bus served by a thread of the same
 process is never starved of the GIL.  Every well-formed packet sent is kept
 in :attr:`Link.sent`, so a trace can be checked against it.
+
+Silence is judged over its own window, :attr:`Link.silence_s`, which defaults
+to the reply timeout: a device that answers when asked does so within the
+timeout, so a reply that must not come would come within it too.  A real
+servo answers within its Return Delay Time (at most 254 x 2 us = 508 us on
+both protocols: e-manual, AX-12A "Return Delay Time(5)" and XL430-W250
+"Return Delay Time(9)") plus its packet's wire time, but a USB adapter holds
+received bytes for up to its latency timer (FTDI's default 16 ms), and a busy
+host adds its own delay; hence the safe default.  Against a bus that answers
+at once (the emulator in process, on a pty or TCP), a short window saves the
+wait without losing what it judges: a status packet that arrives after a
+silence window, yet before the next packet is sent, is kept in
+:attr:`Link.late` rather than flushed away, and the suite fails the check
+during which it was found.
 """
 
 from __future__ import annotations
@@ -60,9 +74,15 @@ def open_port(port: str, baud: int) -> serial.SerialBase:
 class Link:
     """One host on one port: transactions, raw writes, the host's baud rate."""
 
-    def __init__(self, port: serial.SerialBase, *, timeout_s: float = 0.05) -> None:
+    def __init__(self, port: serial.SerialBase, *, timeout_s: float = 0.05, silence_s: float | None = None) -> None:
         self.port = port
         self.timeout_s = timeout_s
+        #: How long a transaction that must get no answer listens (default: the reply timeout; see the module).
+        self.silence_s = timeout_s if silence_s is None else silence_s
+        #: Status packets that came after a transaction had been judged silent, as "packet sent -> reply" lines.
+        self.late: list[str] = []
+        # The last packet whose transaction ended in silence: what arrives before the next send answered it late.
+        self._silenced: bytes | None = None
         #: Every packet sent with :meth:`transact` or :meth:`send`, in order.
         self.sent: list[bytes] = []
         # Bytes after a status packet stay here for the next receive (two replies in one read).
@@ -92,12 +112,14 @@ class Link:
 
     def flush_input(self) -> None:
         """Forget bytes received so far (a late reply must not answer the next packet)."""
+        self._silenced = None
         self.port.reset_input_buffer()
         self._framer.reset()
         self._ready.clear()
 
     def send(self, packet: bytes) -> None:
         """Write a packet that gets no answer (broadcast, or a low status return level)."""
+        self._catch_late()
         self.flush_input()
         self.port.write(packet)
         self.sent.append(bytes(packet))
@@ -110,7 +132,27 @@ class Link:
         """Send ``packet`` and wait for one status packet (an echo of the packet is skipped)."""
         start = time.perf_counter()
         self.send(packet)
-        return self.receive(timeout_s, start=start, echo=packet)
+        response = self.receive(timeout_s, start=start, echo=packet)
+        self._silenced = bytes(packet) if response.status is None else None
+        return response
+
+    def _catch_late(self) -> None:
+        """Keep in :attr:`late` any valid status packet that arrived since the last transaction ended in silence."""
+        packet, self._silenced = self._silenced, None
+        if packet is None:
+            return
+        waiting = self.port.in_waiting
+        if waiting:
+            self._ready.extend(self._framer.feed(self.port.read(waiting)))
+        for received in self._ready:
+            if self._is_echo(received, packet):
+                continue
+            status = self._status(received, 0.0).status
+            if self._valid(status):
+                self.late.append(f"{packet.hex(' ')} -> {received.encode().hex(' ')}")
+
+    def _valid(self, status) -> bool:
+        return bool(status.checksum_ok)
 
     def receive(self, timeout_s: float | None = None, *, start: float | None = None, echo: bytes = b"") -> Response:
         """Wait for the next status packet."""
@@ -159,3 +201,6 @@ class Link2(Link):
 
     def _status(self, packet, rtt_s: float) -> Response2:
         return Response2(packet, rtt_s)
+
+    def _valid(self, status) -> bool:
+        return isinstance(status, StatusPacket2) and bool(status.crc_ok)

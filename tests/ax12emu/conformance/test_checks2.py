@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import pytest
-from emu_testkit import CONFORMANCE_TIMEOUT_S
+from emu_testkit import CONFORMANCE_TIMEOUT_S, EMULATOR_SILENCE_S
 
 from ax12emu import conformance
 from ax12emu.conformance.checks2 import _runs, _trapezoid_pulses, model_for_number, table_differences2
@@ -53,7 +53,7 @@ def test_protocol_2_suite_on_a_protocol_1_bus_fails_at_the_first_ping():
 
 #: The reply timeout for the served runs, longer than CONFORMANCE_TIMEOUT_S: on the shared, loaded test
 #: machine the first Ping twice went unanswered within 200 ms (cause not found: it takes 1-3 ms at a load
-#: of 10 on two cores); every silent check waits this long.
+#: of 10 on two cores).  It costs nothing where replies come; silence is listened to for EMULATOR_SILENCE_S.
 SERVED_TIMEOUT_S = 0.5
 
 #: An XL430-W250 pair and an XL330-M288 pair: both Protocol 2.0 tables the Koch arm uses.
@@ -73,7 +73,7 @@ def test_protocol_2_suite_passes_against_served_x_series(transport, emulator):
     where = ["--tcp", "127.0.0.1:0"] if transport == "tcp" else []
     served = emulator("--servo", MIXED, *where)
     destructive = transport == "pty"
-    report = conformance.run(served.port, MIXED_IDS, protocol="2.0", baud=57_600, timeout_s=SERVED_TIMEOUT_S,
+    report = conformance.run(served.port, MIXED_IDS, protocol="2.0", baud=57_600, timeout_s=SERVED_TIMEOUT_S, silence_s=EMULATOR_SILENCE_S,
                              destructive=destructive)
     assert report.passed, report.table()
     expected = {c.name: conformance.SKIP if c.motion or (c.destructive and not destructive) else conformance.PASS
@@ -91,7 +91,7 @@ def test_cli_protocol_2_starts_at_the_x_series_factory_baud(emulator):
     served = emulator("--servo", "xl330-m288", "--ids", "1")
     result = subprocess.run(
         [sys.executable, "-m", "ax12emu", "conformance", served.port, "--protocol", "2.0",
-         "--timeout-ms", str(round(SERVED_TIMEOUT_S * 1e3)), "--only", "ping", "--only", "SYNC_READ"],
+         "--timeout-ms", str(round(SERVED_TIMEOUT_S * 1e3)), "--silence-ms", str(round(EMULATOR_SILENCE_S * 1e3)), "--only", "ping", "--only", "SYNC_READ"],
         capture_output=True, text=True, timeout=60,
     )
     assert result.returncode == 0, result.stdout + result.stderr
@@ -124,7 +124,7 @@ def test_motion_checks_pass_against_served_x_series(emulator):
     XL330-M288 (current mode on the XL330 only), and every register is put back."""
     served = emulator("--servo", MOTION)
     motion = [c.name for c in conformance.CHECKS2 if c.motion]
-    report = conformance.run(served.port, [1, 2, 3, 4, 5, 6], protocol="2.0", baud=57_600, timeout_s=SERVED_TIMEOUT_S,
+    report = conformance.run(served.port, [1, 2, 3, 4, 5, 6], protocol="2.0", baud=57_600, timeout_s=SERVED_TIMEOUT_S, silence_s=EMULATOR_SILENCE_S,
                              motion=True, only=motion)
     assert report.passed, report.table()
     assert {r.name: r.outcome for r in report.results} == {**dict.fromkeys(motion, conformance.PASS),
@@ -143,7 +143,7 @@ def test_cli_motion_flag_runs_the_motion_checks_and_says_why_one_skips(emulator)
     served = emulator("--servo", "xl430-w250", "--ids", "1")
     result = subprocess.run(
         [sys.executable, "-m", "ax12emu", "conformance", served.port, "--protocol", "2.0", "--motion",
-         "--timeout-ms", str(round(SERVED_TIMEOUT_S * 1e3)), "--only", "current mode", "--only", "time-based profile"],
+         "--timeout-ms", str(round(SERVED_TIMEOUT_S * 1e3)), "--silence-ms", str(round(EMULATOR_SILENCE_S * 1e3)), "--only", "current mode", "--only", "time-based profile"],
         capture_output=True, text=True, timeout=60,
     )
     assert result.returncode == 0, result.stdout + result.stderr
@@ -158,7 +158,7 @@ def test_velocity_mode_fails_against_a_shaft_held_back():
 
     with VirtualBus([1], servo="xl430-w250") as bus:
         bus.set_external_torque(1, -1.3)
-        report = conformance.run(bus.port, [1], protocol="2.0", baud=57_600, timeout_s=SERVED_TIMEOUT_S, motion=True,
+        report = conformance.run(bus.port, [1], protocol="2.0", baud=57_600, timeout_s=SERVED_TIMEOUT_S, silence_s=EMULATOR_SILENCE_S, motion=True,
                                  only=["velocity mode"])
     result = next(r for r in report.results if r.name == "velocity mode")
     assert result.outcome == conformance.FAIL and "Present Velocity" in result.figure, report.table()
@@ -181,7 +181,7 @@ def test_protocol_2_suite_adapts_to_the_xl320s_classic_table():
     skips saying which register or instruction the table lacks (Goal Position's limit is CCW Angle Limit, in joint
     mode); the destructive set runs and puts everything back."""
     report = conformance.run("ax12emu://?servo=xl-320&ids=1,2", [1, 2], protocol="2.0", baud=1_000_000,
-                             timeout_s=SERVED_TIMEOUT_S, destructive=True, motion=True)
+                             timeout_s=SERVED_TIMEOUT_S, silence_s=EMULATOR_SILENCE_S, destructive=True, motion=True)
     assert report.passed, report.table()
     outcomes = {r.name: (r.outcome, r.figure) for r in report.results}
     for name, reason in XL320_SKIPS.items():
@@ -199,7 +199,7 @@ def test_sync_instructions_leave_out_servos_of_another_table():
     """XL430s beside an XL-320 (its ID and LED at other addresses): Sync Read/Write list only the XL430s, the
     broadcast WRITE of LED leaves the XL-320's table unchanged, and each figure says who was left out."""
     report = conformance.run("ax12emu://?servo=1-2:xl430-w250,3:xl-320&baud=1000000", [1, 2, 3], protocol="2.0", baud=1_000_000,
-                             timeout_s=SERVED_TIMEOUT_S, only=["SYNC_READ", "SYNC_WRITE", "broadcast READ/WRITE", "BULK_WRITE"])
+                             timeout_s=SERVED_TIMEOUT_S, silence_s=EMULATOR_SILENCE_S, only=["SYNC_READ", "SYNC_WRITE", "broadcast READ/WRITE", "BULK_WRITE"])
     assert report.passed, report.table()
     figures = {r.name: r.figure for r in report.results}
     assert "listed [2, 1]" in figures["SYNC_READ"] and "IDs 3 left out" in figures["SYNC_READ"]

@@ -6,7 +6,7 @@ import subprocess
 import sys
 
 import pytest
-from emu_testkit import CONFORMANCE_TIMEOUT_S
+from emu_testkit import CONFORMANCE_TIMEOUT_S, EMULATOR_SILENCE_S
 
 from ax12emu import VirtualBus, conformance
 from ax12emu.conformance import FAIL, PASS
@@ -28,11 +28,11 @@ def test_full_suite_passes(transport, emulator):
     """
     if transport == "inprocess":
         with VirtualBus(IDS, transport=transport, model="kinematic") as bus:
-            report = conformance.run(bus.port, IDS, destructive=True, timeout_s=CONFORMANCE_TIMEOUT_S)
+            report = conformance.run(bus.port, IDS, destructive=True, timeout_s=CONFORMANCE_TIMEOUT_S, silence_s=EMULATOR_SILENCE_S)
     else:
         where = ["--tcp", "127.0.0.1:0"] if transport == "tcp" else []
         served = emulator("--ids", ",".join(map(str, IDS)), "--model", "kinematic", *where)
-        report = conformance.run(served.port, IDS, destructive=True, timeout_s=CONFORMANCE_TIMEOUT_S)
+        report = conformance.run(served.port, IDS, destructive=True, timeout_s=CONFORMANCE_TIMEOUT_S, silence_s=EMULATOR_SILENCE_S)
     assert report.passed, report.table()
     for name in ("ID change", "RESET", "return delay", "status return levels", "resync after garbage", "table unchanged"):
         assert report.outcome(name) == PASS, report.table()
@@ -65,13 +65,13 @@ def test_non_destructive_mode_changes_nothing(transport, emulator):
     if transport == "inprocess":
         with VirtualBus(IDS, transport=transport, model="kinematic") as bus:
             before = {i: bus.table(i) for i in IDS}
-            report = conformance.run(bus.port, IDS, timeout_s=CONFORMANCE_TIMEOUT_S)
+            report = conformance.run(bus.port, IDS, timeout_s=CONFORMANCE_TIMEOUT_S, silence_s=EMULATOR_SILENCE_S)
             after = {i: bus.table(i) for i in IDS}
     else:
         where = ["--tcp", "127.0.0.1:0"] if transport == "tcp" else []
         served = emulator("--ids", ",".join(map(str, IDS)), "--model", "kinematic", *where)
         before = _tables_over_the_port(served.port)
-        report = conformance.run(served.port, IDS, timeout_s=CONFORMANCE_TIMEOUT_S)
+        report = conformance.run(served.port, IDS, timeout_s=CONFORMANCE_TIMEOUT_S, silence_s=EMULATOR_SILENCE_S)
         after = _tables_over_the_port(served.port)
     assert report.passed, report.table()
     assert report.outcome("RESET") == "skip"
@@ -80,7 +80,7 @@ def test_non_destructive_mode_changes_nothing(transport, emulator):
 
 def test_private_url_passes_like_the_pty():
     """serial_for_url("ax12emu://?ids=1,2"), with no VirtualBus at all, passes the same suite."""
-    report = conformance.run("ax12emu://?ids=1,2", IDS, destructive=True, timeout_s=CONFORMANCE_TIMEOUT_S)
+    report = conformance.run("ax12emu://?ids=1,2", IDS, destructive=True, timeout_s=CONFORMANCE_TIMEOUT_S, silence_s=EMULATOR_SILENCE_S)
     assert report.passed, report.table()
 
 
@@ -100,11 +100,13 @@ def test_cli_conformance_against_served_tcp(emulator):
     served = emulator("--tcp", "127.0.0.1:0", "--ids", "1,2", "--model", "kinematic")
     result = subprocess.run(
         [sys.executable, "-m", "ax12emu", "conformance", served.port, "--ids", "1,2",
-         "--timeout-ms", str(round(CONFORMANCE_TIMEOUT_S * 1e3)), "--only", "ping", "--only", "return delay"],
+         "--timeout-ms", str(round(CONFORMANCE_TIMEOUT_S * 1e3)), "--silence-ms", str(round(EMULATOR_SILENCE_S * 1e3)),
+         "--only", "ping", "--only", "return delay", "--only", "absent ID is silent"],
         capture_output=True, text=True, timeout=60,
     )
     assert result.returncode == 0, result.stdout + result.stderr
-    assert "return delay" in result.stdout and "3 checks, 0 failed" in result.stdout  # the two and "table unchanged"
+    assert "return delay" in result.stdout and "4 checks, 0 failed" in result.stdout  # the three and "table unchanged"
+    assert f"silent for {round(EMULATOR_SILENCE_S * 1e3)}" in result.stdout
     bad = subprocess.run(
         [sys.executable, "-m", "ax12emu", "conformance", "ax12emu://?ids=1&corrupt=1", "--only", "ping"],
         capture_output=True, text=True, timeout=60,

@@ -7,7 +7,7 @@ import subprocess
 import sys
 
 import pytest
-from emu_testkit import CONFORMANCE_TIMEOUT_S
+from emu_testkit import CONFORMANCE_TIMEOUT_S, EMULATOR_SILENCE_S
 
 from ax12emu import conformance
 from ax12emu.conformance.link import Link, open_port
@@ -27,7 +27,7 @@ def test_conformance_trace_decodes_back_to_the_packets_sent(tmp_path, emulator):
     """
     path = tmp_path / "bus.jsonl"
     served = emulator("--ids", "1,2", "--trace", str(path))
-    link = Link(open_port(served.port, 1_000_000), timeout_s=CONFORMANCE_TIMEOUT_S)
+    link = Link(open_port(served.port, 1_000_000), timeout_s=CONFORMANCE_TIMEOUT_S, silence_s=EMULATOR_SILENCE_S)
     try:
         report = conformance.run_on_link(link, [1, 2])
     finally:
