@@ -388,7 +388,8 @@ class VirtualBus:
         """The simulated shaft angle in degrees from the CW end (0..300 over positions 0..1023).
 
         On a Protocol 2.0 servo: the output shaft's angle as its physics counts it (turns included;
-        180 at the start, where Present Position reads 2048).
+        180 at the start, where Present Position reads 2048, or 512 on the XL-320, whose 0..1023 span
+        150 degrees either side of it).
         """
 
         def _angle(bus: Bus) -> float:
