@@ -31,37 +31,43 @@ def _reading(servo: dict[str, Any], *names: str) -> dict[str, Any] | None:
     return next((found[name] for name in names if name in found), None)
 
 
-def _show(reading: dict[str, Any] | None, signed: bool = False) -> str:
-    """A reading as 'raw (value unit)', or '-' where the servo has no such register."""
+def _show(reading: dict[str, Any] | None) -> str:
+    """A reading in its unit (one decimal), or raw where its unit is unknown; '-' where the servo has no such register.
+
+    The page shows the raw values beside; a terminal row has room for one of them.
+    """
     if reading is None:
         return "-"
-    raw = f"{reading['raw']:+d}" if signed else str(reading["raw"])
-    return raw if reading["value"] is None else f"{raw} ({reading['value']:g} {reading['unit']})"
+    if reading["value"] is None:
+        return f"{reading['raw']:+d}"
+    return f"{reading['value']:+.1f} {reading['unit']}"
 
 
 def _position(servo: dict[str, Any], name: str) -> str:
+    """Position or goal in the servo's own units and in degrees."""
     reading = _reading(servo, name)
     if reading is None:
         return "-"
     return str(reading["raw"]) if reading["value"] is None else f"{reading['raw']} ({reading['value']:.1f}°)"
 
 
-#: Columns of the servo table: heading, how to show one servo (AX-12 and X series alike, from its readings).
-COLUMNS: tuple[tuple[str, Any], ...] = (
-    ("ID", lambda s: str(s["id"])),
-    ("model", lambda s: f"{s['model']} (P{s['protocol']})"),
-    ("mode", lambda s: s["mode"] + (f" {s['limits'][0]}..{s['limits'][1]}" if s["limits"] else "")),
-    ("position", lambda s: _position(s, "position")),
-    ("goal", lambda s: _position(s, "goal")),
-    ("velocity", lambda s: _show(_reading(s, "velocity"), signed=True)),
-    ("current/load", lambda s: _show(_reading(s, "current", "load"), signed=True)),
-    ("PWM", lambda s: _show(_reading(s, "pwm"), signed=True)),
-    ("V", lambda s: "-" if (r := _reading(s, "voltage")) is None or r["value"] is None else f"{r['value']:.1f}"),
-    ("°C", lambda s: "-" if (r := _reading(s, "temperature")) is None else str(r["raw"])),
-    ("torque", lambda s: "on" if s["registers"].get("torque_enable") else "off"),
-    ("moving", lambda s: "yes" if s["registers"].get("moving") else "no"),
-    ("errors", lambda s: ",".join(s["alarm_names"]) or (f"{s['alarms']:#04x}" if s["alarms"] else "-")),
-    ("faults", lambda s: "; ".join(s["faults"]) or "-"),
+#: Columns of the servo table: heading, how to show one servo (AX-12 and X series alike, from its readings),
+#: whether the column may wrap (the free-text ones, so a narrow terminal keeps the numbers whole).
+COLUMNS: tuple[tuple[str, Any, bool], ...] = (
+    ("ID", lambda s: str(s["id"]), False),
+    ("model", lambda s: f"{s['model']} (P{s['protocol']})", False),
+    ("mode", lambda s: s["mode"] + (f" {s['limits'][0]}..{s['limits'][1]}" if s["limits"] else ""), True),
+    ("position", lambda s: _position(s, "position"), False),
+    ("goal", lambda s: _position(s, "goal"), False),
+    ("velocity", lambda s: _show(_reading(s, "velocity")), False),
+    ("current/load", lambda s: _show(_reading(s, "current", "load")), False),
+    ("PWM", lambda s: _show(_reading(s, "pwm")), False),
+    ("V", lambda s: "-" if (r := _reading(s, "voltage")) is None or r["value"] is None else f"{r['value']:.1f}", False),
+    ("°C", lambda s: "-" if (r := _reading(s, "temperature")) is None else str(r["raw"]), False),
+    ("torque", lambda s: "on" if s["registers"].get("torque_enable") else "off", False),
+    ("moving", lambda s: "yes" if s["registers"].get("moving") else "no", False),
+    ("errors", lambda s: ",".join(s["alarm_names"]) or (f"{s['alarms']:#04x}" if s["alarms"] else "-"), True),
+    ("faults", lambda s: "; ".join(s["faults"]) or "-", True),
 )
 
 
@@ -76,11 +82,11 @@ def render(frame: Frame) -> Group:
         f"Protocol {' + '.join(frame.get('protocols', ['1.0']))}"
     )
     table = Table(expand=False, show_edge=False, pad_edge=False)
-    for heading, _ in COLUMNS:
-        table.add_column(heading, no_wrap=True)
+    for heading, _, wraps in COLUMNS:
+        table.add_column(heading, no_wrap=not wraps)
     for servo in frame["servos"]:
         style = "red" if servo["alarm_names"] or servo["faults"] else None
-        table.add_row(*(show(servo) for _, show in COLUMNS), style=style)
+        table.add_row(*(show(servo) for _, show, _ in COLUMNS), style=style)
     return Group(head, table)
 
 

@@ -10,6 +10,7 @@ from ax12emu import VirtualBus
 from ax12emu.live import Sampler
 from ax12emu.live.buses import decoder_options
 from ax12emu.live.monitor import render
+from ax12emu.live.snapshot import REGISTER_UNITS
 from ax12emu.protocol.servo_models import model
 
 
@@ -35,9 +36,11 @@ def test_x_series_rows_show_model_mode_degrees_units_and_errors():
     assert "XL430-W250 (P2.0)" in rows["1"] and "position 0..4095" in rows["1"]
     assert f"{one['present_position']} ({degrees:.1f}°)" in rows["1"]
     assert f"1000 ({1000 * model('xl430-w250').physical.resolution_deg:.1f}°)" in rows["1"]
-    assert one["present_velocity"] < 0 and f"{one['present_velocity']:+d} (" in rows["1"] and "rpm)" in rows["1"]
-    assert f"{one['present_load']:+d} (" in rows["1"] and "%)" in rows["1"]  # the XL430's Present Load, 0.1 %
-    assert "XL330-M288 (P2.0)" in rows["2"] and "velocity" in rows["2"] and "mA)" in rows["2"]  # current in its unit
+    velocity_rpm = one["present_velocity"] * REGISTER_UNITS["present_velocity"].per_raw
+    assert one["present_velocity"] < 0 and f"{velocity_rpm:+.1f} rpm" in rows["1"]
+    assert f"{one['present_load'] * REGISTER_UNITS['present_load'].per_raw:+.1f} %" in rows["1"]  # the XL430's Present Load
+    current_ma = two["present_current"] * model("xl330-m288").physical.current_unit_ma
+    assert "XL330-M288 (P2.0)" in rows["2"] and "velocity" in rows["2"] and f"{current_ma:+.1f} mA" in rows["2"]
     assert "overheating" in rows["2"] and "alarm 0x04" in rows["2"] and two["torque_enable"] == 0
     assert "Protocol 2.0" in text
 

@@ -58,6 +58,7 @@ def test_the_monitor_table_shows_signed_speed_and_load():
     from rich.console import Console
 
     from ax12emu.live.monitor import render
+    from ax12emu.live.snapshot import REGISTER_UNITS
 
     with VirtualBus([1], transport="inprocess", virtual_time=True) as bus:
         bus.write(1, "torque_enable", 1)
@@ -70,4 +71,5 @@ def test_the_monitor_table_shows_signed_speed_and_load():
     text = console.export_text()
     speed = frame["servos"][0]["registers"]["present_speed"]
     assert speed & 0x400, "moving CW sets the direction bit"
-    assert f"-{speed & 0x3FF}" in text and "AX-12A (P1.0)" in text
+    rpm = -(speed & 0x3FF) * REGISTER_UNITS["present_speed"].per_raw  # the AX-12A's, about 0.111 rpm
+    assert f"{rpm:+.1f} rpm" in text and "AX-12A (P1.0)" in text
