@@ -304,13 +304,14 @@ class Bus2(ServosById[Servo2]):
         answered: list[tuple[Servo2, int, bytes]] = []
         #: Servos answering at once to an ID another servo also has (a fault): k in answered -> their answers.
         twins: dict[int, list[tuple[Servo2, int, bytes]]] = {}
+        by_id, faults = self._by_id, self.faults
         for servo_id, address, length in reads:
-            found = self._by_id.get(servo_id, ())
+            found = by_id.get(servo_id, ())
             servo = found[0] if found else None
-            if (servo is None or not self._hears(servo, line_bps) or not answers(servo, packet.instruction)
-                    or (self.faults is not None and not self.faults.admit(servo))):
+            if (servo is None or not (line_bps is None or self._hears(servo, line_bps))
+                    or not answers(servo, packet.instruction) or (faults is not None and not faults.admit(servo))):
                 break
-            error, data = listed_read(servo, address, length)
+            data, error = servo.table.read(address, length)  # listed_read's, without the call
             if len(found) > 1:
                 twins[len(answered)] = [(twin, *listed_read(twin, address, length)) for twin in found[1:]
                                         if self._hears(twin, line_bps) and answers(twin, packet.instruction)
@@ -337,16 +338,17 @@ class Bus2(ServosById[Servo2]):
             return replies
         at_s = wire_s = 0.0
         for k, (servo, error, data) in enumerate(answered):
-            status = encode_status2(servo.id, status_byte(servo, error), data)
+            servo_id, baud = servo.id, servo.baud_bps
+            status = encode_status2(servo_id, status_byte(servo, error), data)
             at_s += servo.return_delay_s
-            reply = Reply(servo.id, status, at_s + wire_s, servo.baud_bps, wire_s)
-            if k in twins:  # the same turn: their answers collide on the wire
+            reply = Reply(servo_id, status, at_s + wire_s, baud, wire_s)
+            if twins and k in twins:  # the same turn: their answers collide on the wire
                 reply = collide([reply, *(Reply(twin.id, encode_status2(twin.id, status_byte(twin, twin_error), twin_data),
                                                 at_s + wire_s + twin.return_delay_s - servo.return_delay_s, twin.baud_bps,
                                                 wire_s)
                                           for twin, twin_error, twin_data in twins[k])])
             replies.append(reply)
-            wire_s += len(status) * BITS_PER_BYTE / servo.baud_bps
+            wire_s += len(status) * BITS_PER_BYTE / baud
         return replies
 
     # -- life cycle --------------------------------------------------------------------

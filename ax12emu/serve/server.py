@@ -149,6 +149,13 @@ class BusServer:
             os.sched_yield()
         return True
 
+    def _send_now(self, data: bytes, now: float) -> None:
+        """:meth:`_flush` of ``data`` alone, with nothing queued."""
+        self._emit(data, now)
+        self._hot_until = now + HOT_S
+        if self._yield_after_reply and not self.pace:
+            os.sched_yield()
+
     def _emit(self, data: bytes, now: float) -> None:
         self._account(data, self.transport.write(data), now)
 
@@ -206,7 +213,12 @@ class BusServer:
             if self._yield_after_reply:
                 os.sched_yield()
             return
-        self._schedule(merge_replies(replies, end, per_byte=self.pace, in_sequence=self._in_sequence))
+        chunks = merge_replies(replies, end, per_byte=self.pace, in_sequence=self._in_sequence)
+        if not (self.pace or self._queue) and chunks[-1][0] <= now:
+            # All due now (a Sync Read's answers at Return Delay Time 0, in order): what _flush would send, unqueued.
+            self._send_now(b"".join(data for _, data in chunks), now)
+            return
+        self._schedule(chunks)
         if not self.pace and replies[0].delay_s == 0.0:
             self._flush(now)
 

@@ -77,6 +77,8 @@ class Table2:
         #: The span of Indirect Data bytes (empty when none): reads and writes clear of it take a short way.
         self._indirect_lo = min(self._indirect, default=0)
         self._indirect_hi = max(self._indirect, default=-1) + 1
+        #: A ``minimum_from``/``maximum_from`` reference -> (the register it names, negated).
+        self._bounds: dict[str, tuple[Entry, bool]] = {}
         #: (address, length) -> what :meth:`check_write` finds from the layout alone (see ``_plan``).
         self._plans: dict[tuple[int, int], tuple[int, bool, tuple[Entry, ...]] | None] = {}
 
@@ -258,8 +260,11 @@ class Table2:
         return entry.minimum, entry.maximum, True
 
     def _bound(self, ref: str, image: bytearray) -> int:
-        negate = ref.startswith("-")
-        value = self.layout.by_name[ref.lstrip("-")].value_in(image)
+        bound = self._bounds.get(ref)
+        if bound is None:  # looked up once per reference: a robot's every goal write is judged against its limits
+            bound = self._bounds[ref] = (self.layout.by_name[ref.lstrip("-")], ref.startswith("-"))
+        entry, negate = bound
+        value = entry.value_in(image)
         return -value if negate else value
 
     def _within_limits(self, entry: Entry, image: bytearray) -> bool:
