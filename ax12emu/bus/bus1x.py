@@ -18,8 +18,12 @@ answers its Return Delay Time after the previous one's status packet ended, in l
 no MX answers (absent, another baud, an AX-12A, which has no Bulk Read) breaks the chain there, as
 the next servo waits for a status packet that never comes.
 
+Faults (``bus.faults``, :class:`ax12emu.faults.injection.Faults1X`): the wire's act on every reply
+of the wire (AX-12As' too) and on each MX servo (unplugged, it hears nothing and a Bulk Read's chain
+breaks at it); an MX servo's own (an error, a blocked shaft, pinned readings) act inside its
+firmware model, the AX-12As' through their bus's own :class:`~ax12emu.faults.injection.Faults`.
 Not modelled for MX servos: the busy time after an EEPROM write (the AX-12's measured figure is an
-AX-12's), faults (``ax12emu.faults``) and the live view; state persists as on the other buses.
+AX-12's) and the live view; state persists as on the other buses.
 """
 
 from __future__ import annotations
@@ -33,7 +37,7 @@ from ax12emu.protocol.servo_models import ServoModel
 from ax12emu.servo.request_handler1x import handle1x, listed_read, parse_bulk_read, status_byte
 from ax12emu.servo.servo1x import Servo1X, Servo1XOptions
 
-from .bus import BAUD_TOLERANCE, Bus
+from .bus import BAUD_TOLERANCE, Bus, Interceptor
 from .clock import VirtualClock, WallClock
 from .reply import BITS_PER_BYTE, Reply
 from .state_store import StateStore
@@ -91,7 +95,8 @@ class Bus1X:
         self.reindex()
         #: How far behind the clock physics may be when a packet is served (see ``Bus.request_lag_s``).
         self._request_lag_s = 0.0
-        self.faults = None
+        #: Injected faults (``ax12emu.faults.injection.Faults1X``); None costs one test per packet.
+        self.faults: Interceptor | None = None
         self._closed = False
 
     # -- lookup ------------------------------------------------------------------------
@@ -127,6 +132,12 @@ class Bus1X:
             except KeyError:
                 pass
         raise KeyError(f"no servo with ID {servo_id} on the bus (IDs now: {sorted(self.ids)})")
+
+    def holder(self, servo) -> "Bus1X | Bus":
+        """The bus that holds ``servo``: the AX-12 bus inside for an AX-12A (its model, its faults), else this one."""
+        if self.ax_bus is not None and any(servo is s for s in self.ax_bus.servos):
+            return self.ax_bus
+        return self
 
     @property
     def request_lag_s(self) -> float:
@@ -192,13 +203,17 @@ class Bus1X:
         self.catch_up(now_s - self._request_lag_s)
         broadcast = packet.id == BROADCAST_ID
         targets = [s for s in (self.servos_mx if broadcast else self._by_id.get(packet.id, ())) if self._hears(s, line_bps)]
+        faults = self.faults
+        if faults is not None:  # an unplugged servo hears nothing (ax12emu.faults: wire faults)
+            targets = [s for s in targets if faults.admit(s)]
         if log.isEnabledFor(logging.DEBUG):
             log.debug("rx id=%d inst=%#04x params=%s -> MX IDs %s", packet.id, packet.instruction, bytes(packet.params).hex(" "),
                       [s.id for s in targets])
         for servo in targets:
             servo.heard(now_s)
         if broadcast and packet.instruction == Instruction.BULK_READ and packet.checksum_ok:
-            return [*replies, *self._bulk_read(packet, line_bps)]
+            replies = [*replies, *self._bulk_read(packet, line_bps)]
+            return faults.on_replies(replies) if faults is not None and replies else replies
         for servo in targets:
             outcome = handle1x(servo, packet)
             if outcome.reply is not None:
@@ -210,6 +225,8 @@ class Bus1X:
                     servo.eeprom_dirty = False
                     if self.state_store is not None:
                         self.state_store.save(slot, servo.table)
+        if faults is not None and replies:  # the AX-12As' too: the wire's faults are the wire's
+            replies = faults.on_replies(replies)
         return replies
 
     def _bulk_read(self, packet: InstructionPacket, line_bps: float | None) -> list[Reply]:
@@ -221,8 +238,9 @@ class Bus1X:
         for request in requests:
             found = self._by_id.get(request.servo_id)
             servo = found[0] if found else None
-            # Status Return Level 0 answers PING only
-            if servo is None or not self._hears(servo, line_bps) or servo.status_return_level < 1:
+            # Status Return Level 0 answers PING only; an unplugged servo hears nothing
+            if (servo is None or not self._hears(servo, line_bps) or servo.status_return_level < 1
+                    or (self.faults is not None and not self.faults.admit(servo))):
                 break
             error, data = listed_read(servo, request.address, request.length)
             status = encode_status(servo.id, status_byte(servo, error), data)

@@ -39,6 +39,10 @@ class ServosById(Generic[S]):
         except KeyError:
             raise KeyError(f"no servo with ID {servo_id} on the bus (IDs now: {sorted(self._by_id)})") from None
 
+    def holder(self, servo: S) -> "ServosById[S]":
+        """The bus that holds ``servo`` (its faults, its model): this one; a bus of buses names the inner one."""
+        return self
+
     @property
     def ids(self) -> list[int]:
         """Present IDs, in slot order."""

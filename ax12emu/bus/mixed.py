@@ -20,14 +20,29 @@ from __future__ import annotations
 from collections.abc import Iterator, Sequence
 from typing import Any
 
+from ax12emu.protocol.servo_models import ServoModel, model, model_names
+
 from .bus import Bus
 from .bus2 import Bus2
 from .reply import Reply
 
-__all__ = ["MixedBus", "PROTOCOLS"]
+__all__ = ["MixedBus", "PROTOCOLS", "model_name", "model_of"]
 
 #: The protocols of a mixed wire, as ``protocol=`` names them.
 PROTOCOLS = (1.0, 2.0)
+
+
+def model_of(servo: Any) -> ServoModel | None:
+    """A servo's model file, found by the Model Number its table holds (every model file's ``model_number``
+    is its table's default, and the register is read-only), so no kind of servo is named here; None if none has it."""
+    number = servo.table.get("model_number")
+    return next((model(key) for key in model_names() if model(key).model_number == number), None)
+
+
+def model_name(servo: Any) -> str:
+    """A servo's model as its model file names it (e.g. "MX-28")."""
+    spec = model_of(servo)
+    return spec.name if spec is not None else f"model number {servo.table.get('model_number')}"
 
 
 class _Framers:
@@ -92,9 +107,16 @@ class MixedBus:
             raise KeyError(f"no servo with ID {servo_id} on this wire (Protocol 1.0 IDs now: {sorted(self.bus1.ids)}, "
                            f"Protocol 2.0: {sorted(self.bus2.ids)})")
         if len(found) > 1:
-            raise ValueError(f"ID {servo_id} answers on both protocols of this wire (an AX-12A on 1.0, "
-                             f"{found[1].spec.name} on 2.0): give protocol=1.0 or protocol=2.0")
+            raise ValueError(f"ID {servo_id} answers on both protocols of this wire ({model_name(found[0])} on 1.0, "
+                             f"{model_name(found[1])} on 2.0): give protocol=1.0 or protocol=2.0")
         return found[0]
+
+    def holder(self, servo: Any) -> Any:
+        """The bus that holds ``servo`` (its faults, its model): within the protocol's bus, its own holder."""
+        for bus in (self.bus1, self.bus2):
+            if any(servo is s for s in bus.servos):
+                return bus.holder(servo)
+        raise KeyError(f"ID {servo.id}: not a servo of this wire")
 
     def reindex(self) -> None:
         """Look servos up by the IDs in their tables again, on both buses."""

@@ -314,13 +314,11 @@ def _serve2(args: argparse.Namespace) -> int:
 
         bus = MixedBus(bus1, bus) if bus is not None else bus1
     faults = cli_hil.fault_config(args)
-    if faults.active and mx:
-        raise SystemExit("ax12emu serve: error: faults (--drop, --alarm, --stall ...) are not available with MX servos yet")
-    if faults.active:
-        faults.install(bus)  # on a mixed wire, a slot both protocols launched is refused (ValueError)
-    # The header names the 2.0 servos, so ax12emu decode names their registers.
-    servos2 = ",".join(f"{i}:{k}" for i, k in args.servo_models if "2.0" in model(k).protocols)
-    trace = TraceWriter(args.trace, servos=servos2) if args.trace else None
+    if faults.active:  # MX servos' through their firmware (Faults1X); a slot both protocols launched is refused (ValueError)
+        faults.install(bus)
+    # The header names every servo's model, so ax12emu decode names each ID's registers by its own table.
+    servos = ",".join(f"{i}:{k}" for i, k in args.servo_models)
+    trace = TraceWriter(args.trace, servos=servos) if args.trace else None
     transport = _open_transport(args)
     server = BusServer(bus, transport, pace=args.pace, echo=args.echo, trace=trace)
     live = _open_live(args, server, transport, bus)

@@ -77,7 +77,7 @@ if TYPE_CHECKING:
     from ax12emu.servo.servo2 import Servo2
     from ax12emu.servo.virtual_servo import VirtualServo
 
-__all__ = ["Faults", "Faults2", "MixedFaults", "ALARM_NAMES", "HW_ERROR_NAMES", "parse_alarm_bits", "faults_for"]
+__all__ = ["Faults", "Faults2", "Faults1X", "MixedFaults", "ALARM_NAMES", "HW_ERROR_NAMES", "parse_alarm_bits", "faults_for"]
 
 log = logging.getLogger(__name__)
 
@@ -548,6 +548,141 @@ class Faults2(Faults):
         """Nothing: the firmware itself holds a stalled shaft and pinned readings."""
 
 
+#: The readings an MX's Protocol 1.0 table shows unchanged from the firmware's (``ClassicMap.sensed_to_registers``
+#: copies them: degrees C, 0.1 V on both), by register name: what ``hold`` can pin, as the firmware's field.
+_CLASSIC_HELD: Mapping[str, str] = {"present_temperature": "present_temperature", "present_voltage": "present_input_voltage"}
+
+
+class Faults1X(Faults2):
+    """The faults of a Protocol 1.0 wire with MX-series servos (:class:`~ax12emu.bus.bus1x.Bus1X`), AX-12As beside them if any.
+
+    An MX on Protocol 1.0 runs the X-series firmware model behind its classic table (``ax12emu.servo.plant1x``),
+    so its own faults act inside that firmware as :class:`Faults2`'s do, and show as the Protocol 1.0 firmware
+    shows them (ROBOTIS e-manual, MX-28 (Protocol 1.0), "Torque Limit(34)": "If the function of Alarm
+    LED(17)/Shutdown(18) is triggered, the motor loses its torque because Torque Limit(34) becomes 0. Once
+    error conditions are resolved and Torque Limit(34) is changed to the value other than 0, the motor can be
+    operated again."):
+
+    * ``alarm``: status-packet alarm bits by the model file's ``[classic] errors`` names (overload,
+      overheating, input_voltage) or as bits; the firmware detects them now if Shutdown(18) selects them
+      (else a ValueError, as on the X series), every status packet carries them and Torque Limit drops to 0.
+      :meth:`clear_alarm` lifts them as the firmware does when Torque Limit is written non-zero; Torque
+      Limit itself stays 0 until the client writes it, as on the AX-12 bus.
+    * ``stall``: the shaft is held while the firmware drives; its overload protection trips after the
+      firmware's own overload time (Overload, Torque Limit 0, if Shutdown selects it).
+    * ``hold``: Present Temperature or Present Voltage pinned, judged by the firmware's limits.
+    * the wire's (``drop``, ``corrupt``, ``delay``) act on every status packet of the wire, the AX-12As'
+      too (one random stream); ``vanish`` and ``duplicate`` (IDs 0..253) on any servo of it.
+
+    An AX-12A on the same wire is named by its slot as well (slots are unique on one protocol): its
+    faults are its bus's (:class:`Faults`, ``bus.ax_bus.faults``), reached through this object.
+    """
+
+    #: Per-servo methods an AX-12A's slot is routed to its own bus's :class:`Faults` for.
+    _ROUTED = ("vanish", "reappear", "force_alarm", "clear_alarm", "duplicate", "unduplicate", "stall", "release",
+               "hold", "active")
+
+    def __init__(self, bus, *, seed: int = 0) -> None:
+        super().__init__(bus, seed=seed)
+        ax_bus = bus.ax_bus
+        #: The AX-12As' faults (their bus's); its reply faults stay off: this object's act on the whole wire.
+        self.ax: Faults | None = None
+        if ax_bus is not None:
+            if ax_bus.faults is None:
+                ax_bus.faults = Faults(ax_bus, seed=seed)
+            self.ax = ax_bus.faults  # type: ignore[assignment]
+
+    def _index(self, slot: int) -> int:
+        try:
+            return self.bus.slots_mx.index(slot)
+        except ValueError:
+            raise ValueError(f"no servo launched as ID {slot} (slots: {self.bus.slots})") from None
+
+    def force_alarm(self, slot: int, bits: int | str) -> None:
+        """The MX's firmware detects the alarms ``bits`` (status-packet bits, or names such as "overload") now."""
+        servo = self._servo2(slot)
+        classic = servo.plant.classic
+        names = dict(classic.units.errors)  # the family's Shutdown/status bits by name, from its model file
+        value = parse_alarm_bits(bits, names) if isinstance(bits, str) else int(bits)
+        if not value or value & ~sum(names.values()):
+            raise ValueError(f"{servo.spec.name}'s alarm bits are {', '.join(f'{k} {v:#04x}' for k, v in names.items())}; "
+                             f"got {value:#04x}")
+        shutdown = servo.table.get("shutdown")
+        if value & ~shutdown:
+            unselected = [name for name, bit in names.items() if bit & value & ~shutdown]
+            raise ValueError(f"alarm: ID {slot}'s Shutdown({servo.table.layout.by_name['shutdown'].address}) is {shutdown:#04x}, "
+                             f"which does not select {', '.join(unselected)}: the firmware detects only the errors Shutdown "
+                             "selects (write Shutdown first)")
+        from ax12emu.servo.classic import X_ERROR_BITS  # loaded with the MX bus, not before
+
+        self._firmware(slot, "alarm").raise_error(sum(X_ERROR_BITS[name] for name, bit in names.items() if bit & value))
+        servo.plant.write_back()  # a newly latched error: Torque Limit 0
+        index = self._index(slot)
+        self._alarms[index] = self._alarms.get(index, 0) | value
+
+    def clear_alarm(self, slot: int) -> None:
+        """The errors go as when a client writes Torque Limit non-zero (the firmware restarts its protections)."""
+        index = self._index(slot)
+        self._alarms.pop(index, None)
+        self._servo2(slot).plant.clear_alarms()
+
+    def duplicate(self, slot: int, as_id: int) -> None:
+        """Give the servo launched as ``slot`` the ID ``as_id`` (0..253 on Protocol 1.0, normally another servo's)."""
+        Faults.duplicate(self, slot, as_id)
+
+    def hold(self, slot: int, name: str, value: int | None) -> None:
+        """Pin Present Temperature or Present Voltage (register units) at ``value``; None frees it."""
+        servo = self._servo2(slot)
+        if name not in servo.table.layout.by_name:
+            raise KeyError(f"{servo.spec.name} has no register {name!r}")
+        if name not in _CLASSIC_HELD:
+            raise ValueError(f"hold: {name!r} is not a register the firmware senses; those are {', '.join(_CLASSIC_HELD)}")
+        self._firmware(slot, "hold").hold_reading(_CLASSIC_HELD[name], value)
+        servo.plant.write_back()
+        index = self._index(slot)
+        held = self._held.setdefault(index, {})
+        if value is None:
+            held.pop(name, None)
+            if not held:
+                del self._held[index]
+        else:
+            held[name] = int(value)
+
+    def active(self, slot: int) -> list[str]:
+        """As :meth:`Faults.active`; a forced alarm the client has cleared (Torque Limit written) is no longer listed."""
+        index = self._index(slot)
+        if index in self._alarms:
+            latched = self._alarms[index] & self._servo2(slot).alarms
+            if latched:
+                self._alarms[index] = latched
+            else:
+                del self._alarms[index]
+        return Faults.active(self, slot)
+
+    def clear(self) -> None:
+        """Lift every fault, the AX-12As' too."""
+        super().clear()
+        if self.ax is not None:
+            self.ax.clear()
+
+
+def _routed_to_ax(name: str):
+    """``Faults1X.<name>``, sending an AX-12A's slot to its own bus's faults."""
+    own = getattr(Faults1X, name)
+
+    def method(self: Faults1X, slot: int, *args, **kwargs):
+        if self.ax is not None and slot in self.ax.bus.slots:
+            return getattr(self.ax, name)(slot, *args, **kwargs)
+        return own(self, slot, *args, **kwargs)
+
+    method.__name__, method.__qualname__, method.__doc__ = name, f"Faults1X.{name}", own.__doc__
+    return method
+
+
+for _name in Faults1X._ROUTED:
+    setattr(Faults1X, _name, _routed_to_ax(_name))
+
+
 class MixedFaults:
     """The faults of a wire mixing AX-12As (Protocol 1.0) and X-series servos (Protocol 2.0).
 
@@ -616,11 +751,15 @@ class MixedFaults:
 
 
 def faults_for(bus: "Bus | Bus2 | MixedBus", *, seed: int = 0) -> "Faults | MixedFaults":
-    """The faults a bus can take: :class:`Faults` on the AX-12 bus, :class:`Faults2` on a Protocol 2.0 bus, both on a mixed wire."""
+    """The faults a bus can take: :class:`Faults` on the AX-12 bus, :class:`Faults2` on a Protocol 2.0 bus,
+    :class:`Faults1X` on a Protocol 1.0 wire with MX servos, both protocols' on a mixed wire."""
     # A Bus2 exists only once its module is loaded: the AX-12 bus's users do not pay for importing it.
     bus2 = sys.modules.get("ax12emu.bus.bus2")
     if bus2 is not None and isinstance(bus, bus2.Bus2):
         return Faults2(bus, seed=seed)  # type: ignore[arg-type]
+    bus1x = sys.modules.get("ax12emu.bus.bus1x")
+    if bus1x is not None and isinstance(bus, bus1x.Bus1X):
+        return Faults1X(bus, seed=seed)
     mixed = sys.modules.get("ax12emu.bus.mixed")
     if mixed is not None and isinstance(bus, mixed.MixedBus):
         return MixedFaults(bus, seed=seed)

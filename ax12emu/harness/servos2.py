@@ -12,58 +12,73 @@ AX-12As) are a Protocol 1.0 bus.
 from __future__ import annotations
 
 from ax12emu.bus.bus import Bus
+from ax12emu.bus.bus1x import Bus1X
 from ax12emu.bus.bus2 import Bus2
 from ax12emu.bus.clock import VirtualClock, WallClock
-from ax12emu.bus.mixed import MixedBus
+from ax12emu.bus.mixed import MixedBus, model_of
 from ax12emu.protocol.control_table import AX12_MODEL, PROTOCOL1_MODELS
-from ax12emu.protocol.servo_models import model
+from ax12emu.protocol.servo_models import model, model_names
 from ax12emu.protocol.servo_spec import parse_servo_spec
 from ax12emu.servo.model_factory import build_protocol1_model
 from ax12emu.servo.model_factory2 import XModelChoice, build_x_firmware
+from ax12emu.servo.plant1x import build_plant1x
 from ax12emu.servo.servo2 import Servo2Options
 from ax12emu.servo.virtual_servo import baud_value
 
 __all__ = ["build_bus2", "build_wire", "servo_list", "servo_models"]
 
 
+def _protocol1_keys() -> tuple[str, ...]:
+    """Every model served on Protocol 1.0 only: the AX-shaped tables (the AX-12 bus) and the MX series' (bus1x)."""
+    return tuple(key for key in model_names() if "1.0" in model(key).protocols and "2.0" not in model(key).protocols)
+
+
 def servo_models(spec: str, ids: list[int] | None, *, mixed: bool = False) -> list[tuple[int, str]]:
     """(ID, model key) per servo; ``ids`` None with a bare MODEL means ID 1. ``ValueError`` names the mistake.
 
-    ``mixed``: AX-12As and AX-18As (Protocol 1.0) are taken beside the X series, as on a mixed wire.
+    ``mixed``: the Protocol 1.0 models (AX-12A, AX-18A, the MX series) are taken beside the X series, as on a mixed wire.
     """
     if ids is None and ":" not in spec:
         ids = [1]
-    return parse_servo_spec(spec, ids, also=PROTOCOL1_MODELS if mixed else ())
+    return parse_servo_spec(spec, ids, also=_protocol1_keys() if mixed else ())
 
 
 def build_wire(spec: str, ids: list[int] | None = None, *, clock: WallClock | VirtualClock,
                baud_bps: float | None = None, choice: XModelChoice = XModelChoice(),
-               options: Servo2Options = Servo2Options()) -> Bus | Bus2 | MixedBus:
-    """:func:`build_bus2`, or, if ``spec`` names AX-12As or AX-18As too, both protocols' servos on one wire
-    (a MixedBus), or a Protocol 1.0 bus when it names no X-series servo (AX-18As among them).
+               options: Servo2Options = Servo2Options()) -> Bus | Bus1X | Bus2 | MixedBus:
+    """The bus ``spec``'s servos need, the one place that decides it: each protocol's servos on its own bus, and
+    both on one wire (a MixedBus) when the text names both.
 
-    The AX servos start at their factory 1,000,000 bps, the X series at theirs (57,600), unless ``baud_bps``.
+    Protocol 1.0: AX-12As and AX-18As on the AX-12 bus (:class:`Bus`); MX servos on :class:`Bus1X`, which holds
+    the AX bus inside when both are named.  Protocol 2.0: :func:`build_bus2`.  Every servo starts at its
+    model's factory rate (1,000,000 bps on the AX and MX series, 57,600 on the X series) unless ``baud_bps``.
     """
     models = servo_models(spec, ids, mixed=True)
-    ax = [(servo_id, key) for servo_id, key in models if "2.0" not in model(key).protocols]
-    if not ax:
-        return build_bus2(spec, ids, clock=clock, baud_bps=baud_bps, choice=choice, options=options)
-    keys1 = [key for _, key in ax]
-    if len(ax) == len(models) and set(keys1) == {AX12_MODEL}:
-        raise ValueError(f"{spec!r} names no Protocol 2.0 servo; AX-12As alone are the default bus (leave out servo=)")
-    x_models = [(servo_id, key) for servo_id, key in models if "2.0" in model(key).protocols]
-    bus1 = Bus([servo_id for servo_id, _ in ax], clock=clock, model=build_protocol1_model(keys1),
-               table_layout=[None if key == AX12_MODEL else model(key).layout() for key in keys1])
-    bus2 = (Bus2([(servo_id, model(key)) for servo_id, key in x_models],
-                 lambda servo_model, index: build_x_firmware(servo_model, choice), clock=clock, options=options)
+    keys = dict.fromkeys(key for _, key in models)
+    if set(keys) == {AX12_MODEL}:
+        raise ValueError(f"{spec!r} names no servo but AX-12As; AX-12As alone are the default bus (leave out servo=)")
+    ax = [(servo_id, key) for servo_id, key in models if key in PROTOCOL1_MODELS]
+    mx = [(servo_id, model(key)) for servo_id, key in models if key not in PROTOCOL1_MODELS and "2.0" not in model(key).protocols]
+    x_models = [(servo_id, model(key)) for servo_id, key in models if "2.0" in model(key).protocols]
+    bus1: Bus | Bus1X | None = None
+    if ax:
+        keys1 = [key for _, key in ax]
+        bus1 = Bus([servo_id for servo_id, _ in ax], clock=clock, model=build_protocol1_model(keys1),
+                   table_layout=[None if key == AX12_MODEL else model(key).layout() for key in keys1])
+    if mx:
+        bus1 = Bus1X(mx, lambda servo_model, servo: build_plant1x(servo_model, servo.table, choice), ax_bus=bus1, clock=clock)
+    bus2 = (Bus2(x_models, lambda servo_model, index: build_x_firmware(servo_model, choice), clock=clock, options=options)
             if x_models else None)
     if baud_bps is not None:
-        value = baud_value(baud_bps)  # ValueError if an AX-12A cannot run at it
-        for servo in bus1.servos:
-            servo.table.set("baud_rate", value)
+        if bus1 is not None:
+            value = baud_value(baud_bps)  # ValueError if an AX-12A cannot run at it
+            for servo in bus1.servos:  # an MX's Baud Rate(4) counts as the AX-12A's for rates up to 1 Mbps
+                servo.table.set("baud_rate", value)
         for servo in bus2.servos if bus2 is not None else ():
             servo.start_at_baud(baud_bps)
-    return MixedBus(bus1, bus2) if bus2 is not None else bus1
+    if bus1 is not None and bus2 is not None:
+        return MixedBus(bus1, bus2)
+    return bus1 if bus1 is not None else bus2  # type: ignore[return-value]
 
 
 def build_bus2(spec: str, ids: list[int] | None = None, *, clock: WallClock | VirtualClock,
@@ -78,8 +93,13 @@ def build_bus2(spec: str, ids: list[int] | None = None, *, clock: WallClock | Vi
     return bus
 
 
-def servo_list(bus: Bus2 | MixedBus) -> str:
-    """The bus's Protocol 2.0 servos in the per-ID ``--servo`` form (launch ID: model key), as a trace's header keeps them."""
-    if isinstance(bus, MixedBus):
-        bus = bus.bus2
-    return ",".join(f"{slot}:{servo.spec.name.lower()}" for slot, servo in zip(bus.slots, bus.servos))
+def servo_list(bus: Bus | Bus1X | Bus2 | MixedBus) -> str:
+    """Every servo of the wire in the per-ID ``--servo`` form (launch ID: model key), as a trace's header keeps them
+    (``ax12emu decode`` names each ID's registers by its model's table)."""
+    keys = []
+    for slot, servo in zip(bus.slots, bus.servos):  # each bus lists its slots and servos in one order
+        spec = model_of(servo)
+        if spec is None:
+            raise ValueError(f"ID {slot}: no model file has Model Number {servo.table.get('model_number')}")
+        keys.append(f"{slot}:{spec.key}")
+    return ",".join(keys)

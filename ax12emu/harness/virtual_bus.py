@@ -40,14 +40,16 @@ from collections.abc import Callable, Iterable
 from typing import Any
 
 from ax12emu.bus.bus import Bus
+from ax12emu.bus.bus1x import Bus1X
 from ax12emu.bus.bus2 import Bus2
 from ax12emu.bus.clock import VirtualClock, WallClock
-from ax12emu.bus.mixed import MixedBus
+from ax12emu.bus.mixed import MixedBus, model_name
 from ax12emu.faults.config import FaultConfig
 from ax12emu.faults.injection import Faults
 from ax12emu.live.controls import ServedControls
+from ax12emu.servo.classic import GOAL_REGISTERS as CLASSIC_GOAL_REGISTERS
 from ax12emu.servo.model_factory import ModelChoice, build_model
-from ax12emu.servo.servo2 import GOAL_REGISTERS, Servo2, Servo2Options
+from ax12emu.servo.servo2 import GOAL_REGISTERS, Servo2Options
 from ax12emu.servo.virtual_servo import ServoOptions
 from ax12emu.tracing.trace import TraceWriter
 from firmware_model.interface import AngleSettable, ServoModel
@@ -64,6 +66,11 @@ log = logging.getLogger(__name__)
 TRANSPORTS = ("pty", "tcp", "inprocess")
 #: Degrees of travel per radian, and the AX-12's 300-degree range over positions 0..1023.
 _DEG_PER_RAD = 180.0 / math.pi
+#: Registers whose write starts a new move in a firmware of its own: the X series' Goal registers and the
+#: classic tables' (MX, XL-320); a table has only its own family's names, so one set serves every model.
+_GOAL_REGISTERS = GOAL_REGISTERS | CLASSIC_GOAL_REGISTERS
+#: Any bus the harness builds.
+AnyBus = Bus | Bus1X | Bus2 | MixedBus
 
 _instances = 0
 _instances_lock = threading.Lock()
@@ -89,29 +96,34 @@ def _web_address(web: str | tuple[str, int] | bool | None) -> tuple[str, int] | 
     return (str(host), int(port))
 
 
-def _lookup(bus: Bus | Bus2 | MixedBus, servo_id: int, protocol: float | None):
-    """The servo answering to ``servo_id`` (on ``protocol``, which a bus of one protocol checks)."""
+def _find(bus: AnyBus, servo_id: int, protocol: float | None) -> tuple[Any, Any]:
+    """(the bus holding it, the servo) answering to ``servo_id`` (on ``protocol``, which a bus of one protocol checks).
+
+    The holder is the bus whose faults and model are the servo's (``holder``: an AX-12A beside MX
+    servos is held by the AX-12 bus inside their bus).
+    """
     if isinstance(bus, MixedBus):
-        return bus.servo(servo_id, protocol)
-    if protocol is not None and protocol != (2.0 if isinstance(bus, Bus2) else 1.0):
-        raise ValueError(f"protocol={protocol}: this bus's servos all speak Protocol {2.0 if isinstance(bus, Bus2) else 1.0}")
-    return bus.servo(servo_id)
+        servo = bus.servo(servo_id, protocol)
+    else:
+        speaks = 2.0 if isinstance(bus, Bus2) else 1.0
+        if protocol is not None and protocol != speaks:
+            raise ValueError(f"protocol={protocol}: this bus's servos all speak Protocol {speaks}")
+        servo = bus.servo(servo_id)
+    return bus.holder(servo), servo
 
 
-def _sub_bus(bus: Bus | Bus2 | MixedBus, servo) -> Bus | Bus2:
-    """The bus of the servo's own protocol (on a mixed wire, one of its two)."""
-    if isinstance(bus, MixedBus):
-        return bus.bus2 if isinstance(servo, Servo2) else bus.bus1
-    return bus
+def _firmware(servo: Any) -> Any:
+    """The firmware model behind a servo that has one of its own (the X and MX series), else None (an AX-12's
+    shaft is its bus's model's)."""
+    return getattr(getattr(servo, "plant", None), "firmware", None)
 
 
-def _servo_with(bus: Bus | Bus2 | MixedBus, servo_id: int, name: str, protocol: float | None = None):
-    """The servo answering to ``servo_id``; KeyError naming the register its model's table lacks."""
-    servo = _lookup(bus, servo_id, protocol)
+def _servo_with(bus: AnyBus, servo_id: int, name: str, protocol: float | None = None) -> tuple[Any, Any]:
+    """:func:`_find`; KeyError naming the register its model's table lacks."""
+    holder, servo = _find(bus, servo_id, protocol)
     if name not in servo.table.layout.by_name:
-        model = servo.spec.name if isinstance(servo, Servo2) else f"the {servo.table.layout.profile.name} table"
-        raise KeyError(f"{model} has no register {name!r} (ID {servo_id}); table(ID) lists its registers")
-    return servo
+        raise KeyError(f"{model_name(servo)} has no register {name!r} (ID {servo_id}); table(ID) lists its registers")
+    return holder, servo
 
 
 class _FaultsOnBus:
@@ -159,7 +171,7 @@ class VirtualBus:
         self.transport_name = transport
         self.virtual_time = virtual_time
         clock = VirtualClock() if virtual_time else WallClock(time_scale)
-        self.bus: Bus | Bus2 | MixedBus
+        self.bus: AnyBus
         if servo is not None:
             refused = [name for name, given in (
                 ("options", not isinstance(options, Servo2Options) and options != ServoOptions()),
@@ -201,11 +213,9 @@ class VirtualBus:
         self._link: InProcessLink | None = None
         self._thread: threading.Thread | None = None
         #: The control methods shared with the live view of ``ax12emu serve`` (one body for both).
-        if isinstance(self.bus, MixedBus):  # the AX-12As' controls act on their own bus
-            self._controls = ServedControls(lambda fn: self.call(lambda bus: fn(bus.bus1)),
-                                            servos=len(self.bus.bus1.slots), seed=seed)
-        else:
-            self._controls = ServedControls(self.call, servos=len(self.bus.slots), seed=seed)
+        self._controls = ServedControls(self.call, servos=len(self.bus.slots), seed=seed)
+        #: The servo text the bus was built from (None: AX-12As of ``ids``), which a trace's header keeps.
+        self._servo_spec = servo
         self._closed = False
         self._started = False
 
@@ -242,7 +252,7 @@ class VirtualBus:
         return self
 
     def _open_trace(self, path: str) -> TraceWriter:
-        if isinstance(self.bus, (Bus2, MixedBus)):
+        if self._servo_spec is not None:  # every servo's model, so ax12emu decode names each ID's registers by its table
             return TraceWriter(path, servos=servo_list(self.bus))
         return TraceWriter(path, profile=self.bus.options.profile)
 
@@ -326,11 +336,6 @@ class VirtualBus:
     def _faults(self, bus: Bus) -> Faults:
         return self._controls.faults_of(bus)
 
-    def _protocol1_only(self, what: str) -> None:
-        """A clear refusal of what the Protocol 2.0 bus does not offer yet."""
-        if isinstance(self.bus, (Bus2, MixedBus)):
-            raise NotImplementedError(f"{what}: not available on a Protocol 2.0 bus (servo=) yet")
-
     @property
     def faults(self) -> Any:
         """The bus's :class:`~ax12emu.faults.injection.Faults` (created on first use); methods take slots."""
@@ -360,16 +365,16 @@ class VirtualBus:
 
         ``protocol``: 1.0 or 2.0, needed on a mixed wire for an ID both protocols have.
         """
-        return self.call(lambda bus: _servo_with(bus, servo_id, name, protocol).table.get(name))
+        return self.call(lambda bus: _servo_with(bus, servo_id, name, protocol)[1].table.get(name))
 
     def write(self, servo_id: int, name: str, value: int, *, protocol: float | None = None) -> None:
         """Set a register as the firmware would (no access or range check); an ``id`` write moves the servo."""
 
         def _write(bus: Bus) -> None:
-            servo = _servo_with(bus, servo_id, name, protocol)
-            servo.table.set(name, value)  # a 1.0 plant hears of it (ControlTable.on_set)
-            if isinstance(servo, Servo2):  # a 2.0 firmware takes its commands when told
-                servo.plant.command(goal_written=name in GOAL_REGISTERS)
+            _, servo = _servo_with(bus, servo_id, name, protocol)
+            servo.table.set(name, value)  # the AX-12 bus's plant hears of it (ControlTable.on_set)
+            if _firmware(servo) is not None:  # a firmware of its own takes its commands when told
+                servo.plant.command(goal_written=name in _GOAL_REGISTERS)
             if name == "id":
                 bus.reindex()
 
@@ -379,7 +384,7 @@ class VirtualBus:
         """Every register by name."""
 
         def _table(bus: Bus) -> dict[str, int]:
-            table = _lookup(bus, servo_id, protocol).table
+            table = _find(bus, servo_id, protocol)[1].table
             return {e.name: table.get(e.name) for e in table.layout.entries}
 
         return self.call(_table)
@@ -387,36 +392,36 @@ class VirtualBus:
     def angle_deg(self, servo_id: int, *, protocol: float | None = None) -> float:
         """The simulated shaft angle in degrees from the CW end (0..300 over positions 0..1023).
 
-        On a Protocol 2.0 servo: the output shaft's angle as its physics counts it (turns included;
-        180 at the start, where Present Position reads 2048, or 512 on the XL-320, whose 0..1023 span
-        150 degrees either side of it).
+        On a servo with a firmware model of its own (the X and MX series): the output shaft's angle as
+        its physics counts it (turns included; 180 at the start, where an X-series Present Position reads
+        2048 and an MX's Present Position 2048).
         """
 
-        def _angle(bus: Bus) -> float:
-            servo = _lookup(bus, servo_id, protocol)
-            if isinstance(servo, Servo2):
-                firmware = servo.plant.firmware
+        def _angle(bus: AnyBus) -> float:
+            holder, servo = _find(bus, servo_id, protocol)
+            firmware = _firmware(servo)
+            if firmware is not None:
                 physics = getattr(firmware, "physics", None)
                 if physics is None:
                     raise NotImplementedError(f"{type(firmware).__name__} does not show its shaft angle (no physics)")
                 return float(physics.angle_rad) * _DEG_PER_RAD
-            return float(_sub_bus(bus, servo).model.angle_rad[servo.index]) * _DEG_PER_RAD
+            return float(holder.model.angle_rad[servo.index]) * _DEG_PER_RAD
 
         return self.call(_angle)
 
-    def set_angle_deg(self, servo_id: int, degrees: float) -> None:
-        """Move the shaft by hand (torque off, or the controller pulls it back)."""
+    def set_angle_deg(self, servo_id: int, degrees: float, *, protocol: float | None = None) -> None:
+        """Move the shaft by hand (torque off, or the controller pulls it back): an AX-12's, whose bus's model sets angles."""
 
-        self._protocol1_only("set_angle_deg")
-
-        def _set(bus: Bus) -> None:
-            model = bus.model
-            index = bus.servo(servo_id).index
+        def _set(bus: AnyBus) -> None:
+            holder, servo = _find(bus, servo_id, protocol)
+            model = getattr(holder, "model", None)
             if not isinstance(model, AngleSettable):
-                raise NotImplementedError(f"{type(model).__name__} does not let its angle be set (no set_angle)")
-            model.set_angle(index, degrees / _DEG_PER_RAD)
-            bus.plant.tables_changed()
-            bus.plant.refresh()
+                what = type(model).__name__ if model is not None else f"the firmware model of {model_name(servo)}"
+                raise NotImplementedError(f"set_angle_deg: {what} does not let its angle be set (ID {servo_id}, "
+                                          f"on a Protocol {2.0 if isinstance(holder, Bus2) else 1.0} bus)")
+            model.set_angle(servo.index, degrees / _DEG_PER_RAD)
+            holder.plant.tables_changed()
+            holder.plant.refresh()
 
         self.call(_set)
 
@@ -424,14 +429,16 @@ class VirtualBus:
         """Present Temperature, degrees C."""
         return self.read(servo_id, "present_temperature", protocol=protocol)
 
-    def _hold(self, servo_id: int, protocol: float | None, names: tuple[str, str], value: int | None) -> None:
-        """Pin a reading through the faults of the servo's own bus: ``names`` is (AX-12 register, X-series register)."""
+    def _hold(self, servo_id: int, protocol: float | None, names: tuple[str, ...], value: int | None) -> None:
+        """Pin a reading through the faults of the servo's own bus: the first of ``names`` its table has."""
 
-        def _pin(bus: Bus) -> None:
-            servo = _lookup(bus, servo_id, protocol)
-            sub = _sub_bus(bus, servo)
-            name = names[1] if isinstance(servo, Servo2) else names[0]
-            self._controls.faults_of(sub).hold(sub.slots[servo.index], name, value)
+        def _pin(bus: AnyBus) -> None:
+            holder, servo = _find(bus, servo_id, protocol)
+            name = next((n for n in names if n in servo.table.layout.by_name), None)
+            if name is None:
+                raise KeyError(f"{model_name(servo)} has no register {' or '.join(map(repr, names))} (ID {servo_id})")
+            self._controls.faults_of(bus)  # the whole wire's faults first: one seed for all its servos
+            self._controls.faults_of(holder).hold(holder.slots[servo.index], name, value)
 
         self.call(_pin)
 
@@ -442,7 +449,7 @@ class VirtualBus:
         selects it, and stays until REBOOT after the reading is released.
         """
         value = None if celsius is None else round(celsius)
-        self._hold(servo_id, protocol, ("present_temperature", "present_temperature"), value)
+        self._hold(servo_id, protocol, ("present_temperature",), value)
 
     def set_voltage(self, servo_id: int, volts: float | None, *, protocol: float | None = None) -> None:
         """Pin Present Voltage (outside the voltage limits: Input Voltage error); None releases it.
@@ -456,12 +463,11 @@ class VirtualBus:
     def set_external_torque(self, servo_id: int, torque_nm: float, *, protocol: float | None = None) -> None:
         """A torque on the output shaft (N m, positive CCW), through the model's ``set_external_torque``."""
 
-        def _x_series(bus: Bus) -> bool:
-            servo = _lookup(bus, servo_id, protocol)
-            if isinstance(servo, Servo2):
-                servo.plant.firmware.set_external_torque(torque_nm)
-                return True
-            return False
+        def _own_firmware(bus: AnyBus) -> bool:
+            firmware = _firmware(_find(bus, servo_id, protocol)[1])
+            if firmware is not None:
+                firmware.set_external_torque(torque_nm)
+            return firmware is not None
 
-        if not self.call(_x_series):
-            self._controls.set_external_torque(servo_id, torque_nm)
+        if not self.call(_own_firmware):  # an AX-12: its bus's one model takes every servo's torque (ServedControls)
+            self._controls.set_external_torque(servo_id, torque_nm, protocol=1.0)

@@ -29,6 +29,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from ax12emu.bus import Bus
+from ax12emu.bus.bus1x import Bus1X
 from ax12emu.bus.bus2 import Bus2
 from ax12emu.faults.injection import Faults, MixedFaults, faults_for
 
@@ -88,7 +89,7 @@ class ServedControls:
     def faults_of(self, bus: AnyBus) -> Faults | MixedFaults:
         # ax12emu.faults knows the AX-12 bus and the Protocol 2.0 bus (and wires of both); another
         # kind of bus would take faults whose hooks it does not call, or calls wrongly.
-        other = [type(sub).__name__ for _, sub in parts(bus) if not isinstance(sub, (Bus, Bus2))]
+        other = [type(sub).__name__ for _, sub in parts(bus) if not isinstance(sub, (Bus, Bus1X, Bus2))]
         if other:
             raise ControlError(f"faults are not available on a {' or '.join(other)} (ax12emu.faults serves the AX-12 and Protocol 2.0 buses)")
         if bus.faults is None:
@@ -105,6 +106,7 @@ class ServedControls:
         def pin(bus: AnyBus) -> None:
             self.faults_of(bus)  # the whole wire's faults first: one seed for both protocols
             _, sub, servo = locate(bus, servo_id, protocol)
+            sub = sub.holder(servo)  # an AX-12A beside MX servos: the AX-12 bus inside theirs
             name = next((n for n in names if n in servo.table.layout.by_name), None)
             if name is None:
                 raise ControlError(f"{what}: ID {servo_id}'s table has no {' or '.join(names)} register to hold")
@@ -121,6 +123,7 @@ class ServedControls:
     def set_external_torque(self, servo_id: int, torque_nm: float, *, protocol: float | None = None) -> None:
         def _set(bus: AnyBus) -> None:
             _, sub, servo = locate(bus, servo_id, protocol)
+            sub = sub.holder(servo)  # an AX-12A beside MX servos: the AX-12 bus inside theirs (its model)
             # A Protocol 2.0 servo has a firmware model of its own; the AX-12 bus's one model moves all its servos.
             firmware = getattr(getattr(servo, "plant", None), "firmware", None)
             if callable(getattr(firmware, "set_external_torque", None)):

@@ -7,7 +7,9 @@ is the one place that knows register names.
 
 from __future__ import annotations
 
-from .control_table import DEFAULT_PROFILE, layout
+from collections.abc import Mapping
+
+from .control_table import DEFAULT_PROFILE, Layout, layout
 from .packets import Instruction, InstructionPacket, StatusError
 
 __all__ = ["describe_instruction", "describe_error", "describe_status"]
@@ -23,8 +25,13 @@ def describe_error(error: int) -> str:
     return "|".join(names)
 
 
-def _registers(address: int, data: bytes, profile: str) -> str:
-    lay = layout(profile)
+def _table(profile: str | Layout) -> Layout:
+    """A profile's AX-12 table by name, or a model's own table (an AX-18A's, an MX's) as given."""
+    return layout(profile) if isinstance(profile, str) else profile
+
+
+def _registers(address: int, data: bytes, profile: str | Layout) -> str:
+    lay = _table(profile)
     parts = []
     offset = 0
     while offset < len(data):
@@ -44,8 +51,15 @@ def _registers(address: int, data: bytes, profile: str) -> str:
     return " ".join(parts)
 
 
-def describe_instruction(packet: InstructionPacket, profile: str = DEFAULT_PROFILE) -> str:
-    """One line: instruction, ID and what it asks, in register names."""
+def describe_instruction(packet: InstructionPacket, profile: str | Layout = DEFAULT_PROFILE,
+                         tables: Mapping[int, Layout] | None = None) -> str:
+    """One line: instruction, ID and what it asks, in register names.
+
+    ``profile``: the table every ID has (an AX-12 profile's name, or a Layout); ``tables``: an ID's own
+    table where the wire mixes models (a SYNC WRITE names each block's registers by its ID's).
+    """
+    tables = tables or {}
+    table = tables.get(packet.id, profile)
     try:
         name = Instruction(packet.instruction).name
     except ValueError:
@@ -55,15 +69,16 @@ def describe_instruction(packet: InstructionPacket, profile: str = DEFAULT_PROFI
         head += " BAD-CHECKSUM"
     params = packet.params
     if packet.instruction == Instruction.READ and len(params) == 2:
-        entries = layout(profile).owner[params[0] : params[0] + params[1]]
-        names = sorted({layout(profile).entries[i].name for i in entries if i >= 0}, key=str)
+        lay = _table(table)
+        entries = lay.owner[params[0] : params[0] + params[1]]
+        names = sorted({lay.entries[i].name for i in entries if i >= 0}, key=str)
         return f"{head} address={params[0]} length={params[1]} ({', '.join(names) or 'unused'})"
     if packet.instruction in (Instruction.WRITE, Instruction.REG_WRITE) and len(params) >= 2:
-        return f"{head} {_registers(params[0], bytes(params[1:]), profile)}"
+        return f"{head} {_registers(params[0], bytes(params[1:]), table)}"
     if packet.instruction == Instruction.SYNC_WRITE and len(params) >= 2 and params[1]:
         size = params[1]
         blocks = [
-            f"[id={params[i]} {_registers(params[0], bytes(params[i + 1 : i + 1 + size]), profile)}]"
+            f"[id={params[i]} {_registers(params[0], bytes(params[i + 1 : i + 1 + size]), tables.get(params[i], profile))}]"
             for i in range(2, len(params) - size, size + 1)
         ]
         return f"{head} " + " ".join(blocks)
@@ -75,10 +90,11 @@ def describe_status(
     error: int,
     params: bytes,
     request: InstructionPacket | None = None,
-    profile: str = DEFAULT_PROFILE,
+    profile: str | Layout = DEFAULT_PROFILE,
     checksum_ok: bool = True,
 ) -> str:
-    """One line for a status packet; a READ's data is named from its ``request``."""
+    """One line for a status packet; a READ's data is named from its ``request`` (by the table ``profile`` gives:
+    a profile's name, or the answering servo's own Layout)."""
     head = f"STATUS id={packet_id} {describe_error(error)}"
     if not checksum_ok:
         head += " BAD-CHECKSUM"

@@ -24,6 +24,10 @@ A 2.0 packet says itself whether it is a status (instruction 0x55), so only the 
 needs the conversation.  Registers of 2.0 packets are named by the servos' model files
 when ``servos`` gives them (a trace of a 2.0 bus records them), else by address.
 :func:`decode` picks ``"both"`` by itself when the bytes hold a 2.0 header.
+
+Registers of 1.0 packets are named by the AX-12 table of ``profile``, or, for an ID ``servos``
+names with a Protocol 1.0 model (a trace records every servo of a ``--servo`` wire: an AX-18A's, an
+MX's), by that model file's table, so an MX's Goal Acceleration(73) is not an unknown address.
 """
 
 from __future__ import annotations
@@ -31,20 +35,20 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping
 from typing import NamedTuple
 
-from ax12emu.protocol.control_table import DEFAULT_PROFILE
+from ax12emu.protocol.control_table import AX12_MODEL, DEFAULT_PROFILE, Layout
 from ax12emu.protocol.describe import describe_instruction, describe_status
 from ax12emu.protocol.describe2 import describe_instruction2, describe_status2
 from ax12emu.protocol.framing import Framer
 from ax12emu.protocol.framing2 import DEFAULT_MAX_LENGTH, Framer2
 from ax12emu.protocol.packets import BROADCAST_ID, Instruction, InstructionPacket
 from ax12emu.protocol.packets2 import HEADER2, InstructionPacket2, StatusPacket2
-from ax12emu.protocol.servo_models import model
+from ax12emu.protocol.servo_models import model, model_names
 from ax12emu.protocol.servo_spec import parse_servo_spec
 
 from .trace import IN, OUT, Chunk
 
-__all__ = ["Decoded", "Decoder", "decode", "format_decoded", "register_names", "INSTRUCTION", "STATUS", "ECHO", "GARBAGE",
-           "PROTOCOLS"]
+__all__ = ["Decoded", "Decoder", "decode", "format_decoded", "register_names", "tables_by_protocol", "INSTRUCTION", "STATUS",
+           "ECHO", "GARBAGE", "PROTOCOLS"]
 
 INSTRUCTION, STATUS, ECHO, GARBAGE = "instruction", "status", "echo", "garbage"
 _INSTRUCTIONS = frozenset(int(code) for code in Instruction)
@@ -56,12 +60,25 @@ _FRAME2_OVERHEAD = len(HEADER2) + 1 + 2 + 1 + 2
 AnyPacket = InstructionPacket | InstructionPacket2 | StatusPacket2
 
 
+def tables_by_protocol(servos: str, profile: str = DEFAULT_PROFILE) -> dict[str, dict[int, Layout]]:
+    """Each ID's table by protocol ("1.0", "2.0"), from the ``--servo`` text of a wire (``1:mx-28,2-5:xm430-w350``).
+
+    IDs are per protocol, so one ID may have a table on each.  An AX-12A's is ``profile``'s (its
+    trace's header names the profile); every other model's is its model file's.
+    """
+    also = tuple(key for key in model_names() if "2.0" not in model(key).protocols)
+    tables: dict[str, dict[int, Layout]] = {"1.0": {}, "2.0": {}}
+    for servo_id, key in parse_servo_spec(servos, also=also):
+        spec = model(key)
+        protocol = "2.0" if "2.0" in spec.protocols else "1.0"
+        tables[protocol][servo_id] = spec.layout(profile if key == AX12_MODEL else None)
+    return tables
+
+
 def register_names(servos: str) -> dict[int, dict[int, str]]:
-    """Address -> register name per ID, from the ``--servo`` text of Protocol 2.0 servos (``1-5:xm430-w350,...``)."""
-    names: dict[int, dict[int, str]] = {}
-    for servo_id, key in parse_servo_spec(servos):
-        names[servo_id] = {entry.address: entry.name for entry in model(key).layout().entries}
-    return names
+    """Address -> register name per ID of the Protocol 2.0 servos in a ``--servo`` text (``1-5:xm430-w350,...``)."""
+    return {servo_id: {entry.address: entry.name for entry in table.entries}
+            for servo_id, table in tables_by_protocol(servos)["2.0"].items()}
 
 
 def _wire2(packet: InstructionPacket2 | StatusPacket2) -> int:
@@ -190,17 +207,19 @@ class _Conversation:
         """Names for a packet to the broadcast ID: the first servo's table (the X series share their addresses)."""
         return next(iter(names.values()), None)
 
-    def describe(self, packet: InstructionPacket, chunk: Chunk, profile: str) -> Decoded:
+    def describe(self, packet: InstructionPacket, chunk: Chunk, profile: str, tables: Mapping[int, Layout]) -> Decoded:
+        """A Protocol 1.0 packet, its registers named by its ID's table in ``tables``, else ``profile``'s."""
         kind = self.classify(packet, chunk.direction)
         if kind == STATUS:
             latency = None if chunk.t is None or self.t is None else chunk.t - self.t
             self.answered = True
-            text = describe_status(packet.id, packet.instruction, packet.params, self.request, profile, packet.checksum_ok)
+            text = describe_status(packet.id, packet.instruction, packet.params, self.request,
+                                   tables.get(packet.id, profile), packet.checksum_ok)
             return Decoded(chunk.t, STATUS, packet, text, latency)
         if kind == ECHO:
-            return Decoded(chunk.t, ECHO, packet, "echo of " + describe_instruction(packet, profile))
+            return Decoded(chunk.t, ECHO, packet, "echo of " + describe_instruction(packet, profile, tables))
         self.request, self.t, self.answered = packet, chunk.t, False
-        return Decoded(chunk.t, INSTRUCTION, packet, describe_instruction(packet, profile))
+        return Decoded(chunk.t, INSTRUCTION, packet, describe_instruction(packet, profile, tables))
 
 
 class Decoder:
@@ -211,8 +230,11 @@ class Decoder:
             raise ValueError(f"protocol must be one of {', '.join(PROTOCOLS)}, got {protocol!r}")
         self.profile = profile
         self.protocol = protocol
-        #: Protocol 2.0 register names per ID (``servos``: the ``--servo`` text), else addresses.
-        self.names = register_names(servos) if servos else {}
+        tables = tables_by_protocol(servos, profile) if servos else {"1.0": {}, "2.0": {}}
+        #: Protocol 1.0 tables per ID that ``servos`` (the ``--servo`` text) names; other IDs: ``profile``'s.
+        self.tables1 = tables["1.0"]
+        #: Protocol 2.0 register names per ID (``servos``), else addresses.
+        self.names = {servo_id: {entry.address: entry.name for entry in table.entries} for servo_id, table in tables["2.0"].items()}
         if protocol == "both":
             self._both = {IN: _BothStream(), OUT: _BothStream(), None: _BothStream()}
         self._streams = {IN: _Stream(), OUT: _Stream(), None: _Stream()}
@@ -231,7 +253,7 @@ class Decoder:
                 if out and out[-1].kind == GARBAGE and out[-1].t == chunk.t:
                     lost += out.pop().discarded
                 out.append(Decoded(chunk.t, GARBAGE, None, f"{lost} byte(s) discarded while hunting for a frame", discarded=lost))
-            out.extend(self._talk.describe(packet, chunk, self.profile) for packet in packets)
+            out.extend(self._talk.describe(packet, chunk, self.profile, self.tables1) for packet in packets)
         return out
 
     def _feed_both(self, chunk: Chunk, out: list[Decoded]) -> list[Decoded]:
@@ -242,7 +264,7 @@ class Decoder:
                 out.append(Decoded(chunk.t, GARBAGE, None, f"{lost} byte(s) discarded while hunting for a frame", discarded=lost))
             for packet, wire in packets:
                 if isinstance(packet, InstructionPacket):
-                    out.append(self._talk.describe(packet, chunk, self.profile)._replace(wire=wire))
+                    out.append(self._talk.describe(packet, chunk, self.profile, self.tables1)._replace(wire=wire))
                 else:
                     out.append(self._talk.describe2(packet, wire, chunk, self.names))
         return out
@@ -260,7 +282,8 @@ def decode(chunks: Iterable[Chunk], *, profile: str = DEFAULT_PROFILE, protocol:
         by_direction: dict[str | None, bytearray] = {}
         for chunk in chunks:
             by_direction.setdefault(chunk.direction, bytearray()).extend(chunk.data)
-        protocol = "both" if servos or any(HEADER2 in data for data in by_direction.values()) else "1.0"
+        names_2 = bool(servos) and bool(tables_by_protocol(servos)["2.0"])
+        protocol = "both" if names_2 or any(HEADER2 in data for data in by_direction.values()) else "1.0"
     decoder = Decoder(profile=profile, protocol=protocol, servos=servos)
     out: list[Decoded] = []
     for chunk in chunks:
