@@ -498,7 +498,12 @@ class Faults2(Faults):
         servo = self._servo2(slot)
         if name not in servo.table.layout.by_name:
             raise KeyError(f"{servo.spec.name} has no register {name!r}")
-        field = next((field for field, names in SENSED_REGISTERS.items() if name in names), None)
+        if servo.spec.classic is not None:  # a classic table (the XL-320's): only the readings in the firmware's units
+            if name not in _CLASSIC_HELD:
+                raise ValueError(f"hold: {name!r} is not a register the firmware senses in its units; those are {', '.join(_CLASSIC_HELD)}")
+            field = _CLASSIC_HELD[name]
+        else:
+            field = next((field for field, names in SENSED_REGISTERS.items() if name in names), None)
         if field is None:
             raise ValueError(f"hold: {name!r} is not a register the firmware senses; those are "
                              f"{', '.join(n for names in SENSED_REGISTERS.values() for n in names if n in servo.table.layout.by_name)}")

@@ -235,3 +235,19 @@ def test_an_xl320s_alarm_is_judged_and_shown_in_its_own_shutdown_bits():
         assert bus.faults.active(1) == ["alarm 0x04"]  # named in the firmware's bits, as on the X series
         bus.faults.clear_alarm(1)
         assert bus.read(1, "hardware_error_status") == 0 and bus.faults.active(1) == []
+
+
+def test_an_xl320_holds_only_the_readings_its_table_shows_in_the_firmwares_units():
+    """Present Voltage and Temperature read as the firmware senses them (0.1 V, deg C); Present Position is in the
+    XL-320's own units, so pinning it is refused.  A pinned voltage below Min Voltage Limit raises Input Voltage
+    (bit 2 in Hardware Error Status(50)) once Shutdown selects it."""
+    with VirtualBus([1], servo="xl-320", transport="inprocess", virtual_time=True) as bus:
+        with pytest.raises(ValueError, match="present_temperature, present_voltage"):
+            bus.faults.hold(1, "present_position", 300)
+        bus.write(1, "shutdown", 0x07)  # Overload, OverHeating and Input Voltage
+        bus.faults.hold(1, "present_voltage", 50)
+        bus.step(0.01)
+        assert bus.read(1, "present_voltage") == 50 and bus.read(1, "hardware_error_status") == 0x04
+        bus.faults.hold(1, "present_voltage", None)
+        bus.step(0.01)
+        assert bus.read(1, "present_voltage") == 74
