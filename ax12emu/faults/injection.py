@@ -301,9 +301,14 @@ class Faults:
         if index in self._duplicates:
             out.append(f"answers as ID {self.bus.servos[index].id}")
         out.extend(f"{name} held at {value}" for name, value in self._held.get(index, {}).items())
-        if (self.drop or self.corrupt or self.delay) and (self.reply_ids is None or self.bus.servos[index].id in self.reply_ids):
-            out.append(f"replies: drop {self.drop:g}, corrupt {self.corrupt:g}, delay {self.delay:g}")
+        out.extend(self._on_replies_of(self.bus.servos[index].id))
         return out
+
+    def _on_replies_of(self, servo_id: int) -> list[str]:
+        """The reply faults that reach the status packets of ``servo_id``, in words (none: empty)."""
+        if (self.drop or self.corrupt or self.delay) and (self.reply_ids is None or servo_id in self.reply_ids):
+            return [f"replies: drop {self.drop:g}, corrupt {self.corrupt:g}, delay {self.delay:g}"]
+        return []
 
     # -- hooks called by the bus -----------------------------------------------------
     def admit(self, servo: "VirtualServo") -> bool:
@@ -584,8 +589,7 @@ class Faults1X(Faults2):
     """
 
     #: Per-servo methods an AX-12A's slot is routed to its own bus's :class:`Faults` for.
-    _ROUTED = ("vanish", "reappear", "force_alarm", "clear_alarm", "duplicate", "unduplicate", "stall", "release",
-               "hold", "active")
+    _ROUTED = ("vanish", "reappear", "force_alarm", "clear_alarm", "duplicate", "unduplicate", "stall", "release", "hold")
 
     def __init__(self, bus, *, seed: int = 0) -> None:
         super().__init__(bus, seed=seed)
@@ -655,6 +659,8 @@ class Faults1X(Faults2):
 
     def active(self, slot: int) -> list[str]:
         """As :meth:`Faults.active`; a forced alarm the client has cleared (Torque Limit written) is no longer listed."""
+        if self.ax is not None and slot in self.ax.bus.slots:  # the AX-12A's own, and the wire's reply faults
+            return [*self.ax.active(slot), *self._on_replies_of(self.ax.bus.servos[self.ax._index(slot)].id)]
         index = self._index(slot)
         if index in self._alarms:
             latched = self._alarms[index] & self._servo2(slot).alarms

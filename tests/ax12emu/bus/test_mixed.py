@@ -65,3 +65,26 @@ def test_a_protocol_1_servo_has_one_default_supply_alone_and_beside_x_series_ser
             bus.step(0.05)
             seen[name] = bus.call(lambda b: getattr(b, "bus1", b).servo(1).table.get("present_voltage"))
     assert set(seen.values()) == {expected}, seen
+
+
+@pytest.mark.parametrize(("spec", "named"), [
+    ("1:ax-12a,1:xl430-w250", "AX-12A on 1.0, XL430-W250 on 2.0"),
+    ("1:ax-18a,1:xl330-m077", "AX-18A on 1.0, XL330-M077 on 2.0"),
+    ("1:mx-64,1:xm430-w350", "MX-64 on 1.0, XM430-W350 on 2.0"),
+])
+def test_an_id_on_both_protocols_is_refused_naming_each_model(spec, named):
+    from ax12emu.harness.servos2 import build_wire
+
+    bus = build_wire(spec, clock=VirtualClock())
+    with pytest.raises(ValueError, match=f"ID 1 answers on both protocols of this wire \\({named}\\)"):
+        bus.servo(1)
+    assert bus.holder(bus.servo(1, 1.0)) is bus.bus1 and bus.holder(bus.servo(1, 2.0)) is bus.bus2
+
+
+def test_an_ax_12a_beside_mx_servos_is_held_by_the_ax_12_bus_inside_theirs():
+    from ax12emu.harness.servos2 import build_wire
+
+    bus = build_wire("1:mx-28,2:ax-12a,3:xl430-w250", clock=VirtualClock())
+    ax12a, mx28 = bus.servo(2, 1.0), bus.servo(1, 1.0)
+    assert bus.holder(ax12a) is bus.bus1.ax_bus and bus.holder(mx28) is bus.bus1
+    assert bus.bus1.ax_bus.slots[ax12a.index] == 2 and bus.bus1.slots[mx28.index] == 1
