@@ -15,12 +15,12 @@ default is ID 1.  The ``ax12_bus_options`` marker passes keyword arguments
 to :class:`~ax12emu.VirtualBus` (``transport="inprocess"``,
 ``virtual_time=True``, ``faults=FaultConfig(...)``, ...).
 
-Protocol 2.0 servos (the X series): the ``ax12_servo`` marker takes the servo text of
-``ax12emu serve --servo`` (``@pytest.mark.ax12_servo("xl430-w250")`` with ``ax12_ids``, or
-``@pytest.mark.ax12_servo("1-5:xm430-w350,6:xl330-m077")`` alone); ``pytest --ax12-servo SPEC``
-gives every ax12_bus without the marker those servos, so a suite written for one model runs
-against another.  AX-12As in the text share the wire on Protocol 1.0 (``"1:ax-12a,1:xl430-w250"``;
-``protocol=`` names an ID both protocols have).
+Other models (the X series on Protocol 2.0, the MX series on Protocol 1.0): the ``ax12_servo``
+marker takes the servo text of ``ax12emu serve --servo`` (``@pytest.mark.ax12_servo("xl430-w250")``
+or ``("mx-28")`` with ``ax12_ids``, or ``@pytest.mark.ax12_servo("1-5:xm430-w350,6:mx-64")`` alone);
+``pytest --ax12-servo SPEC`` gives every ax12_bus without the marker those servos, so a suite
+written for one model runs against another.  Protocol 1.0 models in the text share the wire with
+the 2.0 ones (``"1:ax-12a,1:xl430-w250"``; ``protocol=`` names an ID both protocols have).
 
 ``pytest --ax12-web`` serves a live page of each bus (see the live-view docs)
 and keeps it up after the test, pass or fail, until Ctrl-C, so a failing
@@ -51,7 +51,7 @@ def pytest_addoption(parser: pytest.Parser) -> None:
         "--ax12-servo",
         default=None,
         metavar="SPEC",
-        help="Protocol 2.0 servos for every ax12_bus without an ax12_servo marker: MODEL (e.g. xl430-w250) "
+        help="servos of other models for every ax12_bus without an ax12_servo marker: MODEL (e.g. xl430-w250, mx-28) "
         "or IDS:MODEL,... (e.g. 1-5:xm430-w350,6:xl330-m077); 'ax12emu models' lists the models",
     )
     group.addoption(
@@ -87,7 +87,7 @@ def pytest_configure(config: pytest.Config) -> None:
     """Register the markers so ``--strict-markers`` accepts them."""
     config.addinivalue_line("markers", "ax12_ids(*ids): servo IDs of the ax12_bus fixture (default 1)")
     config.addinivalue_line("markers", "ax12_bus_options(**kwargs): keyword arguments for ax12emu.VirtualBus")
-    config.addinivalue_line("markers", "ax12_servo(spec): Protocol 2.0 servos of the ax12_bus fixture, as serve --servo takes them")
+    config.addinivalue_line("markers", "ax12_servo(spec): the ax12_bus fixture's servo models (X series, MX, ...), as serve --servo takes them")
 
 
 def _default_transport() -> str:

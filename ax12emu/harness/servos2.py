@@ -1,12 +1,13 @@
-"""A Protocol 2.0 bus built from the ``--servo`` text, for the harness (VirtualBus, ``ax12emu://``).
+"""The bus built from the ``--servo`` text, for the harness (VirtualBus, ``ax12emu://``, the pytest plugin).
 
 Why it exists: ``VirtualBus(servo="xl430-w250")`` and ``ax12emu://?servo=...`` must read the same
 servo text the command line does (:func:`ax12emu.protocol.servo_spec.parse_servo_spec`) and build
 the same servos from it: each ID's model file gives its table, and
 :func:`ax12emu.servo.model_factory2.build_x_firmware` its firmware model, so no model is named here.
-AX-12As and AX-18As in the text (``1-2:ax-12a,3-6:xl430-w250``) share the wire on Protocol 1.0
-(:class:`~ax12emu.bus.mixed.MixedBus`), as ``serve --servo`` puts them; AX-18As alone (or with
-AX-12As) are a Protocol 1.0 bus.
+:func:`build_wire` is the one place that decides which bus serves them: the X series on a Protocol
+2.0 bus, the MX series on a Protocol 1.0 :class:`~ax12emu.bus.bus1x.Bus1X`, AX-12As and AX-18As on
+the AX-12 bus (inside the MX servos' when both are named), and both protocols on one wire
+(:class:`~ax12emu.bus.mixed.MixedBus`), as ``serve --servo`` puts them.
 """
 
 from __future__ import annotations

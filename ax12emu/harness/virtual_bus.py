@@ -17,17 +17,21 @@ Servos are addressed by their present ID in the state methods, and by their
 *slot* (the ID they were launched with) in ``bus.faults`` (see
 :mod:`ax12emu.faults.injection`).
 
-``servo=`` serves Protocol 2.0 servos instead (the X series), read as ``ax12emu serve --servo``
-reads it: ``VirtualBus([1, 2], servo="xl430-w250")`` or ``VirtualBus(servo="1-5:xm430-w350,6:xl330-m077")``,
-``options=Servo2Options(...)`` for the behaviours the e-manual leaves open.  AX-12As in the text
-(``servo="1-2:ax-12a,3-6:xl430-w250"``) share the wire on Protocol 1.0; IDs are per protocol there,
-so an ID both protocols have needs ``protocol=1.0`` or ``2.0`` in the state methods and in
-``bus.faults`` (:class:`~ax12emu.faults.injection.MixedFaults`; a ValueError says so).
-Each servo then has its model's table, and the register methods take that table's names
-(``bus.read(1, "present_position")``).  What the Protocol 1.0 bus has and this one has not yet
-(the live view, a set angle, duplicate IDs) is refused with the reason; the faults work
-(:class:`~ax12emu.faults.injection.Faults2`: the wire's, and alarm, stall, hold and pinned
-temperature or voltage acted out by each servo's firmware).
+``servo=`` serves the models the text names instead, read as ``ax12emu serve --servo`` reads it:
+the X series on Protocol 2.0 (``VirtualBus([1, 2], servo="xl430-w250")`` or
+``VirtualBus(servo="1-5:xm430-w350,6:xl330-m077")``, ``options=Servo2Options(...)`` for the
+behaviours the e-manual leaves open), the MX series on Protocol 1.0 (``servo="mx-28"``), and
+AX-12As, AX-18As and MX servos beside them on one wire (``servo="1-2:ax-12a,3:mx-64,4-6:xl430-w250"``).
+Which bus serves them is decided once (:func:`~.servos2.build_wire`); every method here then
+finds the servo and the bus holding it through the buses' own interface (``servo``, ``holder``),
+and tells a servo with a firmware model of its own (X, MX) from an AX-12 by that model, never by
+its kind.  IDs are per protocol, so an ID both protocols have needs ``protocol=1.0`` or ``2.0`` in
+the state methods and in ``bus.faults`` (:class:`~ax12emu.faults.injection.MixedFaults`; a
+ValueError says so).  Each servo has its model's table, and the register methods take that
+table's names (``bus.read(1, "present_position")``).  What these buses lack (the live view, a
+set angle on a firmware's shaft) is refused with the reason; the faults work
+(:class:`~ax12emu.faults.injection.Faults2`, :class:`~ax12emu.faults.injection.Faults1X`: the
+wire's, and alarm, stall, hold and pinned temperature or voltage acted out by each servo's firmware).
 """
 
 from __future__ import annotations
@@ -179,7 +183,7 @@ class VirtualBus:
                 ("web", _web_address(web) is not None),
             ) if given]
             if refused:
-                raise ValueError(f"{', '.join(refused)}: not available with servo= (the Protocol 2.0 bus has no such option yet)")
+                raise ValueError(f"{', '.join(refused)}: not available with servo= (the buses of its models have no such option yet)")
             options2 = options if isinstance(options, Servo2Options) else Servo2Options()
             self.bus = build_wire(servo, None if ids is None else list(ids), clock=clock, baud_bps=baud_bps, options=options2)
         else:

@@ -18,14 +18,14 @@
 #   params=FILE       servo parameters as TOML, effects included (e.g. firmware_model.diagnose's params.toml)
 #   drop, corrupt, delay, delay_s, fault_ids, seed, vanish, duplicate, alarm, stall:
 #                     fault injection, as the serve flags (see ax12emu.faults.injection)
-#   servo=SPEC        Protocol 2.0 servos instead of AX-12As, as `ax12emu serve --servo` takes them:
+#   servo=SPEC        other models instead of AX-12As, as `ax12emu serve --servo` takes them:
 #                     MODEL for every ID of ids= (default 1), or IDS:MODEL,... alone
-#                     (e.g. servo=xl430-w250&ids=1-6, servo=1-5:xm430-w350,6:xl330-m077);
-#                     AX-12As among them share the wire on Protocol 1.0 (servo=1-2:ax-12a,3-6:xl430-w250)
+#                     (e.g. servo=xl430-w250&ids=1-6, servo=mx-28&ids=1-4, servo=1-5:xm430-w350,6:xl330-m077);
+#                     Protocol 1.0 models among X-series ones share the wire (servo=1-2:ax-12a,3:mx-64,4-6:xl430-w250)
 #   baud=BPS          with servo=: every servo starts at this bit rate (default: each model's factory
-#                     rate, 57600 on the X series); the port must be opened at the same rate
+#                     rate, 57600 on the X and MX series); the port must be opened at the same rate
 #                     With servo=, the same faults apply; alarm and stall act through the X-series
-#                     firmware (ax12emu.faults.injection.Faults2).
+#                     firmware (ax12emu.faults.injection.Faults2, Faults1X on MX servos).
 # Options of any URL:
 #   logging=debug|info|warning|error   per-handler logger "ax12emu.harness.urlhandler"
 #
@@ -44,6 +44,7 @@ import urllib.parse
 from serial.serialutil import PortNotOpenError, SerialBase, SerialException, to_bytes
 
 from ax12emu.bus import Bus
+from ax12emu.bus.bus1x import Bus1X
 from ax12emu.bus.bus2 import Bus2
 from ax12emu.bus.clock import VirtualClock, WallClock
 from ax12emu.bus.mixed import MixedBus
@@ -66,7 +67,7 @@ EXPECTED = (
 LOGGER_LEVELS = {"debug": logging.DEBUG, "info": logging.INFO, "warning": logging.WARNING, "error": logging.ERROR}
 #: Options of a private bus besides the fault ones.
 BUS_OPTIONS = ("ids", "profile", "virtual_time", "goal_torque", "eeprom_busy_ms", "trace", "params", "servo", "baud")
-#: Options a Protocol 2.0 bus (servo=) takes; the others shape AX-12As only.
+#: Options a bus of other models (servo=) takes; the others shape AX-12As only.
 SERVO_OPTIONS = ("ids", "virtual_time", "trace", "servo", "baud",
                  "drop", "corrupt", "delay", "delay_s", "fault_ids", "seed", "vanish", "duplicate", "alarm", "stall")
 
@@ -80,7 +81,7 @@ class Serial(SerialBase):
 
     def __init__(self, *args, **kwargs) -> None:
         self._link: InProcessLink | None = None
-        self._private: tuple[Bus | Bus2, TraceWriter | None] | None = None
+        self._private: tuple[Bus | Bus1X | Bus2 | MixedBus, TraceWriter | None] | None = None
         self.logger: logging.Logger | None = None
         super().__init__(*args, **kwargs)
 
@@ -179,10 +180,10 @@ class Serial(SerialBase):
         return InProcessLink(bus, trace=trace)
 
     def _servo_bus(self, options: dict[str, list[str]]) -> InProcessLink:
-        """A private Protocol 2.0 bus (``servo=``); options of the AX-12A bus are refused by name."""
+        """A private bus of the models ``servo=`` names; options of the AX-12A bus are refused by name."""
         refused = sorted(set(options) - set(SERVO_OPTIONS))
         if refused:
-            raise UrlError(f"{EXPECTED}: {', '.join(refused)} not available with servo= (the Protocol 2.0 bus has no such option yet)")
+            raise UrlError(f"{EXPECTED}: {', '.join(refused)} not available with servo= (the buses of its models have no such option yet)")
         try:
             spec = options["servo"][-1]
             ids = parse_ids(options["ids"][-1]) if "ids" in options else None
@@ -205,7 +206,7 @@ class Serial(SerialBase):
         trace = TraceWriter(trace_path, servos=servos) if trace_path else None
         self._private = (bus, trace)
         if self.logger:
-            self.logger.info("private Protocol 2.0 bus: %s%s", servos, " beside AX-12As" if isinstance(bus, MixedBus) else "")
+            self.logger.info("private bus of %s (%s)", servos, type(bus).__name__)
         return InProcessLink(bus, trace=trace)
 
     def _reconfigure_port(self) -> None:
