@@ -137,6 +137,8 @@ class Bus(ServosById[VirtualServo]):
     #: Replies to one packet may overlap on the wire (broadcast PING, duplicate IDs): the serving
     #: loop merges them (``merge_replies``) rather than laying them one after another.
     replies_in_sequence = False
+    #: The protocol its servos speak (``protocol=`` of the harness and the faults).
+    protocol = 1.0
 
     @property
     def physics_step_s(self) -> float:

@@ -55,6 +55,8 @@ class Bus1X:
 
     #: Replies to one packet may collide (broadcast PING): the serving loop merges them.
     replies_in_sequence = False
+    #: The protocol its servos speak (``protocol=`` of the harness and the faults).
+    protocol = 1.0
 
     def __init__(
         self,
@@ -121,8 +123,10 @@ class Bus1X:
         if self.ax_bus is not None:
             self.ax_bus.reindex()
 
-    def servo(self, servo_id: int):
-        """The (first) servo answering to ``servo_id`` now, MX or AX-12A."""
+    def servo(self, servo_id: int, protocol: float | None = None):
+        """The (first) servo answering to ``servo_id`` now, MX or AX-12A; ``protocol``, if given, must be 1.0 (ValueError)."""
+        if protocol is not None and protocol != self.protocol:
+            raise ValueError(f"protocol={protocol}: this bus's servos all speak Protocol {self.protocol}")
         found = self._by_id.get(servo_id)
         if found:
             return found[0]

@@ -107,6 +107,8 @@ class Bus2(ServosById[Servo2]):
     #: Several replies to one packet are timed one after another (see the module docstring): the
     #: serving loop sends each at its own time.
     replies_in_sequence = True
+    #: The protocol its servos speak (``protocol=`` of the harness and the faults).
+    protocol = 2.0
 
     def __init__(
         self,

@@ -24,6 +24,8 @@ class ServosById(Generic[S]):
 
     servos: list[S]
     _by_id: dict[int, list[S]]
+    #: The protocol the bus's servos speak, as ``protocol=`` names it (1.0 or 2.0).
+    protocol: float
 
     def reindex(self) -> None:
         """Look servos up by the IDs in their tables again (after an ID changed outside a packet)."""
@@ -32,8 +34,10 @@ class ServosById(Generic[S]):
             by_id.setdefault(servo.id, []).append(servo)
         self._by_id = by_id
 
-    def servo(self, servo_id: int) -> S:
-        """The (first) servo answering to ``servo_id`` now."""
+    def servo(self, servo_id: int, protocol: float | None = None) -> S:
+        """The (first) servo answering to ``servo_id`` now; ``protocol``, if given, must be the bus's (ValueError)."""
+        if protocol is not None and protocol != self.protocol:
+            raise ValueError(f"protocol={protocol}: this bus's servos all speak Protocol {self.protocol}")
         try:
             return self._by_id[servo_id][0]
         except KeyError:

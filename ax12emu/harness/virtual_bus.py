@@ -106,13 +106,7 @@ def _find(bus: AnyBus, servo_id: int, protocol: float | None) -> tuple[Any, Any]
     The holder is the bus whose faults and model are the servo's (``holder``: an AX-12A beside MX
     servos is held by the AX-12 bus inside their bus).
     """
-    if isinstance(bus, MixedBus):
-        servo = bus.servo(servo_id, protocol)
-    else:
-        speaks = 2.0 if isinstance(bus, Bus2) else 1.0
-        if protocol is not None and protocol != speaks:
-            raise ValueError(f"protocol={protocol}: this bus's servos all speak Protocol {speaks}")
-        servo = bus.servo(servo_id)
+    servo = bus.servo(servo_id, protocol)
     return bus.holder(servo), servo
 
 
@@ -422,7 +416,7 @@ class VirtualBus:
             if not isinstance(model, AngleSettable):
                 what = type(model).__name__ if model is not None else f"the firmware model of {model_name(servo)}"
                 raise NotImplementedError(f"set_angle_deg: {what} does not let its angle be set (ID {servo_id}, "
-                                          f"on a Protocol {2.0 if isinstance(holder, Bus2) else 1.0} bus)")
+                                          f"on a Protocol {holder.protocol} bus)")
             model.set_angle(servo.index, degrees / _DEG_PER_RAD)
             holder.plant.tables_changed()
             holder.plant.refresh()
