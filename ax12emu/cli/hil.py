@@ -81,8 +81,9 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                         help="frame Protocol 1.0 only, or 1.0 and 2.0 (a wire of X-series servos, alone or beside "
                         "AX-12s); auto: both when the trace names 2.0 servos or the bytes hold a 2.0 header")
     decode.add_argument("--servo", metavar="SPEC",
-                        help="name the registers of Protocol 2.0 packets by these models (IDS:MODEL,..., as serve --servo); "
-                        "default: the servos the trace's header names, else addresses")
+                        help="name each ID's registers by its model's table (IDS:MODEL,..., as serve --servo: Protocol 2.0 "
+                        "models and 1.0 ones such as mx-28); default: the servos the trace's header names, else the "
+                        "AX-12 table of --profile on 1.0 and addresses on 2.0")
 
     check = sub.add_parser("conformance", help="run the Protocol 1.0 (or 2.0) checks against any port (emulator or servo)")
     check.add_argument("port", metavar="PORT", help="device path or pyserial URL (socket://HOST:PORT, ax12emu://...)")
