@@ -21,8 +21,10 @@ MX and XL-320 pages):
   the middle, to pulses with 2048 at the middle (XL-320: 1024 units over 300 deg, 3.33 pulses a unit);
   CW/CCW Angle Limit become Min/Max Position Limit, which the firmware holds the goal inside.
 * Joint mode is Position Control Mode; Moving Speed (``speed_unit_rpm``) is Profile Velocity
-  (0.229 rpm, at least 1 so a slow speed is not read as "no limit"), and Moving Speed 0 is Profile
-  Velocity 0: "the maximum rpm of the motor is used without controlling the speed" (e-manual).
+  (0.229 rpm, at least 1 so a slow speed is not read as "no limit"), and Moving Speed 0, "the maximum rpm
+  of the motor is used without controlling the speed. ... However, the rpm will not exceed the No Load
+  Speed" (e-manual), a profile at the data sheet's no-load speed (``no_load_speed_rpm``): Moving, "Goal
+  position command execution is in progress", is then the firmware's running profile from the first step.
 * Wheel mode (``mode_register`` in ``wheel_modes``, or both angle limits 0) is PWM Control Mode where
   Moving Speed is a share of the output (``wheel_output = "pwm"``: the AX and XL-320 pages, "only the
   output control is possible, not speed"), Velocity Control Mode where it is a speed ("velocity");
@@ -52,9 +54,8 @@ github ROBOTIS-GIT/emanual _includes/en/dxl/):
   reports, so the goal is the register value times the divider;
 * Goal Acceleration (``acceleration_unit_deg_s2``: "the unit is approximately 8.583 deg / sec^2 ...
   When it is set to 0, there is no control over acceleration", control_table_goal_acceleration.md) is
-  Profile Acceleration (214.577 rev/min^2); the X series plans no acceleration without a Profile
-  Velocity, so Moving Speed 0 ("the maximum rpm of the motor is used") with an acceleration takes the
-  data sheet's no-load speed (``no_load_speed_rpm``) as the profile's speed;
+  Profile Acceleration (214.577 rev/min^2), planned with Moving Speed's profile speed (the no-load speed
+  for Moving Speed 0, as above: the X series plans no acceleration without a Profile Velocity);
 * Torque Control Mode Enable(70) = 1 (MX-64/106: "DYNAMIXEL is controlled by the Goal Torque value ...
   behaves as if it is in the wheel mode") is Current Control Mode, Goal Torque(71) the goal current in
   the model's current unit with the direction bit ("the unit is 4.5mA"), bounded by Torque Limit's share
@@ -130,7 +131,7 @@ class ClassicMap:
                  current_limit_units: float = 0.0) -> None:
         """``registers``: the table's register names; ``load_per_sensed``: Present Load units per unit of the
         firmware's Present Current/Load reading; ``step_s``: the firmware's control step;
-        ``no_load_speed_rpm``: the speed of Moving Speed 0 with a Goal Acceleration; ``current_limit_units``:
+        ``no_load_speed_rpm``: the profile speed of Moving Speed 0 (0: the X series' step); ``current_limit_units``:
         the current (in the model's current unit) at Torque Limit 100 %, for Goal Torque."""
         self.units = units
         self.no_load_speed_rpm = no_load_speed_rpm
@@ -267,12 +268,14 @@ class ClassicMap:
         cmd.min_position_limit = int(round(self.position_to_pulses(values.get("cw_angle_limit", 0))))
         cmd.max_position_limit = int(round(self.position_to_pulses(values.get("ccw_angle_limit", units.position_units - 1))))
         speed = speed_raw & ((1 << units.direction_bit) - 1)
-        # Moving Speed 0: "the maximum rpm of the motor is used without controlling the speed" (Profile Velocity 0);
-        # any other speed at least one X unit, so a slow one is never read as unlimited.
-        cmd.profile_velocity = 0 if speed == 0 else max(1, int(round(self.speed_to_x_velocity(speed))))
+        # Any speed at least one X unit, so a slow one is never read as unlimited.  Moving Speed 0, "the maximum
+        # rpm of the motor is used without controlling the speed. ... However, the rpm will not exceed the No Load
+        # Speed" (MX-28 and XL-320 pages, "Moving Speed(32)"), is a profile at the data sheet's no-load speed
+        # rather than the X series' step (Profile Velocity 0): the classic Moving reads "Goal position command
+        # execution is in progress" (the pages' Moving(46)/(49)), which a step, over before the first control
+        # step ends, would not show, and the X series plans no acceleration without a profile speed either.
+        cmd.profile_velocity = max(1, int(round(self.speed_to_x_velocity(speed)))) if speed else self._full_speed()
         cmd.profile_acceleration = self._profile_acceleration(values)
-        if cmd.profile_acceleration and cmd.profile_velocity == 0:
-            cmd.profile_velocity = max(1, int(round(self.no_load_speed_rpm / X_VELOCITY_UNIT_RPM)))
         if self.is_multi_turn(values):
             divider = self.divider(values)
             goal = values["goal_position"]
@@ -286,6 +289,10 @@ class ClassicMap:
         cmd.position_i_gain = int(round(values.get("i_gain", 0) * gains["i"]))
         cmd.position_d_gain = int(round(values.get("d_gain", 0) * gains["d"]))
         return cmd
+
+    def _full_speed(self) -> int:
+        """Moving Speed 0's Profile Velocity: the no-load speed (0, the X series' step, on a map given none)."""
+        return max(1, int(round(self.no_load_speed_rpm / X_VELOCITY_UNIT_RPM))) if self.no_load_speed_rpm > 0 else 0
 
     def _profile_acceleration(self, values: Mapping[str, int]) -> int:
         """Goal Acceleration as Profile Acceleration (at least 1 when set, so it is never read as "none")."""

@@ -46,8 +46,9 @@ def test_joint_mode_is_position_control_with_speed_torque_limit_gains_and_angle_
     assert cmd.shutdown == 0x24
 
 
-def test_moving_speed_zero_is_no_limit_and_one_is_the_slowest(xl320):
-    assert xl320.commands({**JOINT, "moving_speed": 0}).profile_velocity == 0
+def test_moving_speed_zero_is_the_no_load_speed_and_one_is_the_slowest(xl320):
+    # "the maximum rpm of the motor ... will not exceed the No Load Speed": the sheet's 114 rpm at 7.4 V, as a profile
+    assert xl320.commands({**JOINT, "moving_speed": 0}).profile_velocity == round(114 / 0.229)
     assert xl320.commands({**JOINT, "moving_speed": 1}).profile_velocity == 1
 
 

@@ -24,7 +24,8 @@ def test_joint_mode_positions_are_the_x_series_pulses(mx64):
     cmd = mx64.commands(JOINT)
     assert cmd.operating_mode == OperatingMode.POSITION
     assert (cmd.goal_position, cmd.min_position_limit, cmd.max_position_limit) == (3000, 0, 4095)
-    assert (cmd.profile_velocity, cmd.profile_acceleration) == (0, 0)
+    # Moving Speed 0: a profile at the sheet's no-load speed (63 rpm at 12 V), no acceleration
+    assert (cmd.profile_velocity, cmd.profile_acceleration) == (round(63 / 0.229), 0)
     # Shutdown 36 (Overheating 0x04, Overload 0x20) is the X series' bits of the same names.
     assert cmd.shutdown == 0x24
 
