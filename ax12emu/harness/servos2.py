@@ -12,11 +12,11 @@ the AX-12 bus (inside the MX servos' when both are named), and both protocols on
 
 from __future__ import annotations
 
-from ax12emu.bus.bus import Bus
+from ax12emu.bus.bus import BAUD_TOLERANCE, Bus
 from ax12emu.bus.bus1x import Bus1X
 from ax12emu.bus.bus2 import Bus2
 from ax12emu.bus.clock import VirtualClock, WallClock
-from ax12emu.bus.mixed import MixedBus, model_of
+from ax12emu.bus.mixed import MixedBus, model_name, model_of
 from ax12emu.protocol.control_table import AX12_MODEL, PROTOCOL1_MODELS
 from ax12emu.protocol.servo_models import model, model_names
 from ax12emu.protocol.servo_spec import parse_servo_spec
@@ -24,7 +24,6 @@ from ax12emu.servo.model_factory import build_protocol1_model
 from ax12emu.servo.model_factory2 import XModelChoice, build_x_firmware
 from ax12emu.servo.plant1x import build_plant1x
 from ax12emu.servo.servo2 import Servo2Options
-from ax12emu.servo.virtual_servo import baud_value
 
 __all__ = ["build_bus2", "build_wire", "servo_list", "servo_models"]
 
@@ -71,15 +70,29 @@ def build_wire(spec: str, ids: list[int] | None = None, *, clock: WallClock | Vi
     bus2 = (Bus2(x_models, lambda servo_model, index: build_x_firmware(servo_model, choice), clock=clock, options=options)
             if x_models else None)
     if baud_bps is not None:
-        if bus1 is not None:
-            value = baud_value(baud_bps)  # ValueError if an AX-12A cannot run at it
-            for servo in bus1.servos:  # an MX's Baud Rate(4) counts as the AX-12A's for rates up to 1 Mbps
-                servo.table.set("baud_rate", value)
+        for servo in bus1.servos if bus1 is not None else ():
+            _start_at_baud(servo, baud_bps)
         for servo in bus2.servos if bus2 is not None else ():
             servo.start_at_baud(baud_bps)
     if bus1 is not None and bus2 is not None:
         return MixedBus(bus1, bus2)
     return bus1 if bus1 is not None else bus2  # type: ignore[return-value]
+
+
+def _start_at_baud(servo, bps: float) -> None:
+    """Set a Protocol 1.0 servo's Baud Rate to the value whose rate is nearest ``bps``, asking the servo itself what each
+    value means (an MX's 250..252 are 2.25..3 Mbps, an AX-12A's are not); ValueError if none is within a UART's 3 %."""
+    table = servo.table
+    entry = table.layout.by_name["baud_rate"]
+    rates = {}
+    for value in range(entry.minimum, entry.maximum + 1):  # the values a client may write
+        table.set("baud_rate", value)
+        rates[value] = servo.baud_bps
+    value = min(rates, key=lambda v: abs(rates[v] - bps))
+    if abs(rates[value] - bps) > BAUD_TOLERANCE * bps:
+        raise ValueError(f"ID {servo.id} ({model_name(servo)}) cannot run at {bps:.0f} bps: its Baud Rate values give "
+                         f"{min(rates.values()):.0f}..{max(rates.values()):.0f} bps, none within 3 %")
+    table.set("baud_rate", value)
 
 
 def build_bus2(spec: str, ids: list[int] | None = None, *, clock: WallClock | VirtualClock,

@@ -177,3 +177,12 @@ def test_plugin_option_serves_mx_servos(pytester):
     )
     result = pytester.runpytest_inprocess("--ax12-servo", "1-2:mx-106", "-p", "no:cacheprovider")
     result.assert_outcomes(passed=1)
+
+
+def test_baud_bps_sets_each_servo_by_what_its_own_baud_rate_values_mean():
+    with VirtualBus([1], servo="mx-106", transport="inprocess", baud_bps=3_000_000) as bus:
+        assert bus.read(1, "baud_rate") == 252  # the MX's "For BPS over 250 values": 3 Mbps
+    with VirtualBus(servo="1:mx-28,2:ax-12a", transport="inprocess", baud_bps=1_000_000) as bus:
+        assert [bus.read(i, "baud_rate") for i in (1, 2)] == [1, 1]
+    with pytest.raises(ValueError, match=r"ID 2 \(AX-12A\) cannot run at 3000000 bps: its Baud Rate values give 7843..2000000 bps"):
+        VirtualBus(servo="1:mx-28,2:ax-12a", transport="inprocess", baud_bps=3_000_000)
