@@ -53,8 +53,9 @@ the bus only shows what the firmware reports.  Two servos with one ID (``duplica
 answer at once; the bus collides their answers (``reply.collide``: AND-ed as on the wire).  In a Sync or
 Bulk Read both answer in the ID's turn; in a Fast Sync/Bulk Read both send their share in its turn
 and the servos after it run their CRC on over the collided bytes they heard.
-Not modelled: the reply cache, the live view (the Protocol 1.0 bus has them), a servo's busy
-time after a write to its EEPROM, and the time a rebooting servo is deaf.
+Not modelled: the reply cache (the Protocol 1.0 bus has one), a servo's busy time after a write to
+its EEPROM, and the time a rebooting servo is deaf.  The live view (:mod:`ax12emu.live`) shows this
+bus's servos as it shows the 1.0 bus's.
 """
 
 from __future__ import annotations

@@ -11,8 +11,9 @@ for bytes until their silence timeout; a 1.0 packet is never a 2.0 header).
 IDs are per protocol: a 1.0 packet to ID 1 reaches the 1.0 servo with ID 1 and no 2.0 servo, so
 both may have ID 1; :meth:`MixedBus.servo` therefore takes the protocol, and refuses an ID both
 protocols have without it.  Both buses keep one clock.  The 1.0 bus's reply cache is bypassed (a cached
-answer would skip the 2.0 framer's view of the bytes); faults and the live view are the 1.0
-bus's alone and not offered here.
+answer would skip the 2.0 framer's view of the bytes).  The faults
+(:class:`~ax12emu.faults.injection.MixedFaults`) and the live view (:mod:`ax12emu.live`) reach each
+servo through the bus of its protocol (``bus1``, ``bus2``).
 """
 
 from __future__ import annotations

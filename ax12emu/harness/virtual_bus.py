@@ -28,8 +28,9 @@ and tells a servo with a firmware model of its own (X, MX) from an AX-12 by that
 its kind.  IDs are per protocol, so an ID both protocols have needs ``protocol=1.0`` or ``2.0`` in
 the state methods and in ``bus.faults`` (:class:`~ax12emu.faults.injection.MixedFaults`; a
 ValueError says so).  Each servo has its model's table, and the register methods take that
-table's names (``bus.read(1, "present_position")``).  What these buses lack (the live view, a
-set angle on a firmware's shaft) is refused with the reason; the faults work
+table's names (``bus.read(1, "present_position")``).  What is not offered here with ``servo=``
+(``web=``, though ``ax12emu serve --servo ... --web`` shows these buses; a set angle on a firmware's
+shaft) is refused with the reason; the faults work
 (:class:`~ax12emu.faults.injection.Faults2`, :class:`~ax12emu.faults.injection.Faults1X`: the
 wire's, and alarm, stall, hold and pinned temperature or voltage acted out by each servo's firmware).
 """

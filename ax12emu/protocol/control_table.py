@@ -54,7 +54,8 @@ DEFAULT_PROFILE = "ax12a"
 #: Protocol 1.0 models the bus serves: tables laid out as the AX-12A's (same size, same EEPROM
 #: area, same register names, so the plant and the request handler read them alike), with their
 #: own model number and data-sheet physics.  The MX series' 1.0 tables differ (PID gains where the
-#: compliance registers are, goal acceleration, multi-turn offset) and are not served.
+#: compliance registers are, goal acceleration, multi-turn offset): their own bus serves them
+#: (:mod:`ax12emu.bus.bus1x`, on the X-series firmware).
 PROTOCOL1_MODELS = (AX12_MODEL, "ax-18a")
 
 
