@@ -192,9 +192,8 @@ class Bus2(ServosById[Servo2]):
         catch-up.  The model takes the same steps either way (the packet's catch-up finds nothing
         left to do); only the host's wait is shorter.
         """
-        sim_time_s = self._sim_time_s()
         for servo in self.servos:
-            plant = servo.plant
+            plant, sim_time_s = servo.plant, self._sim_time_s()
             if plant.due(sim_time_s):
                 plant.catch_up(sim_time_s)
                 yield

@@ -113,8 +113,10 @@ class BusServer:
         self._physics: Iterator[None] | None = None
         #: The steps a bus's servos owe after a packet, in pieces (``Bus2.settle_in_pieces``), if it has them.
         self._settle: Callable[[], Iterator[None]] | None = getattr(bus, "settle_in_pieces", None)
-        #: A packet was handled since the last settling.
+        #: A packet was handled since the last settling began (only with ``_settle``).
         self._unsettled = False
+        #: The settling under way, in pieces, or None.
+        self._settling: Iterator[None] | None = None
         #: Counters for diagnostics and tests.
         self.packets_in = 0
         self.bytes_dropped = 0
@@ -199,7 +201,7 @@ class BusServer:
         for replies in self.bus.answer(data, now, line_bps=line_bps, cache=not self.pace, looked_up=not self.pace):
             self.packets_in += 1
             self._answer(replies, now, end)
-            self._unsettled = True
+            self._unsettled = self._settle is not None
 
     def _answer(self, replies: Sequence[Reply], now: float, end: float) -> None:
         """Put one packet's replies on the line: now, or queued for their delay (and pace)."""
@@ -293,13 +295,19 @@ class BusServer:
                 self._physics = self.bus.advance_in_pieces()
                 self.bus.expire(now)
                 self._next_physics = self._next_tick_s(now)
-            elif self._physics is None and self._unsettled and self._settle is not None:
-                # The step a client's write earned, taken while the host is busy with the reply or its
-                # next packet rather than when that packet arrives (a Sync Write has no reply to wait for).
-                self._unsettled = False
-                self._physics = self._settle()
             if self._physics is not None and next(self._physics, _DONE) is _DONE:
                 self._physics = None
+        # The step a client's write earned, taken while the host is busy with the reply or its next
+        # packet (a Sync Write has no reply to wait for) rather than when that packet arrives.  Owed to
+        # that packet anyway, so one piece in every pass, hot or not; never inside a half-done physics
+        # step, whose copy back would then follow a step it did not take, nor just before a reply.
+        if (self._physics is None and (self._settling is not None or self._unsettled)
+                and not (queue and queue[0][0] - now < PHYSICS_DEFER_S)):
+            if self._settling is None:
+                self._unsettled = False
+                self._settling = self._settle()
+            if next(self._settling, _DONE) is _DONE:
+                self._settling = None
         if self._calls:
             self._run_calls()
 
