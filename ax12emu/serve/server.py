@@ -11,7 +11,9 @@ would be too coarse.  The 1 kHz physics step runs on the loop's tick, which
 lands when the model's next step falls due, in pieces (step, sensors,
 tables: ``Bus.advance_in_pieces``), and while a host polls, each piece just
 after a packet was answered: the host is then busy with the reply, so the
-step costs it almost nothing.
+step costs it almost nothing.  The step a Protocol 2.0 client's write earns
+(``Bus2.settle_in_pieces``) is taken the same way, one servo a pass, right
+after the packet that wrote, rather than when the next packet arrives.
 
 The wire, as it is modelled here:
 
