@@ -5,6 +5,6 @@ act through the bus's and the model's declared interfaces.
 """
 
 from .config import FAULT_OPTIONS, FaultConfig
-from .injection import Faults, Faults2, MixedFaults, faults_for, parse_alarm_bits
+from .injection import Faults, Faults1X, Faults2, MixedFaults, faults_for, parse_alarm_bits
 
-__all__ = ["FAULT_OPTIONS", "FaultConfig", "Faults", "Faults2", "MixedFaults", "faults_for", "parse_alarm_bits"]
+__all__ = ["FAULT_OPTIONS", "FaultConfig", "Faults", "Faults1X", "Faults2", "MixedFaults", "faults_for", "parse_alarm_bits"]

@@ -100,7 +100,7 @@ class FaultConfig:
         """Attach a :class:`Faults` with this configuration to ``bus`` and return it.
 
         On a Protocol 2.0 bus: :class:`~.injection.Faults2` (its firmware acts out ``alarm``,
-        ``stall`` and ``hold``).  On a wire mixing protocols: :class:`~.injection.MixedFaults`, where
+        ``stall`` and ``hold``); on a Protocol 1.0 wire with MX servos: :class:`~.injection.Faults1X`.  On a wire mixing protocols: :class:`~.injection.MixedFaults`, where
         a slot launched on both protocols is a ValueError (the options cannot name the protocol).
         """
         faults = faults_for(bus, seed=self.seed)

@@ -47,6 +47,10 @@ status packet has a wrong CRC, its last byte flipped -> ``COMM_RX_CORRUPT``), an
 a servo's own (``alarm``, ``stall``, ``hold``) acted out by its firmware model, which reports
 them otherwise: Hardware Error Status, the Alert bit, Shutdown latching until REBOOT (see
 :class:`Faults2`); ``duplicate`` as here, replies overlapping on the wire colliding.
+
+A Protocol 1.0 wire with MX servos (:class:`~ax12emu.bus.bus1x.Bus1X`) takes :class:`Faults1X`: the
+wire's faults as here, an MX's own acted out by its X-series firmware and shown as the Protocol 1.0
+firmware shows them (status-packet alarm bits, Torque Limit 0 until a client writes it).
 """
 
 from __future__ import annotations
@@ -695,9 +699,9 @@ for _name in Faults1X._ROUTED:
 
 
 class MixedFaults:
-    """The faults of a wire mixing AX-12As (Protocol 1.0) and X-series servos (Protocol 2.0).
+    """The faults of a wire mixing Protocol 1.0 servos (AX-12A, AX-18A, MX) and X-series servos (Protocol 2.0).
 
-    Each protocol's bus keeps its own :class:`Faults` or :class:`Faults2` (``bus1.faults``,
+    Each protocol's bus keeps its own :class:`Faults`, :class:`Faults1X` or :class:`Faults2` (``bus1.faults``,
     ``bus2.faults``), both from one seed.  The wire's reply faults apply to both.  A servo is named
     by its slot; launch IDs are per protocol, so a slot both protocols have needs ``protocol=1.0``
     or ``2.0`` (a ValueError says so), which the CLI flags and URL options cannot give.
