@@ -101,8 +101,11 @@ def test_a_per_id_mix_puts_mx_and_ax_12a_on_protocol_1_beside_the_x_series():
             assert bus.angle_deg(2, protocol=1.0) == pytest.approx(100.0)
             bus.set_temperature(2, 80, protocol=1.0)
             assert ph1.ping(port, 2)[2] & 0x04 and ph1.ping(port, 1)[2] == 0
-            bus.set_external_torque(2, 0.2, protocol=1.0)
-            bus.set_external_torque(1, 0.2)
+            bus.set_external_torque(2, 0.2, protocol=1.0)  # both torque off: each turns CCW under its push
+            bus.set_external_torque(1, 1.0)
+            bus.step(0.2)  # short of a turn: the AX-12A's angle wraps at 360
+            assert bus.angle_deg(2, protocol=1.0) > 100.0 + 5.0 and bus.angle_deg(1) > 180.0 + 5.0
+            assert bus.angle_deg(2, protocol=2.0) == pytest.approx(180.0, abs=0.5)  # the XL430 with ID 2 unpushed
         finally:
             port.closePort()
 
