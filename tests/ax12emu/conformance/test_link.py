@@ -7,6 +7,7 @@ judged the packet silent, which is what a late reply is.
 from __future__ import annotations
 
 import os
+import select
 import time
 
 import pytest
@@ -17,7 +18,7 @@ from ax12emu.conformance.checks import Context, expect
 from ax12emu.conformance.link import Link, open_port
 from ax12emu.protocol.packets import Instruction, encode_instruction, encode_status
 
-SILENCE_S, TIMEOUT_S = 0.02, 0.3
+SILENCE_S, TIMEOUT_S = 0.02, 2.0
 
 
 @pytest.fixture
@@ -53,7 +54,9 @@ def test_a_check_fails_when_a_reply_comes_after_the_silence_window(wire):
     def answered_late(ctx: Context) -> str:
         expect(ctx.silent(encode_instruction(7, Instruction.PING)), "ID 7 answered")
         os.write(device, encode_status(7, 0))  # the device's reply, later than the window
-        time.sleep(0.05)
+        # a pty hands bytes over through a kernel worker, which a loaded machine may delay: the reply has
+        # come before the next packet once the host end can read it
+        assert select.select([ctx.link.port.fileno()], [], [], 10.0)[0], "the late reply never reached the host"
         ctx.link.send(encode_instruction(1, Instruction.ACTION))
         return "silent"
 
