@@ -22,7 +22,7 @@ from ax12emu.bus import Bus
 from ax12emu.bus.clock import WallClock
 from ax12emu.bus.state_store import StateFileError, StateStore
 from ax12emu.cli import hil as cli_hil
-from ax12emu.protocol.control_table import AX12_MODEL, DEFAULT_PROFILE, PROFILES, PROTOCOL1_MODELS
+from ax12emu.protocol.control_table import AX12_MODEL, DEFAULT_PROFILE, PROFILES
 from ax12emu.protocol.ids import parse_ids
 from ax12emu.servo.model_factory import MODELS, ModelChoice, build_model, parse_arm
 from ax12emu.servo.virtual_servo import ServoOptions
@@ -87,8 +87,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     serve.add_argument(
         "--baud", type=_positive_float, metavar="BPS",
-        help="with --servo: every servo starts at this bit rate (its Baud Rate register set to match; "
-        "default: each model's factory rate, 57600 on the X series, 1000000 on the AX-12A)",
+        help="with --servo: every servo starts at this bit rate (its Baud Rate register set to the value its own model "
+        "gives that rate: an MX runs up to 3000000, an AX-12A up to 1000000; default: each model's factory rate, "
+        "57600 on the X series, 1000000 on the AX and MX series)",
     )
     where = serve.add_mutually_exclusive_group()
     where.add_argument("--pty", action="store_true", help="serve on a pseudo-terminal (the default)")
@@ -179,21 +180,15 @@ _PROTOCOL1_ONLY = ("params", "arm", "model", "controller", "profile",
                    "broadcast_ping", "reset_reply_id", "goal_torque", "eeprom_busy_ms")
 
 
-def _protocol1_keys() -> tuple[str, ...]:
-    """Every Protocol 1.0 model served beside the 2.0 ones: the AX-shaped tables and the MX series' (bus1x)."""
-    from ax12emu.protocol.servo_models import model, model_names
-
-    return tuple(key for key in model_names() if "1.0" in model(key).protocols and "2.0" not in model(key).protocols)
-
-
 def _check_servo_spec(parser: argparse.ArgumentParser, args: argparse.Namespace, argv: list[str]) -> None:
     """Resolve ``--servo`` into ``args.servo_models`` [(ID, model key)], or exit with the reason."""
+    from ax12emu.bus.wire import protocol1_keys
     from ax12emu.protocol.servo_spec import parse_servo_spec
 
     ids_given = any(a == "--ids" or a.startswith("--ids=") for a in argv)
     try:
         args.servo_models = parse_servo_spec(args.servo, args.ids if ids_given or ":" not in args.servo else None,
-                                             also=_protocol1_keys())
+                                             also=protocol1_keys())
     except ValueError as exc:
         parser.error(f"--servo: {exc}")
     if all(key == AX12_MODEL for _, key in args.servo_models):
@@ -243,76 +238,37 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
 STATE_SUBDIR_2 = "protocol2"
 
 
-def _serve2(args: argparse.Namespace) -> int:
-    """``serve --servo``: X-series servos on Protocol 2.0, each with its model's table and firmware."""
-    from ax12emu.bus.bus2 import Bus2
-    from ax12emu.protocol.servo_models import model
-    from ax12emu.serve import BusServer
-    from ax12emu.servo.model_factory2 import XModelChoice, build_x_firmware
+def build_serve_wire(args: argparse.Namespace, clock):
+    """The wire ``serve --servo`` serves, built by the one builder the harness uses (:func:`ax12emu.bus.wire.build_wire_of`).
+
+    Every servo takes ``--baud`` as its own model says its Baud Rate values (an MX runs up to 3 Mbps, an
+    AX-12A not); ``ValueError`` names a servo that cannot, or a model the other flags do not fit.
+    """
+    from ax12emu.bus.wire import build_wire_of
+    from ax12emu.servo.model_factory2 import XModelChoice
+    from ax12emu.servo.servo1x import Servo1XOptions
     from ax12emu.servo.servo2 import Servo2Options
 
-    choice = XModelChoice(voltage_v=args.voltage, external_torque_nm=args.external_torque)
-    clock = WallClock(args.time_scale)
-    # Protocol 2.0 servos keep their EEPROM in a directory of their own: IDs are per protocol.
-    store2 = StateStore(Path(args.state_dir) / STATE_SUBDIR_2) if args.state_dir else None
-    store1 = StateStore(args.state_dir) if args.state_dir else None
-    x_models = [(servo_id, model(key)) for servo_id, key in args.servo_models if "2.0" in model(key).protocols]
-    bus = None
-    if x_models:  # none: Protocol 1.0 servos alone (AX-18As, the MX series)
-        bus = Bus2(
-            x_models,
-            lambda spec, index: build_x_firmware(spec, choice),
-            clock=clock,
-            options=Servo2Options(reply_on_crc_error=args.checksum_error == "reply"),
-            state_store=None if args.factory_reset else store2,
-        )
-        bus.state_store = store2
-        if args.baud is not None:
-            for servo in bus.servos:
-                servo.start_at_baud(args.baud)
-    ax = [(servo_id, key) for servo_id, key in args.servo_models if key in PROTOCOL1_MODELS]
-    ax_ids = [servo_id for servo_id, _ in ax]
-    # The other Protocol 1.0 models (the MX series) run the X-series firmware behind their own tables (bus1x).
-    mx = [(servo_id, model(key)) for servo_id, key in args.servo_models
-          if "2.0" not in model(key).protocols and key not in PROTOCOL1_MODELS]
-    bus1 = None
-    if ax_ids:
-        from ax12emu.servo.model_factory import build_protocol1_model
-        from ax12emu.servo.virtual_servo import baud_value
+    reply = args.checksum_error == "reply"
+    return build_wire_of(
+        args.servo_models, clock=clock, baud_bps=args.baud,
+        choice=XModelChoice(voltage_v=args.voltage, external_torque_nm=args.external_torque),
+        options=Servo2Options(reply_on_crc_error=reply), options1=ServoOptions(reply_on_checksum_error=reply),
+        options1x=Servo1XOptions(reply_on_checksum_error=reply),
+        # Protocol 2.0 servos keep their EEPROM in a directory of their own: IDs are per protocol.
+        state_store1=StateStore(args.state_dir) if args.state_dir else None,
+        state_store2=StateStore(Path(args.state_dir) / STATE_SUBDIR_2) if args.state_dir else None,
+        load_state=not args.factory_reset,
+    )
 
-        # The AX-12A keeps its measured defaults; another AX model runs its data sheet's physics and table.
-        keys1 = [key for _, key in ax]
-        try:
-            physics = build_protocol1_model(keys1, ModelChoice(voltage_v=args.voltage, external_torque_nm=args.external_torque))
-        except ValueError as exc:
-            raise SystemExit(f"ax12emu serve: error: --servo: {exc}") from None
-        bus1 = Bus(ax_ids, options=ServoOptions(reply_on_checksum_error=args.checksum_error == "reply"), clock=clock,
-                   model=physics, state_store=None if args.factory_reset else store1,
-                   table_layout=[None if key == AX12_MODEL else model(key).layout() for key in keys1])
-        bus1.state_store = store1
-        if args.baud is not None:
-            for servo in bus1.servos:
-                servo.table.set("baud_rate", baud_value(args.baud))
-    if mx:
-        from ax12emu.bus.bus1x import Bus1X
-        from ax12emu.servo.plant1x import build_plant1x
-        from ax12emu.servo.servo1x import Servo1XOptions
-        from ax12emu.servo.virtual_servo import baud_value
 
-        try:
-            bus1 = Bus1X(mx, lambda spec, servo: build_plant1x(spec, servo.table, choice), ax_bus=bus1, clock=clock,
-                         options=Servo1XOptions(reply_on_checksum_error=args.checksum_error == "reply"),
-                         state_store=None if args.factory_reset else store1)
-        except ValueError as exc:
-            raise SystemExit(f"ax12emu serve: error: --servo: {exc}") from None
-        bus1.state_store = store1
-        if args.baud is not None:
-            for servo in bus1.servos_mx:
-                servo.table.set("baud_rate", baud_value(args.baud))
-    if bus1 is not None:
-        from ax12emu.bus.mixed import MixedBus
+def _serve2(args: argparse.Namespace) -> int:
+    """``serve --servo``: the X series on Protocol 2.0, the AX and MX series on 1.0, or both on one wire."""
+    from ax12emu.protocol.servo_models import model
+    from ax12emu.serve import BusServer
 
-        bus = MixedBus(bus1, bus) if bus is not None else bus1
+    bus = build_serve_wire(args, WallClock(args.time_scale))
+    protocols = sorted({"2.0" if "2.0" in model(key).protocols else "1.0" for _, key in args.servo_models}, reverse=True)
     faults = cli_hil.fault_config(args)
     if faults.active:  # MX servos' through their firmware (Faults1X); a slot both protocols launched is refused (ValueError)
         faults.install(bus)
@@ -328,7 +284,7 @@ def _serve2(args: argparse.Namespace) -> int:
     if live is not None and live.url:
         print(live.url, flush=True)
     log.info("serving %s on %s (Protocol %s%s%s)", ", ".join(f"{i}:{k}" for i, k in args.servo_models), transport.name,
-             "/".join((["2.0"] if x_models else []) + (["1.0"] if ax_ids or mx else [])), ", paced" if args.pace else "", ", echo" if args.echo else "")
+             "/".join(protocols), ", paced" if args.pace else "", ", echo" if args.echo else "")
     try:
         server.serve_forever()
     finally:

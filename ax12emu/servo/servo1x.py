@@ -108,6 +108,14 @@ class Servo1X:
         return baud_bps_1x(self.table.row[self._baud_at])
 
     @property
+    def baud_rates_bps(self) -> dict[int, float]:
+        """Every Baud Rate value this servo's table takes (its model file's range) and the rate it runs at: up to
+        3 Mbps at 252 (MX-106 e-manual, https://emanual.robotis.com/docs/en/dxl/mx/mx-106/: "Baud Rate |
+        7,834 [bps] ~ 3 [Mbps]"), which the AX-12A's 2,000,000 / (value + 1) never reaches."""
+        entry = self.table.layout.by_name["baud_rate"]
+        return {value: baud_bps_1x(value) for value in range(entry.minimum, entry.maximum + 1)}
+
+    @property
     def return_delay_s(self) -> float:
         """Return Delay Time(5): 2 us per unit."""
         return self.table.row[self._return_delay_at] * 2e-6

@@ -116,6 +116,13 @@ class VirtualServo:
         return baud_bps(int(self.table.row[self._baud_rate_at]))
 
     @property
+    def baud_rates_bps(self) -> dict[int, float]:
+        """Every Baud Rate value this servo's table takes (its model file's range) and the rate it runs at, so a
+        bus started at another rate than the factory's asks the servo rather than assuming the AX-12A's."""
+        entry = self.table.layout.by_name["baud_rate"]
+        return {value: baud_bps(value) for value in range(entry.minimum, entry.maximum + 1)}
+
+    @property
     def return_delay_s(self) -> float:
         """Return Delay Time in seconds: 2 us per unit (e-manual)."""
         return int(self.table.row[self._return_delay_at]) * 2e-6

@@ -34,7 +34,7 @@ def test_a_model_for_every_id_and_per_id_models():
         (["--servo", "xl430-w250", "--voltage", "30"], "runs on 6.5..12 V, not 30 V"),
         (["--baud", "1000000"], "--baud applies with --servo"),
         (["--servo", "xl430-w250", "--baud", "250000"], "runs at 9600, 57600, 115200, 1000000"),
-        (["--servo", "1:ax-12a,2:xl430-w250", "--baud", "4500000"], "an AX-12A cannot run at 4500000 bps"),
+        (["--servo", "1:ax-12a,2:xl430-w250", "--baud", "4500000"], "ID 1 (AX-12A) cannot run at 4500000 bps"),
         (["--servo", "1-2:ax-12a"], "no Protocol 2.0 servo"),
         (["--servo", "1:ax-12a,1:ax-12a,2:xl430-w250"], "ID 1 is given two models"),
     ],

@@ -1,0 +1,37 @@
+"""The one wire builder: each servo takes a bit rate as its own model's Baud Rate values give it."""
+
+from __future__ import annotations
+
+import pytest
+
+from ax12emu.bus.clock import VirtualClock
+from ax12emu.bus.wire import build_wire
+
+
+@pytest.mark.parametrize(("bps", "value"), [(3_000_000, 252), (2_500_000, 251), (2_250_000, 250), (1_000_000, 1),
+                                            (57_600, 34)])
+def test_an_mx_takes_its_own_baud_values(bps, value):
+    """MX series, Protocol 1.0: 2,000,000 / (value + 1) up to 249, then 2.25, 2.5 and 3 Mbps at 250..252."""
+    bus = build_wire("mx-106", clock=VirtualClock(), baud_bps=bps)
+    try:
+        servo = bus.servo(1)
+        assert servo.table.get("baud_rate") == value
+        assert servo.baud_bps == pytest.approx(bps, rel=0.03)
+    finally:
+        bus.close()
+
+
+def test_rates_come_from_each_servos_table_range():
+    """Every value the Baud Rate register accepts (0..254 in the MX and AX-18A files) has a rate, and no other."""
+    bus = build_wire("1:ax-18a,2:mx-28", clock=VirtualClock())
+    try:
+        ax, mx = bus.servo(1), bus.servo(2)
+        assert sorted(ax.baud_rates_bps) == sorted(mx.baud_rates_bps) == list(range(255))
+        assert max(ax.baud_rates_bps.values()) == 2_000_000 and max(mx.baud_rates_bps.values()) == 3_000_000
+    finally:
+        bus.close()
+
+
+def test_a_rate_one_servo_cannot_run_names_it():
+    with pytest.raises(ValueError, match=r"ID 1 \(AX-18A\) cannot run at 3000000 bps"):
+        build_wire("1:ax-18a,2:mx-28", clock=VirtualClock(), baud_bps=3_000_000)
