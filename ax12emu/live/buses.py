@@ -13,6 +13,7 @@ from typing import Any
 from ax12emu.bus import Bus
 from ax12emu.bus.bus2 import Bus2
 from ax12emu.bus.mixed import MixedBus
+from ax12emu.bus.wire import servo_list
 
 __all__ = ["AnyBus", "PROTOCOL_NAMES", "parts", "protocols", "locate", "decoder_options", "protocol_name"]
 
@@ -63,16 +64,18 @@ def locate(bus: AnyBus, servo_id: int, protocol: float | None = None) -> tuple[f
 
 
 def decoder_options(bus: AnyBus) -> dict[str, Any]:
-    """The ``ax12emu decode`` decoder's options for this bus's traffic (protocol, 2.0 servos to name registers by)."""
+    """The ``ax12emu decode`` decoder's options for this bus's traffic: the protocol, the AX-12 table profile, and
+    every servo of the wire in the ``--servo`` form, so each ID's registers are named by its own model's table
+    (an MX's, an AX-18A's on Protocol 1.0 as much as an X series servo's on 2.0), as a trace's header keeps them."""
     on_wire = parts(bus)
     # The decoder frames 2.0 traffic in its "both" mode (each byte to both protocols' framers), as
     # ``ax12emu decode`` reads a 2.0 trace: a 2.0 status packet says itself that it is one.
     options: dict[str, Any] = {"protocol": "1.0" if [p for p, _ in on_wire] == [1.0] else "both"}
     for protocol, sub in on_wire:
         if protocol == 1.0:
-            profile = getattr(getattr(sub, "options", None), "profile", None)  # the AX-12 bus's table profile
+            ax = getattr(sub, "ax_bus", sub)  # an MX bus holds its AX-12As on an AX-12 bus of their own
+            profile = getattr(getattr(ax, "options", None), "profile", None)  # the AX-12 bus's table profile
             if profile is not None:
                 options["profile"] = profile
-        else:  # the --servo text: launch ID and model file per servo, as a trace's header keeps it
-            options["servos"] = ",".join(f"{slot}:{servo.spec.key}" for slot, servo in zip(sub.slots, sub.servos))
+    options["servos"] = servo_list(bus)
     return options
