@@ -29,8 +29,8 @@ its kind.  IDs are per protocol, so an ID both protocols have needs ``protocol=1
 the state methods and in ``bus.faults`` (:class:`~ax12emu.faults.injection.MixedFaults`; a
 ValueError says so).  Each servo has its model's table, and the register methods take that
 table's names (``bus.read(1, "present_position")``).  What is not offered here with ``servo=``
-(``web=``, though ``ax12emu serve --servo ... --web`` shows these buses; a set angle on a firmware's
-shaft) is refused with the reason; the faults work
+(a set angle on a firmware's shaft) is refused with the reason; ``web=`` shows any wire, as
+``ax12emu serve --servo ... --web`` does; the faults work
 (:class:`~ax12emu.faults.injection.Faults2`, :class:`~ax12emu.faults.injection.Faults1X`: the
 wire's, and alarm, stall, hold and pinned temperature or voltage acted out by each servo's firmware).
 """
@@ -175,7 +175,6 @@ class VirtualBus:
             refused = [name for name, given in (
                 ("options", not isinstance(options, Servo2Options) and options != ServoOptions()),
                 ("model", model is not None), ("params", params is not None),
-                ("web", _web_address(web) is not None),
             ) if given]
             if refused:
                 raise ValueError(f"{', '.join(refused)}: not available with servo= (the buses of its models have no such option yet)")
@@ -256,10 +255,12 @@ class VirtualBus:
         return TraceWriter(path, profile=self.bus.options.profile)
 
     def _start_live(self) -> None:
-        """The live page (``web=...``): sampled through :meth:`call`; its controls are this object's methods."""
+        """The live page (``web=...``) of any wire: sampled through :meth:`call`; its controls are this object's methods;
+        its packet log names each servo's registers by its model's table (``decoder_options``)."""
         if self._web_address is None:
             return
         from ax12emu.live import ByteTap, LiveView
+        from ax12emu.live.buses import decoder_options
 
         if self._link is not None:
             link = self._link
@@ -267,7 +268,7 @@ class VirtualBus:
             link.trace = tap
             self._live = LiveView(
                 self.call, controls=self, tap=tap, counters=lambda: {"packets_in": link.packets_in}, web=self._web_address,
-                profile=self.bus.options.profile,
+                **self.call(decoder_options),
             )
         else:
             self._live = LiveView.for_server(self._server, controls=self, web=self._web_address)

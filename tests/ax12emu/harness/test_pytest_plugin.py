@@ -48,3 +48,56 @@ def test_failing_test_still_tears_down(pytester):
     result = pytester.runpytest_inprocess("--strict-markers", "-p", "no:cacheprovider")
     result.assert_outcomes(failed=1)
     assert not [t for t in threading.enumerate() if t.name.startswith("ax12emu-")]
+
+
+def test_ax12_web_shows_a_bus_of_ax12_servo_models(tmp_path):
+    """``pytest --ax12-web`` with an ``ax12_servo`` marker: the page shows the MX and the X series servo the marker
+    names, with the test's last write, until Ctrl-C (the process is ended by its own handle)."""
+    import json
+    import os
+    import signal
+    import subprocess
+    import sys
+    import textwrap
+    import time
+    import urllib.request
+
+    pytest.importorskip("aiohttp")
+    (tmp_path / "test_watch.py").write_text(textwrap.dedent(
+        """
+        import pytest
+
+        @pytest.mark.ax12_servo("1:mx-28,1:xl430-w250")
+        def test_arm(ax12_bus):
+            ax12_bus.write(1, "goal_position", 600, protocol=1.0)
+        """
+    ))
+    process = subprocess.Popen(
+        [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "--ax12-web", "test_watch.py"],
+        cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+        env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)},
+    )
+    try:
+        lines: list[str] = []
+        while not any("press Ctrl-C" in line for line in lines):
+            line = process.stdout.readline()
+            assert line, "pytest ended before the page was up: " + "".join(lines)
+            lines.append(line)
+        url = lines[-1].split(" still at ")[1].split()[0]
+        deadline = time.monotonic() + 2.0
+        shown: dict = {}
+        while time.monotonic() < deadline:  # the page is at most a frame (40 ms) behind the bus
+            with urllib.request.urlopen(url + "api/servos", timeout=5) as answer:
+                shown = {(s["protocol"], s["id"]): s for s in json.loads(answer.read())["servos"]}
+            if shown.get(("1.0", 1), {}).get("registers", {}).get("goal_position") == 600:
+                break
+        assert shown[("1.0", 1)]["model"] == "MX-28" and shown[("2.0", 1)]["model"] == "XL430-W250"
+        assert shown[("1.0", 1)]["registers"]["goal_position"] == 600
+        process.send_signal(signal.SIGINT)
+        out, _ = process.communicate(timeout=20)
+        assert process.returncode == 0, out
+        assert "1 passed" in out
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.communicate()
