@@ -37,6 +37,9 @@ from .buses import AnyBus, locate, parts, protocols
 
 __all__ = ["Controls", "ServedControls", "ACTIONS", "ControlError", "apply"]
 
+#: The buses ax12emu.faults serves (Faults, Faults1X, Faults2), as a refusal names them.
+FAULT_BUSES = {Bus: "the AX-12 bus", Bus1X: "the MX series' Protocol 1.0 bus", Bus2: "the Protocol 2.0 bus"}
+
 #: The registers ``temperature`` and ``voltage`` pin, the first the servo's table has
 #: (AX-12A and XL-320: Present Voltage; X series: Present Input Voltage), and the count per unit.
 HELD_READINGS: Mapping[str, tuple[tuple[str, ...], float]] = {
@@ -87,11 +90,12 @@ class ServedControls:
         self._torque_nm: dict[int, float] = {}
 
     def faults_of(self, bus: AnyBus) -> Faults | MixedFaults:
-        # ax12emu.faults knows the AX-12 bus and the Protocol 2.0 bus (and wires of both); another
+        # ax12emu.faults knows the buses of FAULT_BUSES (and wires of both protocols); another
         # kind of bus would take faults whose hooks it does not call, or calls wrongly.
-        other = [type(sub).__name__ for _, sub in parts(bus) if not isinstance(sub, (Bus, Bus1X, Bus2))]
+        other = [type(sub).__name__ for _, sub in parts(bus) if not isinstance(sub, tuple(FAULT_BUSES))]
         if other:
-            raise ControlError(f"faults are not available on a {' or '.join(other)} (ax12emu.faults serves the AX-12 and Protocol 2.0 buses)")
+            raise ControlError(f"faults are not available on a {' or '.join(other)} (ax12emu.faults serves "
+                               f"{', '.join(FAULT_BUSES.values())}, and wires of both protocols)")
         if bus.faults is None:
             bus.faults = faults_for(bus, seed=self.seed)  # type: ignore[assignment]  # Faults2 on 2.0, MixedFaults on a mixed wire
         return bus.faults  # type: ignore[return-value]

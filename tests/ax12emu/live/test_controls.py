@@ -108,3 +108,20 @@ def test_a_mixed_wire_names_a_servo_by_id_and_protocol():
         apply(controls, {"action": "reply_faults", "drop": 1.0})
         figures = bus.call(take)["faults"]
         assert figures["drop"] == 1.0
+
+
+def test_faults_name_the_buses_that_take_them():
+    """An MX wire takes the faults (Faults1X); a bus ax12emu.faults does not serve is refused naming the ones it does."""
+    from ax12emu.faults.injection import Faults1X
+
+    with VirtualBus(servo="mx-28", transport="inprocess", virtual_time=True) as bus:
+        assert isinstance(bus.call(ServedControls(bus.call).faults_of), Faults1X)
+
+    class SomeOtherBus:
+        faults = None
+
+    with pytest.raises(ControlError) as refused:
+        ServedControls(lambda fn: fn(SomeOtherBus())).faults_of(SomeOtherBus())
+    says = str(refused.value)
+    assert "not available on a SomeOtherBus" in says
+    assert all(name in says for name in ("AX-12", "MX", "Protocol 2.0")), says
