@@ -89,12 +89,29 @@ class KinematicModel:
         """:meth:`advance` without reading the sensors."""
         target_steps = int(np.floor(to_time_s / self.step_s + 1e-9))
         count = target_steps - self._steps
-        if count > 0 and commands is not self._rest_commands:
+        if count <= 0:
+            self._take_commands(commands)
+        elif commands is not self._rest_commands:
             self._integrate(count * self.step_s, commands)
             # At rest under unchanged commands, further steps change nothing: skip them.
             self._rest_commands = commands if not self.speed_rad_s.any() else None
             self._steps = target_steps
             self.time_s = target_steps * self.step_s
+
+    def _take_commands(self, c: Commands) -> None:
+        """New commands with no time passing (a packet between two control steps): Moving follows them at once.
+
+        Moving as :meth:`_integrate` leaves it over a zero-length interval: short of the goal (wheel mode:
+        a speed commanded), torque on; the shaft has not moved yet.
+        """
+        enabled = np.asarray(c.torque_enable) != 0
+        wheel = (np.asarray(c.cw_angle_limit) == 0) & (np.asarray(c.ccw_angle_limit) == 0)
+        turning = (np.asarray(c.moving_speed, dtype=np.int64) & 0x3FF) != 0
+        short = np.abs(np.asarray(c.goal_position) * RAD_PER_POSITION_UNIT - self.angle_rad) > 1e-9
+        moving = (enabled & np.where(wheel, turning, short)).astype(np.int64)
+        if not np.array_equal(moving, self._moving):
+            self._moving = moving
+            self._sensed = None
 
     def _integrate(self, dt_s: float, c: Commands) -> None:
         # Constant speed makes the closed form exact, so many steps cost one.

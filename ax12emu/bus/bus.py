@@ -188,7 +188,7 @@ class Bus(ServosById[VirtualServo]):
         model, sim_time_s = plant.model, now_s - self.request_lag_s
         # Plant.catch_up's own tests, without the call
         if sim_time_s >= model.time_s + model.step_s or plant.write_unseen:
-            plant.catch_up(sim_time_s)
+            plant.catch_up(sim_time_s, now_s)
         return self.reply_cache.lookup(data if type(data) is bytes else bytes(data), line_bps, self._by_id)
 
     def answer(self, data: bytes, now_s: float | None = None, *, line_bps: float | None = None,
@@ -228,7 +228,7 @@ class Bus(ServosById[VirtualServo]):
         sees the consequence of the writes before it, as on a real servo.
         """
         now_s = self.clock.now_s()
-        self.plant.catch_up(now_s - self.request_lag_s)
+        self.plant.catch_up(now_s - self.request_lag_s, now_s)
         faults = self.faults
         if faults is not None:
             faults.after_physics()

@@ -161,10 +161,10 @@ class Bus1X:
         return min(steps)
 
     # -- time --------------------------------------------------------------------------
-    def catch_up(self, sim_time_s: float) -> None:
+    def catch_up(self, sim_time_s: float, clock_s: float | None = None) -> None:
         for servo in self.servos_mx:
             if servo.plant.due(sim_time_s):
-                servo.plant.catch_up(sim_time_s)
+                servo.plant.catch_up(sim_time_s, clock_s)
 
     def advance(self) -> bool:
         sim_time_s = self.clock.now_s()
@@ -204,7 +204,7 @@ class Bus1X:
         """Run one packet on every servo it reaches (AX-12As first); return the replies."""
         replies = self.ax_bus.dispatch(packet, line_bps=line_bps) if self.ax_bus is not None else []
         now_s = self.clock.now_s()
-        self.catch_up(now_s - self._request_lag_s)
+        self.catch_up(now_s - self._request_lag_s, now_s)
         broadcast = packet.id == BROADCAST_ID
         targets = [s for s in (self.servos_mx if broadcast else self._by_id.get(packet.id, ())) if self._hears(s, line_bps)]
         faults = self.faults

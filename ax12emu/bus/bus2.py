@@ -160,14 +160,12 @@ class Bus2(ServosById[Servo2]):
         return min(servo.plant.firmware.step_s for servo in self.servos)
 
     # -- time --------------------------------------------------------------------------
-    def _sim_time_s(self) -> float:
-        return self.clock.now_s() - self.request_lag_s
-
-    def catch_up(self, sim_time_s: float) -> None:
-        """Every servo's firmware brought to ``sim_time_s`` (and past a client's write); watchdogs checked."""
+    def catch_up(self, sim_time_s: float, clock_s: float | None = None) -> None:
+        """Every servo's firmware brought to ``sim_time_s`` (and past a client's write, at most a step past
+        the clock's present ``clock_s``: ``Plant2.catch_up``); watchdogs checked."""
         for servo in self.servos:
             if servo.plant.due(sim_time_s):
-                servo.plant.catch_up(sim_time_s)
+                servo.plant.catch_up(sim_time_s, clock_s)
             servo.check_watchdog(sim_time_s)
 
     def advance(self) -> bool:
@@ -193,9 +191,10 @@ class Bus2(ServosById[Servo2]):
         left to do); only the host's wait is shorter.
         """
         for servo in self.servos:
-            plant, sim_time_s = servo.plant, self._sim_time_s()
+            plant, clock_s = servo.plant, self.clock.now_s()
+            sim_time_s = clock_s - self.request_lag_s
             if plant.due(sim_time_s):
-                plant.catch_up(sim_time_s)
+                plant.catch_up(sim_time_s, clock_s)
                 yield
 
     # -- bytes in, replies out ---------------------------------------------------------
@@ -224,8 +223,9 @@ class Bus2(ServosById[Servo2]):
         """Run one decoded packet on the servos it reaches; return their replies, timed."""
         if isinstance(packet, StatusPacket2):
             return []  # another device's answer: every servo hears it, none acts
-        now_s = self._sim_time_s()
-        self.catch_up(now_s)
+        clock_s = self.clock.now_s()
+        now_s = clock_s - self.request_lag_s
+        self.catch_up(now_s, clock_s)
         broadcast = packet.id == BROADCAST_ID
         targets = [s for s in (self.servos if broadcast else self._by_id.get(packet.id, ()))
                    if self._hears(s, line_bps)]

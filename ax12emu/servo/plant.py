@@ -19,6 +19,7 @@ import numpy as np
 from ax12emu.protocol.control_table import Layout
 from firmware_model.interface import Commands, Sensed, ServoModel, SteppableTo
 
+from .plant2 import GRID_SLACK_S
 from .virtual_servo import VirtualServo
 
 __all__ = ["Plant"]
@@ -108,14 +109,20 @@ class Plant:
         """Whether the tables do not yet show a step taken after the last client write."""
         return self._writes != self._writes_shown
 
-    def catch_up(self, sim_time_s: float) -> None:
-        """:meth:`advance` for a request: also at least one step past the last client write.
+    def catch_up(self, sim_time_s: float, clock_s: float | None = None) -> None:
+        """:meth:`advance` for a request: also one step past the last client write.
 
-        That step may end up to one step past ``sim_time_s`` (the clock): the
-        time the control loop had before the request could arrive.  Only the
-        first request after a write pays for it; if the serving loop's tick
-        already stepped after the write (its sensors not yet copied), only
-        the copying is left.
+        That step may end up to one step past ``clock_s`` (the clock's present:
+        ``sim_time_s`` plus any request lag): the time the control loop had
+        before the request could arrive.  Only the first request after a write
+        pays for it; if the serving loop's tick already stepped after the write
+        (its sensors not yet copied), only the copying is left.  A model already
+        a step past the clock takes no other: a real servo's loop never runs
+        ahead of its own clock, so a write in the same control period (a client
+        faster than 1 kHz, possible over a pty, not over USB) is taken as the
+        firmware takes a packet between two ticks, the new commands acted on
+        (goal, limits, torque: the sensed registers that follow from them alone,
+        such as Moving) with no time passing; the physics waits for the clock.
         """
         model = self.model
         if sim_time_s >= model.time_s + model.step_s:
@@ -124,8 +131,10 @@ class Plant:
             writes = self._writes
             if model.time_s > self._write_time_s:
                 sensed = model.sense()
-            else:
+            elif model.time_s <= (sim_time_s if clock_s is None else clock_s) + GRID_SLACK_S:
                 sensed = model.advance(model.time_s + model.step_s, self.commands())
+            else:
+                sensed = model.advance(model.time_s, self.commands())
             self._write_back(sensed)
             self._writes_shown = writes
 

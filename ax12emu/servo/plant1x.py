@@ -25,6 +25,7 @@ from ax12emu.protocol.servo_models import ServoModel
 from firmware_model.xseries.interface import XCommands, XServoModel
 
 from .classic import ClassicMap
+from .plant2 import GRID_SLACK_S
 from .table2 import Table2
 
 __all__ = ["Plant1X", "build_plant1x"]
@@ -69,15 +70,17 @@ class Plant1X:
         model = self.firmware
         return self._write_unseen or sim_time_s >= model.time_s + model.step_s
 
-    def catch_up(self, sim_time_s: float) -> None:
-        """Step to ``sim_time_s``, and one step past a client's write, then copy the sensed registers (as ``Plant2``)."""
+    def catch_up(self, sim_time_s: float, clock_s: float | None = None) -> None:
+        """Step to ``sim_time_s``, and one step past a client's write but never more than a step past the clock
+        ``clock_s``, then copy the sensed registers (as ``Plant2.catch_up``)."""
         model = self.firmware
         stepped = False
         if sim_time_s >= model.time_s + model.step_s:
             model.step_to(sim_time_s)
             stepped = True
         if self._write_unseen and not stepped:
-            model.step_to(model.time_s + model.step_s)
+            if model.time_s <= (sim_time_s if clock_s is None else clock_s) + GRID_SLACK_S:
+                model.step_to(model.time_s + model.step_s)
             stepped = True
         self._write_unseen = False
         if stepped:

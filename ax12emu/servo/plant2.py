@@ -27,7 +27,7 @@ from firmware_model.xseries.interface import OperatingMode, XCommands, XSensed, 
 from .classic import ClassicMap
 from .table2 import Table2
 
-__all__ = ["ClassicPlant2", "Plant2", "SENSED_REGISTERS", "plant_for"]
+__all__ = ["ClassicPlant2", "GRID_SLACK_S", "Plant2", "SENSED_REGISTERS", "plant_for"]
 
 #: Where each sensed value goes: the first of these registers the table has (the XL430's
 #: register 126 is Present Load, the current-sensing models' Present Current).
@@ -35,6 +35,10 @@ SENSED_REGISTERS: dict[str, tuple[str, ...]] = {
     name: (name,) for name in XSensed.field_names()
 }
 SENSED_REGISTERS["present_current"] = ("present_current", "present_load")
+
+#: How far a model's time may sit past the clock and still count as not ahead of it: both add up
+#: steps of a millisecond in floating point, so equal times may differ in their last bits.
+GRID_SLACK_S = 1e-9
 
 #: struct codes of a little-endian register by (size, signed).
 _CODES = {(1, False): "B", (1, True): "b", (2, False): "H", (2, True): "h", (4, False): "I", (4, True): "i"}
@@ -172,12 +176,18 @@ class Plant2:
         model = self.firmware
         return self._write_unseen or sim_time_s >= model.time_s + model.step_s
 
-    def catch_up(self, sim_time_s: float) -> None:
-        """Step to ``sim_time_s``, and at least one step past a client's write, then copy the sensed registers.
+    def catch_up(self, sim_time_s: float, clock_s: float | None = None) -> None:
+        """Step to ``sim_time_s``, and one step past a client's write, then copy the sensed registers.
 
         Why one step past a write: as on the AX-12 (``Plant.wrote``), the firmware's control loop
         runs before a host's next packet can arrive, so a client that writes a goal and then reads
-        Moving finds the move started.
+        Moving finds the move started.  That step may take the model at most one step past the
+        clock (``clock_s``: the clock's present, ``sim_time_s`` plus any request lag): a servo's
+        loop never runs ahead of its own clock, so a second write in the same control period (a
+        client faster than 1 kHz, possible over a pty, not over USB) is taken as the firmware takes
+        a packet between two ticks: the commands it handed the model (:meth:`command`: profile
+        restarted, torque and mode acted on, at the model's time) read back at once, and the
+        physics waits for the clock.
         """
         model = self.firmware
         stepped = False
@@ -185,7 +195,8 @@ class Plant2:
             model.step_to(sim_time_s)
             stepped = True
         if self._write_unseen and not stepped:
-            model.step_to(model.time_s + model.step_s)
+            if model.time_s <= (sim_time_s if clock_s is None else clock_s) + GRID_SLACK_S:
+                model.step_to(model.time_s + model.step_s)
             stepped = True
         self._write_unseen = False
         if stepped:

@@ -55,12 +55,14 @@ def _write_then_compare(bus: Bus, name: str, value: int) -> dict[str, int]:
     """Write, then read the sensed registers at the same instant; check them against the model stepped once.
 
     The twin is the model as the write left it, stepped one control step with
-    the new commands: what the firmware has computed before the next packet.
+    the new commands: what the firmware has computed before the next packet
+    (the model no further than the clock at the write, so the step is due).
     """
     _write(bus, name, value)
     twin = copy.deepcopy(bus.plant.model, {id(SCALAR): SCALAR, id(NUMPY): NUMPY})  # the backends are compared by identity
     expected = twin.advance(twin.time_s + twin.step_s, bus.plant.commands())
     seen = {register: _read(bus, register) for register in SENSED}
+    assert bus.plant.model.time_s == pytest.approx(twin.time_s), "the write earned one control step"
     for register in SENSED:
         assert seen[register] == int(getattr(expected, register)[0]), (name, value, register, seen)
     return seen
@@ -80,6 +82,7 @@ def test_goal_beyond_the_margin_reads_moving_on_the_first_read(lag_s):
     seen = _write_then_compare(bus, "goal_position", 800)
     assert seen["moving"] == 1
     # Reversing toward a goal behind the shaft one step later: still moving, never a 0 in between.
+    _run(bus, STEP_S)  # a write in the same step is taken with no time passing (test_write_burst.py)
     assert _write_then_compare(bus, "goal_position", 200)["moving"] == 1
     for _ in range(5):
         _run(bus, STEP_S)
@@ -125,6 +128,7 @@ def test_angle_limits_and_compliance_are_acted_on_before_the_next_packet(lag_s):
     _write(bus, "torque_enable", 1)
     _run(bus, 0.05)
     _write_then_compare(bus, "cw_compliance_margin", 40)
+    _run(bus, STEP_S)
     _write_then_compare(bus, "cw_angle_limit", 600)  # the goal (at 512) now lies below the limit: clamped to it
     assert _read(bus, "moving") == 1
 
