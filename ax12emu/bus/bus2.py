@@ -40,7 +40,8 @@ see ``reply.merge_replies``):
 * status packets on the wire (another servo's answer) are heard and ignored.
 
 Time: before any request the firmware models are brought to the present (and one control step
-past a client's write), as the Protocol 1.0 bus does with ``Plant.catch_up``; the Bus Watchdog of
+past a client's write, but never more than one step past the clock), as the Protocol 1.0 bus does
+with ``Plant.catch_up``; the Bus Watchdog of
 each servo measures the silence since the last instruction packet it heard.
 
 EEPROM areas persist in a :class:`~ax12emu.bus.state_store.StateStore` as on the 1.0 bus (by
