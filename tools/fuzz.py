@@ -364,14 +364,17 @@ def run_case(case: Case) -> int:
         # input; the model may run ahead of the clock only for a write (before this input or in it).
         stepped = bus.plant.model.time_s != model_time_s
         ahead = bus.plant.model.time_s > max(model_time_s, clock.now_s()) + 1e-9
-        if ahead and not (write_unseen or any(p.checksum_ok and p.instruction in WRITES for p in packets)):
+        wrote = write_unseen or any(p.checksum_ok and p.instruction in WRITES for p in packets)
+        if ahead and not wrote:
             raise FuzzFailure(f"{where}: physics ran past the clock while handling packets, with no write before them")
         _check_replies(bus, oracle, replies, predicted, where, alarms_before)
         # RESET sets Goal Position to Present Position, which a control step after an earlier write
         # in the same input may have moved by the time the RESET ran (the oracle sees positions only
         # between inputs): there Goal Position is checked against nothing but its own rule below.
         goal_follows = reset_slots if stepped else set()
-        _check_tables(bus, oracle, before, reset_slots | (set(range(len(SLOTS))) if stepped else set()),
+        # A write's consequence shows at the next request with no step when the model is already a
+        # step past the clock (``Plant.catch_up``): the firmware acting on new commands between ticks.
+        _check_tables(bus, oracle, before, reset_slots | (set(range(len(SLOTS))) if stepped or wrote else set()),
                       shutdown_register, where, goal_follows)
     # A PING after a pause is answered cleanly by every servo holding the ID (past any EEPROM write).
     wire_s += PAUSE_S
