@@ -57,7 +57,7 @@ import textwrap
 import time
 from pathlib import Path
 
-from dynamixel_sdk import COMM_SUCCESS, GroupSyncRead, GroupSyncWrite, PacketHandler, PortHandler
+from dynamixel_sdk import COMM_RX_CORRUPT, COMM_SUCCESS, GroupSyncRead, GroupSyncWrite, PacketHandler, PortHandler
 
 #: Per byte written into the EEPROM area, how long to leave the servo alone (about 6 ms measured, 9 ms by the datasheet).
 EEPROM_WAIT_S = 0.009
@@ -137,8 +137,7 @@ class Session:
         if setup:
             setup(self.port, self.ph)
         if transaction is None:
-            read, port = self.ph.read2ByteTxRx, self.port
-            self.transaction = lambda: read(port, 1, 36)[1]
+            self.transaction = read_present_position(self.port, self.ph)
         else:
             self.transaction = transaction(self.port, self.ph)
         self.latencies: list[float] = []
@@ -179,6 +178,25 @@ class Session:
             "count": len(latencies),
             "server_cpu_s": self.server_cpu_s,
         }
+
+
+def read_present_position(port: PortHandler, ph: PacketHandler):
+    """The default transaction: a 2-byte read of ID 1's Present Position, returning the SDK's result code.
+
+    Why the guard: dynamixel-sdk's read2ByteTxRx indexes the reply's data whenever the packet it
+    took was well formed, so a stale or short status packet (a late answer to a read that had
+    timed out, on a loaded machine) raises IndexError instead of returning an error code.  The
+    benchmark counts it as the failed read it is rather than stopping the run.
+    """
+    read = ph.read2ByteTxRx
+
+    def once() -> int:
+        try:
+            return read(port, 1, 36)[1]
+        except IndexError:
+            return COMM_RX_CORRUPT
+
+    return once
 
 
 def measure(path: str, seconds: float, *, baud: int = 1_000_000, setup=None) -> dict:
