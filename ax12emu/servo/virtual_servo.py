@@ -13,20 +13,12 @@ import numpy as np
 
 from ax12emu.protocol.control_table import DEFAULT_PROFILE, PROFILES, ControlTable, Layout
 
-__all__ = ["ServoOptions", "VirtualServo", "baud_bps", "baud_value"]
+__all__ = ["ServoOptions", "VirtualServo", "baud_bps"]
 
 
 def baud_bps(value: int) -> float:
     """Baud Rate register to bits per second: 2,000,000 / (value + 1) (e-manual, Baud Rate)."""
     return 2_000_000.0 / (value + 1)
-
-
-def baud_value(bps: float) -> int:
-    """The Baud Rate register value whose rate is ``bps``; ``ValueError`` if none is within 3 % (what a UART tolerates)."""
-    value = max(0, min(254, round(2_000_000.0 / bps - 1)))
-    if abs(baud_bps(value) - bps) > 0.03 * bps:
-        raise ValueError(f"an AX-12A cannot run at {bps:.0f} bps (2,000,000 / (value + 1) for value 0..254)")
-    return value
 
 
 @dataclass(frozen=True)
