@@ -32,7 +32,7 @@ the 2006 AX-12 User's Manual):
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -41,7 +41,7 @@ from ax12emu.protocol.packets import BROADCAST_ID, Instruction, InstructionPacke
 
 from .virtual_servo import VirtualServo
 
-__all__ = ["Outcome", "handle", "HANDLERS"]
+__all__ = ["MAX_READ_BYTES", "Outcome", "handle", "HANDLERS", "ping", "silent_read_length", "write_handlers"]
 
 #: The largest READ reply that fits in one status packet (LENGTH is one byte).
 MAX_READ_BYTES = 253
@@ -64,7 +64,7 @@ class Outcome(NamedTuple):
 Handler = Callable[[VirtualServo, InstructionPacket], tuple[StatusError, bytes]]
 
 
-def _ping(servo: VirtualServo, packet: InstructionPacket) -> tuple[StatusError, bytes]:
+def ping(servo: object, packet: InstructionPacket) -> tuple[StatusError, bytes]:
     return StatusError.NONE, b""
 
 
@@ -112,33 +112,6 @@ def _apply_write(servo: VirtualServo, address: int, data: bytes) -> StatusError:
     return StatusError.NONE
 
 
-def _write(servo: VirtualServo, packet: InstructionPacket) -> tuple[StatusError, bytes]:
-    if len(packet.params) < 2:
-        return StatusError.RANGE, b""
-    return _apply_write(servo, packet.params[0], bytes(packet.params[1:])), b""
-
-
-def _reg_write(servo: VirtualServo, packet: InstructionPacket) -> tuple[StatusError, bytes]:
-    if len(packet.params) < 2:
-        return StatusError.RANGE, b""
-    address, data = packet.params[0], bytes(packet.params[1:])
-    candidate, error = servo.table.check_write(address, data)
-    if candidate is None:
-        return error, b""
-    servo.registered_write = (address, data)
-    servo.table.set("registered", 1)
-    return StatusError.NONE, b""
-
-
-def _action(servo: VirtualServo, packet: InstructionPacket) -> tuple[StatusError, bytes]:
-    if servo.registered_write is None:
-        return StatusError.INSTRUCTION, b""
-    address, data = servo.registered_write
-    servo.registered_write = None
-    servo.table.set("registered", 0)
-    return _apply_write(servo, address, data), b""
-
-
 def _reset(servo: VirtualServo, packet: InstructionPacket) -> tuple[StatusError, bytes]:
     present = servo.table.get("present_position")
     servo.table.factory_reset()
@@ -148,26 +121,69 @@ def _reset(servo: VirtualServo, packet: InstructionPacket) -> tuple[StatusError,
     return StatusError.NONE, b""
 
 
-def _sync_write(servo: VirtualServo, packet: InstructionPacket) -> tuple[StatusError, bytes]:
-    """SYNC_WRITE: start address, data length L, then (ID, L bytes) per servo."""
-    params = packet.params
-    if len(params) < 2 or params[1] == 0 or (len(params) - 2) % (params[1] + 1):
-        return StatusError.RANGE, b""
-    address, size = params[0], params[1]
-    for start in range(2, len(params), size + 1):
-        if params[start] == servo.id:
-            return _apply_write(servo, address, bytes(params[start + 1 : start + 1 + size])), b""
-    return StatusError.NONE, b""
+def write_handlers(apply_write: Callable[[Any, int, bytes], StatusError],
+                   check_write: Callable[[Any, int, bytes], tuple[object | None, StatusError]]) -> dict[int, Handler]:
+    """WRITE, REG_WRITE, ACTION and SYNC_WRITE as Protocol 1.0 defines them, over one servo kind's write.
+
+    Why a factory: the AX-12 and the MX series on Protocol 1.0 parse these four alike (a write without
+    address and data, or a Sync Write whose length does not divide, is a Range Error; Action with
+    nothing registered an Instruction Error) and differ only in how one write is judged and committed.
+    ``apply_write(servo, address, data)`` commits all-or-nothing and returns the error bits;
+    ``check_write(servo, address, data)`` judges without writing: (anything, NONE) or (None, the bits).
+    """
+
+    def write(servo: Any, packet: InstructionPacket) -> tuple[StatusError, bytes]:
+        if len(packet.params) < 2:
+            return StatusError.RANGE, b""
+        return apply_write(servo, packet.params[0], bytes(packet.params[1:])), b""
+
+    def reg_write(servo: Any, packet: InstructionPacket) -> tuple[StatusError, bytes]:
+        if len(packet.params) < 2:
+            return StatusError.RANGE, b""
+        address, data = packet.params[0], bytes(packet.params[1:])
+        accepted, error = check_write(servo, address, data)
+        if accepted is None:
+            return error, b""
+        servo.registered_write = (address, data)
+        servo.table.set("registered", 1)
+        return StatusError.NONE, b""
+
+    def action(servo: Any, packet: InstructionPacket) -> tuple[StatusError, bytes]:
+        if servo.registered_write is None:
+            return StatusError.INSTRUCTION, b""
+        address, data = servo.registered_write
+        servo.registered_write = None
+        servo.table.set("registered", 0)
+        return apply_write(servo, address, data), b""
+
+    def sync_write(servo: Any, packet: InstructionPacket) -> tuple[StatusError, bytes]:
+        """SYNC_WRITE: start address, data length L, then (ID, L bytes) per servo."""
+        params = packet.params
+        if len(params) < 2 or params[1] == 0 or (len(params) - 2) % (params[1] + 1):
+            return StatusError.RANGE, b""
+        address, size = params[0], params[1]
+        for start in range(2, len(params), size + 1):
+            if params[start] == servo.id:
+                return apply_write(servo, address, bytes(params[start + 1 : start + 1 + size])), b""
+        return StatusError.NONE, b""
+
+    return {
+        Instruction.WRITE: write,
+        Instruction.REG_WRITE: reg_write,
+        Instruction.ACTION: action,
+        Instruction.SYNC_WRITE: sync_write,
+    }
+
+
+def _check_write(servo: VirtualServo, address: int, data: bytes) -> tuple[np.ndarray | None, StatusError]:
+    return servo.table.check_write(address, data)
 
 
 HANDLERS: dict[int, Handler] = {
-    Instruction.PING: _ping,
+    Instruction.PING: ping,
     Instruction.READ: _read,
-    Instruction.WRITE: _write,
-    Instruction.REG_WRITE: _reg_write,
-    Instruction.ACTION: _action,
     Instruction.RESET: _reset,
-    Instruction.SYNC_WRITE: _sync_write,
+    **write_handlers(_apply_write, _check_write),
 }
 
 
@@ -182,7 +198,7 @@ def _answers(servo: VirtualServo, packet: InstructionPacket) -> bool:
     return level >= 2 or (level == 1 and instruction == Instruction.READ)
 
 
-def _silent_read_length(packet: InstructionPacket) -> int:
+def silent_read_length(packet: InstructionPacket) -> int:
     """Bytes a READ asked for, so an erroring reply still carries them (dynamixel-sdk indexes them)."""
     if packet.instruction == Instruction.READ and len(packet.params) == 2:
         return min(packet.params[1], MAX_READ_BYTES)
@@ -196,18 +212,18 @@ def handle(servo: VirtualServo, packet: InstructionPacket) -> Outcome:
     answers = _answers(servo, packet)
     if not packet.checksum_ok:
         error = StatusError.CHECKSUM
-        data = bytes(_silent_read_length(packet))
+        data = bytes(silent_read_length(packet))
         answers = answers and servo.options.reply_on_checksum_error
     else:
         handler = HANDLERS.get(packet.instruction)
         if handler is None:
-            error, data = StatusError.INSTRUCTION, bytes(_silent_read_length(packet))
+            error, data = StatusError.INSTRUCTION, bytes(silent_read_length(packet))
         else:
             error, data = handler(servo, packet)
             if packet.instruction == Instruction.RESET and servo.options.reset_reply_from_new_id:
                 reply_id = servo.id
         if error and packet.instruction == Instruction.READ:
-            data = data.ljust(_silent_read_length(packet), b"\x00")
+            data = data.ljust(silent_read_length(packet), b"\x00")
     if not answers:
         return Outcome(None, reply_id, delay_s, error)
     status = (int(error) | servo.alarms) & 0x7F

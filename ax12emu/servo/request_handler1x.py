@@ -28,22 +28,13 @@ from typing import NamedTuple
 
 from ax12emu.protocol.packets import BROADCAST_ID, Instruction, InstructionPacket, StatusError, encode_status
 
+from .request_handler import MAX_READ_BYTES, Outcome, ping, silent_read_length, write_handlers
 from .servo1x import Servo1X
 
 __all__ = ["BulkReadRequest", "HANDLERS", "Outcome1X", "handle1x", "listed_read", "parse_bulk_read", "status_byte"]
 
-#: The largest READ reply that fits in one status packet (LENGTH is one byte).
-MAX_READ_BYTES = 253
-
-
-class Outcome1X(NamedTuple):
-    """What one servo does in answer to one packet."""
-
-    reply: bytes | None
-    reply_id: int
-    delay_s: float
-    error: StatusError = StatusError.NONE
-
+#: The AX-12's answer (:class:`~.request_handler.Outcome`): who replies, when, with which error bits.
+Outcome1X = Outcome
 
 Handler = Callable[[Servo1X, InstructionPacket], tuple[StatusError, bytes]]
 
@@ -63,10 +54,6 @@ def listed_read(servo: Servo1X, address: int, length: int) -> tuple[StatusError,
     return StatusError.NONE, bytes(table.row[address : address + length])
 
 
-def _ping(servo: Servo1X, packet: InstructionPacket) -> tuple[StatusError, bytes]:
-    return StatusError.NONE, b""
-
-
 def _read(servo: Servo1X, packet: InstructionPacket) -> tuple[StatusError, bytes]:
     if len(packet.params) != 2:
         return StatusError.RANGE, b""
@@ -77,57 +64,15 @@ def _read(servo: Servo1X, packet: InstructionPacket) -> tuple[StatusError, bytes
     return error, data
 
 
-def _write(servo: Servo1X, packet: InstructionPacket) -> tuple[StatusError, bytes]:
-    if len(packet.params) < 2:
-        return StatusError.RANGE, b""
-    return servo.write(packet.params[0], bytes(packet.params[1:])), b""
-
-
-def _reg_write(servo: Servo1X, packet: InstructionPacket) -> tuple[StatusError, bytes]:
-    if len(packet.params) < 2:
-        return StatusError.RANGE, b""
-    address, data = packet.params[0], bytes(packet.params[1:])
-    check, error = servo.check_write(address, data)
-    if check is None:
-        return error, b""
-    servo.registered_write = (address, data)
-    servo.table.set("registered", 1)
-    return StatusError.NONE, b""
-
-
-def _action(servo: Servo1X, packet: InstructionPacket) -> tuple[StatusError, bytes]:
-    if servo.registered_write is None:
-        return StatusError.INSTRUCTION, b""
-    address, data = servo.registered_write
-    servo.registered_write = None
-    servo.table.set("registered", 0)
-    return servo.write(address, data), b""
-
-
 def _reset(servo: Servo1X, packet: InstructionPacket) -> tuple[StatusError, bytes]:
     return StatusError.NONE, b""  # done after the reply is built (handle1x)
 
 
-def _sync_write(servo: Servo1X, packet: InstructionPacket) -> tuple[StatusError, bytes]:
-    """SYNC_WRITE: start address, data length L, then (ID, L bytes) per servo."""
-    params = packet.params
-    if len(params) < 2 or params[1] == 0 or (len(params) - 2) % (params[1] + 1):
-        return StatusError.RANGE, b""
-    address, size = params[0], params[1]
-    for start in range(2, len(params), size + 1):
-        if params[start] == servo.id:
-            return servo.write(address, bytes(params[start + 1 : start + 1 + size])), b""
-    return StatusError.NONE, b""
-
-
 HANDLERS: dict[int, Handler] = {
-    Instruction.PING: _ping,
+    Instruction.PING: ping,
     Instruction.READ: _read,
-    Instruction.WRITE: _write,
-    Instruction.REG_WRITE: _reg_write,
-    Instruction.ACTION: _action,
     Instruction.RESET: _reset,
-    Instruction.SYNC_WRITE: _sync_write,
+    **write_handlers(Servo1X.write, Servo1X.check_write),
 }
 
 
@@ -169,28 +114,22 @@ def answers(servo: Servo1X, packet: InstructionPacket) -> bool:
     return level >= 2 or (level == 1 and instruction in (Instruction.READ, Instruction.BULK_READ))
 
 
-def _silent_read_length(packet: InstructionPacket) -> int:
-    if packet.instruction == Instruction.READ and len(packet.params) == 2:
-        return min(packet.params[1], MAX_READ_BYTES)
-    return 0
-
-
 def handle1x(servo: Servo1X, packet: InstructionPacket) -> Outcome1X:
     """Execute ``packet`` on ``servo`` (addressed to it, or broadcast) and build its answer (Bulk Read is the bus's)."""
     reply_id = servo.id
     delay_s = servo.return_delay_s
     talks = answers(servo, packet)
     if not packet.checksum_ok:
-        error, data = StatusError.CHECKSUM, bytes(_silent_read_length(packet))
+        error, data = StatusError.CHECKSUM, bytes(silent_read_length(packet))
         talks = talks and servo.options.reply_on_checksum_error
     else:
         handler = HANDLERS.get(packet.instruction)
         if handler is None:
-            error, data = StatusError.INSTRUCTION, bytes(_silent_read_length(packet))
+            error, data = StatusError.INSTRUCTION, bytes(silent_read_length(packet))
         else:
             error, data = handler(servo, packet)
         if error and packet.instruction == Instruction.READ:
-            data = data.ljust(_silent_read_length(packet), b"\x00")
+            data = data.ljust(silent_read_length(packet), b"\x00")
     reply = encode_status(reply_id, status_byte(servo, error), data) if talks else None
     if packet.checksum_ok and packet.instruction == Instruction.RESET:
         servo.reset()
