@@ -383,11 +383,14 @@ def _fast_shares_on_wire(pieces: list[bytes], parts: list[FastStatusPart],
     the first share's twin is not modelled), so their bytes collide, AND-ed as ``reply.collide`` does for
     other answers.  Each servo's CRC is the running CRC of what it heard before its share
     (``packets2.fast_status_pieces``), so the servos after a collision continue from the collided bytes.
+    A twin of the first listed ID sends the header too, announcing every listed share as its twin does
+    (both read the same instruction), so the two headers agree.
     """
     out: list[bytes] = []
     crc = 0
     for k, (servo, _, _) in enumerate(answered):
-        sent = [pieces[k], *(fast_status_pieces([*parts[:k], FastStatusPart(twin.id, status_byte(twin, error), data)])[k]
+        sent = [pieces[k], *(fast_status_pieces([*parts[:k], FastStatusPart(twin.id, status_byte(twin, error), data),
+                                                 *parts[k + 1:]])[k]
                              for twin, error, data in twins.get(k, ()))]
         wire = collide([Reply(BROADCAST_ID, piece[:-2] + crc16(piece[:-2], crc).to_bytes(2, "little"), 0.0,
                               servo.baud_bps) for piece in sent]).data

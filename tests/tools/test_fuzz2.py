@@ -94,3 +94,27 @@ def test_tool_main_prints_figures(capsys, tmp_path):
                        "--failure-file", failure_file]) == 0
     out = capsys.readouterr().out
     assert "inputs/s" in out and "2.0 packets checked" in out and "failures: 0" in out
+
+
+def test_a_fast_sync_read_listing_an_id_two_servos_share_then_one_id_three_times():
+    """Found by ``--seed 7``: an XL330-M077 moved to ID 2 beside the XM430-W350 there, then a Fast Sync Read of
+    Present Input Voltage listing IDs 2, 1, 1, 1.  Both ID 2 servos send the header (announcing all four
+    shares) and their share at once, AND-ed on the wire; ID 1 sends a share in each of its three turns, its
+    CRC run on over the collided bytes.  The oracle predicts that packet byte for byte."""
+    case = fuzz2.Case2(bus="2.0", reply_on_crc_error=False, inputs=[
+        (bytes.fromhex("ffff0207027ed484861d7beafffffd00030600030700029ee1"), 0.0, 0.0),
+        (bytes.fromhex("ffff"), 0.0, 0.0),
+        (bytes.fromhex("fd00fe0b008a90000200020101016a6d"), 0.0, 0.0)])
+    assert fuzz2.run_case(case) == 4
+    assert fuzz2.CHECKED[("0x8a", "combined status")] >= 1
+
+
+def test_a_fast_sync_read_of_an_id_two_servos_share_last():
+    """Found by ``--seed 7`` next: on the mixed wire an XL330-M077 reset to ID 1 beside the XL430-W250 there, both
+    moved to ID 4, then a Fast Sync Read of ID 4 alone.  The packet's CRC is the two servos' CRCs AND-ed, not a
+    CRC of the collided bytes; the oracle checks the bytes and does not demand a whole CRC of a collided end."""
+    case = fuzz2.Case2(bus="mixed", reply_on_crc_error=False, inputs=[
+        (bytes.fromhex("fffffd0003040006ff55e4"), 0.0, 0.0),
+        (bytes.fromhex("fffffd0001060003070004a963"), 0.0, 0.0),
+        (bytes.fromhex("fffffd00fe08008a2600020004623c"), 0.0, 0.0)])
+    assert fuzz2.run_case(case) == 4
