@@ -10,16 +10,17 @@ call could name different effects for the same data.
 
 The diagnoses run in two child processes, so nothing the test session did
 before (other tests' simulations in this process) counts as "before": one
-makes five diagnoses in a row, the other the same five in the opposite order,
-and each diagnosis must come out the same in both.  The five: the suite's
+makes three diagnoses in a row, the other the same three in the opposite order,
+and each diagnosis must come out the same in both.  The three: the suite's
 ``extra_inertia`` trace (seed 7; with nothing before it in one process and
-after the four others in the other), its several-effect trace, a compliance
-dead band, a Stribeck trace with its breakaway block, and an inertia trace
+after the two others in the other), a compliance dead band, and an inertia trace
 recorded live (command times not recorded: the search fits them) by a servo
 with a higher acceleration limit (other setpoint paths), searched over part
 of the library with that limit.  Every output is compared exactly: names,
 fitted values, BIC gains, base parameters, recording traits, gaps and the
-simulated registers.
+simulated registers.  Three, not more, because each diagnosis here is made
+twice in the suite's time; a path cache keyed without the acceleration limit
+(a leak of the kind meant) already shows on the first of them.
 """
 
 from __future__ import annotations
@@ -73,9 +74,7 @@ print(json.dumps([summary(*case) for case in json.loads(sys.argv[1])]))
 #: acceleration scale of the servo that made the trace and of the model it is diagnosed with).
 CASES = [
     (["extra_inertia"], 7, 10.0, 0.0, False, None, 1.0),
-    (["delay", "extra_inertia"], 2, 10.0, 0.0, False, None, 1.0),
     (["compliance_deadband"], 7, 10.0, 0.0, False, None, 1.0),
-    (["stribeck_friction"], 7, 14.0, 6.0, False, None, 1.0),
     (["extra_inertia"], 7, 10.0, 0.0, True, ["extra_inertia", "coulomb_friction", "backlash"], 1.5),
 ]
 
@@ -90,7 +89,7 @@ def test_diagnosis_does_not_depend_on_earlier_ones():
     """Each diagnosis is the same whichever ran before it in its process (two processes, opposite orders).
 
     The first of each order is made with nothing before it; it is made last
-    in the other, after the four others.  Whichever way a kept result could
+    in the other, after the two others.  Whichever way a kept result could
     travel (from an earlier diagnosis into a later one), some case sees it in
     one order and not in the other.
     """
