@@ -646,11 +646,16 @@ class Oracle2:
         if 1 + sum(4 + n for _, _, n in reads) > 0xFFFF:
             return []  # no LENGTH can announce the listed shares: nobody starts the packet
         # A share's data is what its servo read (a read past the table: zeros up to the table's size);
-        # the shares never sent are announced with the length asked for.
-        length = 1 + sum(4 + (len(shares[i][3]) if i < len(shares) else n) for i, (_, _, n) in enumerate(reads))
-        head = HEADER + bytes((BROADCAST_ID, length & 0xFF, length >> 8, STATUS))
-        whole = bytearray(head)
-        running = crc(head)
+        # the shares never sent are announced with the length asked for.  Each servo sending the
+        # header announces the shares' lengths with its own share's.
+        sizes = [len(shares[i][3]) if i < len(shares) else n for i, (_, _, n) in enumerate(reads)]
+
+        def head(first_size: int) -> bytes:
+            length = 1 + sum(4 + n for n in [first_size, *sizes[1:]])
+            return HEADER + bytes((BROADCAST_ID, length & 0xFF, length >> 8, STATUS))
+
+        whole = bytearray()
+        running = 0
         sent = 0
         for index, (_, _, n) in enumerate(reads):
             error, data = (shares[index][2], shares[index][3]) if index < len(shares) else (0, bytes(n))
@@ -659,7 +664,7 @@ class Oracle2:
             # (the longer one's tail as sent), each CRC run on from what it heard before its share.
             piece = b""
             for twin_error, twin_data in [(error, data), *(twins[index] if index < len(shares) else ())]:
-                body = bytes((twin_error, servo_id)) + twin_data
+                body = (head(len(twin_data)) if index == 0 else b"") + bytes((twin_error, servo_id)) + twin_data
                 own = body + crc(body, running).to_bytes(2, "little")
                 piece = own if not piece else bytes(a & b for a, b in zip(piece, own)) + (piece if len(piece) > len(own)
                                                                                          else own)[min(len(piece), len(own)):]

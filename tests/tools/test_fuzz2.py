@@ -118,3 +118,15 @@ def test_a_fast_sync_read_of_an_id_two_servos_share_last():
         (bytes.fromhex("fffffd0001060003070004a963"), 0.0, 0.0),
         (bytes.fromhex("fffffd00fe08008a2600020004623c"), 0.0, 0.0)])
     assert fuzz2.run_case(case) == 4
+
+
+def test_a_fast_bulk_read_past_the_tables_of_two_servos_sharing_the_first_id():
+    """Found by ``--seed 7`` next: an XL330-M077 (a 228-byte table) and an XL430-W250 (662 bytes) both on ID 1,
+    then a Fast Bulk Read of 662 bytes from 64 on ID 1 and 4 bytes on ID 1 again.  Each reads zeros up to its
+    own table's size, so each announces another LENGTH in the header they send at once (AND-ed)."""
+    case = fuzz2.Case2(bus="2.0", inputs=[(bytes.fromhex(h), 0.0, 0.0) for h in (
+        "fffffd0002070055009cea568b03fffffd00030700036400d6ff495bfffffd00040f264378030001190a"
+        "fffffd00040900035e0200008b056c63fffffd",
+        "0003040006ff55e4",
+        "fffffd00040b0003e000fffffd5a16b4884bfffffd0004087399c275762dcfded23efffffd00fe0d009a01400096020174000400f36a")])
+    assert fuzz2.run_case(case) == 4
