@@ -29,7 +29,7 @@ AX-12's) and the live view; state persists as on the other buses.
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator
 
 from ax12emu.protocol.framing import Framer
 from ax12emu.protocol.packets import BROADCAST_ID, MAX_ID, Instruction, InstructionPacket, encode_status
@@ -37,8 +37,9 @@ from ax12emu.protocol.servo_models import ServoModel
 from ax12emu.servo.request_handler1x import handle1x, listed_read, parse_bulk_read, status_byte
 from ax12emu.servo.servo1x import Servo1X, Servo1XOptions
 
-from .bus import BAUD_TOLERANCE, Bus, Interceptor
+from .bus import Bus, Interceptor
 from .clock import VirtualClock, WallClock
+from .decoded import DecodedBus
 from .reply import BITS_PER_BYTE, Reply
 from .state_store import StateStore
 
@@ -50,7 +51,7 @@ log = logging.getLogger(__name__)
 PlantFactory = Callable[[ServoModel, Servo1X], object]
 
 
-class Bus1X:
+class Bus1X(DecodedBus):
     """MX-series servos on a Protocol 1.0 wire, and optionally an AX-12 bus sharing it."""
 
     #: Replies to one packet may collide (broadcast PING): the serving loop merges them.
@@ -181,25 +182,7 @@ class Bus1X:
         if self.ax_bus is not None:
             yield from self.ax_bus.advance_in_pieces()
 
-    # -- bytes in, replies out ---------------------------------------------------------
-    def receive(self, data: bytes, now_s: float | None = None, *, line_bps: float | None = None) -> list[Reply]:
-        return [reply for replies in self.answer(data, now_s, line_bps=line_bps) for reply in replies]
-
-    def cached_replies(self, data: bytes, line_bps: float | None = None) -> Sequence[Reply] | None:
-        """No reply cache on this wire: always None."""
-        return None
-
-    def answer(self, data: bytes, now_s: float | None = None, *, line_bps: float | None = None,
-               cache: bool = True, looked_up: bool = False) -> list[Sequence[Reply]]:
-        return [self.dispatch(packet, line_bps=line_bps) for packet in self.framer.feed(data, now_s)]
-
-    def expire(self, now_s: float) -> None:
-        self.framer.expire(now_s)
-
-    def _hears(self, servo: Servo1X, line_bps: float | None) -> bool:
-        baud = servo.baud_bps
-        return line_bps is None or abs(line_bps - baud) <= BAUD_TOLERANCE * baud
-
+    # -- bytes in, replies out (receive, answer, expire: DecodedBus) ---------------------
     def dispatch(self, packet: InstructionPacket, *, line_bps: float | None = None) -> list[Reply]:
         """Run one packet on every servo it reaches (AX-12As first); return the replies."""
         replies = self.ax_bus.dispatch(packet, line_bps=line_bps) if self.ax_bus is not None else []
@@ -223,12 +206,7 @@ class Bus1X:
             if outcome.reply is not None:
                 replies.append(Reply(outcome.reply_id, outcome.reply, outcome.delay_s, servo.baud_bps))
         if targets and packet.checksum_ok and packet.instruction not in (Instruction.PING, Instruction.READ):
-            self.reindex()
-            for slot, servo in zip(self.slots_mx, self.servos_mx):
-                if servo.eeprom_dirty:
-                    servo.eeprom_dirty = False
-                    if self.state_store is not None:
-                        self.state_store.save(slot, servo.table)
+            self._after_writes()
         if faults is not None and replies:  # the AX-12As' too: the wire's faults are the wire's
             replies = faults.on_replies(replies)
         return replies
@@ -253,21 +231,12 @@ class Bus1X:
             at_s += len(status) * BITS_PER_BYTE / servo.baud_bps
         return replies
 
-    # -- life cycle --------------------------------------------------------------------
-    def save_state(self) -> None:
-        if self.state_store is not None:
-            for slot, servo in zip(self.slots_mx, self.servos_mx):
-                self.state_store.save(slot, servo.table)
+    # -- life cycle (save_state, __enter__, __exit__: DecodedBus) -----------------------
+    def _persisted(self) -> Iterable[tuple[int, Servo1X]]:
+        return zip(self.slots_mx, self.servos_mx)  # the AX-12As' are their bus's to keep
 
     def close(self) -> None:
         if not self._closed:
-            self._closed = True
-            self.save_state()
+            super().close()
             if self.ax_bus is not None:
                 self.ax_bus.close()
-
-    def __enter__(self) -> "Bus1X":
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()

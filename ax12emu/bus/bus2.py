@@ -62,7 +62,7 @@ bus's servos as it shows the 1.0 bus's.
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator
 
 from ax12emu.protocol.crc16 import crc16
 from ax12emu.protocol.framing2 import Framer2
@@ -83,8 +83,9 @@ from ax12emu.servo.request_handler2 import answers, handle2, listed_read, parsed
 from ax12emu.servo.servo2 import Servo2, Servo2Options
 from firmware_model.xseries.interface import XServoModel
 
-from .bus import BAUD_TOLERANCE, Interceptor
+from .bus import Interceptor
 from .clock import VirtualClock, WallClock
+from .decoded import DecodedBus
 from .lookup import ServosById
 from .reply import BITS_PER_BYTE, Reply, collide
 from .state_store import StateStore
@@ -103,8 +104,9 @@ _LISTED_READS = frozenset({Broadcast.REQUIRED_EACH_ANSWERS, Broadcast.REQUIRED_C
 _REQUIRED_BROADCAST = _LISTED_READS | {Broadcast.REQUIRED_SILENT}
 
 
-class Bus2(ServosById[Servo2]):
-    """Protocol 2.0 servos on one wire, each with its own model file and firmware model."""
+class Bus2(ServosById[Servo2], DecodedBus):
+    """Protocol 2.0 servos on one wire, each with its own model file and firmware model (bytes in and
+    the life cycle: :class:`~.decoded.DecodedBus`)."""
 
     #: Several replies to one packet are timed one after another (see the module docstring): the
     #: serving loop sends each at its own time.
@@ -198,28 +200,7 @@ class Bus2(ServosById[Servo2]):
                 plant.catch_up(sim_time_s, clock_s)
                 yield
 
-    # -- bytes in, replies out ---------------------------------------------------------
-    def receive(self, data: bytes, now_s: float | None = None, *, line_bps: float | None = None) -> list[Reply]:
-        """Feed bytes that arrived at wall time ``now_s``; return the replies they cause."""
-        return [reply for replies in self.answer(data, now_s, line_bps=line_bps) for reply in replies]
-
-    def cached_replies(self, data: bytes, line_bps: float | None = None) -> Sequence[Reply] | None:
-        """No reply cache on this bus: always None (every packet is decoded)."""
-        return None
-
-    def answer(self, data: bytes, now_s: float | None = None, *, line_bps: float | None = None,
-               cache: bool = True, looked_up: bool = False) -> list[Sequence[Reply]]:
-        """Feed bytes; return the replies to each packet they completed, one sequence per packet."""
-        return [self.dispatch(packet, line_bps=line_bps) for packet in self.framer.feed(data, now_s)]
-
-    def expire(self, now_s: float) -> None:
-        """Let the framer drop a partial packet after silence."""
-        self.framer.expire(now_s)
-
-    def _hears(self, servo: Servo2, line_bps: float | None) -> bool:
-        baud = servo.baud_bps
-        return line_bps is None or abs(line_bps - baud) <= BAUD_TOLERANCE * baud
-
+    # -- bytes in, replies out (receive, answer, expire: DecodedBus) ---------------------
     def dispatch(self, packet: InstructionPacket2 | StatusPacket2, *, line_bps: float | None = None) -> list[Reply]:
         """Run one decoded packet on the servos it reaches; return their replies, timed."""
         if isinstance(packet, StatusPacket2):
@@ -260,12 +241,7 @@ class Bus2(ServosById[Servo2]):
         else:
             replies = []  # Read to the broadcast ID, or an undefined instruction: not executed
         if packet.crc_ok and kind not in _LISTED_READS and packet.instruction != Instruction2.PING:
-            self.reindex()
-            for slot, servo in zip(self.slots, self.servos):
-                if servo.eeprom_dirty:
-                    servo.eeprom_dirty = False
-                    if self.state_store is not None:
-                        self.state_store.save(slot, servo.table)
+            self._after_writes()
         if faults is not None and replies:
             replies = faults.on_replies(replies)
         return replies
@@ -353,25 +329,6 @@ class Bus2(ServosById[Servo2]):
             replies.append(reply)
             wire_s += len(status) * BITS_PER_BYTE / baud
         return replies
-
-    # -- life cycle --------------------------------------------------------------------
-    def save_state(self) -> None:
-        """Write every servo's EEPROM area to the state store (if any)."""
-        if self.state_store is not None:
-            for slot, servo in zip(self.slots, self.servos):
-                self.state_store.save(slot, servo.table)
-
-    def close(self) -> None:
-        """Save state; safe to call more than once."""
-        if not self._closed:
-            self._closed = True
-            self.save_state()
-
-    def __enter__(self) -> "Bus2":
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
 
 def _fast_shares_on_wire(pieces: list[bytes], parts: list[FastStatusPart],
