@@ -1,9 +1,15 @@
 """Fuzz the Protocol 2.0 bus, and a wire shared by Protocol 1.0 and 2.0 servos, with an oracle checked per packet.
 
 The Protocol 1.0 fuzzer (``tools/fuzz.py``) feeds an AX-12 bus; this one feeds
-:class:`ax12emu.bus.bus2.Bus2` (an XL430-W250, an XM430-W350 and an XL330-M077)
-or :class:`ax12emu.bus.mixed.MixedBus` (two AX-12As and two X-series servos on
-one wire), in virtual time, with the real X-series firmware models behind them.
+:class:`ax12emu.bus.bus2.Bus2` (an XL430-W250, an XM430-W350, an XL330-M077 and
+an XL-320) or :class:`ax12emu.bus.mixed.MixedBus` (two AX-12As and three of those
+on one wire), in virtual time, with the real X-series firmware models behind them.
+The XL-320 keeps the classic table (the AX series' registers at other addresses)
+on the X firmware: the oracle reads every table by its layout and finds registers
+by name, so a check of a register a table lacks (Secondary ID, Bus Watchdog,
+indirect addresses, Backup Ready, Drive Mode) is skipped for that servo, and a
+power-up's goals are checked against the limits the table has (Goal PWM and Goal
+Current on the X series, Torque Limit taking Max Torque on the XL-320).
 
 Generation is structure-aware: valid 2.0 instruction packets of every
 instruction (Ping, Read, Write, Reg Write, Action, Factory Reset, Reboot, Clear,
@@ -135,12 +141,15 @@ from ax12emu.servo.virtual_servo import ServoOptions  # noqa: E402
 FuzzFailure = fuzz1.FuzzFailure
 #: What the oracle checked, over the run: (instruction, error number or "silent"/"fast") -> packets.
 CHECKED: collections.Counter = collections.Counter()
+#: Replies (and shares of combined ones) the oracle checked, by servo model: model name -> replies.
+CHECKED_MODELS: collections.Counter = collections.Counter()
 #: One chunk taking longer than this counts as a hang.
 HANG_S = 2.0
 PAUSE_S = max(DEFAULT_SILENCE_TIMEOUT_S, fuzz1.DEFAULT_SILENCE_TIMEOUT_S) * 1.5
 #: The buses: X-series servos by ID and model; on the mixed wire AX-12As beside them (IDs are per protocol).
-BUS2_SERVOS = ((1, "xl430-w250"), (2, "xm430-w350"), (3, "xl330-m077"))
-MIXED_SERVOS2 = ((1, "xl430-w250"), (3, "xl330-m077"))
+#: The XL-320 has the classic table (the AX series' registers at other addresses) on the X firmware.
+BUS2_SERVOS = ((1, "xl430-w250"), (2, "xm430-w350"), (3, "xl330-m077"), (4, "xl-320"))
+MIXED_SERVOS2 = ((1, "xl430-w250"), (3, "xl330-m077"), (4, "xl-320"))
 MIXED_IDS1 = (1, 2)
 #: Every servo starts at 1 Mbps, the AX-12A's rate, so one line rate reaches both protocols.
 LINE_BPS = 1_000_000
@@ -159,13 +168,19 @@ BROADCAST_ONLY = LISTED | {SYNC_WRITE, BULK_WRITE}
 EXECUTED = frozenset({PING, READ, WRITE, REG_WRITE, ACTION, FACTORY_RESET, REBOOT, CLEAR, BACKUP, SYNC_WRITE, BULK_WRITE})
 CLEAR_KEY, BACKUP_KEY = b"DXL\x22", b"CTRL"
 GOALS = frozenset({"goal_pwm", "goal_current", "goal_velocity", "goal_position"})
-#: Registers a power-up sets (goals at their limits and at Present Position): not compared after a reboot.
-BOOT_SET = frozenset({"goal_pwm", "goal_current", "goal_position"})
+#: Registers a power-up sets (goals at their limits and at Present Position): not compared after a reboot,
+#: each of the first set checked against the limit it takes (a classic table's Torque Limit takes Max Torque:
+#: e-manual, _includes/en/dxl/control_table_torque_limit.md).
+BOOT_LIMITS = {"goal_pwm": "pwm_limit", "goal_current": "current_limit", "torque_limit": "max_torque"}
+BOOT_SET = frozenset({*BOOT_LIMITS, "goal_position"})
 #: Registers the firmware writes (what it senses); Torque Enable is checked on its own.
 SENSED = frozenset({"present_position", "present_velocity", "present_current", "present_load", "present_pwm",
                     "velocity_trajectory", "position_trajectory", "moving", "moving_status",
-                    "present_input_voltage", "present_temperature", "hardware_error_status"})
+                    "present_input_voltage", "present_temperature", "hardware_error_status",
+                    "present_speed", "present_voltage"})  # the last two: a classic table's (XL-320)
 KEEPS = {0xFF: (), 0x01: ("id",), 0x02: ("id", "baud_rate")}
+#: What Factory Reset never resets: what the servo is (the X series keeps them in bytes 0..6).
+IDENTITY = ("model_number", "model_information", "firmware_version")
 
 
 def _crc_table() -> list[int]:
@@ -485,7 +500,10 @@ class Oracle2:
             for name in KEEPS[params[0]]:
                 entry = rules.by_name[name]
                 image[entry.address:entry.end] = row[entry.address:entry.end]
-            image[0:7] = row[0:7]  # model number, model information, firmware version: the servo's own
+            for name in IDENTITY:  # the servo's own, wherever its table keeps them
+                if name in rules.by_name:
+                    entry = rules.by_name[name]
+                    image[entry.address:entry.end] = row[entry.address:entry.end]
             return 0, b"", self._boot(shadow, row, bytes(image)), "boot"
         if instruction == REBOOT:
             if params:
@@ -752,7 +770,7 @@ def _between(oracle: Oracle2, rows: list[bytes], where: str) -> None:
             if a == rules.address["torque_enable"] and old[a] == 1 and new[a] == 0:
                 continue  # a shutdown (Hardware Error Status) turns the torque off
             if a == rules.address["torque_enable"] and old[a] == 0 and new[a] == 1 \
-                    and old[rules.address["drive_mode"]] & 0x08:
+                    and "drive_mode" in rules.by_name and old[rules.address["drive_mode"]] & 0x08:
                 continue  # Drive Mode bit 3, "Torque On by Goal Update": a goal written turns the torque on
             raise FuzzFailure(f"{where}: between packets byte {a} of servo {k} changed {old[a]} -> {new[a]}")
         shadow.row = new
@@ -763,9 +781,7 @@ def _compare(oracle: Oracle2, k: int, expected: bytes, actual: bytes, mark: str 
     boot-set registers, after a Clear ('sensed') the firmware's, are the firmware's to say."""
     boot = mark == "boot"
     rules = oracle.shadows[k].rules
-    if expected == actual:
-        return
-    for a in range(rules.size):
+    for a in range(rules.size) if expected != actual else ():
         if expected[a] == actual[a] or a in rules.tick_bytes:
             continue
         if boot and (a in rules.firmware_bytes or a in rules.boot_bytes or a == rules.address["torque_enable"]):
@@ -776,7 +792,7 @@ def _compare(oracle: Oracle2, k: int, expected: bytes, actual: bytes, mark: str 
         raise FuzzFailure(f"{where}: servo {k} byte {a} ({entry.name if entry else 'unused'}) is {actual[a]}, "
                           f"the rules give {expected[a]}")
     if boot:
-        for goal, limit in (("goal_pwm", "pwm_limit"), ("goal_current", "current_limit")):
+        for goal, limit in BOOT_LIMITS.items():
             if goal in rules.by_name and rules.get(actual, goal) != rules.get(actual, limit):
                 raise FuzzFailure(f"{where}: servo {k} {goal} after a power-up is not {limit}")
 
@@ -810,6 +826,8 @@ def _check_record(oracle: Oracle2, record: tuple, stream: bytes, where: str) -> 
     else:
         for expect in expected or [None]:
             CHECKED[(f"{packet.instruction:#04x}", f"error {expect.error & 0x7F}" if expect else "silent")] += 1
+    for k in (expected[3] if isinstance(expected, tuple) else [e.servo for e in expected]):
+        CHECKED_MODELS[oracle.shadows[k].rules.spec.name] += 1
     what = f"{where}, packet id={packet.id} inst={packet.instruction:#04x} params={bytes(packet.params).hex()}" \
            f"{'' if packet.crc_ok else ' (bad CRC)'}"
     if isinstance(expected, tuple):
@@ -992,7 +1010,7 @@ def _check_one(one: _One, replies: list, data: bytes, wire_s: float, clock: Virt
 
 
 # -- generation -------------------------------------------------------------------------
-_RULES = {key: TableRules(key) for key in ("xl430-w250", "xl330-m077")}
+_RULES = {key: TableRules(key) for key in ("xl430-w250", "xl330-m077", "xl-320")}
 #: Registers the grammar writes often: the ones whose rules interact (torque and EEPROM, IDs,
 #: Status Return Level, limits and goals, indirect addresses, watchdog, backup), by name.
 HOT_REGISTERS = ("torque_enable",) * 4 + ("goal_position",) * 3 + (
@@ -1001,7 +1019,7 @@ HOT_REGISTERS = ("torque_enable",) * 4 + ("goal_position",) * 3 + (
     "indirect_address_1", "indirect_address_2", "indirect_data_1", "indirect_data_2", "led", "homing_offset",
     "drive_mode", "profile_velocity", "shutdown", "goal_current", "current_limit", "baud_rate", "hardware_error_status",
     "present_position", "model_number", "registered_instruction")
-HOT_IDS2 = (1, 2, 3, 1, 2, 3, BROADCAST_ID, BROADCAST_ID, 0, 4)
+HOT_IDS2 = (1, 2, 3, 4, 1, 2, 3, 4, BROADCAST_ID, BROADCAST_ID, 0, 5)
 #: Values that matter for some registers: IDs that collide, a short watchdog, indirect targets.
 SPECIAL_VALUES = {
     "id": (1, 2, 3, 4, 0), "secondary_id": (1, 2, 3, 4, 255), "status_return_level": (0, 1, 2, 2, 2),
@@ -1063,7 +1081,7 @@ def _read_target(c: Any) -> tuple[int, int]:
 
 
 def _ids(c: Any) -> bytes:
-    return bytes(c.pick(HOT_IDS2[:6] + (0, 4, 200)) for _ in range(c.integer(0, 4)))
+    return bytes(c.pick(HOT_IDS2[:8] + (0, 5, 200)) for _ in range(c.integer(0, 4)))
 
 
 KINDS2 = ("write",) * 5 + ("read",) * 3 + ("reg", "action", "ping", "ping", "sync_read", "fast_sync_read", "bulk_read",
@@ -1268,6 +1286,7 @@ def main(argv: list[str] | None = None) -> int:
         label = named.get(int(instruction, 16), f"undefined {instruction}") if instruction.startswith("0x") else instruction
         rows.setdefault(label, []).append(f"{outcome} {count:,}")
     print(f"2.0 packets checked: {sum(CHECKED.values()):,}")
+    print("  replies checked, by model: " + ", ".join(f"{name} {n:,}" for name, n in sorted(CHECKED_MODELS.items())))
     for label, outcomes in rows.items():
         print(f"  {label}: {', '.join(outcomes)}")
     if cov is not None:

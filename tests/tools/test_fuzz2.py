@@ -130,3 +130,26 @@ def test_a_fast_bulk_read_past_the_tables_of_two_servos_sharing_the_first_id():
         "0003040006ff55e4",
         "fffffd00040b0003e000fffffd5a16b4884bfffffd0004087399c275762dcfded23efffffd00fe0d009a01400096020174000400f36a")])
     assert fuzz2.run_case(case) == 4
+
+
+def test_the_xl320_with_its_classic_table_is_fuzzed_beside_the_x_series():
+    """The XL-320 is on both buses and the oracle checks its replies, a power-up's Torque Limit among them."""
+    assert "xl-320" in dict(fuzz2.BUS2_SERVOS).values() and "xl-320" in dict(fuzz2.MIXED_SERVOS2).values()
+    before = fuzz2.CHECKED_MODELS["XL-320"]
+    stats = fuzz2.fuzz(3000, seed=20261124)
+    assert stats.failure is None, f"{stats.failure}\nreproducer: {stats.reproducer}"
+    assert fuzz2.CHECKED_MODELS["XL-320"] - before > 100
+    # A reboot that left Torque Limit at its default instead of Max Torque is caught.
+    rules = fuzz2.TableRules("xl-320")
+    row = bytearray(rules.defaults)
+    row[rules.address["max_torque"]:rules.address["max_torque"] + 2] = (500).to_bytes(2, "little")
+    shadow = fuzz2.Shadow(rules, bytes(row))
+    oracle = fuzz2.Oracle2.__new__(fuzz2.Oracle2)
+    oracle.shadows = [shadow]
+    _, _, image, mark = oracle.execute(shadow, bytes(row), fuzz2.REBOOT, b"", to_broadcast=False)
+    assert mark == "boot"
+    booted = bytearray(image)
+    booted[rules.address["torque_limit"]:rules.address["torque_limit"] + 2] = (500).to_bytes(2, "little")
+    fuzz2._compare(oracle, 0, image, bytes(booted), mark, "test")
+    with pytest.raises(fuzz2.FuzzFailure, match="torque_limit"):
+        fuzz2._compare(oracle, 0, image, image, mark, "test")
