@@ -19,19 +19,17 @@ protections when a client writes it non-zero.  The latched errors are the status
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-
 from ax12emu.protocol.servo_models import ServoModel
 from firmware_model.xseries.interface import XCommands, XServoModel
 
 from .classic import ClassicMap
-from .plant2 import GRID_SLACK_S
+from .plant2 import SteppedPlant
 from .table2 import Table2
 
 __all__ = ["Plant1X", "build_plant1x"]
 
 
-class Plant1X:
+class Plant1X(SteppedPlant):
     """Runs ``firmware`` (an X-series model) behind an MX table through ``classic``; brought to a time by the bus."""
 
     def __init__(self, firmware: XServoModel, table: Table2, classic: ClassicMap) -> None:
@@ -65,38 +63,7 @@ class Plant1X:
         self.firmware.command(self._commands, goal_written=goal_written)
         self._write_unseen = True
 
-    # -- time --------------------------------------------------------------------------------
-    def due(self, sim_time_s: float) -> bool:
-        model = self.firmware
-        return self._write_unseen or sim_time_s >= model.time_s + model.step_s
-
-    def catch_up(self, sim_time_s: float, clock_s: float | None = None) -> None:
-        """Step to ``sim_time_s``, and one step past a client's write but never more than a step past the clock
-        ``clock_s``, then copy the sensed registers (as ``Plant2.catch_up``)."""
-        model = self.firmware
-        stepped = False
-        if sim_time_s >= model.time_s + model.step_s:
-            model.step_to(sim_time_s)
-            stepped = True
-        if self._write_unseen and not stepped:
-            if model.time_s <= (sim_time_s if clock_s is None else clock_s) + GRID_SLACK_S:
-                model.step_to(model.time_s + model.step_s)
-            stepped = True
-        self._write_unseen = False
-        if stepped:
-            self.write_back()
-
-    def tick(self, sim_time_s: float) -> Iterator[None]:
-        """:meth:`catch_up` in two pieces (step, then the copy), for a serving loop to interleave with packets."""
-        model = self.firmware
-        if sim_time_s < model.time_s + model.step_s:
-            return
-        model.step_to(sim_time_s)
-        yield
-        self._write_unseen = False
-        self.write_back()
-
-    # -- firmware -> table -------------------------------------------------------------------
+    # -- time: due, catch_up, tick (SteppedPlant); firmware -> table ------------------------
     def write_back(self) -> None:
         """Copy what the firmware senses into the table; a newly latched error is an Alarm Shutdown."""
         sensed = self.firmware.sense()

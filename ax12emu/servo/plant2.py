@@ -27,7 +27,7 @@ from firmware_model.xseries.interface import OperatingMode, XCommands, XSensed, 
 from .classic import ClassicMap
 from .table2 import Table2
 
-__all__ = ["ClassicPlant2", "GRID_SLACK_S", "Plant2", "SENSED_REGISTERS", "plant_for"]
+__all__ = ["ClassicPlant2", "GRID_SLACK_S", "Plant2", "SENSED_REGISTERS", "SteppedPlant", "plant_for"]
 
 #: Where each sensed value goes: the first of these registers the table has (the XL430's
 #: register 126 is Present Load, the current-sensing models' Present Current).
@@ -100,7 +100,61 @@ def _writer(entries: list[Entry]) -> Callable[[bytearray, tuple[int, ...]], None
     return by_runs
 
 
-class Plant2:
+class SteppedPlant:
+    """A firmware model brought to the bus's time: the steps due by then, one past a client's write, then the copy.
+
+    Why a class of its own: the X series' plant (:class:`Plant2`) and the MX series' on Protocol 1.0
+    (:class:`~.plant1x.Plant1X`) run the same firmware model against the same clock and differ only
+    in how the table's commands reach it and its readings come back.  A subclass holds ``firmware``,
+    sets ``_write_unseen`` when it commands the model, and copies the readings in ``write_back()``.
+    """
+
+    firmware: XServoModel
+    _write_unseen: bool
+
+    def due(self, sim_time_s: float) -> bool:
+        """Whether a whole step is due by ``sim_time_s`` or a client's write is not yet shown."""
+        model = self.firmware
+        return self._write_unseen or sim_time_s >= model.time_s + model.step_s
+
+    def catch_up(self, sim_time_s: float, clock_s: float | None = None) -> None:
+        """Step to ``sim_time_s``, and one step past a client's write, then copy the sensed registers.
+
+        Why one step past a write: as on the AX-12 (``Plant.wrote``), the firmware's control loop
+        runs before a host's next packet can arrive, so a client that writes a goal and then reads
+        Moving finds the move started.  That step may take the model at most one step past the
+        clock (``clock_s``: the clock's present, ``sim_time_s`` plus any request lag): a servo's
+        loop never runs ahead of its own clock, so a second write in the same control period (a
+        client faster than 1 kHz, possible over a pty, not over USB) is taken as the firmware takes
+        a packet between two ticks: the commands it handed the model (:meth:`command`: profile
+        restarted, torque and mode acted on, at the model's time) read back at once, and the
+        physics waits for the clock.
+        """
+        model = self.firmware
+        stepped = False
+        if sim_time_s >= model.time_s + model.step_s:
+            model.step_to(sim_time_s)
+            stepped = True
+        if self._write_unseen and not stepped:
+            if model.time_s <= (sim_time_s if clock_s is None else clock_s) + GRID_SLACK_S:
+                model.step_to(model.time_s + model.step_s)
+            stepped = True
+        self._write_unseen = False
+        if stepped:
+            self.write_back()
+
+    def tick(self, sim_time_s: float) -> Iterator[None]:
+        """:meth:`catch_up` in two pieces (step, then the copy), for a serving loop to interleave with packets."""
+        model = self.firmware
+        if sim_time_s < model.time_s + model.step_s:
+            return
+        model.step_to(sim_time_s)
+        yield
+        self._write_unseen = False
+        self.write_back()
+
+
+class Plant2(SteppedPlant):
     """Runs ``firmware`` behind ``table``; brought to a time by the bus before each request."""
 
     def __init__(self, firmware: XServoModel, table: Table2) -> None:
@@ -170,48 +224,7 @@ class Plant2:
         """Take the table's goals again (called with a goal write, which then commands the model)."""
         self._held = None
 
-    # -- time ----------------------------------------------------------------------------
-    def due(self, sim_time_s: float) -> bool:
-        """Whether a whole step is due by ``sim_time_s`` or a client's write is not yet shown."""
-        model = self.firmware
-        return self._write_unseen or sim_time_s >= model.time_s + model.step_s
-
-    def catch_up(self, sim_time_s: float, clock_s: float | None = None) -> None:
-        """Step to ``sim_time_s``, and one step past a client's write, then copy the sensed registers.
-
-        Why one step past a write: as on the AX-12 (``Plant.wrote``), the firmware's control loop
-        runs before a host's next packet can arrive, so a client that writes a goal and then reads
-        Moving finds the move started.  That step may take the model at most one step past the
-        clock (``clock_s``: the clock's present, ``sim_time_s`` plus any request lag): a servo's
-        loop never runs ahead of its own clock, so a second write in the same control period (a
-        client faster than 1 kHz, possible over a pty, not over USB) is taken as the firmware takes
-        a packet between two ticks: the commands it handed the model (:meth:`command`: profile
-        restarted, torque and mode acted on, at the model's time) read back at once, and the
-        physics waits for the clock.
-        """
-        model = self.firmware
-        stepped = False
-        if sim_time_s >= model.time_s + model.step_s:
-            model.step_to(sim_time_s)
-            stepped = True
-        if self._write_unseen and not stepped:
-            if model.time_s <= (sim_time_s if clock_s is None else clock_s) + GRID_SLACK_S:
-                model.step_to(model.time_s + model.step_s)
-            stepped = True
-        self._write_unseen = False
-        if stepped:
-            self.write_back()
-
-    def tick(self, sim_time_s: float) -> Iterator[None]:
-        """:meth:`catch_up` in two pieces (step, then the copy), for a serving loop to interleave with packets."""
-        model = self.firmware
-        if sim_time_s < model.time_s + model.step_s:
-            return
-        model.step_to(sim_time_s)
-        yield
-        self._write_unseen = False
-        self.write_back()
-
+    # -- time: due, catch_up, tick (SteppedPlant) ----------------------------------------
     def write_back(self) -> None:
         """Copy what the firmware senses into the table (Torque Enable too, which Shutdown clears)."""
         self._store_sensed(self.table.row, self._sense_fields(self.firmware.sense()))
