@@ -36,6 +36,7 @@ from ax12emu.protocol.servo_models import ServoModel
 
 from .plant1x import Plant1X
 from .table2 import Table2
+from .table_servo import TableServo
 
 __all__ = ["Servo1X", "Servo1XOptions", "baud_bps_1x"]
 #: Baud Rate(4) 0..249 is 2,000,000 / (value + 1) bps; the MX pages add "For BPS over 250 values".
@@ -70,39 +71,21 @@ class _Table1X(Table2):
         return False
 
 
-class Servo1X:
-    """Firmware-side state of one MX-series servo on a Protocol 1.0 wire."""
+class Servo1X(TableServo):
+    """Firmware-side state of one MX-series servo on a Protocol 1.0 wire (ID, Return Delay Time, Status Return
+    Level, the registered write: :class:`~.table_servo.TableServo`)."""
 
     def __init__(self, spec: ServoModel, plant_factory, *, servo_id: int, index: int,
                  options: Servo1XOptions = Servo1XOptions()) -> None:
-        if "1.0" not in spec.protocols:
-            raise ValueError(f"{spec.name} speaks Protocol {'/'.join(spec.protocols)}, not 1.0")
-        self.spec = spec
-        self.options = options
-        self.index = index
-        self.table = _Table1X(spec.layout())
-        by_name = self.table.layout.by_name
-        self._id_at = by_name["id"].address
-        self._baud_at = by_name["baud_rate"].address
-        self._return_delay_at = by_name["return_delay_time"].address
-        self._level_at = by_name["status_return_level"].address
-        self._eeprom_end = self.table.layout.eeprom_end
+        self.require(spec, "1.0")
+        super().__init__(spec, _Table1X(spec.layout()), servo_id=servo_id, index=index, options=options)
         self._lock_writable = self.table.layout.profile.lock_writable
-        self.table.set("id", servo_id)
-        #: The REG_WRITE waiting for ACTION: (address, data), or None.
-        self.registered_write: tuple[int, bytes] | None = None
-        #: Set when a write changed the EEPROM area; the bus persists and clears it.
-        self.eeprom_dirty = False
         #: Bus-clock time until which the servo ignores packets (kept for the bus's interface; MX writes are not timed).
         self.busy_until_s = float("-inf")
         self.plant: Plant1X = plant_factory(self)
         self.power_on()
 
-    # -- what the bus reads per packet -------------------------------------------------------
-    @property
-    def id(self) -> int:
-        return self.table.row[self._id_at]
-
+    # -- what the bus reads per packet (id, return_delay_s, status_return_level: TableServo) --
     @property
     def baud_bps(self) -> float:
         return baud_bps_1x(self.table.row[self._baud_at])
@@ -114,15 +97,6 @@ class Servo1X:
         7,834 [bps] ~ 3 [Mbps]"), which the AX-12A's 2,000,000 / (value + 1) never reaches."""
         entry = self.table.layout.by_name["baud_rate"]
         return {value: baud_bps_1x(value) for value in range(entry.minimum, entry.maximum + 1)}
-
-    @property
-    def return_delay_s(self) -> float:
-        """Return Delay Time(5): 2 us per unit."""
-        return self.table.row[self._return_delay_at] * 2e-6
-
-    @property
-    def status_return_level(self) -> int:
-        return self.table.row[self._level_at]
 
     @property
     def alarms(self) -> int:

@@ -18,6 +18,7 @@ from ax12emu.protocol.servo_models import ServoModel
 
 from .plant2 import Plant2
 from .table2 import Table2
+from .table_servo import TableServo
 
 __all__ = ["GOAL_REGISTERS", "SECONDARY_ID_MAX", "Servo2", "Servo2Options", "WATCHDOG_ERROR", "WATCHDOG_UNIT_S"]
 
@@ -48,41 +49,28 @@ class Servo2Options:
     reply_on_crc_error: bool = True
 
 
-class Servo2:
-    """Firmware-side state of one Protocol 2.0 servo on the bus."""
+class Servo2(TableServo):
+    """Firmware-side state of one Protocol 2.0 servo on the bus (ID, Return Delay Time, Status Return Level,
+    the registered write: :class:`~.table_servo.TableServo`)."""
 
     def __init__(self, spec: ServoModel, plant_factory, *, servo_id: int, index: int,
                  options: Servo2Options = Servo2Options(), profile: str | None = None) -> None:
-        if "2.0" not in spec.protocols:
-            raise ValueError(f"{spec.name} speaks Protocol {'/'.join(spec.protocols)}, not 2.0")
+        self.require(spec, "2.0")
         if not spec.baud_rates_bps:
             raise ValueError(f"{spec.path}: a Protocol 2.0 model needs model.baud_rates_bps")
-        self.spec = spec
-        self.options = options
-        self.index = index
-        self.table = Table2(spec.layout(profile))
+        super().__init__(spec, Table2(spec.layout(profile)), servo_id=servo_id, index=index, options=options)
         by_name = self.table.layout.by_name
-        self._id_at = by_name["id"].address
-        self._baud_at = by_name["baud_rate"].address
-        self._return_delay_at = by_name["return_delay_time"].address
-        self._level_at = by_name["status_return_level"].address
-        self._eeprom_end = self.table.layout.eeprom_end
-        # The registers the bus consults on every packet, looked up once (None: the model has none):
+        # More registers the bus consults on every packet, looked up once (None: the model has none):
         # a Sync Read or Write of six servos reads each of them for every servo.
         self._secondary = by_name.get("secondary_id")
         self._hardware_error = by_name.get("hardware_error_status")
         self._watchdog = by_name.get("bus_watchdog")
         self._tick = by_name.get("realtime_tick")
         self._bauds_bps = tuple(float(bps) for bps in spec.baud_rates_bps)
-        self.table.set("id", servo_id)
         if spec.firmware_version is not None and self.table.has("firmware_version"):
             self.table.set("firmware_version", spec.firmware_version)
-        #: The REG_WRITE waiting for ACTION: (address, data), or None.
-        self.registered_write: tuple[int, bytes] | None = None
         #: Bus-clock time of the last instruction packet this servo heard (Bus Watchdog).
         self.last_instruction_s: float | None = None
-        #: Set when a write changed the EEPROM area.
-        self.eeprom_dirty = False
         #: The backup area of Control Table Backup (0x20): the table's bytes, or None.
         self.backup: bytes | None = None
         #: True while a packet addressed to the Secondary ID is handled: the EEPROM area is out of reach.
@@ -90,23 +78,10 @@ class Servo2:
         self.plant: Plant2 = plant_factory(self)
         self.power_on()
 
-    # -- what the bus reads per packet ----------------------------------------------------
-    @property
-    def id(self) -> int:
-        return self.table.row[self._id_at]
-
+    # -- what the bus reads per packet (id, return_delay_s, status_return_level: TableServo) --
     @property
     def baud_bps(self) -> float:
         return self._bauds_bps[self.table.row[self._baud_at]]
-
-    @property
-    def return_delay_s(self) -> float:
-        """Return Delay Time(9): 2 us per unit (e-manual, X series)."""
-        return self.table.row[self._return_delay_at] * 2e-6
-
-    @property
-    def status_return_level(self) -> int:
-        return self.table.row[self._level_at]
 
     @property
     def secondary_id(self) -> int | None:
