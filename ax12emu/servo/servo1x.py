@@ -23,7 +23,7 @@ https://emanual.robotis.com/docs/en/dxl/protocol1/#status-packet):
   1.0 firmware's; its Lock register freezes the EEPROM instead);
 * Torque Limit(34) written non-zero after an Alarm Shutdown lets the motor run again
   (control_table_torque_limit.md); at power-up Torque Limit takes Max Torque(14) and Goal Position
-  the Present Position (as on the AX-12, :meth:`~.virtual_servo.VirtualServo.power_on`).
+  the Present Position (as on the AX-12, :func:`~.virtual_servo.power_on_1`).
 """
 
 from __future__ import annotations
@@ -37,6 +37,7 @@ from ax12emu.protocol.servo_models import ServoModel
 from .plant1x import Plant1X
 from .table2 import Table2
 from .table_servo import TableServo
+from .virtual_servo import power_on_1
 
 __all__ = ["Servo1X", "Servo1XOptions", "baud_bps_1x"]
 #: Baud Rate(4) 0..249 is 2,000,000 / (value + 1) bps; the MX pages add "For BPS over 250 values".
@@ -110,12 +111,8 @@ class Servo1X(TableServo):
 
     # -- firmware events ---------------------------------------------------------------------
     def power_on(self) -> None:
-        """Power-up: Torque Limit = Max Torque, Goal Position = Present Position, nothing registered."""
-        table = self.table
-        table.set("torque_limit", table.get("max_torque"))
-        table.set("goal_position", table.get("present_position"))
-        table.set("registered", 0)
-        self.registered_write = None
+        """Power-up as on the AX-12 (:func:`~.virtual_servo.power_on_1`), then the firmware takes the commands."""
+        power_on_1(self)
         self.plant.command()
 
     def reset(self) -> None:

@@ -13,7 +13,18 @@ import numpy as np
 
 from ax12emu.protocol.control_table import DEFAULT_PROFILE, PROFILES, ControlTable, Layout
 
-__all__ = ["ServoOptions", "VirtualServo", "baud_bps"]
+__all__ = ["ServoOptions", "VirtualServo", "baud_bps", "power_on_1"]
+
+
+def power_on_1(servo) -> None:
+    """Protocol 1.0 power-up rules, the AX-12's and the MX series' firmware alike: Torque Limit loads
+    Max Torque (e-manual, the Torque Limit entry of both), Goal Position follows Present Position,
+    nothing registered."""
+    table = servo.table
+    table.set("torque_limit", table.get("max_torque"))
+    table.set("goal_position", table.get("present_position"))
+    table.set("registered", 0)
+    servo.registered_write = None
 
 
 def baud_bps(value: int) -> float:
@@ -124,10 +135,5 @@ class VirtualServo:
         """0: answer PING only; 1: PING and READ; 2: everything (e-manual)."""
         return int(self.table.row[self._status_return_level_at])
 
-    def power_on(self) -> None:
-        """Power-up rules: Torque Limit loads Max Torque; Goal Position follows Present Position."""
-        table = self.table
-        table.set("torque_limit", table.get("max_torque"))
-        table.set("goal_position", table.get("present_position"))
-        table.set("registered", 0)
-        self.registered_write = None
+    #: Power-up rules (:func:`power_on_1`).
+    power_on = power_on_1
