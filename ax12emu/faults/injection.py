@@ -516,8 +516,12 @@ class Faults2(Faults):
         if field is None:
             raise ValueError(f"hold: {name!r} is not a register the firmware senses; those are "
                              f"{', '.join(n for names in SENSED_REGISTERS.values() for n in names if n in servo.table.layout.by_name)}")
+        self._hold_reading(slot, name, field, value)
+
+    def _hold_reading(self, slot: int, name: str, field: str, value: int | None) -> None:
+        """Pin the firmware's reading ``field`` (the table's register ``name``) at ``value``; None frees it."""
         self._firmware(slot, "hold").hold_reading(field, value)
-        servo.plant.write_back()
+        self._servo2(slot).plant.write_back()
         index = self._index(slot)
         held = self._held.setdefault(index, {})
         if value is None:
@@ -527,15 +531,19 @@ class Faults2(Faults):
         else:
             held[name] = int(value)
 
+    def _forget_cleared_alarms(self, index: int, latched_bits: int) -> None:
+        """Keep of the alarms forced on servo ``index`` only those still in ``latched_bits`` (the servo's, in their terms)."""
+        latched = self._alarms[index] & latched_bits
+        if latched:
+            self._alarms[index] = latched
+        else:
+            del self._alarms[index]
+
     def active(self, slot: int) -> list[str]:
         """As :meth:`Faults.active`; a forced alarm a REBOOT has cleared is no longer listed."""
         index = self._index(slot)
-        if index in self._alarms:
-            latched = self._alarms[index] & self._servo2(slot).plant.firmware.sense().hardware_error_status  # the firmware's bits
-            if latched:
-                self._alarms[index] = latched
-            else:
-                del self._alarms[index]
+        if index in self._alarms:  # the firmware's bits
+            self._forget_cleared_alarms(index, self._servo2(slot).plant.firmware.sense().hardware_error_status)
         return super().active(slot)
 
     def clear(self) -> None:
@@ -650,28 +658,15 @@ class Faults1X(Faults2):
             raise KeyError(f"{servo.spec.name} has no register {name!r}")
         if name not in _CLASSIC_HELD:
             raise ValueError(f"hold: {name!r} is not a register the firmware senses; those are {', '.join(_CLASSIC_HELD)}")
-        self._firmware(slot, "hold").hold_reading(_CLASSIC_HELD[name], value)
-        servo.plant.write_back()
-        index = self._index(slot)
-        held = self._held.setdefault(index, {})
-        if value is None:
-            held.pop(name, None)
-            if not held:
-                del self._held[index]
-        else:
-            held[name] = int(value)
+        self._hold_reading(slot, name, _CLASSIC_HELD[name], value)
 
     def active(self, slot: int) -> list[str]:
         """As :meth:`Faults.active`; a forced alarm the client has cleared (Torque Limit written) is no longer listed."""
         if self.ax is not None and slot in self.ax.bus.slots:  # the AX-12A's own, and the wire's reply faults
             return [*self.ax.active(slot), *self._on_replies_of(self.ax.bus.servos[self.ax._index(slot)].id)]
         index = self._index(slot)
-        if index in self._alarms:
-            latched = self._alarms[index] & self._servo2(slot).alarms
-            if latched:
-                self._alarms[index] = latched
-            else:
-                del self._alarms[index]
+        if index in self._alarms:  # the status packets' bits
+            self._forget_cleared_alarms(index, self._servo2(slot).alarms)
         return Faults.active(self, slot)
 
     def clear(self) -> None:
