@@ -24,12 +24,33 @@ After every input (one chunk) the harness checks:
 
 and at the end of each case a PING after a pause is answered cleanly.
 
+A third of the cases run on the MX wire instead (:class:`ax12emu.bus.bus1x.Bus1X`: an MX-28 and
+an MX-64, each its model file's table with the X-series firmware behind it, and an AX-12A beside
+them), fed the same grammar plus whole MX registers (by the model files' layouts) and Bulk Reads.
+The AX-12A is checked as above; for the MX servos, whose write rules this oracle does not restate,
+the checks are those any Protocol 1.0 servo keeps, per packet (the wire's ``dispatch`` wrapped):
+
+* every MX reply parses (header, LENGTH, checksum, bit 7 clear) and comes from the ID the packet
+  named (a Bulk Read: the listed IDs in list order, a prefix of them; another broadcast but PING:
+  none), no more replies than servos holding the ID;
+* error bits valid: Checksum Error exactly when the packet's checksum is wrong, Instruction Error
+  exactly for an undefined instruction (not judged for Action, Sync Write and Bulk Read sent to one
+  ID), none and no data for a plain PING; a READ answers the length asked, its bytes the table's
+  (but the sensed ones) when one servo holds the ID;
+* table bytes change only by an accepted write to that servo (WRITE, SYNC_WRITE, ACTION of the
+  registered write: each byte then holds what was written; refused, by its reply's error bits,
+  nothing), Registered by REG_WRITE/ACTION, Torque Enable/Torque Limit as a write's side effects,
+  RESET to the factory table (Torque Limit at Max Torque), or by the firmware (the sensed
+  registers, Realtime Tick, an Alarm Shutdown clearing Torque Enable or Torque Limit);
+* at the end of a case every MX with an ID of its own answers a PING after a pause.
+
 Protocol 2.0 servos, and a wire shared by 1.0 and 2.0 servos, are fuzzed by
 ``tools/fuzz2.py``, which drives this file's 1.0 grammar and oracle for the 1.0 side.
 
 Usage::
 
-    python tools/fuzz.py --inputs 1000000          # the full run
+    python tools/fuzz.py --inputs 1000000          # the full run, both wires
+    python tools/fuzz.py --wire mx --seconds 10    # a quick one on the MX wire
     python tools/fuzz.py --seconds 5 --no-coverage # a quick one
     python tools/fuzz.py --replay failure.json     # rerun a reported failure
 
@@ -60,7 +81,8 @@ from typing import Any
 
 #: Modules the target exercises, for the coverage figure.
 TARGET_MODULES = ("protocol/framing", "protocol/packets", "protocol/control_table", "servo/request_handler",
-                  "servo/virtual_servo", "servo/plant", "bus/bus", "bus/clock")
+                  "servo/virtual_servo", "servo/plant", "bus/bus", "bus/clock", "bus/bus1x", "servo/servo1x",
+                  "servo/request_handler1x", "servo/plant1x")
 
 
 def _start_coverage() -> Any:
@@ -87,11 +109,15 @@ from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
 from ax12emu.bus.bus import Bus
+from ax12emu.bus.bus1x import Bus1X
 from ax12emu.bus.clock import VirtualClock
 from ax12emu.protocol.control_table import TABLE_SIZE, Access, layout
 from ax12emu.protocol.framing import DEFAULT_SILENCE_TIMEOUT_S, MAX_FRAME_BYTES, Framer
 from ax12emu.protocol.packets import BROADCAST_ID, Instruction, StatusError, checksum, encode_instruction, encode_status
+from ax12emu.protocol.servo_models import model as servo_model
 from ax12emu.servo.model_factory import ModelChoice, build_model
+from ax12emu.servo.plant1x import build_plant1x
+from ax12emu.servo.servo1x import Servo1XOptions
 from ax12emu.servo.virtual_servo import ServoOptions, baud_bps
 
 #: One chunk taking longer than this counts as a hang.
@@ -104,6 +130,8 @@ WRITES = frozenset({Instruction.WRITE, Instruction.ACTION, Instruction.SYNC_WRIT
 PAUSE_S = DEFAULT_SILENCE_TIMEOUT_S * 1.5
 
 R = StatusError.RANGE
+#: The error bits the physics raises (the others answer the instruction).
+PHYSICAL_ALARMS = int(StatusError.INPUT_VOLTAGE | StatusError.OVERHEATING | StatusError.OVERLOAD)
 
 
 class FuzzFailure(AssertionError):
@@ -284,6 +312,8 @@ class Case:
 
     profile: str = "ax12a"
     model: str = "kinematic"
+    #: "ax12": two AX-12As (the oracle above); "mx": an MX-28, an MX-64 and an AX-12A (``run_mx_case``).
+    wire: str = "ax12"
     reply_on_checksum_error: bool = True
     reply_to_broadcast_ping: bool = True
     reset_reply_from_new_id: bool = False
@@ -316,9 +346,9 @@ def _parse_status(reply: bytes) -> tuple[int, int, bytes]:
     return reply[2], reply[4], reply[5:-1]
 
 
-def run_case(case: Case) -> int:
-    """Feed every input of ``case`` to a fresh bus, checking the invariants; return inputs fed."""
-    options = ServoOptions(
+def _options(case: Case) -> ServoOptions:
+    """The AX-12As' options of ``case``."""
+    return ServoOptions(
         profile=case.profile,
         reply_on_checksum_error=case.reply_on_checksum_error,
         reply_to_broadcast_ping=case.reply_to_broadcast_ping,
@@ -326,6 +356,13 @@ def run_case(case: Case) -> int:
         goal_position_enables_torque=case.goal_position_enables_torque,
         eeprom_busy_s_per_byte=case.eeprom_busy_s_per_byte,
     )
+
+
+def run_case(case: Case) -> int:
+    """Feed every input of ``case`` to a fresh bus, checking the invariants; return inputs fed."""
+    if case.wire == "mx":
+        return run_mx_case(case)
+    options = _options(case)
     clock = VirtualClock()
     bus = Bus(list(SLOTS), options=options, clock=clock, model=build_model(ModelChoice(name=case.model), len(SLOTS)))
     oracle = Oracle(bus.rows, options, case.line_bps)
@@ -367,7 +404,7 @@ def run_case(case: Case) -> int:
         wrote = write_unseen or any(p.checksum_ok and p.instruction in WRITES for p in packets)
         if ahead and not wrote:
             raise FuzzFailure(f"{where}: physics ran past the clock while handling packets, with no write before them")
-        _check_replies(bus, oracle, replies, predicted, where, alarms_before)
+        _check_replies(bus, oracle, replies, predicted, where, alarms_before, reset_slots)
         # RESET sets Goal Position to Present Position, which a control step after an earlier write
         # in the same input may have moved by the time the RESET ran (the oracle sees positions only
         # between inputs): there Goal Position is checked against nothing but its own rule below.
@@ -391,11 +428,13 @@ def run_case(case: Case) -> int:
 
 
 def _check_replies(bus: Bus, oracle: Oracle, replies: list, predicted: list[Predicted], where: str,
-                   alarms_before: list[int]) -> None:
+                   alarms_before: list[int], reset_slots: set[int] = frozenset()) -> None:
     """Each reply as predicted; its physical alarm bits may be those before the input or after it.
 
     A control step runs right after a write, within the input, so an alarm that a write cleared
-    (a voltage limit reset) can still be in a reply sent before that step.
+    (a voltage limit reset) can still be in a reply sent before that step.  In a slot a RESET
+    reached in the input, an alarm raised by that step (a write of the limits) and cleared by the
+    RESET shows in neither: there the physical alarm bits are not judged.
     """
     if len(replies) != len(predicted):
         raise FuzzFailure(
@@ -405,6 +444,8 @@ def _check_replies(bus: Bus, oracle: Oracle, replies: list, predicted: list[Pred
     for reply, expect in zip(replies, predicted):
         servo_id, status, data = _parse_status(reply.data)
         alarms = bus.servos[expect.slot].alarms | alarms_before[expect.slot]
+        if expect.slot in reset_slots:
+            alarms |= PHYSICAL_ALARMS
         if servo_id != expect.servo_id or reply.servo_id != servo_id:
             raise FuzzFailure(f"{where}: reply {reply.data.hex()} from ID {servo_id}, expected {expect.servo_id}")
         if (status & ~alarms) != (expect.error & ~alarms) or (status & expect.error) != expect.error:
@@ -464,6 +505,290 @@ def _sync_physics(bus: Bus, oracle: Oracle, shutdown_register: str, where: str) 
                 if not _shutdown_explains(bus, slot, address, shutdown_register):
                     raise FuzzFailure(f"{where}: physics changed byte {address} of slot {slot}")
         shadow.row[:] = actual
+
+
+# -- the MX wire: MX-series servos and an AX-12A on one Protocol 1.0 wire ------------------
+#: An MX-28 and an MX-64 (each its model's table, the X-series firmware behind it: ``Bus1X``) and an
+#: AX-12A beside them (on the AX-12 bus the wire holds, checked by :class:`Oracle` as above).
+MX_SERVOS = ((1, "mx-28"), (2, "mx-64"))
+MX_AX_IDS = (3,)
+#: Registers an MX's firmware writes (what it senses, and the clock it keeps): they change with no write.
+MX_SENSED = frozenset({"present_position", "present_speed", "present_load", "present_voltage", "present_temperature",
+                       "moving", "current", "realtime_tick"})
+#: What a write sets besides its own bytes: Goal Position may turn the torque on (``Servo1XOptions``), Angle
+#: Limit Error with Shutdown's bit zeroes Torque Limit (e-manual, control_table_mx_goal_position.md).
+MX_WRITE_SIDE = frozenset({"torque_enable", "torque_limit"})
+#: Error bits an instruction's handling sets (the others are the servo's alarms: voltage, overheating, overload).
+INSTRUCTION_BITS = int(StatusError.RANGE | StatusError.INSTRUCTION | StatusError.CHECKSUM | StatusError.ANGLE_LIMIT)
+MX_KNOWN = frozenset({Instruction.PING, Instruction.READ, Instruction.WRITE, Instruction.REG_WRITE, Instruction.ACTION,
+                      Instruction.RESET, Instruction.SYNC_WRITE, Instruction.BULK_READ})
+#: Instruction Error not judged: Action (an error without a registered write) and the instructions the e-manual
+#: sends to the broadcast ID only (Sync Write, Bulk Read), whose answer sent to one ID it does not give.
+MX_UNJUDGED = frozenset({Instruction.ACTION, Instruction.SYNC_WRITE, Instruction.BULK_READ})
+
+
+class MXRules:
+    """What the MX checks need of one model's table, read from its model file by register name."""
+
+    def __init__(self, key: str) -> None:
+        self.layout = servo_model(key).layout()
+        self.size = self.layout.table_size
+        self.defaults = bytes(self.layout.defaults)
+        self.by_name = self.layout.by_name
+        self.at: list[Any] = [None] * self.size
+        for entry in self.layout.entries:
+            for address in range(entry.address, entry.end):
+                self.at[address] = entry
+
+    def span(self, *names: str) -> frozenset[int]:
+        return frozenset(a for name in names if name in self.by_name
+                         for a in range(self.by_name[name].address, self.by_name[name].end))
+
+
+@dataclass
+class MXRecord:
+    """One packet the MX wire handled: tables of its MX servos before and after, registered writes, replies."""
+
+    packet: Any
+    line_bps: float | None
+    before: list[bytes]
+    after: list[bytes]
+    registered: list[tuple[int, bytes] | None]
+    replies: list
+    ax_replies: int
+
+
+def build_mx_wire(case: Case) -> tuple[Bus1X, Bus]:
+    """The MX wire of ``case``: the MX servos on a ``Bus1X`` holding an AX-12 bus with the AX-12A."""
+    clock = VirtualClock()
+    options = _options(case)
+    ax = Bus(list(MX_AX_IDS), options=options, clock=clock, model=build_model(ModelChoice(name=case.model), len(MX_AX_IDS)))
+    mx_options = Servo1XOptions(reply_on_checksum_error=case.reply_on_checksum_error,
+                                reply_to_broadcast_ping=case.reply_to_broadcast_ping,
+                                goal_position_enables_torque=case.goal_position_enables_torque)
+    wire = Bus1X([(i, servo_model(key)) for i, key in MX_SERVOS],
+                 lambda spec, servo: build_plant1x(spec, servo.table), ax_bus=ax, clock=clock, options=mx_options)
+    return wire, ax
+
+
+def _record_mx(wire: Bus1X, ax: Bus, records: list[MXRecord]) -> None:
+    """Wrap the wire's ``dispatch``: each packet with the MX tables just before and after it."""
+    original, ax_original = wire.dispatch, ax.dispatch
+    ax_count: list[int] = [0]
+
+    def ax_dispatch(packet, *, line_bps=None):
+        replies = ax_original(packet, line_bps=line_bps)
+        ax_count[0] = len(replies)
+        return replies
+
+    def dispatch(packet, *, line_bps=None):
+        now_s = wire.clock.now_s()
+        wire.catch_up(now_s - wire.request_lag_s, now_s)  # physics first, so "before" is what the servos hold
+        before = [bytes(s.table.row) for s in wire.servos_mx]
+        registered = [s.registered_write for s in wire.servos_mx]
+        ax_count[0] = 0
+        replies = list(original(packet, line_bps=line_bps))
+        records.append(MXRecord(packet, line_bps, before, [bytes(s.table.row) for s in wire.servos_mx], registered,
+                                replies, ax_count[0]))
+        return replies
+
+    ax.dispatch = ax_dispatch
+    wire.dispatch = dispatch
+
+
+def _mx_between(rules: list[MXRules], old: list[bytes], new: list[bytes], where: str) -> None:
+    """Between packets an MX table changes only in what its firmware writes, or by an Alarm Shutdown."""
+    for k, (r, a, b) in enumerate(zip(rules, old, new)):
+        free = r.span(*MX_SENSED) | r.span("torque_enable", "torque_limit")
+        for address in range(r.size):
+            if a[address] != b[address] and address not in free:
+                raise FuzzFailure(f"{where}: between packets byte {address} ({_mx_name(r, address)}) of MX {k} changed "
+                                  f"{a[address]} -> {b[address]}")
+        for name in ("torque_enable", "torque_limit"):  # a shutdown only ever clears them
+            entry = r.by_name[name]
+            if entry.value_in(a) != entry.value_in(b) and entry.value_in(b) != 0:
+                raise FuzzFailure(f"{where}: between packets {name} of MX {k} went {entry.value_in(a)} -> {entry.value_in(b)}")
+
+
+def _mx_name(rules: MXRules, address: int) -> str:
+    entry = rules.at[address] if address < rules.size else None
+    return entry.name if entry is not None else "unused"
+
+
+def _mx_writes(packet: Any, servo_id: int, registered: tuple[int, bytes] | None) -> list[tuple[int, bytes]] | None:
+    """The writes ``packet`` asks of the MX holding ``servo_id`` ([] none), or None for RESET (the factory table)."""
+    code, params = packet.instruction, bytes(packet.params)
+    if code == Instruction.RESET:
+        return None
+    if code == Instruction.WRITE and len(params) >= 2:
+        return [(params[0], params[1:])]
+    if code == Instruction.ACTION and registered is not None:
+        return [registered]
+    if code == Instruction.SYNC_WRITE and len(params) >= 2 and params[1]:  # to one ID too, as the AX-12's oracle has it
+        size = params[1]
+        if (len(params) - 2) % (size + 1) == 0:
+            return [(params[0], params[at + 1: at + 1 + size]) for at in range(2, len(params), size + 1)
+                    if params[at] == servo_id][:1]
+    return []
+
+
+def _check_mx_record(rules: list[MXRules], record: MXRecord, where: str) -> None:
+    """The invariants any Protocol 1.0 servo keeps, for the MX servos' part of one packet (see the docstring)."""
+    packet = record.packet
+    what = f"{where}, packet id={packet.id} inst={packet.instruction:#04x} params={bytes(packet.params).hex()}" \
+           f"{'' if packet.checksum_ok else ' (bad checksum)'}"
+    replies = record.replies[record.ax_replies:]
+    ids_before = [r.by_name["id"].value_in(row) for r, row in zip(rules, record.before)]
+    ids_after = [r.by_name["id"].value_in(row) for r, row in zip(rules, record.after)]
+    reached = [k for k, i in enumerate(ids_before) if packet.id in (i, BROADCAST_ID)]
+    broadcast = packet.id == BROADCAST_ID
+    bulk = broadcast and packet.instruction == Instruction.BULK_READ and packet.checksum_ok
+    if bulk:
+        listed = _bulk_list(bytes(packet.params))
+        if [r.servo_id for r in replies] != listed[: len(replies)]:
+            raise FuzzFailure(f"{what}: Bulk Read answered by IDs {[r.servo_id for r in replies]}, listed {listed}")
+    elif broadcast and packet.instruction != Instruction.PING and replies:
+        raise FuzzFailure(f"{what}: {len(replies)} MX replies to a broadcast")
+    elif len(replies) > len(reached):
+        raise FuzzFailure(f"{what}: {len(replies)} MX replies, {len(reached)} MX servos hold ID {packet.id}")
+    for reply in replies:
+        servo_id, error, data = _parse_status(reply.data)
+        if servo_id != reply.servo_id or not (servo_id in ids_before or servo_id in ids_after):
+            raise FuzzFailure(f"{what}: MX reply {reply.data.hex()} from ID {servo_id}, MX IDs {ids_before}")
+        if not broadcast and servo_id != packet.id:
+            raise FuzzFailure(f"{what}: MX reply {reply.data.hex()} from ID {servo_id}, not the packet's")
+        if bool(error & StatusError.CHECKSUM) != (not packet.checksum_ok):
+            raise FuzzFailure(f"{what}: MX reply {reply.data.hex()}: Checksum Error bit against the packet's checksum")
+        if packet.checksum_ok and packet.instruction not in MX_UNJUDGED \
+                and (packet.instruction not in MX_KNOWN) != bool(error & StatusError.INSTRUCTION):
+            raise FuzzFailure(f"{what}: MX reply {reply.data.hex()}: Instruction Error bit against the instruction")
+        if packet.checksum_ok and packet.instruction == Instruction.PING and (error & INSTRUCTION_BITS or data) \
+                and not bytes(packet.params):
+            raise FuzzFailure(f"{what}: MX reply {reply.data.hex()} to a plain PING carries an error or data")
+        if packet.checksum_ok and packet.instruction == Instruction.READ and len(packet.params) == 2:
+            address, length = bytes(packet.params)
+            if len(data) != min(length, 253):
+                raise FuzzFailure(f"{what}: MX READ of {length} bytes answered with {len(data)}")
+            holders = [k for k in reached if ids_before[k] == servo_id]
+            k = holders[0] if len(holders) == 1 else None  # MX servos sharing the ID each answer: whose is whose?
+            if k is not None and not error & INSTRUCTION_BITS:
+                sensed = rules[k].span(*MX_SENSED)
+                for offset, byte in enumerate(data):
+                    a = address + offset
+                    if a not in sensed and byte != record.before[k][a]:
+                        raise FuzzFailure(f"{what}: MX READ byte {a} ({_mx_name(rules[k], a)}) is {byte}, "
+                                          f"the table holds {record.before[k][a]}")
+    refused = {r.servo_id for r in replies if _parse_status(r.data)[1] & INSTRUCTION_BITS}
+    for k, r in enumerate(rules):
+        old, new = record.before[k], record.after[k]
+        if old == new:
+            continue
+        free = set(r.span(*MX_SENSED))
+        if packet.checksum_ok and k in reached and not bulk and packet.instruction in (Instruction.REG_WRITE,
+                                                                                      Instruction.ACTION):
+            free |= r.span("registered")
+        writes = _mx_writes(packet, ids_before[k], record.registered[k]) if packet.checksum_ok and k in reached else []
+        if writes is None:  # RESET: the factory table, but for what the firmware sets at power-up
+            boot = free | r.span("goal_position", "torque_limit")
+            wrong = [a for a in range(r.size) if a not in boot and new[a] != r.defaults[a]]
+            if wrong:
+                raise FuzzFailure(f"{what}: after RESET MX {k} byte {wrong[0]} ({_mx_name(r, wrong[0])}) is "
+                                  f"{new[wrong[0]]}, the factory table holds {r.defaults[wrong[0]]}")
+            if r.by_name["torque_limit"].value_in(new) != r.by_name["max_torque"].value_in(new):
+                raise FuzzFailure(f"{what}: after RESET MX {k} Torque Limit is not Max Torque")
+            continue
+        # Refused when its reply says so; with no reply (Status Return Level, broadcast) or a shared ID (whose
+        # answer is whose?) only the written bytes may change, to what was written.
+        shared = sum(ids_before[j] == ids_before[k] for j in reached) > 1
+        accepted = ids_before[k] not in refused or broadcast or shared
+        written: dict[int, int] = {}
+        for address, data in writes if accepted else ():
+            written.update({address + i: byte for i, byte in enumerate(data)})
+        side = r.span(*MX_WRITE_SIDE) if writes else frozenset()
+        for a in range(r.size):
+            if old[a] == new[a] or a in free or a in side:
+                continue
+            if a in written and new[a] == written[a]:
+                continue
+            raise FuzzFailure(f"{what}: MX {k} byte {a} ({_mx_name(r, a)}) changed {old[a]} -> {new[a]}, "
+                              f"{'written ' + str(written.get(a)) if a in written else 'not written'}")
+
+
+def _bulk_list(params: bytes) -> list[int]:
+    """The IDs a Protocol 1.0 Bulk Read lists (0x00, then LEN ID ADDR each), first of each ID only."""
+    if len(params) < 4 or (len(params) - 1) % 3 or params[0] != 0:
+        return []
+    out: list[int] = []
+    for at in range(1, len(params), 3):
+        if params[at + 1] not in out:
+            out.append(params[at + 1])
+    return out
+
+
+def run_mx_case(case: Case) -> int:
+    """Feed every input of an MX-wire ``case``: the MX servos' invariants per packet, the AX-12A's by :class:`Oracle`."""
+    wire, ax = build_mx_wire(case)
+    records: list[MXRecord] = []
+    _record_mx(wire, ax, records)
+    rules = [MXRules(key) for _, key in MX_SERVOS]
+    shadow = [bytes(s.table.row) for s in wire.servos_mx]
+    options = _options(case)
+    oracle = Oracle(ax.rows, options, case.line_bps)
+    ax_framer = Framer()
+    shutdown_register = layout(case.profile).profile.shutdown_clears
+    clock = wire.clock
+    wire_s = 0.0
+    fed = 0
+    for index, (data, pause_s, physics_dt_s) in enumerate(case.inputs):
+        where = f"input {index} ({data.hex() or 'empty'})"
+        wire_s += pause_s
+        if physics_dt_s:
+            clock.advance(physics_dt_s)
+            wire.advance()
+            _sync_physics(ax, oracle, shutdown_register, f"{where}, physics step")
+        before = ax.rows.copy()
+        alarms_before = [servo.alarms for servo in ax.servos]
+        write_unseen, model_time_s = ax.plant.write_unseen, ax.plant.model.time_s
+        first = len(records)
+        started_cpu_s, started_s = time.thread_time(), time.perf_counter()
+        replies = wire.receive(data, wire_s, line_bps=case.line_bps)
+        if time.thread_time() - started_cpu_s > HANG_S or time.perf_counter() - started_s > 5 * HANG_S:
+            raise FuzzFailure(f"{where}: took {time.thread_time() - started_cpu_s:.1f} s of CPU")
+        fed += 1
+        if wire.framer.buffered >= MAX_FRAME_BYTES:
+            raise FuzzFailure(f"{where}: framer holds {wire.framer.buffered} bytes")
+        ax_replies = []
+        for k, record in enumerate(records[first:]):
+            _mx_between(rules, shadow, record.before, f"{where}, packet {k}")
+            _check_mx_record(rules, record, f"{where}, packet {k}")
+            shadow = record.after
+            ax_replies += record.replies[: record.ax_replies]
+        if len(replies) != sum(len(r.replies) for r in records[first:]):
+            raise FuzzFailure(f"{where}: {len(replies)} replies, the packets' dispatch gave another count")
+        packets = ax_framer.feed(data, wire_s)
+        predicted: list[Predicted] = []
+        reset_slots: set[int] = set()
+        for packet in packets:
+            if packet.checksum_ok and packet.instruction == Instruction.RESET:
+                reset_slots |= {i for i, s in enumerate(oracle.servos) if packet.id in (BROADCAST_ID, int(s.row[3]))}
+            predicted += oracle.packet(packet.id, packet.instruction, packet.params, packet.checksum_ok, clock.now_s())
+        _check_replies(ax, oracle, ax_replies, predicted, f"{where} (AX-12A)", alarms_before, reset_slots)
+        stepped = ax.plant.model.time_s != model_time_s
+        wrote = write_unseen or any(p.checksum_ok and p.instruction in WRITES for p in packets)
+        _check_tables(ax, oracle, before, reset_slots | (set(range(len(MX_AX_IDS))) if stepped or wrote else set()),
+                      shutdown_register, f"{where} (AX-12A)", reset_slots if stepped else set())
+    now = [bytes(s.table.row) for s in wire.servos_mx]
+    _mx_between(rules, shadow, now, "after the inputs")
+    # After a pause every MX servo with an ID of its own on the wire, at the line's rate, answers a PING cleanly.
+    for servo in wire.servos_mx:
+        wire_s += PAUSE_S
+        if wire.ids.count(servo.id) != 1 or (case.line_bps is not None
+                                             and abs(case.line_bps - servo.baud_bps) > 0.03 * servo.baud_bps):
+            continue
+        got = wire.receive(encode_instruction(servo.id, Instruction.PING), wire_s)
+        if [r.data for r in got] != [encode_status(servo.id, servo.alarms)]:
+            raise FuzzFailure(f"PING to MX {servo.id} after the inputs: got {[r.data.hex() for r in got]}")
+    return fed + 1
 
 
 # -- generation -------------------------------------------------------------------------
@@ -590,9 +915,35 @@ PAUSES = (0.0, 0.0, 0.0, 0.0, 1e-4, PAUSE_S)
 PHYSICS_STEPS = (0.0,) * 14 + (0.001, 0.003)
 
 
-def generate_case(c: Any, pieces: int) -> Case:
-    """Options plus a stream of ``pieces`` pieces, each fed whole, cut in two, or glued to the next."""
+_MX_RULES = [MXRules(key) for _, key in MX_SERVOS]
+
+
+def mx_piece(c: Any) -> bytes:
+    """On the MX wire: a whole MX register read or written (a value in its range mostly), a Bulk Read, or :func:`piece`."""
+    roll = c.integer(0, 9)
+    if roll < 3:
+        entry = c.pick(_MX_RULES[c.integer(0, len(_MX_RULES) - 1)].layout.entries)
+        code = c.pick((Instruction.WRITE, Instruction.WRITE, Instruction.REG_WRITE, Instruction.READ))
+        if code == Instruction.READ:
+            return encode_instruction(_id(c), code, bytes((entry.address, entry.size)))
+        value = c.integer(entry.minimum, entry.maximum) if c.integer(0, 2) else c.integer(0, (1 << 8 * entry.size) - 1)
+        return encode_instruction(_id(c), code, bytes((entry.address,)) + (value % (1 << 8 * entry.size)).to_bytes(entry.size, "little"))
+    if roll < 5:
+        reads = b"".join(bytes((c.pick((1, 2, 4, 8, 74, 0)), _id(c), c.pick((0, 24, 30, 36, 50, 68, 73, c.integer(0, 255)))))
+                         for _ in range(c.integer(0, 4)))
+        params = (b"\x00" if c.integer(0, 9) else _data(c, 1, 1)) + reads
+        return encode_instruction(BROADCAST_ID if c.integer(0, 5) else _id(c), Instruction.BULK_READ, params)
+    return piece(c)
+
+
+def generate_case(c: Any, pieces: int, wire: str | None = None) -> Case:
+    """Options plus a stream of ``pieces`` pieces, each fed whole, cut in two, or glued to the next.
+
+    ``wire``: "ax12" or "mx" only; None: both, 2:1.
+    """
+    wire = wire or c.pick(("ax12", "ax12", "mx"))
     case = Case(
+        wire=wire,
         profile=c.pick(("ax12a", "ax12a", "ax12-2006")),
         model=c.pick(("kinematic", "kinematic", "physical")),
         reply_on_checksum_error=bool(c.integer(0, 1)),
@@ -603,7 +954,7 @@ def generate_case(c: Any, pieces: int) -> Case:
         eeprom_busy_s_per_byte=c.pick((0.0, 0.0, 0.0, 0.002)),
         line_bps=c.pick((None, None, 1e6)),
     )
-    case.inputs.extend(stream_inputs(c, pieces, piece, PAUSES, PHYSICS_STEPS))
+    case.inputs.extend(stream_inputs(c, pieces, mx_piece if wire == "mx" else piece, PAUSES, PHYSICS_STEPS))
     return case
 
 
@@ -672,6 +1023,7 @@ class Stats:
     cases: int = 0
     failure: str | None = None
     reproducer: str | None = None
+    by_wire: dict[str, int] = field(default_factory=dict)
 
 
 def _watchdog(signum: int, frame: object) -> None:
@@ -745,16 +1097,22 @@ def drive(stats: Any, make_case: Callable[[int, int], Any], run: Callable[[Any],
 
 
 def fuzz(
-    max_inputs: int, *, seconds: float | None = None, seed: int | None = None, pieces: int = 200, batch: int = 100
+    max_inputs: int, *, seconds: float | None = None, seed: int | None = None, pieces: int = 200, batch: int = 100,
+    wire: str | None = None,
 ) -> Stats:
     """Run Protocol 1.0 cases until ``max_inputs`` inputs were fed (or ``seconds`` passed) or one fails (:func:`drive`).
 
     A PRNG with each case's seed expands the grammar; a failing case is
     minimised by delta debugging and returned as a JSON reproducer.
     """
-    return drive(Stats(), lambda case_seed, count: generate_case(RandomChooser(case_seed), count), run_case, minimise,
-                 max_inputs, seconds=seconds, round_seed=None if seed is None else (lambda k: seed + k),
-                 pieces=pieces, batch=batch)
+    stats = Stats()
+
+    def counted(case: Case, fed: int) -> None:
+        stats.by_wire[case.wire] = stats.by_wire.get(case.wire, 0) + fed
+
+    return drive(stats, lambda case_seed, count: generate_case(RandomChooser(case_seed), count, wire), run_case,
+                 minimise, max_inputs, seconds=seconds, round_seed=None if seed is None else (lambda k: seed + k),
+                 pieces=pieces, batch=batch, counted=counted)
 
 
 def replay(path: str, load: Callable[[str], Any], run: Callable[[Any], int]) -> int:
@@ -793,6 +1151,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--inputs", type=int, default=1_000_000, help="inputs (chunks) to feed (default 1,000,000)")
     parser.add_argument("--seconds", type=float, help="stop after this long even if fewer inputs were fed")
     parser.add_argument("--seed", type=int, help="seed hypothesis (default: random)")
+    parser.add_argument("--wire", choices=("ax12", "mx"), help="only this wire (default: both, 2:1)")
     parser.add_argument("--no-coverage", action="store_true", help="skip coverage measurement (faster)")
     parser.add_argument("--replay", metavar="FILE", help="rerun one case written on a failure")
     parser.add_argument("--failure-file", default="fuzz-failure.json", help="where a failing case is written")
@@ -804,12 +1163,14 @@ def main(argv: list[str] | None = None) -> int:
     cov = _COVERAGE
     started = time.perf_counter()
     try:
-        stats = fuzz(args.inputs, seconds=args.seconds, seed=args.seed)
+        stats = fuzz(args.inputs, seconds=args.seconds, seed=args.seed, wire=args.wire)
     finally:
         if cov is not None:
             cov.stop()
     elapsed = time.perf_counter() - started
-    print(f"inputs: {stats.inputs:,} in {stats.cases:,} cases, {elapsed:.1f} s, {stats.inputs / elapsed:,.0f} inputs/s")
+    per_wire = ", ".join(f"{wire}: {n:,}" for wire, n in sorted(stats.by_wire.items()))
+    print(f"inputs: {stats.inputs:,} in {stats.cases:,} cases ({per_wire}), {elapsed:.1f} s, "
+          f"{stats.inputs / elapsed:,.0f} inputs/s")
     if cov is not None:
         report = io.StringIO()
         total = cov.report(file=report, show_missing=True, skip_empty=True)

@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass
 
+import pytest
 from emu_testkit import load_tool
 
 fuzz = load_tool("fuzz")
@@ -70,3 +71,68 @@ def test_the_coverage_figure_names_modules_that_exist():
     for tool in (fuzz, fuzz2):
         missing = [name for name in tool.TARGET_MODULES if not (package / f"{name}.py").is_file()]
         assert not missing, f"{tool.__name__}: {missing}"
+
+
+def test_the_mx_wire_holds_every_invariant_and_both_wires_run():
+    """A few thousand inputs on both wires: the MX wire (an MX-28, an MX-64 and an AX-12A) among them."""
+    stats = fuzz.fuzz(4000, seed=20261123)
+    assert stats.failure is None, f"{stats.failure}\nreproducer: {stats.reproducer}"
+    assert stats.by_wire.get("mx", 0) > 0 and stats.by_wire.get("ax12", 0) > 0
+
+
+def _refused_but_written(monkeypatch):
+    from ax12emu.protocol.packets import Instruction
+    from ax12emu.servo import request_handler1x
+
+    original = request_handler1x.HANDLERS[Instruction.WRITE]
+
+    def write(servo, packet):
+        error, data = original(servo, packet)
+        params = bytes(packet.params)
+        if error and len(params) >= 2:  # the reply says refused, the table takes the bytes anyway
+            for offset, byte in enumerate(params[1:][: max(0, servo.table.size - params[0])]):
+                servo.table.row[params[0] + offset] = byte
+        return error, data
+
+    monkeypatch.setitem(request_handler1x.HANDLERS, Instruction.WRITE, write)
+
+
+def _read_one_byte_off(monkeypatch):
+    from ax12emu.servo import request_handler1x
+
+    original = request_handler1x.listed_read
+
+    def listed_read(servo, address, length):
+        return original(servo, address + 1, length)
+
+    monkeypatch.setattr(request_handler1x, "listed_read", listed_read)
+
+
+def _reply_from_the_next_id(monkeypatch):
+    from ax12emu.protocol.packets import encode_status
+    from ax12emu.servo import request_handler1x
+
+    original = request_handler1x.handle1x
+
+    def handle1x(servo, packet):
+        outcome = original(servo, packet)
+        if outcome.reply is None:
+            return outcome
+        return outcome._replace(reply=encode_status((servo.id + 1) % 253, outcome.reply[4], outcome.reply[5:-1]))
+
+    monkeypatch.setattr(request_handler1x, "handle1x", handle1x)
+    monkeypatch.setattr("ax12emu.bus.bus1x.handle1x", handle1x)
+
+
+@pytest.mark.parametrize("plant", [_refused_but_written, _read_one_byte_off, _reply_from_the_next_id])
+def test_the_mx_checks_catch_a_planted_bug(monkeypatch, plant):
+    """Each planted MX bug fails the MX wire's checks within seconds, with a minimised case the real code passes."""
+    plant(monkeypatch)
+    stats = fuzz.fuzz(10**9, seconds=15.0, seed=11, wire="mx")
+    assert stats.failure is not None and "FuzzFailure" in stats.failure, stats.failure
+    case = fuzz.Case.from_json(stats.reproducer)
+    assert case.wire == "mx" and len(case.inputs) <= 4, "the failure is minimised"
+    with pytest.raises(fuzz.FuzzFailure):
+        fuzz.run_case(case)
+    monkeypatch.undo()
+    fuzz.run_case(case)
