@@ -34,7 +34,7 @@ from ax12emu.servo.virtual_servo import ServoOptions, VirtualServo
 from firmware_model.interface import ServoModel
 
 from .clock import VirtualClock, WallClock
-from .lookup import ServosById
+from .lookup import ServosById, check_ids
 from .reply import Reply
 from .reply_cache import ReplyCache
 from .state_store import StateStore
@@ -88,13 +88,7 @@ class Bus(ServosById[VirtualServo]):
         ``options.profile``), instead of the profile's; ``model`` should then carry each model's
         physics (``firmware_model.grouped.GroupedModel`` for several)."""
         slots = list(ids)
-        if not slots:
-            raise ValueError("a bus needs at least one servo")
-        if len(set(slots)) != len(slots):
-            raise ValueError(f"duplicate IDs in {slots}")
-        for servo_id in slots:
-            if not 0 <= servo_id <= MAX_ID:
-                raise ValueError(f"ID {servo_id} is outside 0..{MAX_ID}")
+        check_ids(slots, MAX_ID)
         self.slots = slots
         self.options = options
         self.clock = clock if clock is not None else WallClock()

@@ -40,6 +40,7 @@ from ax12emu.servo.servo1x import Servo1X, Servo1XOptions
 from .bus import Bus, Interceptor
 from .clock import VirtualClock, WallClock
 from .decoded import DecodedBus
+from .lookup import check_ids
 from .reply import BITS_PER_BYTE, Reply
 from .state_store import StateStore
 
@@ -72,12 +73,7 @@ class Bus1X(DecodedBus):
         slots = list(servos)
         if not slots:
             raise ValueError("a bus needs at least one servo")
-        ids = [servo_id for servo_id, _ in slots] + (ax_bus.slots if ax_bus is not None else [])
-        if len(set(ids)) != len(ids):
-            raise ValueError(f"duplicate IDs in {ids}")
-        for servo_id in ids:
-            if not 0 <= servo_id <= MAX_ID:
-                raise ValueError(f"ID {servo_id} is outside 0..{MAX_ID}")
+        check_ids([servo_id for servo_id, _ in slots] + (ax_bus.slots if ax_bus is not None else []), MAX_ID)
         if ax_bus is not None and clock is not None and ax_bus.clock is not clock:
             raise ValueError("the AX-12 bus and the MX servos of one wire must keep one clock")
         self.clock = ax_bus.clock if ax_bus is not None else (clock if clock is not None else WallClock())

@@ -86,7 +86,7 @@ from firmware_model.xseries.interface import XServoModel
 from .bus import Interceptor
 from .clock import VirtualClock, WallClock
 from .decoded import DecodedBus
-from .lookup import ServosById
+from .lookup import ServosById, check_ids
 from .reply import BITS_PER_BYTE, Reply, collide
 from .state_store import StateStore
 
@@ -125,14 +125,8 @@ class Bus2(ServosById[Servo2], DecodedBus):
         state_store: StateStore | None = None,
     ) -> None:
         slots = list(servos)
-        if not slots:
-            raise ValueError("a bus needs at least one servo")
         ids = [servo_id for servo_id, _ in slots]
-        if len(set(ids)) != len(ids):
-            raise ValueError(f"duplicate IDs in {ids}")
-        for servo_id in ids:
-            if not 0 <= servo_id <= MAX_ID2:
-                raise ValueError(f"ID {servo_id} is outside 0..{MAX_ID2} (Protocol 2.0)")
+        check_ids(ids, MAX_ID2, " (Protocol 2.0)")
         self.slots = ids
         self.clock = clock if clock is not None else WallClock()
         self.framer = framer if framer is not None else Framer2()

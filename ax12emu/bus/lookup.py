@@ -1,14 +1,26 @@
 """Servos looked up by the IDs in their tables: what every bus needs to know who a packet is for.
 
 Why a module of its own: the Protocol 1.0 and 2.0 buses look servos up alike (an ID is a
-register, so it changes when a packet or a fault writes it, and two servos may share one).
+register, so it changes when a packet or a fault writes it, and two servos may share one), and
+refuse the same launch IDs.
 """
 
 from __future__ import annotations
 
 from typing import Generic, Protocol, TypeVar
 
-__all__ = ["ServosById"]
+__all__ = ["ServosById", "check_ids"]
+
+
+def check_ids(ids: list[int], max_id: int, protocol_note: str = "") -> None:
+    """ValueError for the IDs a bus is launched with when there are none, one repeats, or one lies outside 0..max_id."""
+    if not ids:
+        raise ValueError("a bus needs at least one servo")
+    if len(set(ids)) != len(ids):
+        raise ValueError(f"duplicate IDs in {ids}")
+    for servo_id in ids:
+        if not 0 <= servo_id <= max_id:
+            raise ValueError(f"ID {servo_id} is outside 0..{max_id}{protocol_note}")
 
 
 class _HasId(Protocol):
