@@ -1111,7 +1111,8 @@ def fuzz(
         stats.by_wire[case.wire] = stats.by_wire.get(case.wire, 0) + fed
 
     return drive(stats, lambda case_seed, count: generate_case(RandomChooser(case_seed), count, wire), run_case,
-                 minimise, max_inputs, seconds=seconds, round_seed=None if seed is None else (lambda k: seed + k),
+                 # runs with nearby seeds must not share rounds
+                 minimise, max_inputs, seconds=seconds, round_seed=None if seed is None else (lambda k: seed * 1_000_000 + k),
                  pieces=pieces, batch=batch, counted=counted)
 
 
