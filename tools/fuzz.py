@@ -130,6 +130,8 @@ WRITES = frozenset({Instruction.WRITE, Instruction.ACTION, Instruction.SYNC_WRIT
 PAUSE_S = DEFAULT_SILENCE_TIMEOUT_S * 1.5
 
 R = StatusError.RANGE
+#: Bytes an Alarm Shutdown clears: Torque Limit (34, 35), or Torque Enable (24) in the 2006 profile.
+SHUTDOWN_CLEARED = frozenset({24, 34, 35})
 #: The error bits the physics raises (the others answer the instruction).
 PHYSICAL_ALARMS = int(StatusError.INPUT_VOLTAGE | StatusError.OVERHEATING | StatusError.OVERLOAD)
 
@@ -456,6 +458,10 @@ def _check_replies(bus: Bus, oracle: Oracle, replies: list, predicted: list[Pred
             address, _ = expect.read
             for k, (got, want) in enumerate(zip(data, expect.data)):
                 if address + k < TABLE_SIZE and address + k not in FIRMWARE_OWNED and got != want:
+                    # An Alarm Shutdown by the control step a write earned, taken in this input before
+                    # the READ: the oracle's table learns of it after the input (``_shutdown_explains``).
+                    if got == 0 and address + k in SHUTDOWN_CLEARED and alarms & int(bus.rows[expect.slot, 18]):
+                        continue
                     raise FuzzFailure(f"{where}: READ of {address + k} gave {got}, table holds {want}")
 
 

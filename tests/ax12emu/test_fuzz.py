@@ -54,3 +54,15 @@ def test_tool_main_prints_figures(capsys):
     assert fuzz.main(["--inputs", "500", "--no-coverage", "--seed", "1"]) == 0
     out = capsys.readouterr().out
     assert "inputs/s" in out and "failures: 0" in out
+
+
+def test_a_read_after_an_alarm_shutdown_within_the_same_input():
+    """Found by ``--seed 41``: a broadcast write of Temperature Limit 22 (below the servo's 30 C), then in one input
+    a READ over Torque Limit: the control step that write earned, taken before the READ, raised Overheating and
+    the Alarm Shutdown zeroed Torque Limit, so the READ shows 0 where the oracle's table (which learns of the
+    shutdown after the input) holds 255."""
+    case = fuzz.Case(model="physical", reset_reply_from_new_id=True, inputs=[
+        (bytes.fromhex("ffff0306aa037f0106c3ffff84054c03116b293426fffffe04030b16d9"), 0.0001, 0.0),
+        (bytes.fromhex("ffff01"), 0.0001, 0.0),
+        (bytes.fromhex("04020d707bfffffe05040301fdf7"), 0.0, 0.0)])
+    assert fuzz.run_case(case) == 4
