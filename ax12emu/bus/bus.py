@@ -269,7 +269,7 @@ class Bus(ServosById[VirtualServo]):
         if instruction in _CHANGES_TABLES and targets and packet.checksum_ok:
             self.plant.wrote()
             if instruction == Instruction.RESET:
-                self.plant.refresh()
+                self.plant.refresh(alarms=False)
             if faults is not None:
                 # Held registers and a stall's drive timer see the write now, at its time, not at
                 # whichever comes next of a physics tick or a packet (in virtual time, a later step).

@@ -175,13 +175,19 @@ class Plant:
             self._write_back(sensed)
             self._writes_shown = writes  # writes that came between the pieces stay unseen
 
-    def refresh(self) -> None:
-        """Copy the model's present sensed values into the tables without advancing."""
+    def refresh(self, *, alarms: bool = True) -> None:
+        """Copy the model's present sensed values into the tables without advancing.
+
+        ``alarms=False`` after a RESET: the model's last step judged its alarms under the
+        limits the RESET has just erased, and tripping the Alarm Shutdown with them would
+        zero Torque Limit on the factory table.  The next control step (which a RESET, a
+        write, earns before the next request) judges them under the factory limits.
+        """
         self._written.clear()
         self._refreshes += 1
-        self._write_back(self.model.sense())
+        self._write_back(self.model.sense(), alarms=alarms)
 
-    def _write_back(self, sensed: Sensed) -> None:
+    def _write_back(self, sensed: Sensed, *, alarms: bool = True) -> None:
         rows, written = self.rows, self._written
         words = rows.view("<u2")
         for name, (address, size) in self._sensed.items():
@@ -193,6 +199,8 @@ class Plant:
                 words[:, address // 2] = value
             else:
                 rows[:, address] = value
+        if not alarms:
+            return
         if written.get("alarms") is sensed.alarms and not (self._any_alarm or sensed.alarms.flags.writeable):
             return  # no alarm then, the same read-only bits now
         written["alarms"] = sensed.alarms

@@ -145,3 +145,25 @@ def test_physics_runs_at_most_one_step_ahead_of_the_clock_per_write():
     assert bus.plant.model.time_s == pytest.approx(0.02 + STEP_S)
     _run(bus, 0.01)
     assert bus.plant.model.time_s == pytest.approx(0.03)
+
+
+def test_reset_judges_alarms_under_the_factory_limits_not_the_ones_it_erased():
+    """A servo overheating under a low Temperature Limit, then RESET: the fresh table keeps its Torque Limit.
+
+    The alarms of the model's last step were raised under the limits RESET
+    has just erased; tripping the Alarm Shutdown with them zeroed Torque Limit
+    on the factory table (a case tools/fuzz.py found).  The next control step
+    judges the alarms under the factory limits, as a rebooted firmware does.
+    """
+    bus = _bus(0.0)
+    _write(bus, "torque_enable", 1)
+    _write(bus, "temperature_limit", 15)  # below the servo's own temperature: Overheating at once
+    _run(bus, 0.01)
+    assert _read(bus, "torque_limit") == 0, "the overheat tripped the Alarm Shutdown (default Shutdown has bit 2)"
+    (reply,) = bus.receive(encode_instruction(1, Instruction.RESET, b""))
+    assert reply.data[4] & 0x08 == 0, "RESET is answered (its reply may still show the overheat it ends)"
+    assert _read(bus, "torque_limit") == _read(bus, "max_torque")
+    _run(bus, 0.01)
+    assert _read(bus, "torque_limit") == _read(bus, "max_torque")
+    (status,) = bus.receive(encode_instruction(1, Instruction.PING, b""))
+    assert status.data[4] == 0, f"no alarm under the factory limits: {status.data[4]:#04x}"
