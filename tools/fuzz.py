@@ -360,6 +360,21 @@ def _options(case: Case) -> ServoOptions:
     )
 
 
+def _predict(oracle: Oracle, packets: list, now_s: float) -> tuple[list, list[Predicted], set[int]]:
+    """The AX-12 oracle's answers to one input's packets, and the slots a RESET among them reached.
+
+    Why the slots: a RESET rewrites its servo's table, so the table checks after the input
+    judge those slots by the reset rules rather than byte by byte.
+    """
+    predicted: list[Predicted] = []
+    reset_slots: set[int] = set()
+    for packet in packets:
+        if packet.checksum_ok and packet.instruction == Instruction.RESET:
+            reset_slots |= {i for i, s in enumerate(oracle.servos) if packet.id in (BROADCAST_ID, int(s.row[3]))}
+        predicted += oracle.packet(packet.id, packet.instruction, packet.params, packet.checksum_ok, now_s)
+    return packets, predicted, reset_slots
+
+
 def run_case(case: Case) -> int:
     """Feed every input of ``case`` to a fresh bus, checking the invariants; return inputs fed."""
     if case.wire == "mx":
@@ -389,15 +404,7 @@ def run_case(case: Case) -> int:
         fed += 1
         if bus.framer.buffered >= MAX_FRAME_BYTES:
             raise FuzzFailure(f"{where}: framer holds {bus.framer.buffered} bytes")
-        packets = shadow_framer.feed(data, wire_s)
-        predicted: list[Predicted] = []
-        reset_slots: set[int] = set()
-        for packet in packets:
-            if packet.checksum_ok and packet.instruction == Instruction.RESET:
-                reset_slots |= {
-                    i for i, s in enumerate(oracle.servos) if packet.id in (BROADCAST_ID, int(s.row[3]))
-                }
-            predicted += oracle.packet(packet.id, packet.instruction, packet.params, packet.checksum_ok, clock.now_s())
+        packets, predicted, reset_slots = _predict(oracle, shadow_framer.feed(data, wire_s), clock.now_s())
         # Physics catches up with the clock when a packet is handled, and the control step after a
         # write runs before the next packet is answered, so firmware bytes may change within this
         # input; the model may run ahead of the clock only for a write (before this input or in it).
@@ -771,13 +778,7 @@ def run_mx_case(case: Case) -> int:
             ax_replies += record.replies[: record.ax_replies]
         if len(replies) != sum(len(r.replies) for r in records[first:]):
             raise FuzzFailure(f"{where}: {len(replies)} replies, the packets' dispatch gave another count")
-        packets = ax_framer.feed(data, wire_s)
-        predicted: list[Predicted] = []
-        reset_slots: set[int] = set()
-        for packet in packets:
-            if packet.checksum_ok and packet.instruction == Instruction.RESET:
-                reset_slots |= {i for i, s in enumerate(oracle.servos) if packet.id in (BROADCAST_ID, int(s.row[3]))}
-            predicted += oracle.packet(packet.id, packet.instruction, packet.params, packet.checksum_ok, clock.now_s())
+        packets, predicted, reset_slots = _predict(oracle, ax_framer.feed(data, wire_s), clock.now_s())
         _check_replies(ax, oracle, ax_replies, predicted, f"{where} (AX-12A)", alarms_before, reset_slots)
         stepped = ax.plant.model.time_s != model_time_s
         wrote = write_unseen or any(p.checksum_ok and p.instruction in WRITES for p in packets)
