@@ -61,6 +61,7 @@ bus's servos as it shows the 1.0 bus's.
 
 from __future__ import annotations
 
+import functools
 import logging
 from collections.abc import Callable, Iterable, Iterator
 
@@ -79,7 +80,7 @@ from ax12emu.protocol.packets2 import (
 from ax12emu.protocol.params2 import INSTRUCTION_SPECS, Broadcast, BulkRead, SyncRead
 from ax12emu.protocol.servo_models import ServoModel
 from ax12emu.servo.plant2 import plant_for
-from ax12emu.servo.request_handler2 import answers, handle2, listed_read, parsed_params, status_byte
+from ax12emu.servo.request_handler2 import answers, handle2, listed_read, parsed_params, status_byte, sync_write_all
 from ax12emu.servo.servo2 import Servo2, Servo2Options
 from firmware_model.xseries.interface import XServoModel
 
@@ -102,6 +103,10 @@ MAX_LENGTH = 0xFFFF
 _EXECUTED_SILENTLY = frozenset({Broadcast.SILENT, Broadcast.EACH_ANSWERS})
 _LISTED_READS = frozenset({Broadcast.REQUIRED_EACH_ANSWERS, Broadcast.REQUIRED_COMBINED_ANSWER})
 _REQUIRED_BROADCAST = _LISTED_READS | {Broadcast.REQUIRED_SILENT}
+#: ``encode_status2`` remembered for the last answers (``data``: bytes, as ``Table2.read`` gives): a robot's
+#: Sync Read asks the same servos for the same registers every cycle, and a servo at rest, or read again
+#: within one control step, answers the same bytes.
+_status_packet = functools.lru_cache(maxsize=1024)(encode_status2)
 
 
 class Bus2(ServosById[Servo2], DecodedBus):
@@ -148,6 +153,10 @@ class Bus2(ServosById[Servo2], DecodedBus):
         #: Injected faults (``ax12emu.faults.Faults2``: replies dropped, corrupted or delayed,
         #: servos unplugged; the servos' own act in their firmware); None costs one test per packet.
         self.faults: Interceptor | None = None
+        #: Set by a serving loop that takes the steps the servos owe right after each packet
+        #: (``settle_in_pieces``): a Sync/Bulk Read may then leave a servo's catch-up for after its reply
+        #: where the reply cannot tell (``Plant2.defer_catch_up``).  Off, every request catches up first.
+        self.defer_settling = False
         self._closed = False
 
     # -- lookup (reindex, servo, ids: ServosById) ---------------------------------------
@@ -157,12 +166,21 @@ class Bus2(ServosById[Servo2], DecodedBus):
         return min(servo.plant.firmware.step_s for servo in self.servos)
 
     # -- time --------------------------------------------------------------------------
-    def catch_up(self, sim_time_s: float, clock_s: float | None = None) -> None:
+    def catch_up(self, sim_time_s: float, clock_s: float | None = None,
+                 reads: dict[Servo2, tuple[tuple[int, int], ...] | None] | None = None) -> None:
         """Every servo's firmware brought to ``sim_time_s`` (and past a client's write, at most a step past
-        the clock's present ``clock_s``: ``Plant2.catch_up``); watchdogs checked."""
+        the clock's present ``clock_s``: ``Plant2.catch_up``); watchdogs checked.
+
+        ``reads``: for a read the serving loop settles after (see :attr:`defer_settling`), the spans each
+        listed servo's answer reads of its sensed registers (None: it reads one it cannot leave); a servo
+        whose catch-up would change none of them takes it after the reply (``Plant2.defer_catch_up``).
+        """
         for servo in self.servos:
-            if servo.plant.due(sim_time_s):
-                servo.plant.catch_up(sim_time_s, clock_s)
+            plant = servo.plant
+            if plant.due(sim_time_s):
+                spans = reads.get(servo) if reads is not None else None
+                if spans is None or clock_s is None or not plant.defer_catch_up(sim_time_s, clock_s, spans):
+                    plant.catch_up(sim_time_s, clock_s)
             servo.check_watchdog(sim_time_s)
 
     def advance(self) -> bool:
@@ -194,6 +212,14 @@ class Bus2(ServosById[Servo2], DecodedBus):
                 plant.catch_up(sim_time_s, clock_s)
                 yield
 
+    def take_deferred(self) -> None:
+        """Every catch-up a reply went out before (``Plant2.defer_catch_up``), taken now at the times it was due.
+
+        For a serving loop before it hands the bus to a caller, who may read any register.
+        """
+        for servo in self.servos:
+            servo.plant.catch_up_deferred()
+
     # -- bytes in, replies out (receive, answer, expire: DecodedBus) ---------------------
     def dispatch(self, packet: InstructionPacket2 | StatusPacket2, *, line_bps: float | None = None) -> list[Reply]:
         """Run one decoded packet on the servos it reaches; return their replies, timed."""
@@ -201,8 +227,13 @@ class Bus2(ServosById[Servo2], DecodedBus):
             return []  # another device's answer: every servo hears it, none acts
         clock_s = self.clock.now_s()
         now_s = clock_s - self.request_lag_s
-        self.catch_up(now_s, clock_s)
         broadcast = packet.id == BROADCAST_ID
+        spec = INSTRUCTION_SPECS.get(packet.instruction)
+        kind = spec.broadcast if spec is not None else None
+        faults = self.faults
+        reads = (self._sensed_reads(packet) if self.defer_settling and broadcast and packet.crc_ok
+                 and kind in _LISTED_READS and faults is None else None)
+        self.catch_up(now_s, clock_s, reads)
         targets = [s for s in (self.servos if broadcast else self._by_id.get(packet.id, ()))
                    if self._hears(s, line_bps)]
         if log.isEnabledFor(logging.DEBUG):
@@ -211,14 +242,11 @@ class Bus2(ServosById[Servo2], DecodedBus):
         # Servos whose Secondary ID this is (and not their ID: "ID(7) has a higher priority").
         grouped = [] if broadcast else [s for s in self.servos if s.secondary_id == packet.id and s.id != packet.id
                                         and self._hears(s, line_bps)]
-        faults = self.faults
         if faults is not None:  # an unplugged servo hears nothing (ax12emu.faults: wire faults)
             targets = [s for s in targets if faults.admit(s)]
             grouped = [s for s in grouped if faults.admit(s)]
         for servo in (*targets, *grouped):
             servo.heard(now_s)
-        spec = INSTRUCTION_SPECS.get(packet.instruction)
-        kind = spec.broadcast if spec is not None else None
         if not packet.crc_ok or not broadcast:
             replies = [] if kind in _REQUIRED_BROADCAST and packet.crc_ok else self._each_own(packet, targets)
             if packet.crc_ok and kind not in _REQUIRED_BROADCAST:
@@ -228,6 +256,9 @@ class Bus2(ServosById[Servo2], DecodedBus):
             replies = self._listed(packet, line_bps)
         elif packet.instruction == Instruction2.PING:
             replies = self._broadcast_ping(packet, targets)
+        elif packet.instruction == Instruction2.SYNC_WRITE:
+            sync_write_all(targets, packet)
+            replies = []
         elif kind in _EXECUTED_SILENTLY or kind is Broadcast.REQUIRED_SILENT:
             for servo in targets:
                 handle2(servo, packet)
@@ -239,6 +270,27 @@ class Bus2(ServosById[Servo2], DecodedBus):
         if faults is not None and replies:
             replies = faults.on_replies(replies)
         return replies
+
+    def _sensed_reads(self, packet: InstructionPacket2) -> dict[Servo2, tuple[tuple[int, int], ...] | None] | None:
+        """For a Sync/Bulk Read (or a fast one): each listed servo's sensed-register spans its answer reads
+        (``Plant2.sensed_spans``; None where it reads Indirect Data or a register a command changes at once)."""
+        params = parsed_params(packet.instruction, packet.params if type(packet.params) is bytes else bytes(packet.params))
+        if isinstance(params, SyncRead):
+            reads = [(servo_id, params.address, params.length) for servo_id in params.ids]
+        elif isinstance(params, BulkRead):
+            reads = list(params.reads)
+        else:
+            return None
+        spans_by_servo: dict[Servo2, tuple[tuple[int, int], ...] | None] = {}
+        by_id = self._by_id
+        for servo_id, address, length in reads:
+            for servo in by_id.get(servo_id, ()):
+                spans = None if servo.table.reads_indirect(address, length) else servo.plant.sensed_spans(address, length)
+                if servo in spans_by_servo:  # listed twice: both reads count
+                    before = spans_by_servo[servo]
+                    spans = None if before is None or spans is None else before + spans
+                spans_by_servo[servo] = spans
+        return spans_by_servo
 
     def _each_own(self, packet: InstructionPacket2, targets: list[Servo2]) -> list[Reply]:
         if packet.id == BROADCAST_ID:
@@ -312,7 +364,7 @@ class Bus2(ServosById[Servo2], DecodedBus):
         at_s = wire_s = 0.0
         for k, (servo, error, data) in enumerate(answered):
             servo_id, baud = servo.id, servo.baud_bps
-            status = encode_status2(servo_id, status_byte(servo, error), data)
+            status = _status_packet(servo_id, status_byte(servo, error), data)
             at_s += servo.return_delay_s
             reply = Reply(servo_id, status, at_s + wire_s, baud, wire_s)
             if twins and k in twins:  # the same turn: their answers collide on the wire

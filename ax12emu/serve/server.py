@@ -117,6 +117,11 @@ class BusServer:
         self._settle: Callable[[], Iterator[None]] | None = getattr(bus, "settle_in_pieces", None)
         #: A packet was handled since the last settling began (only with ``_settle``).
         self._unsettled = False
+        if self._settle is not None and hasattr(bus, "defer_settling"):
+            # This loop settles right after each packet, so a read may leave for then what its reply cannot show.
+            bus.defer_settling = True
+        #: Takes what a reply went out before (``Bus2.take_deferred``), before a call sees the bus; None: nothing to take.
+        self._take_deferred: Callable[[], None] | None = getattr(bus, "take_deferred", None)
         #: The settling under way, in pieces, or None.
         self._settling: Iterator[None] | None = None
         #: Counters for diagnostics and tests.
@@ -370,6 +375,8 @@ class BusServer:
 
     def _run_calls(self) -> None:
         self._read_pending()
+        if self._take_deferred is not None:
+            self._take_deferred()  # a caller may read any register, the ones a reply could not show included
         while self._calls:
             fn, future = self._calls.popleft()
             try:

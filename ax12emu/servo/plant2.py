@@ -22,7 +22,7 @@ from collections.abc import Callable, Iterator
 
 from ax12emu.protocol.registers import Entry
 from ax12emu.protocol.servo_models import ServoModel
-from firmware_model.xseries.interface import OperatingMode, XCommands, XSensed, XServoModel
+from firmware_model.xseries.interface import TRAJECTORY_SENSED, OperatingMode, XCommands, XSensed, XServoModel
 
 from .classic import ClassicMap
 from .table2 import Table2
@@ -39,6 +39,13 @@ SENSED_REGISTERS["present_current"] = ("present_current", "present_load")
 #: How far a model's time may sit past the clock and still count as not ahead of it: both add up
 #: steps of a millisecond in floating point, so equal times may differ in their last bits.
 GRID_SLACK_S = 1e-9
+
+#: Sensed registers the bus reads while handling any packet: the Bus Watchdog checks Torque Enable, and
+#: every status packet's Alert bit is Hardware Error Status.
+_READ_PER_PACKET = ("torque_enable", "hardware_error_status")
+#: More distinct reads than a client makes; past it the remembered spans start over.
+_MAX_SPANS = 256
+_UNKNOWN = object()
 
 #: struct codes of a little-endian register by (size, signed).
 _CODES = {(1, False): "B", (1, True): "b", (2, False): "H", (2, True): "h", (4, False): "I", (4, True): "i"}
@@ -111,6 +118,9 @@ class SteppedPlant:
 
     firmware: XServoModel
     _write_unseen: bool
+    #: The (sim_time_s, clock_s) of a catch-up left for after a reply it could not change (see
+    #: :meth:`Plant2.defer_catch_up`), taken before anything else reaches the model; None: none.
+    _deferred: tuple[float, float | None] | None = None
 
     def due(self, sim_time_s: float) -> bool:
         """Whether a whole step is due by ``sim_time_s`` or a client's write is not yet shown."""
@@ -130,6 +140,8 @@ class SteppedPlant:
         restarted, torque and mode acted on, at the model's time) read back at once, and the
         physics waits for the clock.
         """
+        if self._deferred is not None:
+            self.catch_up_deferred()
         model = self.firmware
         stepped = False
         if sim_time_s >= model.time_s + model.step_s:
@@ -145,6 +157,8 @@ class SteppedPlant:
 
     def tick(self, sim_time_s: float) -> Iterator[None]:
         """:meth:`catch_up` in two pieces (step, then the copy), for a serving loop to interleave with packets."""
+        if self._deferred is not None:
+            self.catch_up_deferred()
         model = self.firmware
         if sim_time_s < model.time_s + model.step_s:
             return
@@ -152,6 +166,14 @@ class SteppedPlant:
         yield
         self._write_unseen = False
         self.write_back()
+
+
+    def catch_up_deferred(self) -> None:
+        """The catch-up a reply went out before, if any, at the times it was due (the model has not changed since)."""
+        deferred = self._deferred
+        if deferred is not None:
+            self._deferred = None
+            self.catch_up(*deferred)
 
 
 class Plant2(SteppedPlant):
@@ -179,6 +201,14 @@ class Plant2(SteppedPlant):
         #: The command registers last handed to the firmware, and the commands made of them (see :meth:`command`).
         self._commanded_values: tuple[int, ...] | None = None
         self._commanded: XCommands | None = None
+        #: The table's bytes and the firmware's ``sensing_epoch`` as of the last :meth:`write_back` (see :meth:`defer_catch_up`).
+        self._written_back_row = b""
+        self._written_back_epoch: int | None = None
+        #: The registers whose bytes a sensed value other than the trajectory ones lands in, and the trajectory ones'.
+        self._steady_sensed = tuple((entry.address, entry.end) for field, entry in self._sensed if field not in TRAJECTORY_SENSED)
+        self._trajectory_sensed = tuple((entry.address, entry.end) for field, entry in self._sensed if field in TRAJECTORY_SENSED)
+        #: (address, length) -> the steady sensed registers' spans among those bytes, or None if a trajectory one is.
+        self._spans: dict[tuple[int, int], tuple[tuple[int, int], ...] | None] = {}
         self.command()
         self.write_back()
 
@@ -195,6 +225,8 @@ class Plant2(SteppedPlant):
 
     def command(self, *, goal_written: bool = False) -> None:
         """Hand the model the table's commands now; the next request sees a step taken after them."""
+        if self._deferred is not None:
+            self.catch_up_deferred()
         values = self._read_commands(self.table.row)
         if self._held is not None or values != self._commanded_values:
             # A robot writes the same goals cycle after cycle: equal registers, the same (never mutated) object;
@@ -210,6 +242,8 @@ class Plant2(SteppedPlant):
         Goal PWM (and Goal Current in Current-based Position mode) also cap the drive in the other
         modes; zeroing them there would leave the servo limp instead of stopped.
         """
+        if self._deferred is not None:
+            self.catch_up_deferred()
         present = self.table.get("present_position") if self.table.has("present_position") else 0
         held = {"goal_velocity": 0, "goal_position": present}
         mode = self.table.get("operating_mode") if self.table.has("operating_mode") else OperatingMode.POSITION
@@ -227,11 +261,66 @@ class Plant2(SteppedPlant):
     # -- time: due, catch_up, tick (SteppedPlant) ----------------------------------------
     def write_back(self) -> None:
         """Copy what the firmware senses into the table (Torque Enable too, which Shutdown clears)."""
-        self._store_sensed(self.table.row, self._sense_fields(self.firmware.sense()))
+        if self._deferred is not None:
+            self.catch_up_deferred()  # which writes back itself
+        row = self.table.row
+        self._store_sensed(row, self._sense_fields(self.firmware.sense()))
+        self._written_back_row = bytes(row)
+        self._written_back_epoch = getattr(self.firmware, "sensing_epoch", None)
+
+    def sensed_spans(self, address: int, length: int) -> tuple[tuple[int, int], ...] | None:
+        """The byte spans of the sensed registers among ``address``..``+length`` other than the trajectory ones,
+        with Torque Enable and Hardware Error Status (which every packet's handling reads: the Bus Watchdog,
+        the Alert bit); None if a trajectory register is among those bytes."""
+        key = (address, length)
+        spans = self._spans.get(key, _UNKNOWN)
+        if spans is _UNKNOWN:
+            end = address + length
+            if any(start < end and address < stop for start, stop in self._trajectory_sensed):
+                spans = None
+            else:
+                always = {self.table.layout.by_name[name].address for name in _READ_PER_PACKET if self.table.has(name)}
+                spans = tuple((start, stop) for start, stop in self._steady_sensed
+                              if (start < end and address < stop) or start in always)
+            if len(self._spans) >= _MAX_SPANS:
+                self._spans.clear()
+            self._spans[key] = spans
+        return spans
+
+    def defer_catch_up(self, sim_time_s: float, clock_s: float, spans: tuple[tuple[int, int], ...]) -> bool:
+        """Leave the catch-up a request owes for after its reply, if the reply provably cannot tell; True if left.
+
+        Why: a robot's cycle sends a Sync Write and at once a Sync Read; the copy of the write's effects
+        into six tables (``write_back``) before the read is answered is on the host's wait, and a read of,
+        say, Present Position cannot see it.  Left only when the catch-up would not step the model (no
+        step due by ``sim_time_s``, and the one a write earns would run past ``clock_s``), so all it
+        would do is copy what the firmware senses; and that copy would leave every byte of ``spans``
+        (see :meth:`sensed_spans`) as it is: the firmware's ``sensing_epoch`` has not moved since the last
+        copy (so none of those values changed) and nobody wrote those bytes since.  The catch-up is taken
+        later at the same times (``sim_time_s``, ``clock_s``) before anything else reaches the model, so
+        the tables end as they would have.
+        """
+        model = self.firmware
+        if sim_time_s >= model.time_s + model.step_s:
+            return False  # a step is due: the read must see it
+        if self._deferred is None:
+            if not self._write_unseen or model.time_s <= clock_s + GRID_SLACK_S:
+                return False  # nothing owed, or the write earns a step the read must see
+        if self._written_back_epoch is None or getattr(model, "sensing_epoch", None) != self._written_back_epoch:
+            return False
+        row, before = self.table.row, self._written_back_row
+        for start, stop in spans:
+            if row[start:stop] != before[start:stop]:
+                return False
+        if self._deferred is None:
+            self._deferred = (sim_time_s, clock_s)
+        return True
 
     # -- instructions that reach the firmware ---------------------------------------------
     def reboot(self) -> None:
         """REBOOT: the model restarts; the table's RAM area returns to its defaults."""
+        if self._deferred is not None:
+            self.catch_up_deferred()
         self.firmware.reboot()
         self.table.ram_defaults()
         self._held = None
@@ -240,6 +329,8 @@ class Plant2(SteppedPlant):
 
     def clear_multi_turn(self) -> None:
         """CLEAR option 0x01: the model drops Present Position's turn count."""
+        if self._deferred is not None:
+            self.catch_up_deferred()
         self.firmware.clear_multi_turn()
         self.write_back()
 

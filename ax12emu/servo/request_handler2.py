@@ -33,7 +33,7 @@ Policy, with sources (ROBOTIS e-manual, "DYNAMIXEL Protocol 2.0"; X series "Stat
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from typing import NamedTuple
 
 from ax12emu.protocol.packets import BROADCAST_ID
@@ -61,7 +61,8 @@ from ax12emu.protocol.params2 import (
 
 from .servo2 import Servo2
 
-__all__ = ["HANDLERS", "READ_INSTRUCTIONS", "Outcome2", "answers", "handle2", "listed_read", "parsed_params", "status_byte"]
+__all__ = ["HANDLERS", "READ_INSTRUCTIONS", "Outcome2", "answers", "handle2", "listed_read", "parsed_params", "status_byte",
+           "sync_write_all"]
 
 #: ``parse_params`` remembered for the last packets: a broadcast Sync/Bulk Write reaches every servo,
 #: and each would parse the same parameters again, and a robot sends the same Sync Read every cycle
@@ -175,6 +176,27 @@ def _sync_write(servo: Servo2, params: SyncWrite) -> tuple[int, bytes]:
         if servo_id == servo.id:
             return servo.write(params.address, data), b""
     return ErrorNumber.NONE, b""
+
+
+def sync_write_all(servos: Iterable[Servo2], packet: InstructionPacket2) -> None:
+    """:func:`handle2` of a broadcast Sync Write with a good CRC on each of ``servos`` in turn, as one call.
+
+    The same outcome: each servo writes the data listed first under its ID (``_sync_write``), a servo
+    not listed does nothing, malformed parameters write nothing, and nobody answers a broadcast.  Why:
+    a robot's control cycle sends one every cycle, and the parameters are looked at once here instead
+    of once per servo, each searching the list for its ID.
+    """
+    params = parsed_params(packet.instruction, packet.params if type(packet.params) is bytes else bytes(packet.params))
+    if isinstance(params, Malformed):
+        return  # Result Fail on every servo, which nobody reports
+    first: dict[int, bytes] = {}
+    for servo_id, data in params.writes:
+        first.setdefault(servo_id, data)
+    address = params.address
+    for servo in servos:
+        data = first.get(servo.id)  # its ID now: a servo ahead of it may have taken another one
+        if data is not None:
+            servo.write(address, data)
 
 
 def _bulk_write(servo: Servo2, params: BulkWrite) -> tuple[int, bytes]:

@@ -13,7 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from ax12emu.protocol.packets2 import ErrorNumber
-from ax12emu.protocol.registers import Area
+from ax12emu.protocol.registers import Area, Entry
 from ax12emu.protocol.servo_models import ServoModel
 
 from .plant2 import Plant2
@@ -35,6 +35,10 @@ WATCHDOG_UNIT_S = 0.020
 BOOT_GOALS = {"goal_pwm": "pwm_limit", "goal_current": "current_limit", "torque_limit": "max_torque"}
 #: The highest active Secondary ID(12); 253..255 switch the function off.
 SECONDARY_ID_MAX = 252
+#: ``refused`` of a write outside a Bus Watchdog Error.
+_NOTHING_REFUSED: frozenset[str] = frozenset()
+#: More distinct sets of registers written than a client uses; past it the remembered ones start over.
+_MAX_WRITTEN = 256
 #: Realtime Tick(120) counts milliseconds from 0 to 32767 and wraps (e-manual, "Realtime Tick(120)").
 REALTIME_TICK_PERIOD = 32768
 
@@ -75,6 +79,8 @@ class Servo2(TableServo):
         self.backup: bytes | None = None
         #: True while a packet addressed to the Secondary ID is handled: the EEPROM area is out of reach.
         self.ram_only = False
+        #: id(entries) -> (entries, what they write): see :meth:`_what_is_written`.
+        self._written: dict[int, tuple[tuple[Entry, ...], tuple[bool, bool, bool]]] = {}
         self.plant: Plant2 = plant_factory(self)
         self.power_on()
 
@@ -157,23 +163,39 @@ class Servo2(TableServo):
     def write(self, address: int, data: bytes) -> int:
         """A client's write, all or nothing, with the firmware's side effects; returns the error number."""
         table = self.table
-        check = table.check_write(address, data, refused=GOAL_REGISTERS if self.watchdog_error else frozenset())
+        check = table.check_write(address, data, refused=GOAL_REGISTERS if self.watchdog_error else _NOTHING_REFUSED)
         if check.error:
             return check.error
-        if self.ram_only and any(entry.area is Area.EEPROM for entry in check.entries):
+        mode_written, goal_written, eeprom = self._what_is_written(check.entries)
+        if self.ram_only and eeprom:
             return ErrorNumber.ACCESS  # "The EEPROM area ... cannot be modified with Secondary ID(12)"
-        names = {entry.name for entry in check.entries}
-        mode_before = table.get("operating_mode") if "operating_mode" in names else None
+        mode_before = table.get("operating_mode") if mode_written else None
         table.apply(check)
         if mode_before is not None and table.get("operating_mode") != mode_before:
             self._mode_changed()
-        goal_written = bool(names & GOAL_REGISTERS)
         if goal_written and self.plant.held and not self.watchdog_error:
             self.plant.release()
-        if any(entry.area is Area.EEPROM for entry in check.entries):
+        if eeprom:
             self.eeprom_dirty = True
         self.plant.command(goal_written=goal_written)
         return ErrorNumber.NONE
+
+    def _what_is_written(self, entries: tuple[Entry, ...]) -> tuple[bool, bool, bool]:
+        """Whether ``entries`` hold Operating Mode, a Goal register, an EEPROM register.
+
+        Remembered by the tuple's identity: a write of the same registers gets the same tuple from the
+        table's plans (``Table2._plan``), and a robot writes the same ones every cycle.
+        """
+        known = self._written.get(id(entries))
+        if known is not None and known[0] is entries:  # the tuple itself is kept, so its id is not reused meanwhile
+            return known[1]
+        names = {entry.name for entry in entries}
+        facts = ("operating_mode" in names, bool(names & GOAL_REGISTERS),
+                 any(entry.area is Area.EEPROM for entry in entries))
+        if len(self._written) >= _MAX_WRITTEN:
+            self._written.clear()
+        self._written[id(entries)] = (entries, facts)
+        return facts
 
     def _mode_changed(self) -> None:
         """Operating Mode(11) took a new value: the registers the model's ``[mode_change]`` names are reset.

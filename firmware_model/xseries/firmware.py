@@ -168,6 +168,11 @@ class XFirmware:
         self._cmd = XCommands()
         #: Sensed registers pinned by a stuck sensor (:meth:`hold_reading`): the world's fault, so a reboot keeps them.
         self._held_readings: dict[str, int] = {}
+        #: Counts every change that may alter a sensed value other than :data:`.interface.TRAJECTORY_SENSED` (a step, a
+        #: reboot, the world, a command that moves the frame or the torque): while it stands still, ``sense()``
+        #: gives the same values for every other field.  A serving bus uses it to leave the copy of a
+        #: command's effects for after a reply that reads none of them (``ax12emu.servo.plant2``).
+        self.sensing_epoch = 0
         self._reset_firmware()
 
     # ------------------------------------------------------------------ state
@@ -178,6 +183,7 @@ class XFirmware:
         self._last_torque_cmd = 0
         self._hw_error = 0
         self._fixed = False
+        self.sensing_epoch += 1
         self._overload_elapsed_s = 0.0
         self._duty = 0.0
         self._reset_control()
@@ -234,9 +240,21 @@ class XFirmware:
         by goal update does not undo them; :attr:`.XSensed.torque_enable` is the firmware's value.
         """
         old = self._cmd
-        commands = dataclasses.replace(commands)  # our own copy: a caller may reuse and mutate its object
+        # Our own copy: a caller may reuse and mutate its object.  A shallow copy of the instance dict, not
+        # dataclasses.replace: every Sync Write commands each servo it reaches, and replace() re-runs
+        # __init__ with every field by keyword (about ten times the cost).
+        own = object.__new__(type(commands))
+        own.__dict__.update(commands.__dict__)
+        commands = own
         self._cmd = commands
         self._fixed = False
+        torque_cmd = 1 if commands.torque_enable else 0
+        # What sense() reads besides the trajectory fields moves only with the frame (reverse bit, mode,
+        # Homing Offset: Present Position and the signs), the torque (turns counted afresh) or a step.
+        if ((commands.drive_mode ^ old.drive_mode) & 0x01 or commands.operating_mode != old.operating_mode
+                or commands.homing_offset != old.homing_offset or torque_cmd != self._last_torque_cmd
+                or (goal_written and not self._torque_on and commands.drive_mode & 0x08)):
+            self.sensing_epoch += 1
         if (commands.drive_mode ^ old.drive_mode) & 0x01:
             self._reset_turns()  # a mirrored frame counts its turns afresh
             self._hold_here()
@@ -247,7 +265,6 @@ class XFirmware:
             self._hold_here()
         elif commands.homing_offset != old.homing_offset and not self._profile_running():
             self._hold_here()
-        torque_cmd = 1 if commands.torque_enable else 0
         if torque_cmd != self._last_torque_cmd:
             self._last_torque_cmd = torque_cmd
             if torque_cmd:
@@ -333,6 +350,7 @@ class XFirmware:
         n = int((to_time_s - self.time_s) / step_s + 1e-9)
         if n <= 0:
             return
+        self.sensing_epoch += 1
         if self._fixed or self._at_rest():
             # Nothing but the temperature would change: heat or cool in closed form, unless that
             # would cross Temperature Limit on the way (then step, so the error comes on time).
@@ -588,6 +606,7 @@ class XFirmware:
         the same shaft angle instead of driving back over the cleared turns.
         """
         self._fixed = False
+        self.sensing_epoch += 1
         before = self._turn_base_pulses
         self._reset_turns()
         self._traj_pulses -= self._turn_base_pulses - before
@@ -602,6 +621,7 @@ class XFirmware:
         and turn the torque off, and only REBOOT clears them.
         """
         self._fixed = False
+        self.sensing_epoch += 1
         latched = bits & self._cmd.shutdown
         self._latch(bits)
         return latched
@@ -610,6 +630,7 @@ class XFirmware:
         """Hold the output shaft still (or free it): the motor keeps driving into the block, so the
         current rises to the stall current and the overload protection follows (:meth:`_protect`)."""
         self._fixed = False
+        self.sensing_epoch += 1
         self.physics.blocked = bool(blocked)
 
     def hold_reading(self, name: str, value: int | None) -> None:
@@ -621,6 +642,7 @@ class XFirmware:
         if name not in XSensed.field_names():
             raise ValueError(f"{name!r} is not a sensed register; the firmware senses {', '.join(XSensed.field_names())}")
         self._fixed = False
+        self.sensing_epoch += 1
         if value is None:
             self._held_readings.pop(name, None)
         else:
@@ -630,16 +652,19 @@ class XFirmware:
     def set_external_torque(self, torque_nm: float) -> None:
         """A torque on the output shaft (N·m, positive = counter-clockwise), passed to the physics."""
         self._fixed = False
+        self.sensing_epoch += 1
         self.physics.set_external_torque(torque_nm)
 
     def set_supply_v(self, supply_v: float) -> None:
         """The bus supply voltage (V): the motor's drive and Present Input Voltage follow it."""
         self._fixed = False
+        self.sensing_epoch += 1
         self.physics.supply_v = float(supply_v)
 
     def set_load(self, *, inertia_kg_m2: float = 0.0, gravity_torque_nm: float = 0.0, gravity_zero_rad: float = 0.0) -> None:
         """What is on the horn (an inertia, a pendulum), passed to the physics."""
         self._fixed = False
+        self.sensing_epoch += 1
         self.physics.set_load(inertia_kg_m2=inertia_kg_m2, gravity_torque_nm=gravity_torque_nm, gravity_zero_rad=gravity_zero_rad)
 
 

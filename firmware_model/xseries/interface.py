@@ -22,6 +22,7 @@ from dataclasses import dataclass, fields
 from typing import Protocol, runtime_checkable
 
 __all__ = [
+    "TRAJECTORY_SENSED",
     "HW_ERROR_INPUT_VOLTAGE",
     "HW_ERROR_OVERHEATING",
     "HW_ERROR_MOTOR_ENCODER",
@@ -118,6 +119,12 @@ class XSensed:
     def field_names(cls) -> tuple[str, ...]:
         """Names of all sensed registers, in declaration order."""
         return tuple(f.name for f in fields(cls))
+
+
+#: The sensed fields a command can change before the next step without moving a firmware's ``sensing_epoch``
+#: (where it keeps one: :class:`.firmware.XFirmware`): a goal restarts the profile (the trajectory, Moving,
+#: Moving Status), and Moving Threshold and the position limits are read by Moving and Moving Status.
+TRAJECTORY_SENSED = frozenset({"velocity_trajectory", "position_trajectory", "moving", "moving_status"})
 
 
 class XServoModel(Protocol):
