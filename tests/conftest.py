@@ -144,3 +144,31 @@ def emulator() -> Iterator[Callable[..., Served]]:
     yield _start
     for served in started:
         served.close()
+
+
+# -- The parallel pass (``-n 2 --dist loadfile``): which files go together --------------------------------------------
+
+#: Files whose tests share one session fixture too costly to make twice (tests/tools/conftest.py's fitted twin of
+#: the real AX-12A): the parallel pass gives each group to one worker, which makes the fixture once.
+SCHEDULED_TOGETHER = {
+    "tests/tools/test_real_ax12a_inertia.py": "tests/tools/test_real_ax12a.py",
+}
+
+
+def _test_file(nodeid: str) -> str:
+    return nodeid.split("::", 1)[0]
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config, log):
+    """``--dist loadfile`` with the SCHEDULED_TOGETHER groups as one unit each."""
+    if config.getoption("dist") != "loadfile":
+        return None
+    from xdist.scheduler import LoadFileScheduling
+
+    class GroupedFileScheduling(LoadFileScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            path = _test_file(nodeid)
+            return SCHEDULED_TOGETHER.get(path, path)
+
+    return GroupedFileScheduling(config, log)

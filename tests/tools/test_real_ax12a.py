@@ -17,8 +17,9 @@ pytestmark = pytest.mark.skipif(not (DATA / tool.FIT_ON).exists(),
 
 
 @pytest.fixture(scope="module")
-def twin():
-    params, volts, scale, result = tool.fit_twin(tool.ServoParams(), tool.load(DATA / tool.FIT_ON), 500)
+def twin(real_ax12a_twin):
+    """fit_twin(ServoParams(), the unloaded step, 500), made once per process (tests/tools/conftest.py)."""
+    params, volts, scale, result = real_ax12a_twin
     return params, result
 
 

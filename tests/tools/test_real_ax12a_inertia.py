@@ -18,8 +18,9 @@ pytestmark = pytest.mark.skipif(not (DATA / real.FIT_ON).exists(),
 
 
 @pytest.fixture(scope="module")
-def twin():
-    return real.fit_twin(real.ServoParams(), real.load(DATA / real.FIT_ON), 500)[0]
+def twin(real_ax12a_twin):
+    """fit_twin(ServoParams(), the unloaded step, 500)'s parameters, made once per process (tests/tools/conftest.py)."""
+    return real_ax12a_twin[0]
 
 
 def test_the_twin_read_like_the_wizard_peaks_where_the_loaded_steps_peak(twin):
