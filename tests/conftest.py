@@ -8,6 +8,7 @@ import threading
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
+from pathlib import Path
 
 import pytest
 
@@ -146,7 +147,7 @@ def emulator() -> Iterator[Callable[..., Served]]:
         served.close()
 
 
-# -- The parallel pass (``-n 2 --dist loadfile``): which files go together --------------------------------------------
+# -- The parallel pass (``-n 2 --dist loadfile``): which files go together, and which start first ----------------------
 
 #: Files whose tests share one session fixture too costly to make twice (tests/tools/conftest.py's fitted twin of
 #: the real AX-12A): the parallel pass gives each group to one worker, which makes the fixture once.
@@ -154,14 +155,40 @@ SCHEDULED_TOGETHER = {
     "tests/tools/test_real_ax12a_inertia.py": "tests/tools/test_real_ax12a.py",
 }
 
+#: The files whose shared setup runs longest (CPU-bound diagnoses and fits, tens of seconds each), slowest first.
+#: The parallel pass hands files out in collection order, these first: a long file handed out last would keep
+#: one worker busy while the other has finished (xdist's own order, most tests first, put the single-test
+#: diagnosis-order check near the end).  The rest keep their order, short files last, so the workers finish
+#: within a few seconds of each other.
+RUN_FIRST = (
+    "tests/firmware_model/diagnose/test_search.py",
+    "tests/firmware_model/diagnose/test_search_state.py",
+    "tests/tools/test_real_ax12a.py",
+    "tests/tools/test_real_ax12a_inertia.py",
+    "tests/tools/test_twin_check.py",
+    "tests/firmware_model/diagnose/test_cli_tools.py",
+    "tests/ax12emu/bus/test_crash_state.py",
+)
+
 
 def _test_file(nodeid: str) -> str:
     return nodeid.split("::", 1)[0]
 
 
+def pytest_collection_modifyitems(config, items):
+    """Put the RUN_FIRST files' tests first, in that order (a stable sort: the rest keep theirs)."""
+    root = Path(__file__).resolve().parent.parent
+    missing = [path for path in (*RUN_FIRST, *SCHEDULED_TOGETHER, *SCHEDULED_TOGETHER.values())
+               if not (root / path).is_file()]
+    if missing:  # a renamed file would silently lose its place: say so
+        raise pytest.UsageError(f"tests/conftest.py schedules files that are not there: {missing}")
+    rank = {path: i for i, path in enumerate(RUN_FIRST)}
+    items.sort(key=lambda item: rank.get(_test_file(item.nodeid), len(RUN_FIRST)))
+
+
 @pytest.hookimpl(optionalhook=True)
 def pytest_xdist_make_scheduler(config, log):
-    """``--dist loadfile`` with the SCHEDULED_TOGETHER groups as one unit each."""
+    """``--dist loadfile`` with the SCHEDULED_TOGETHER groups as one unit each, handed out in collection order."""
     if config.getoption("dist") != "loadfile":
         return None
     from xdist.scheduler import LoadFileScheduling
@@ -171,4 +198,6 @@ def pytest_xdist_make_scheduler(config, log):
             path = _test_file(nodeid)
             return SCHEDULED_TOGETHER.get(path, path)
 
+    # xdist would otherwise reorder the units, most tests first, ignoring the order collection set
+    config.option.loadscopereorder = False
     return GroupedFileScheduling(config, log)
