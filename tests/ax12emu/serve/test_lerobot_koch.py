@@ -80,14 +80,29 @@ HOLD_BAND_TICKS = 16
 EXTENDED_POSITION, CURRENT_POSITION = 4, 5
 
 
+#: lerobot's reply timeout (dynamixel.py DEFAULT_TIMEOUT_MS, set at connect).
+LEROBOT_TIMEOUT_MS = 1000.0
+
+
 class LerobotPort(PatientPortHandler):
-    """dynamixel-sdk's PortHandler waiting at least lerobot's own timeout, 1000 ms (dynamixel.py
-    DEFAULT_TIMEOUT_MS, set at connect), for each reply, rather than the SDK's few milliseconds: the
-    tests run on a shared, loaded machine, where a reply can come late for reasons of the host."""
+    """dynamixel-sdk's PortHandler waiting lerobot's own timeout, 1000 ms, for each reply.
+
+    At least that long for a reply to an instruction, rather than the SDK's few milliseconds: the tests
+    run on a shared, loaded machine, where a reply can come late for reasons of the host.  At most that
+    long for a broadcast Ping's replies: the SDK's Protocol 2.0 ``broadcastPing`` sets its window with
+    ``setPacketTimeoutMillis((14 * 253 * tx_time_per_byte) + 3.0 * 253 + 16.0)``, the time all 253 IDs'
+    replies would take at the line rate, and waits it out whoever answers (4.5 s at 9,600 bps, 1.4 s at
+    57,600; dynamixel-sdk 4.1.0 protocol2_packet_handler.py).  The buses here hold one to six servos,
+    whose replies come within milliseconds, so a second is the same test: a servo that answers is found
+    and one that cannot hear the rate is silence.
+    """
 
     def setPacketTimeout(self, packet_length):  # noqa: N802 (the SDK's name)
         super().setPacketTimeout(packet_length)
-        self.packet_timeout = max(self.packet_timeout, 1000.0)
+        self.packet_timeout = max(self.packet_timeout, LEROBOT_TIMEOUT_MS)
+
+    def setPacketTimeoutMillis(self, msec):  # noqa: N802 (the SDK's name)
+        super().setPacketTimeoutMillis(min(msec, LEROBOT_TIMEOUT_MS))
 
 
 class LerobotError(Exception):
@@ -121,7 +136,7 @@ class KochBus:
             if model_number != MODEL_NUMBER[model]:
                 raise LerobotError(f"{name} (ID {motor_id}): expected model {MODEL_NUMBER[model]}, found {model_number}")
             found[motor_id] = model_number
-        self.port_handler.setPacketTimeoutMillis(1000)
+        self.port_handler.setPacketTimeoutMillis(LEROBOT_TIMEOUT_MS)
 
     def close(self) -> None:
         self.port_handler.closePort()
