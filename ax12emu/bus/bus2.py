@@ -77,7 +77,7 @@ from ax12emu.protocol.packets2 import (
     encode_status2,
     fast_status_pieces,
 )
-from ax12emu.protocol.params2 import INSTRUCTION_SPECS, Broadcast, BulkRead, SyncRead
+from ax12emu.protocol.params2 import INSTRUCTION_SPECS, Broadcast, BulkRead, SyncRead, SyncWrite
 from ax12emu.protocol.servo_models import ServoModel
 from ax12emu.servo.plant2 import plant_for
 from ax12emu.servo.request_handler2 import answers, handle2, listed_read, parsed_params, status_byte, sync_write_all
@@ -98,6 +98,8 @@ log = logging.getLogger(__name__)
 #: Builds one servo's firmware model from its model file (``spec``) and its index on the bus.
 FirmwareFactory = Callable[[ServoModel, int], XServoModel]
 
+#: More distinct Sync Writes (and reads after them) than a client sends; past it the remembered ones start over.
+_MAX_REMEMBERED = 64
 #: The largest LENGTH a packet can announce.
 MAX_LENGTH = 0xFFFF
 _EXECUTED_SILENTLY = frozenset({Broadcast.SILENT, Broadcast.EACH_ANSWERS})
@@ -157,6 +159,14 @@ class Bus2(ServosById[Servo2], DecodedBus):
         #: (``settle_in_pieces``): a Sync/Bulk Read may then leave a servo's catch-up for after its reply
         #: where the reply cannot tell (``Plant2.defer_catch_up``).  Off, every request catches up first.
         self.defer_settling = False
+        #: A Sync Write held until the next packet (see :meth:`answer`): (packet, line speed), or None; and
+        #: whether it still waits for that packet (False once a read went before it).
+        self._parked: tuple[InstructionPacket2, float | None] | None = None
+        self._waiting = False
+        #: What :meth:`_may_hold` and :meth:`_read_unchanged_by` find from the IDs and layouts alone, per write
+        #: (and read), with the lookup (``_by_id``) they were found under.
+        self._holdable: dict[tuple, tuple[dict, bool]] = {}
+        self._overtaking: dict[tuple, tuple[dict, list | None]] = {}
         self._closed = False
 
     # -- lookup (reindex, servo, ids: ServosById) ---------------------------------------
@@ -164,6 +174,17 @@ class Bus2(ServosById[Servo2], DecodedBus):
     def physics_step_s(self) -> float:
         """The shortest control step of the servos' firmware models."""
         return min(servo.plant.firmware.step_s for servo in self.servos)
+
+    def reindex(self) -> None:
+        """Look servos up by the IDs in their tables again; the same lookup while no ID changed.
+
+        Why keep it: it runs after every packet that may have written, and what is remembered per
+        lookup (the Sync Write held for the next read, :meth:`_read_unchanged_by`) stays good.
+        """
+        ids = tuple(servo.id for servo in self.servos)
+        if ids != getattr(self, "_indexed_ids", None):
+            super().reindex()
+            self._indexed_ids = ids
 
     # -- time --------------------------------------------------------------------------
     def catch_up(self, sim_time_s: float, clock_s: float | None = None,
@@ -185,6 +206,7 @@ class Bus2(ServosById[Servo2], DecodedBus):
 
     def advance(self) -> bool:
         """Bring the physics up to the clock's present time; True if a servo stepped."""
+        self.take_parked()
         sim_time_s = self.clock.now_s()
         due = any(servo.plant.due(sim_time_s) for servo in self.servos)
         self.catch_up(sim_time_s)
@@ -192,6 +214,7 @@ class Bus2(ServosById[Servo2], DecodedBus):
 
     def advance_in_pieces(self) -> Iterator[None]:
         """:meth:`advance` one servo piece at a time, for a serving loop to interleave with packets."""
+        self.take_parked()
         sim_time_s = self.clock.now_s()
         for servo in self.servos:
             yield from servo.plant.tick(sim_time_s)
@@ -203,8 +226,9 @@ class Bus2(ServosById[Servo2], DecodedBus):
         For a serving loop, right after a packet: taken while the host reads the reply or, after a
         packet nobody answers (a Sync Write), prepares its next one, instead of in that packet's
         catch-up.  The model takes the same steps either way (the packet's catch-up finds nothing
-        left to do); only the host's wait is shorter.
+        left to do); only the host's wait is shorter.  A Sync Write held for the next packet is taken first.
         """
+        self.take_parked()
         for servo in self.servos:
             plant, clock_s = servo.plant, self.clock.now_s()
             sim_time_s = clock_s - self.request_lag_s
@@ -215,12 +239,149 @@ class Bus2(ServosById[Servo2], DecodedBus):
     def take_deferred(self) -> None:
         """Every catch-up a reply went out before (``Plant2.defer_catch_up``), taken now at the times it was due.
 
-        For a serving loop before it hands the bus to a caller, who may read any register.
+        For a serving loop before it hands the bus to a caller, who may read any register; a Sync Write
+        held for the next packet is taken too.
         """
+        self.take_parked()
         for servo in self.servos:
             servo.plant.catch_up_deferred()
 
     # -- bytes in, replies out (receive, answer, expire: DecodedBus) ---------------------
+    def answer(self, data: bytes, now_s: float | None = None, *, line_bps: float | None = None,
+               cache: bool = True, looked_up: bool = False) -> list[list[Reply]]:
+        """Feed bytes; return the replies to each packet they completed, one list per packet.
+
+        With :attr:`defer_settling` (a serving loop that settles after each packet), a broadcast Sync
+        Write of Goal and profile registers only (``Servo2.writes_goals_only``) is held until the next
+        packet or the loop's next settling (:meth:`take_parked`).  Why: a robot's cycle sends it and at
+        once a Sync Read, and the host waits for the read's answer while the write is handled.  If the
+        next packet is a Sync/Bulk Read whose answer the write provably cannot change
+        (:meth:`_read_unchanged_by`), the read is answered first and the write taken right after;
+        otherwise the write is taken first, as it came.  Either way the replies are the bytes they would be.
+        """
+        if self._parked is None and not self.defer_settling:
+            return [self.dispatch(packet, line_bps=line_bps) for packet in self.framer.feed(data, now_s)]
+        return [self._answer_holding(packet, line_bps) for packet in self.framer.feed(data, now_s)]
+
+    @property
+    def parked(self) -> bool:
+        """Whether a Sync Write is held waiting for the next packet (see :meth:`answer`); once a read has
+        overtaken it, it is no longer waiting, and the serving loop's settling takes it at once."""
+        return self._parked is not None and self._waiting
+
+    def take_parked(self) -> None:
+        """Take the Sync Write held for the next packet, if any (see :meth:`answer`)."""
+        parked = self._parked
+        if parked is not None:
+            self._parked = None
+            self.dispatch(parked[0], line_bps=parked[1])
+
+    def _answer_holding(self, packet: InstructionPacket2 | StatusPacket2, line_bps: float | None) -> list[Reply]:
+        parked = self._parked
+        if parked is not None:
+            if (isinstance(packet, InstructionPacket2) and parked[1] == line_bps
+                    and self._read_unchanged_by(packet, parked[0], line_bps)):
+                self._waiting = False  # overtaken: the loop's settling takes the write right after this reply
+                return self.dispatch(packet, line_bps=line_bps)
+            self.take_parked()
+        if self.defer_settling and isinstance(packet, InstructionPacket2) and self._may_hold(packet, line_bps):
+            self._parked, self._waiting = (packet, line_bps), True
+            return []
+        return self.dispatch(packet, line_bps=line_bps)
+
+    def _may_hold(self, packet: InstructionPacket2, line_bps: float | None) -> bool:
+        """A broadcast Sync Write, good CRC, no faults, storing only Goal and profile registers on every servo it reaches."""
+        if not (packet.instruction == Instruction2.SYNC_WRITE and packet.crc_ok and packet.id == BROADCAST_ID
+                and self.faults is None):
+            return False
+        params = parsed_params(packet.instruction, packet.params if type(packet.params) is bytes else bytes(packet.params))
+        if not isinstance(params, SyncWrite):
+            return False
+        ids = tuple(servo_id for servo_id, _ in params.writes)
+        key = (params.address, params.length, ids, line_bps)
+        known = self._holdable.get(key)
+        if known is not None and known[0] is self._by_id:  # no ID changed since: the same servos, the same tables
+            return known[1]
+        listed = set(ids)
+        # Every listed servo, heard or not: a servo's baud may change without a new lookup.
+        holdable = all(servo.writes_goals_only(params.address, params.length) for servo in self.servos
+                       if servo.id in listed)
+        if len(self._holdable) >= _MAX_REMEMBERED:
+            self._holdable.clear()
+        self._holdable[key] = (self._by_id, holdable)
+        return holdable
+
+    def _read_unchanged_by(self, packet: InstructionPacket2, write: InstructionPacket2, line_bps: float | None) -> bool:
+        """Whether ``packet`` is a Sync/Bulk Read whose answer and effects are the same before ``write`` (a
+        Sync Write :meth:`_may_hold` held, taken at the same time) as after it.
+
+        So when: no faults; no servo's Bus Watchdog is on (the write would restart its interval); and for
+        every servo the write stores into, the read reads none of the bytes it stores, nor Indirect Data,
+        and the store with the catch-up it earns leaves the sensed registers the read reads as they are
+        (``Plant2.goal_write_unseen_by``: no step before the read, commands that keep the frame and the
+        torque).  Nothing else the read's handling looks at (ID, baud, Return Delay Time, Status Return
+        Level, Torque Enable, Hardware Error Status) is among what the write stores (``Servo2.writes_goals_only``).
+        """
+        if not (packet.crc_ok and packet.id == BROADCAST_ID and self.faults is None):
+            return False
+        spec = INSTRUCTION_SPECS.get(packet.instruction)
+        if spec is None or spec.broadcast not in _LISTED_READS:
+            return False
+        params = parsed_params(packet.instruction, packet.params if type(packet.params) is bytes else bytes(packet.params))
+        written = parsed_params(write.instruction, write.params if type(write.params) is bytes else bytes(write.params))
+        key = (params, written.address, written.length, tuple(servo_id for servo_id, _ in written.writes), line_bps)
+        known = self._overtaking.get(key)
+        if known is None or known[0] is not self._by_id:
+            known = (self._by_id, self._servos_to_judge(params, written, line_bps))
+            if len(self._overtaking) >= _MAX_REMEMBERED:
+                self._overtaking.clear()
+            self._overtaking[key] = known
+        judged = known[1]
+        if judged is None:
+            return False
+        for servo in self.servos:
+            if not servo.watchdog_off:
+                return False
+        clock_s = self.clock.now_s()
+        sim_time_s = clock_s - self.request_lag_s
+        for servo, spans in judged:
+            if not servo.plant.goal_write_unseen_by(sim_time_s, clock_s, spans):
+                return False
+        return True
+
+    def _servos_to_judge(self, params: object, written: SyncWrite,
+                         line_bps: float | None) -> list[tuple[Servo2, tuple[tuple[int, int], ...]]] | None:
+        """What :meth:`_read_unchanged_by` finds from the IDs and the tables' layouts alone: each servo the write
+        stores into whose registers the read reads, with the sensed spans it reads (``Plant2.sensed_spans``);
+        None if the read reads bytes the write stores, Indirect Data or a trajectory register of such a servo,
+        or is malformed."""
+        if isinstance(params, SyncRead):
+            reads = [(servo_id, params.address, params.length) for servo_id in params.ids]
+        elif isinstance(params, BulkRead):
+            reads = list(params.reads)
+        else:
+            return None
+        start, end = written.address, written.address + written.length
+        listed = {servo_id for servo_id, _ in written.writes}
+        read_by: dict[Servo2, list[tuple[int, int]]] = {}
+        for servo_id, address, length in reads:
+            for servo in self._by_id.get(servo_id, ()):
+                read_by.setdefault(servo, []).append((address, length))
+        judged = []
+        for servo in self.servos:
+            if servo not in read_by or servo.id not in listed:
+                continue  # the write stores nothing the read reads (heard or not: a baud may change without a new lookup)
+            spans: tuple[tuple[int, int], ...] = ()
+            for address, length in read_by[servo]:
+                if address < end and start < address + length or servo.table.reads_indirect(address, length):
+                    return None
+                more = servo.plant.sensed_spans(address, length)
+                if more is None:
+                    return None
+                spans += more
+            judged.append((servo, spans))
+        return judged
+
     def dispatch(self, packet: InstructionPacket2 | StatusPacket2, *, line_bps: float | None = None) -> list[Reply]:
         """Run one decoded packet on the servos it reaches; return their replies, timed."""
         if isinstance(packet, StatusPacket2):

@@ -63,6 +63,10 @@ HOT_S = 0.0002
 #: A physics step is put off while a reply is due sooner than this (a step of many servos takes
 #: ~0.1 ms), so it cannot delay the reply; a longer Return Delay Time hides the step inside it.
 PHYSICS_DEFER_S = 0.0003
+#: How long a packet the bus holds for the next one (``Bus2.parked``: a Sync Write that a read following it at
+#: once may overtake) waits for it before the loop settles it anyway: a robot's cycle sends its Sync Read
+#: within tens of microseconds of its Sync Write.
+PARKED_WAIT_S = 0.0002
 #: What ``next`` returns from a finished physics step.
 _DONE = object()
 
@@ -120,6 +124,9 @@ class BusServer:
         if self._settle is not None and hasattr(bus, "defer_settling"):
             # This loop settles right after each packet, so a read may leave for then what its reply cannot show.
             bus.defer_settling = True
+        #: Whether the bus holds a packet for the next one (``Bus2.parked``), and since when (None: it holds none).
+        self._bus_parked: Callable[[], bool] | None = (lambda: bus.parked) if hasattr(bus, "parked") else None
+        self._parked_at: float | None = None
         #: Takes what a reply went out before (``Bus2.take_deferred``), before a call sees the bus; None: nothing to take.
         self._take_deferred: Callable[[], None] | None = getattr(bus, "take_deferred", None)
         #: The settling under way, in pieces, or None.
@@ -209,6 +216,8 @@ class BusServer:
             self.packets_in += 1
             self._answer(replies, now, end)
             self._unsettled = self._settle is not None
+        if self._bus_parked is not None:
+            self._parked_at = now if self._bus_parked() else None
 
     def _answer(self, replies: Sequence[Reply], now: float, end: float) -> None:
         """Put one packet's replies on the line: now, or queued for their delay (and pace)."""
@@ -308,10 +317,13 @@ class BusServer:
         # packet (a Sync Write has no reply to wait for) rather than when that packet arrives.  Owed to
         # that packet anyway, so one piece in every pass, hot or not; never inside a half-done physics
         # step, whose copy back would then follow a step it did not take, nor just before a reply.
+        # A packet the bus holds for the next one waits for it a moment (PARKED_WAIT_S) before it is settled.
         if (self._physics is None and (self._settling is not None or self._unsettled)
-                and not (queue and queue[0][0] - now < PHYSICS_DEFER_S)):
+                and not (queue and queue[0][0] - now < PHYSICS_DEFER_S)
+                and not (self._parked_at is not None and now - self._parked_at < PARKED_WAIT_S and self._bus_parked())):
             if self._settling is None:
                 self._unsettled = False
+                self._parked_at = None  # settling takes the held packet first
                 self._settling = self._settle()
             if next(self._settling, _DONE) is _DONE:
                 self._settling = None

@@ -43,6 +43,8 @@ GRID_SLACK_S = 1e-9
 #: Sensed registers the bus reads while handling any packet: the Bus Watchdog checks Torque Enable, and
 #: every status packet's Alert bit is Hardware Error Status.
 _READ_PER_PACKET = ("torque_enable", "hardware_error_status")
+#: The command registers that move the frame or the torque (``XFirmware.keeps_sensing``), in this order.
+_FRAME_REGISTERS = ("drive_mode", "operating_mode", "homing_offset", "torque_enable")
 #: More distinct reads than a client makes; past it the remembered spans start over.
 _MAX_SPANS = 256
 _UNKNOWN = object()
@@ -190,6 +192,13 @@ class Plant2(SteppedPlant):
             if present:
                 self._sensed.append((field, present[0]))
         self._command_names, self._read_commands = _reader([entry for _, entry in self._commands])
+        # The registers of the frame and the torque (XFirmware.keeps_sensing), in that order (0 where the table has none).
+        frame = [by_name[name] for name in _FRAME_REGISTERS if name in by_name]
+        if len(frame) == len(_FRAME_REGISTERS):
+            self._read_frame = _reader(frame)[1] if [e.name for e in sorted(frame, key=lambda e: e.address)] == list(
+                _FRAME_REGISTERS) else (lambda row, frame=frame: tuple(entry.value_in(row) for entry in frame))
+        else:
+            self._read_frame = lambda row: None  # never equal: the commands are built in full
         # write_back runs every step of every servo: the sensed fields in one call, and where each goes.
         getter = operator.attrgetter(*(field for field, _ in self._sensed))  # Torque Enable at least (Table2 needs it)
         self._sense_fields = getter if len(self._sensed) > 1 else lambda sensed: (getter(sensed),)
@@ -256,6 +265,8 @@ class Plant2(SteppedPlant):
 
     def release(self) -> None:
         """Take the table's goals again (called with a goal write, which then commands the model)."""
+        if self._deferred is not None:
+            self.catch_up_deferred()
         self._held = None
 
     # -- time: due, catch_up, tick (SteppedPlant) ----------------------------------------
@@ -300,21 +311,53 @@ class Plant2(SteppedPlant):
         later at the same times (``sim_time_s``, ``clock_s``) before anything else reaches the model, so
         the tables end as they would have.
         """
+        if not self._unchanged_unless_stepped(sim_time_s, spans):
+            return False
         model = self.firmware
-        if sim_time_s >= model.time_s + model.step_s:
-            return False  # a step is due: the read must see it
         if self._deferred is None:
             if not self._write_unseen or model.time_s <= clock_s + GRID_SLACK_S:
                 return False  # nothing owed, or the write earns a step the read must see
+        if self._deferred is None:
+            self._deferred = (sim_time_s, clock_s)
+        return True
+
+    def _unchanged_unless_stepped(self, sim_time_s: float, spans: tuple[tuple[int, int], ...]) -> bool:
+        """No step due by ``sim_time_s``, and a copy of what the firmware senses now would leave ``spans`` as they are."""
+        model = self.firmware
+        if sim_time_s >= model.time_s + model.step_s:
+            return False  # a step is due: the read must see it
         if self._written_back_epoch is None or getattr(model, "sensing_epoch", None) != self._written_back_epoch:
             return False
         row, before = self.table.row, self._written_back_row
         for start, stop in spans:
             if row[start:stop] != before[start:stop]:
                 return False
-        if self._deferred is None:
-            self._deferred = (sim_time_s, clock_s)
         return True
+
+    def goal_write_unseen_by(self, sim_time_s: float, clock_s: float, spans: tuple[tuple[int, int], ...]) -> bool:
+        """Whether a write of Goal or profile registers (none of the frame's or the torque's) taken now, with
+        the catch-up it earns, would leave ``spans`` (see :meth:`sensed_spans`) as they are: a read of them
+        answered before it answers the same bytes as after it.
+
+        True when no step is due by ``sim_time_s`` and the one the write earns would run past ``clock_s``
+        (so the catch-up only copies what the firmware senses), that copy leaves ``spans`` as they are
+        (as in :meth:`defer_catch_up`), and the firmware says the commands the write gives (the table's
+        frame and torque registers, a goal written) change no sensed value but the trajectory ones.
+        """
+        if not self._unchanged_unless_stepped(sim_time_s, spans):
+            return False
+        model = self.firmware
+        if model.time_s <= clock_s + GRID_SLACK_S:
+            return False  # the write would earn a step before the read
+        keeps_sensing = getattr(model, "keeps_sensing", None)
+        if keeps_sensing is None:
+            return False
+        # The frame and torque registers are the table's whether or not goals are held (hold() replaces goals only).
+        commands = self._commanded
+        if commands is None or self._read_frame(self.table.row) != (
+                commands.drive_mode, commands.operating_mode, commands.homing_offset, commands.torque_enable):
+            commands = self.commands()
+        return keeps_sensing(commands, goal_written=True)
 
     # -- instructions that reach the firmware ---------------------------------------------
     def reboot(self) -> None:

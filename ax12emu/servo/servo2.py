@@ -35,6 +35,11 @@ WATCHDOG_UNIT_S = 0.020
 BOOT_GOALS = {"goal_pwm": "pwm_limit", "goal_current": "current_limit", "torque_limit": "max_torque"}
 #: The highest active Secondary ID(12); 253..255 switch the function off.
 SECONDARY_ID_MAX = 252
+#: RAM registers whose write is not one :meth:`Servo2.writes_goals_only` lets through: what the bus reads per
+#: packet (Status Return Level, the Bus Watchdog, Torque Enable), what the firmware acts on beyond the
+#: motion (Torque Enable again), the registered-write bookkeeping and Lock; the Indirect Addresses and Data
+#: are refused by their prefix (what Indirect Data reads depends on them).
+QUIET_WRITE_REFUSED = frozenset({"torque_enable", "status_return_level", "bus_watchdog", "registered_instruction", "lock"})
 #: ``refused`` of a write outside a Bus Watchdog Error.
 _NOTHING_REFUSED: frozenset[str] = frozenset()
 #: More distinct sets of registers written than a client uses; past it the remembered ones start over.
@@ -150,11 +155,18 @@ class Servo2(TableServo):
         if watchdog is None or self.last_instruction_s is None:
             return
         value = watchdog.value_in(table.row)
+        if not value:
+            return  # off (the usual case: checked for every servo on every packet)
         if not 1 <= value < WATCHDOG_ERROR or not table.torque_on:
             return
         if now_s - self.last_instruction_s > value * WATCHDOG_UNIT_S:
             table.set("bus_watchdog", WATCHDOG_ERROR)
             self.plant.hold()
+
+    @property
+    def watchdog_off(self) -> bool:
+        """Bus Watchdog(98) is 0 (or the model has none): silence stops nothing, and an instruction's time is not measured."""
+        return self._watchdog is None or self._watchdog.value_in(self.table.row) == 0
 
     @property
     def watchdog_error(self) -> bool:
@@ -179,6 +191,19 @@ class Servo2(TableServo):
             self.eeprom_dirty = True
         self.plant.command(goal_written=goal_written)
         return ErrorNumber.NONE
+
+    def writes_goals_only(self, address: int, length: int) -> bool:
+        """Whether a write of ``length`` bytes at ``address`` can only store RAM registers that steer the motion
+        (Goal, profile, gains, LED: :data:`QUIET_WRITE_REFUSED` aside) and fails on nothing but their values.
+
+        Such a write changes nothing the bus reads to handle a packet (ID, baud, Return Delay Time, Status
+        Return Level, the Bus Watchdog, Torque Enable, Hardware Error Status) and no sensed register, and
+        its command keeps the frame and the torque: the bus may answer a read that reads none of its bytes
+        before taking it (``Bus2``).
+        """
+        entries = self.table.registers_written(address, length)
+        return entries is not None and not any(entry.name in QUIET_WRITE_REFUSED or entry.name.startswith("indirect_")
+                                               for entry in entries)
 
     def _what_is_written(self, entries: tuple[Entry, ...]) -> tuple[bool, bool, bool]:
         """Whether ``entries`` hold Operating Mode, a Goal register, an EEPROM register.

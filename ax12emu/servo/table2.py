@@ -209,6 +209,21 @@ class Table2:
             candidate[target] = byte
         return self._judge(changes, tuple(touched), candidate, refused)
 
+    def registers_written(self, address: int, length: int) -> tuple[Entry, ...] | None:
+        """The registers a write of ``length`` bytes at ``address`` covers, if the layout alone accepts it (no
+        Indirect Data, no undefined, read-only or partly written register, no EEPROM one); else None."""
+        if length <= 0 or address + length > self.size:
+            return None
+        key = (address, length)
+        plan = self._plans.get(key, _UNPLANNED)
+        if plan is _UNPLANNED:
+            if len(self._plans) >= MAX_PLANS:
+                self._plans.clear()
+            plan = self._plans[key] = self._plan(address, length)
+        if plan is None or plan[0] or plan[1]:
+            return None
+        return plan[2]
+
     def _plan(self, address: int, length: int) -> tuple[int, bool, tuple[Entry, ...]] | None:
         """What :meth:`check_write` finds of a write to ``address``..``+length`` from the layout alone.
 

@@ -246,15 +246,11 @@ class XFirmware:
         own = object.__new__(type(commands))
         own.__dict__.update(commands.__dict__)
         commands = own
+        if not self.keeps_sensing(commands, goal_written=goal_written):
+            self.sensing_epoch += 1
         self._cmd = commands
         self._fixed = False
         torque_cmd = 1 if commands.torque_enable else 0
-        # What sense() reads besides the trajectory fields moves only with the frame (reverse bit, mode,
-        # Homing Offset: Present Position and the signs), the torque (turns counted afresh) or a step.
-        if ((commands.drive_mode ^ old.drive_mode) & 0x01 or commands.operating_mode != old.operating_mode
-                or commands.homing_offset != old.homing_offset or torque_cmd != self._last_torque_cmd
-                or (goal_written and not self._torque_on and commands.drive_mode & 0x08)):
-            self.sensing_epoch += 1
         if (commands.drive_mode ^ old.drive_mode) & 0x01:
             self._reset_turns()  # a mirrored frame counts its turns afresh
             self._hold_here()
@@ -276,6 +272,19 @@ class XFirmware:
                 self._start_profile()
             elif commands.drive_mode & 0x08:
                 self._torque_on_now()  # Drive Mode bit 3: torque on by goal update
+
+    def keeps_sensing(self, commands: XCommands, *, goal_written: bool = False) -> bool:
+        """Whether :meth:`command` with these now would leave every sensed value but the trajectory ones
+        (``TRAJECTORY_SENSED``) as it is, and so :attr:`sensing_epoch` too.
+
+        What sense() reads besides the trajectory moves only with the frame (the reverse bit, the mode and
+        Homing Offset: Present Position and the signs), the torque (turns counted afresh, the output) or a step.
+        """
+        old = self._cmd
+        torque_cmd = 1 if commands.torque_enable else 0
+        return not ((commands.drive_mode ^ old.drive_mode) & 0x01 or commands.operating_mode != old.operating_mode
+                    or commands.homing_offset != old.homing_offset or torque_cmd != self._last_torque_cmd
+                    or (goal_written and not self._torque_on and commands.drive_mode & 0x08))
 
     def _torque_on_now(self) -> None:
         if self._hw_error:

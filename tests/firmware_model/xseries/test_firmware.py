@@ -7,8 +7,10 @@ the control tables' initial gains; everything checked is measured from the model
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
+import random
 import statistics
 from pathlib import Path
 
@@ -19,6 +21,7 @@ from firmware_model.xseries.interface import (
     HW_ERROR_INPUT_VOLTAGE,
     HW_ERROR_OVERHEATING,
     HW_ERROR_OVERLOAD,
+    TRAJECTORY_SENSED,
     OperatingMode,
     XCommands,
 )
@@ -451,3 +454,51 @@ def test_xl330_position_output_scale_matches_the_real_servos_present_pwm(log_nam
     s = servo.sense()
     model = s.present_pwm / (kp / 128 * (servo._goal_pulses() - s.present_position))
     assert model == pytest.approx(real, abs=0.02)
+
+
+# ---------------------------------------------------------------------------- sensing_epoch
+
+#: Commands a client's writes give, drawn at random: goals, profile, gains, and now and then the frame or the torque.
+_COMMAND_DRAWS = {
+    "goal_position": lambda rng: rng.randint(0, 4095),
+    "goal_velocity": lambda rng: rng.randint(-200, 200),
+    "profile_velocity": lambda rng: rng.choice((0, 50, 200)),
+    "profile_acceleration": lambda rng: rng.choice((0, 10, 50)),
+    "position_p_gain": lambda rng: rng.choice((400, 800)),
+    "moving_threshold": lambda rng: rng.choice((5, 10, 40)),
+    "max_position_limit": lambda rng: rng.choice((4095, 3000)),
+    "torque_enable": lambda rng: rng.choice((0, 1, 1, 1)),
+    "operating_mode": lambda rng: rng.choice((OperatingMode.POSITION, OperatingMode.POSITION, OperatingMode.VELOCITY,
+                                              OperatingMode.EXTENDED_POSITION)),
+    "homing_offset": lambda rng: rng.choice((0, 0, 0, 300)),
+    "drive_mode": lambda rng: rng.choice((0, 0, 0, 1, 4, 8)),
+}
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_a_command_that_keeps_sensing_changes_no_sensed_value_but_the_trajectory_ones(seed):
+    """``keeps_sensing`` (and the unmoved ``sensing_epoch``) is what lets a serving bus leave a copy of the sensed
+    registers for later: it must never be wrong, whatever the state and the command."""
+    rng = random.Random(seed)
+    servo, commands = make("XM430-W350", profile_velocity=100, profile_acceleration=20, torque_enable=1)
+    kept = changed = 0
+    for _ in range(600):
+        name = rng.choice(list(_COMMAND_DRAWS))
+        new = dataclasses.replace(commands, **{name: _COMMAND_DRAWS[name](rng)})
+        goal_written = name.startswith("goal_") or rng.random() < 0.3
+        before, epoch = servo.sense(), servo.sensing_epoch
+        keeps = servo.keeps_sensing(new, goal_written=goal_written)
+        servo.command(new, goal_written=goal_written)
+        commands = new
+        after = servo.sense()
+        assert (servo.sensing_epoch == epoch) == keeps
+        if keeps:
+            kept += 1
+            for field in dataclasses.fields(after):
+                if field.name not in TRAJECTORY_SENSED:
+                    assert getattr(after, field.name) == getattr(before, field.name), (name, field.name)
+        else:
+            changed += 1
+        if rng.random() < 0.3:
+            servo.step_to(servo.time_s + servo.step_s * rng.randint(1, 20))
+    assert kept > 100 and changed > 20  # both kinds were drawn

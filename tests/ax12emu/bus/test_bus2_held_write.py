@@ -1,0 +1,189 @@
+"""A bus served by a loop that settles after each packet (``Bus2.defer_settling``) answers every packet as the plain path does.
+
+With it, a Sync/Bulk Read may leave a servo's catch-up for after its reply, and a broadcast Sync Write of
+Goal registers is held for the next packet, which a read that cannot tell may overtake.  Both are shortcuts
+for a robot's control cycle; neither may change a byte a client reads.  Here two identical buses take the
+same packets in virtual time, one with the shortcuts and one without, settled at the same points as a
+serving loop settles them (``settle_in_pieces``, the physics tick, time passing only once both have settled),
+and every reply is compared byte for byte, then every table.  The packets are a robot's (Sync Write of Goal
+Position, Sync Read of Present Position) mixed with what could catch a shortcut out: reads of Moving, Goal
+Position and the trajectory right after a goal, a Bulk Read, writes the servo refuses (out of range), torque
+off and on, Operating Mode, Homing Offset, the Bus Watchdog, a Hardware Error raised in the firmware, a
+corrupt packet.
+"""
+
+from __future__ import annotations
+
+import random
+
+import pytest
+
+from ax12emu.bus.bus2 import Bus2
+from ax12emu.bus.clock import VirtualClock
+from ax12emu.protocol.packets import BROADCAST_ID
+from ax12emu.protocol.packets2 import Instruction2, encode_instruction2
+from ax12emu.protocol.servo_models import model
+from ax12emu.servo.model_factory2 import build_x_firmware
+from firmware_model.xseries.interface import HW_ERROR_OVERHEATING
+
+IDS = (1, 2, 3, 4, 5, 6)
+#: X-series addresses (e-manual, XL430-W250 / XM430-W350 control tables).
+OPERATING_MODE, HOMING_OFFSET, SHUTDOWN, TORQUE_ENABLE = 11, 20, 63, 64
+BUS_WATCHDOG, PROFILE_ACCELERATION, PROFILE_VELOCITY, GOAL_POSITION = 98, 108, 112, 116
+MOVING, VELOCITY_TRAJECTORY, PRESENT_POSITION, RETURN_DELAY_TIME = 122, 136, 132, 9
+
+
+def u16(value: int) -> bytes:
+    return (value & 0xFFFF).to_bytes(2, "little")
+
+
+def u32(value: int) -> bytes:
+    return (value & 0xFFFFFFFF).to_bytes(4, "little")
+
+
+def new_bus(defer: bool) -> Bus2:
+    specs = [model("xl430-w250"), model("xm430-w350")]
+    bus = Bus2([(servo_id, specs[servo_id % 2]) for servo_id in IDS], lambda spec, index: build_x_firmware(spec),
+               clock=VirtualClock(1.0))
+    bus.request_lag_s = 0.001  # as the serving loop sets it
+    bus.defer_settling = defer
+    return bus
+
+
+def sync_write(address: int, values: dict[int, bytes]) -> bytes:
+    length = len(next(iter(values.values())))
+    params = u16(address) + u16(length) + b"".join(bytes((servo_id,)) + data for servo_id, data in values.items())
+    return encode_instruction2(BROADCAST_ID, Instruction2.SYNC_WRITE, params)
+
+
+def sync_read(address: int, length: int, ids=IDS) -> bytes:
+    return encode_instruction2(BROADCAST_ID, Instruction2.SYNC_READ, u16(address) + u16(length) + bytes(ids))
+
+
+def bulk_read(reads: list[tuple[int, int, int]]) -> bytes:
+    params = b"".join(bytes((servo_id,)) + u16(address) + u16(length) for servo_id, address, length in reads)
+    return encode_instruction2(BROADCAST_ID, Instruction2.BULK_READ, params)
+
+
+def write(servo_id: int, address: int, data: bytes) -> bytes:
+    return encode_instruction2(servo_id, Instruction2.WRITE, u16(address) + data)
+
+
+def packets(rng: random.Random):
+    """An endless mix, weighted towards a robot's cycle."""
+    goals = {servo_id: 2048 for servo_id in IDS}
+    while True:
+        roll = rng.random()
+        if roll < 0.35:  # the cycle's write: new goals, near or far, sometimes the same again
+            for servo_id in IDS:
+                if rng.random() < 0.5:
+                    goals[servo_id] = rng.choice((goals[servo_id] + rng.randint(-15, 15), rng.randint(0, 4095)))
+            yield sync_write(GOAL_POSITION, {servo_id: u32(goal) for servo_id, goal in goals.items()})
+        elif roll < 0.65:
+            yield sync_read(PRESENT_POSITION, 4)
+        elif roll < 0.70:
+            yield sync_read(MOVING, 1)
+        elif roll < 0.74:
+            yield sync_read(GOAL_POSITION, 4)
+        elif roll < 0.77:
+            yield sync_read(VELOCITY_TRAJECTORY, 8)  # velocity and position trajectory
+        elif roll < 0.80:
+            yield sync_read(GOAL_POSITION, 20)  # goal, tick, moving, status, present PWM ... present position
+        elif roll < 0.82:
+            yield bulk_read([(2, PRESENT_POSITION, 4), (1, MOVING, 2), (5, 126, 10)])
+        elif roll < 0.84:  # out of range on some: refused there, taken elsewhere
+            yield sync_write(GOAL_POSITION, {servo_id: u32(rng.choice((5000, -3, goals[servo_id]))) for servo_id in IDS})
+        elif roll < 0.86:
+            yield sync_write(PROFILE_ACCELERATION, {servo_id: u32(rng.randint(0, 50)) + u32(rng.randint(0, 200))
+                                                    for servo_id in IDS})
+        elif roll < 0.88:
+            yield write(rng.choice(IDS), TORQUE_ENABLE, bytes((rng.randint(0, 1),)))
+        elif roll < 0.89:  # EEPROM: refused while the torque is on, taken when off
+            yield write(rng.choice(IDS), OPERATING_MODE, bytes((rng.choice((3, 4)),)))
+        elif roll < 0.90:
+            yield write(rng.choice(IDS), HOMING_OFFSET, u32(rng.randint(-900, 900)))
+        elif roll < 0.91:
+            yield write(rng.choice(IDS), BUS_WATCHDOG, bytes((rng.choice((0, 0, 0, 3)),)))
+        elif roll < 0.92:
+            yield write(rng.choice(IDS), SHUTDOWN, bytes((rng.choice((0x34, 0x00)),)))  # Shutdown: EEPROM
+        elif roll < 0.93:
+            yield "raise"  # the firmware detects an overheating (a fault the world causes)
+        elif roll < 0.94:
+            yield encode_instruction2(rng.choice(IDS), Instruction2.REBOOT)
+        elif roll < 0.95:
+            corrupt = bytearray(sync_read(PRESENT_POSITION, 4))
+            corrupt[-1] ^= 0xFF
+            yield bytes(corrupt)
+        else:
+            yield encode_instruction2(rng.choice(IDS), Instruction2.READ, u16(PRESENT_POSITION) + u16(4))
+
+
+def settle(bus: Bus2) -> None:
+    for _ in bus.settle_in_pieces():
+        pass
+
+
+def tick(bus: Bus2) -> None:
+    for _ in bus.advance_in_pieces():
+        pass
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3, 4])
+def test_the_shortcuts_answer_every_packet_byte_for_byte_as_the_plain_path(seed):
+    rng = random.Random(seed)
+    plain, quick = new_bus(defer=False), new_bus(defer=True)
+    setup = [write(servo_id, RETURN_DELAY_TIME, b"\x00") for servo_id in IDS]
+    setup += [write(servo_id, TORQUE_ENABLE, b"\x01") for servo_id in IDS]
+    for data in setup:
+        assert plain.receive(data) == quick.receive(data)
+    overtaken = deferred = 0
+    stream = packets(rng)
+    for step in range(2500):
+        data = next(stream)
+        if data == "raise":
+            servo_index = rng.randrange(len(IDS))
+            for bus in (plain, quick):
+                settle(bus)  # a fault acts between packets, once the loop has settled (it runs as a call)
+                bus.take_deferred()
+                bus.servos[servo_index].plant.firmware.raise_error(HW_ERROR_OVERHEATING)
+            continue
+        held_before = quick.parked
+        replies_plain, replies_quick = plain.receive(data), quick.receive(data)
+        assert [(r.data, r.delay_s) for r in replies_quick] == [(r.data, r.delay_s) for r in replies_plain], (step, data.hex())
+        overtaken += held_before and quick._parked is not None and not quick.parked
+        deferred += any(servo.plant._deferred is not None for servo in quick.servos)
+        roll = rng.random()
+        if roll < 0.6:  # the loop settles right after the packet (or the next packet comes first)
+            settle(plain)
+            settle(quick)
+        if roll < 0.15:  # the physics tick, then time passes
+            settle(plain)
+            settle(quick)
+            tick(plain)
+            tick(quick)
+            dt_s = rng.choice((0.0001, 0.0003, 0.001, 0.0025))
+            plain.clock.advance(dt_s)
+            quick.clock.advance(dt_s)
+    settle(plain)
+    settle(quick)
+    quick.take_deferred()
+    for a, b in zip(plain.servos, quick.servos):
+        assert bytes(a.table.row) == bytes(b.table.row)
+    # The shortcuts were taken (or this compared the plain path with itself).
+    assert overtaken > 20 and deferred > 20, (overtaken, deferred)
+
+
+def test_a_held_goal_write_is_visible_to_a_read_of_what_it_changes():
+    """Whatever a write changes is visible to the next request: Goal Position reads back, Moving is 1."""
+    bus = new_bus(defer=True)
+    for servo_id in IDS:
+        bus.receive(write(servo_id, RETURN_DELAY_TIME, b"\x00"))
+        bus.receive(write(servo_id, PROFILE_VELOCITY, u32(100)))
+        bus.receive(write(servo_id, TORQUE_ENABLE, b"\x01"))
+    assert bus.receive(sync_write(GOAL_POSITION, {servo_id: u32(3000) for servo_id in IDS})) == []
+    assert bus.parked  # held for the next packet
+    replies = bus.receive(sync_read(GOAL_POSITION, 4))
+    assert [int.from_bytes(reply.data[9:13], "little") for reply in replies] == [3000] * len(IDS)
+    bus.receive(sync_write(GOAL_POSITION, {servo_id: u32(1000) for servo_id in IDS}))
+    replies = bus.receive(sync_read(MOVING, 1))
+    assert [reply.data[9] for reply in replies] == [1] * len(IDS)
