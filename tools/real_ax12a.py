@@ -208,6 +208,24 @@ def fit_twin(base: ServoParams, rec: Measured, goal: int) -> tuple[ServoParams, 
     return best
 
 
+def close_twin(twin: ServoParams, path: Path, goal: int) -> tuple[ServoParams, object]:
+    """The twin with what the diagnosis names on its own fit recording added: (that twin, the diagnosis).
+
+    Why: what the workflow finds missing on the recording the twin was fitted on (no bar) is the servo's
+    (on these steps, gear play), so the twin the loaded steps are diagnosed from should carry it, or the
+    loaded steps name it again instead of the bar.  Named effects that are fields of the params
+    (:func:`firmware_model.diagnose.output.fitted_params`) go in, the base re-fit with them; the recording's
+    own traits (the goal write's time) do not.
+    """
+    from firmware_model.diagnose.cli import load_input, parse_args
+    from firmware_model.diagnose.output import fitted_params
+    from firmware_model.diagnose.search import diagnose
+
+    args = parse_args([str(path), "--out", "unused", "--goal", str(goal), "--voltage", str(twin.supply_voltage_v)])
+    d = diagnose(load_input(args, twin).trace, twin, progress=lambda msg: None)
+    return (fitted_params(d, twin) if d.named else twin), d
+
+
 def _row(name: str, r: dict, real: dict | None = None) -> str:
     text = f"  {name:<34} overshoot {r['overshoot']:5.1f}  dip {r['dip']:4.1f}  final {r['final']:6.1f}"
     if "rms" in r:

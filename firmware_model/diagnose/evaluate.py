@@ -6,6 +6,21 @@ simulation (identical motion knobs are simulated once; sensing knobs are
 applied afterwards), and :class:`Lockstep` lets several least-squares fits,
 each in its own thread, pool their requests into that one simulation, so
 fitting three candidates costs about what fitting one does.
+
+**Rows that count less.**  Where a trace says its rests are arbitrary
+(``meta["rests_arbitrary"]``: a Wizard graph export, where the flat stretch
+before the goal's write and after the servo settles lasts as long as the
+user happened to wait before and after), each of those two stretches counts
+as :data:`REST_COUNTS_S` of readings however long it is (:func:`rest_weights`):
+otherwise a recording stopped a minute later would weigh its settled reading
+(one unit either way, decided by friction, play and the unrecorded goal as
+much as by anything the step shows) a hundred times over the move, and the
+model comparison would name whatever moves that unit.  The weights scale the
+whitened residual (a down-weighted row is read as a noisier one) in every
+cost, fit and count (:meth:`Evaluator.weigh`), and the held-out blocks are
+cut to equal weight, so on a single step they hold rows of the move; the
+residual a report shows is not weighted.  Traces of a designed excitation (synthetic, live, BAM) have
+rests of designed lengths and no weights.
 """
 
 from __future__ import annotations
@@ -22,10 +37,39 @@ from .phases import classify
 from .schedule import compile_schedule
 from .trace import Trace
 
-__all__ = ["Evaluator", "Lockstep", "HELD_OUT_BLOCKS"]
+__all__ = ["Evaluator", "Lockstep", "HELD_OUT_BLOCKS", "REST_COUNTS_S", "rest_weights"]
 
 #: The trace is cut into 8 equal blocks; these are held out of every fit and used only to check it.
 HELD_OUT_BLOCKS = (1, 5)
+#: An arbitrary rest (see the module docstring) counts as this many seconds of readings, however long it lasts:
+#: about the time a step's own settling takes, so the settled reading counts once, like any other feature.
+REST_COUNTS_S = 0.25
+#: A reading within this many position units of the final one is settled (the compliance margin's default, 1).
+SETTLED_UNITS = 1.0
+#: A reading this many units from the first one has moved (as :data:`.nuisance.MOVEMENT_UNITS`).
+MOVED_UNITS = 2.0
+
+
+def rest_weights(trace: Trace) -> np.ndarray:
+    """Each row's weight: 1, except in a trace with arbitrary rests (module docstring), where the rows before the
+    first movement and those after the last reading more than :data:`SETTLED_UNITS` from the final one share
+    :data:`REST_COUNTS_S` worth of readings each."""
+    n = len(trace)
+    w = np.ones(n)
+    if not trace.meta.get("rests_arbitrary") or not trace.has("present_position") or n < 3:
+        return w
+    pos = trace["present_position"].astype(float)
+    moved = np.flatnonzero(np.abs(pos - pos[0]) >= MOVED_UNITS)
+    if len(moved) == 0:
+        return w
+    away = np.flatnonzero(np.abs(pos - pos[-1]) > SETTLED_UNITS)
+    spacing_s = float(np.median(np.diff(trace.t)))
+    # the row before the first movement may have started moving: it stays a move row
+    for rows in (np.arange(0, max(int(moved[0]) - 1, 0)), np.arange(int(away[-1]) + 1 if len(away) else n, n)):
+        lasts_s = len(rows) * spacing_s
+        if lasts_s > REST_COUNTS_S:
+            w[rows] = REST_COUNTS_S / lasts_s
+    return w
 
 
 class Evaluator:
@@ -50,10 +94,19 @@ class Evaluator:
         self.scales = channel_scales(trace, self.phases == 0)
         self.measured = np.stack([trace[ch].astype(float) for ch in channels], axis=1)
         self.sd = np.array([self.scales[ch] for ch in channels])
-        n = len(trace)
-        block = np.arange(n) * 8 // n
+        weight = rest_weights(trace)
+        # blocks of equal weight (of equal row count where every row weighs one): with its rests weighed, the
+        # held-out blocks of a single step fall on the move, not on rows at rest that test nothing
+        before = np.cumsum(weight) - weight
+        block = np.floor(before * 8 / weight.sum() + 1e-9).astype(np.int64)
         self.held = np.isin(block, HELD_OUT_BLOCKS)
         self.train = ~self.held
+        #: sqrt of each row's weight (:func:`rest_weights`): what :meth:`weigh` scales the whitened residual by.
+        self.row_scale = np.sqrt(weight)
+
+    def weigh(self, z: np.ndarray) -> np.ndarray:
+        """Whitened residuals (..., n, C) scaled by each row's weight, as every cost and count reads them."""
+        return z * self.row_scale[:, None]
 
     def run(self, requests: list[dict[str, float]], onsets: np.ndarray | None = None) -> np.ndarray:
         """Simulated channels for each knob set, shape (M, n, C); missing knobs take their null value.
@@ -89,7 +142,7 @@ class Evaluator:
 
     def costs(self, z: np.ndarray) -> tuple[float, float]:
         """Robust cost of whitened residuals ``z`` (n, C) on the training rows and on the held-out rows."""
-        c = robust_cost(z).sum(axis=1)
+        c = robust_cost(self.weigh(z)).sum(axis=1)
         return float(c[self.train].sum()), float(c[self.held].sum())
 
 

@@ -88,7 +88,7 @@ class Nuisance:
 
 def _row_cost(ev, simulated: np.ndarray) -> np.ndarray:
     """Robust cost per row, summed over channels, of simulated channels (M, n, C): shape (M, n)."""
-    return robust_cost(ev.whiten(simulated)).sum(axis=2)
+    return robust_cost(ev.weigh(ev.whiten(simulated))).sum(axis=2)
 
 
 def profile_hold_phase(ev, knobs: dict[str, float]) -> float | None:
@@ -99,7 +99,7 @@ def profile_hold_phase(ev, knobs: dict[str, float]) -> float | None:
     dt = ev.schedule.step_s
     hold = max(1, int(round(knobs["hold_s"] / dt)))
     reqs = [{**knobs, "hold_phase_s": j * dt} for j in range(hold)]
-    z = ev.whiten(ev.run(reqs))[:, :, held]
+    z = ev.weigh(ev.whiten(ev.run(reqs)))[:, :, held]
     cost = robust_cost(z).sum(axis=(1, 2))
     return float(int(np.argmin(cost)) * dt)
 

@@ -21,6 +21,20 @@ nothing about names.
   multi-start for the non-smooth parameters), all fits in lockstep threads
   sharing each simulation; grid-only effects (``smooth=False``) keep their
   grid optimum (:meth:`Selection.grid_fit`).
+
+**The write time of a single unrecorded step** (a Wizard export: one goal
+written at a time nobody recorded).  The base fit places it to the model's
+step (:mod:`.nuisance`), but a step's start lag is what inertia, friction and
+the drive's strength all move: held where the base model put it, an inertia
+is charged for a lag the write time would absorb (the real AX-12A steps: the
+cost of the bars' J halves once the write is re-fitted).  So on such a trace
+the write time is also a continuous shared base parameter, :data:`WRITE_SHIFT`
+(the readings of a servo at rest until the write, shifted in time: the
+sampler's reading latency, which is the same thing on such a trace and is why
+the ``delay`` effect is not offered on it), re-fitted with every candidate:
+profiled over :data:`WRITE_SHIFT_GRID_S` at each screened grid point (a
+re-sampling, no new simulation) and fitted by least squares with the rest, so
+an effect's interval allows for it.
 """
 
 from __future__ import annotations
@@ -40,12 +54,21 @@ from .metrics import F_SCALE, effective_count
 from .nuisance import PROFILERS, Nuisance, fit_onsets, profile_hold_phase
 from .trace import Trace
 
-__all__ = ["Selection", "Score", "Screened", "Fit", "Linearisation", "shortlist", "FIT_TOP", "MAX_NFEV"]
+__all__ = ["Selection", "Score", "Screened", "Fit", "Linearisation", "shortlist", "FIT_TOP", "MAX_NFEV", "WRITE_SHIFT",
+           "WRITE_SHIFT_KNOB", "WRITE_SHIFT_GRID_S"]
 
 #: Candidates fitted per round.
 FIT_TOP = 3
 #: Function evaluations per fit (each one batched simulation).
 MAX_NFEV = 10
+
+#: The write time of a single unrecorded step, as a shift of the readings (s; see the module docstring).  Bounds: a
+#: reading period (20 ms on a Wizard export) either way of where the base fit placed it; the step is 1 ms.
+WRITE_SHIFT = Param("write_shift_s", 0.0, -0.025, 0.025, (0.0,), 0.001, (0.0, 0.0))
+#: The simulator's knob that shifts the readings in time (the ``delay`` effect's, not offered on such a trace).
+WRITE_SHIFT_KNOB = "delay_s"
+#: Shifts profiled at each screened grid point (s).
+WRITE_SHIFT_GRID_S = tuple(round(0.002 * i, 3) for i in range(-10, 11))
 
 #: A pseudo-effect with no parameters: fitting it re-fits only the shared base parameters.
 _BASE_ONLY = Effect("base", "", "", (), lambda v, k: {}, ())
@@ -76,6 +99,8 @@ class Screened:
     best_z: np.ndarray
     #: Each grid point's re-fitted recording traits (knob -> value), keyed by the point's values in order.
     nuisance: dict[tuple[float, ...], dict[str, float]]
+    #: Each grid point's profiled write shift (:data:`WRITE_SHIFT`), keyed like ``nuisance``; empty where not fitted.
+    shift: dict[tuple[float, ...], float] = field(default_factory=dict)
 
     def starts(self, count: int) -> list[dict[str, float]]:
         """The ``count`` best grid points, best first: where the least-squares fits start."""
@@ -127,6 +152,11 @@ class Selection:
         start = self.ev.params
         self.base_params = tuple(Param(p.name, getattr(start, p.name), p.low, p.high, (getattr(start, p.name),),
                                        p.fd_step, p.hidden) for p in family.base_params)
+        #: Whether the trace is one step written at an unrecorded time (module docstring): the write shift is fitted.
+        self.shifts_write = (not self.ev.schedule.onsets_known and len(self.ev.schedule.segments) == 2
+                             and WRITE_SHIFT_KNOB in self.ev.null and not self.ev.null[WRITE_SHIFT_KNOB])
+        if self.shifts_write:
+            self.base_params += (WRITE_SHIFT,)
         self.base = {p.name: p.null for p in self.base_params}
         self.chosen: dict[str, dict[str, float]] = {}
         self.nuisance = Nuisance(onsets_fitted=not self.ev.schedule.onsets_known)
@@ -136,6 +166,8 @@ class Selection:
         """Simulator knobs for base values, the recording's nuisance (``nuisance`` overrides it) and chosen effects."""
         k = dict(self.ev.null)
         k.update(base)
+        if WRITE_SHIFT.name in k:
+            k[WRITE_SHIFT_KNOB] = k.pop(WRITE_SHIFT.name)
         k.update(self.nuisance.knobs())
         k.update(nuisance or {})
         return apply_effects(k, chosen, self.library)
@@ -154,7 +186,7 @@ class Selection:
     def score(self, z: np.ndarray) -> Score:
         """Costs and effective training count of whitened residuals ``z`` (n, C)."""
         s, h = self.ev.costs(z)
-        return Score(s, h, effective_count(z[self.ev.train]))
+        return Score(s, h, effective_count(self.ev.weigh(z)[self.ev.train]))
 
     # ------------------------------------------------------------------ screen
     def screen(self, remaining: list[str], round_no: int) -> dict[str, Screened]:
@@ -175,14 +207,26 @@ class Selection:
                 grid_reqs.append(req)
                 owners.append((name, vals))
         self.progress(f"round {round_no}: screening {len(remaining)} effects on {len(grid_reqs)} grid points")
-        zs = ev.whiten(ev.run(grid_reqs))
+        shifts = np.zeros(len(grid_reqs))
+        if self.shifts_write:  # the write shift profiled at every grid point: one simulation, re-sampled per shift
+            grid_s = np.array(WRITE_SHIFT_GRID_S) + self.base[WRITE_SHIFT.name]
+            grid_s = grid_s[(grid_s >= WRITE_SHIFT.low) & (grid_s <= WRITE_SHIFT.high)]
+            reqs = [{**r, WRITE_SHIFT_KNOB: float(d)} for r in grid_reqs for d in grid_s]
+            zs_all = ev.whiten(ev.run(reqs)).reshape(len(grid_reqs), len(grid_s), *ev.measured.shape)
+            at = np.array([int(np.argmin([ev.costs(z)[0] for z in row])) for row in zs_all])
+            shifts = grid_s[at]
+            zs = zs_all[np.arange(len(grid_reqs)), at]
+        else:
+            zs = ev.whiten(ev.run(grid_reqs))
         out: dict[str, Screened] = {}
-        for (name, vals), z in zip(owners, zs):
+        for (name, vals), z, shift in zip(owners, zs, shifts):
             s, _ = ev.costs(z)
             entry = out.get(name)
             if entry is None:
                 entry = out[name] = Screened(name, [], {}, np.inf, None,
                                              {c: p for (n, c), p in profiled.items() if n == name})
+            if self.shifts_write:
+                entry.shift[tuple(vals.values())] = float(shift)
             entry.table.append((vals, s))
             if s < entry.best_cost:
                 entry.best_values, entry.best_cost, entry.best_z = vals, s, z
@@ -199,7 +243,8 @@ class Selection:
         """
         lock = Lockstep(self.ev.run)
         starts = [(n, vals) for n in smooth for vals in screened[n].starts(self.library[n].starts)]
-        jobs = [lambda n=n, v=v: self.fit(self.library[n], v, lock, screened[n].nuisance[tuple(v.values())])
+        jobs = [lambda n=n, v=v: self.fit(self.library[n], v, lock, screened[n].nuisance[tuple(v.values())],
+                                          screened[n].shift.get(tuple(v.values())))
                 for n, v in starts]
         if with_base:  # the shared base parameters alone, in the same batches
             jobs.append(lambda: self.fit(_BASE_ONLY, {}, lock))
@@ -216,15 +261,19 @@ class Selection:
         values = {k: float(v) for k, v in screened.best_values.items()}
         refitted = {**{k: dict(v) for k, v in self.chosen.items()}, screened.effect: values}
         _, held = self.ev.costs(screened.best_z)
-        score = Score(screened.best_cost, held, effective_count(screened.best_z[self.ev.train]))
-        return Fit(screened.effect, values, dict(self.base), refitted, score, screened.best_z, grid=screened.table)
+        score = Score(screened.best_cost, held, effective_count(self.ev.weigh(screened.best_z)[self.ev.train]))
+        base = dict(self.base)
+        if self.shifts_write:
+            base[WRITE_SHIFT.name] = screened.shift.get(tuple(screened.best_values.values()), base[WRITE_SHIFT.name])
+        return Fit(screened.effect, values, base, refitted, score, screened.best_z, grid=screened.table)
 
     def fit(self, effect: Effect, start: dict[str, float], lock: Lockstep,
-            nuisance: dict[str, float] | None = None) -> Fit:
+            nuisance: dict[str, float] | None = None, shift_s: float | None = None) -> Fit:
         """Fit ``effect`` plus the base and the smooth accepted effects, from ``start``.
 
         ``nuisance``: the recording's traits as re-fitted at ``start`` (for an
-        effect with ``nuisances``), held through the fit.
+        effect with ``nuisances``), held through the fit.  ``shift_s``: the
+        write shift profiled at ``start`` (where it is fitted), where its fit starts.
 
         The accepted effects are re-fitted too (their columns cost little in a
         batched simulation), so a new effect is not accepted merely to patch an
@@ -237,8 +286,11 @@ class Selection:
         lo = np.array([p.low for _, p in owners])
         hi = np.array([p.high for _, p in owners])
         step = np.array([p.fd_step for _, p in owners])
+        base0 = dict(self.base)
+        if shift_s is not None:
+            base0[WRITE_SHIFT.name] = shift_s
         x0 = np.array([start.get(p.name, p.null) if o == effect.name else
-                       (self.base[p.name] if o == "base" else self.chosen[o][p.name]) for o, p in owners], dtype=float)
+                       (base0[p.name] if o == "base" else self.chosen[o][p.name]) for o, p in owners], dtype=float)
         x0 = np.clip(x0, lo + 1e-9 * (hi - lo), hi - 1e-9 * (hi - lo))
         cache: dict[bytes, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         train = self.ev.train
@@ -273,8 +325,9 @@ class Selection:
                     _, b, chosen = split(pt)
                     reqs.append(self.knobs(b, chosen, nuisance))
                 z = self.ev.whiten(lock.submit(reqs))
-                r0 = z[0][train].ravel()
-                jac = np.stack([(z[j + 1][train].ravel() - r0) / hs[j] for j in range(len(x))], axis=1)
+                zw = self.ev.weigh(z)  # the rows' weights, as every cost reads them
+                r0 = zw[0][train].ravel()
+                jac = np.stack([(zw[j + 1][train].ravel() - r0) / hs[j] for j in range(len(x))], axis=1)
                 cache[key] = (r0, jac, z[0])
             return cache[key]
 
