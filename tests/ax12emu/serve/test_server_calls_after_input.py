@@ -8,7 +8,8 @@ before each Sync Write leaves the loop mid-conversation (spinning), the case whe
 
 from __future__ import annotations
 
-from dynamixel_sdk import COMM_SUCCESS, GroupSyncWrite, PacketHandler, PortHandler
+from dynamixel_sdk import COMM_SUCCESS, GroupSyncWrite, PacketHandler
+from emu_testkit import PatientPortHandler
 
 from ax12emu import VirtualBus
 
@@ -18,7 +19,9 @@ ROUNDS = 200
 
 def _misses(bus: VirtualBus, protocol: float, baud: int, led_at: int) -> list[int]:
     """Each round: PING, a Sync Write of LED to IDs 1 and 2, a step at once, then the tables; the rounds that missed."""
-    port = PortHandler(bus.port)
+    # Patient for the PING's reply (the SDK's own wait is a few ms, which a loaded machine can outlast): a late
+    # reply is not what this counts.
+    port = PatientPortHandler(bus.port)
     assert port.openPort() and port.setBaudRate(baud)
     handler = PacketHandler(protocol)
     misses = []
