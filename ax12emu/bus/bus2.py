@@ -165,8 +165,9 @@ class Bus2(ServosById[Servo2], DecodedBus):
         self._waiting = False
         #: What :meth:`_may_hold` and :meth:`_read_unchanged_by` find from the IDs and layouts alone, per write
         #: (and read), with the lookup (``_by_id``) they were found under.
-        self._holdable: dict[tuple, tuple[dict, bool]] = {}
+        self._holdable: dict[tuple, tuple[dict, list[Servo2], bool]] = {}
         self._overtaking: dict[tuple, tuple[dict, list | None]] = {}
+        self._sensed_by_read: dict[object, tuple[dict, dict]] = {}
         self._closed = False
 
     # -- lookup (reindex, servo, ids: ServosById) ---------------------------------------
@@ -300,16 +301,21 @@ class Bus2(ServosById[Servo2], DecodedBus):
         ids = tuple(servo_id for servo_id, _ in params.writes)
         key = (params.address, params.length, ids, line_bps)
         known = self._holdable.get(key)
-        if known is not None and known[0] is self._by_id:  # no ID changed since: the same servos, the same tables
-            return known[1]
-        listed = set(ids)
-        # Every listed servo, heard or not: a servo's baud may change without a new lookup.
-        holdable = all(servo.writes_goals_only(params.address, params.length) for servo in self.servos
-                       if servo.id in listed)
-        if len(self._holdable) >= _MAX_REMEMBERED:
-            self._holdable.clear()
-        self._holdable[key] = (self._by_id, holdable)
-        return holdable
+        if known is None or known[0] is not self._by_id:  # an ID changed since: other servos, other tables
+            listed = set(ids)
+            # Every listed servo, heard or not: a servo's baud may change without a new lookup.
+            known = (self._by_id, [servo for servo in self.servos if servo.id in listed],
+                     all(servo.writes_goals_only(params.address, params.length) for servo in self.servos
+                         if servo.id in listed))
+            if len(self._holdable) >= _MAX_REMEMBERED:
+                self._holdable.clear()
+            self._holdable[key] = known
+        if not known[2]:
+            return False
+        # A write that earns its servo a step now is taken now: no read could go before it, and the loop
+        # takes the step while the host prepares its next packet.
+        clock_s = self.clock.now_s()
+        return not any(servo.plant.write_earns_step(clock_s) for servo in known[1])
 
     def _read_unchanged_by(self, packet: InstructionPacket2, write: InstructionPacket2, line_bps: float | None) -> bool:
         """Whether ``packet`` is a Sync/Bulk Read whose answer and effects are the same before ``write`` (a
@@ -339,9 +345,8 @@ class Bus2(ServosById[Servo2], DecodedBus):
         judged = known[1]
         if judged is None:
             return False
-        for servo in self.servos:
-            if not servo.watchdog_off:
-                return False
+        if not all(servo.watchdog_off for servo in self.servos):
+            return False
         clock_s = self.clock.now_s()
         sim_time_s = clock_s - self.request_lag_s
         for servo, spans in judged:
@@ -436,6 +441,9 @@ class Bus2(ServosById[Servo2], DecodedBus):
         """For a Sync/Bulk Read (or a fast one): each listed servo's sensed-register spans its answer reads
         (``Plant2.sensed_spans``; None where it reads Indirect Data or a register a command changes at once)."""
         params = parsed_params(packet.instruction, packet.params if type(packet.params) is bytes else bytes(packet.params))
+        known = self._sensed_by_read.get(params)
+        if known is not None and known[0] is self._by_id:  # no ID changed since: the same servos, the same tables
+            return known[1]
         if isinstance(params, SyncRead):
             reads = [(servo_id, params.address, params.length) for servo_id in params.ids]
         elif isinstance(params, BulkRead):
@@ -451,6 +459,9 @@ class Bus2(ServosById[Servo2], DecodedBus):
                     before = spans_by_servo[servo]
                     spans = None if before is None or spans is None else before + spans
                 spans_by_servo[servo] = spans
+        if len(self._sensed_by_read) >= _MAX_REMEMBERED:
+            self._sensed_by_read.clear()
+        self._sensed_by_read[params] = (self._by_id, spans_by_servo)
         return spans_by_servo
 
     def _each_own(self, packet: InstructionPacket2, targets: list[Servo2]) -> list[Reply]:

@@ -334,6 +334,10 @@ class Plant2(SteppedPlant):
                 return False
         return True
 
+    def write_earns_step(self, clock_s: float) -> bool:
+        """Whether a client's write now would earn a step of the model (:meth:`catch_up`: it is not ahead of ``clock_s``)."""
+        return self.firmware.time_s <= clock_s + GRID_SLACK_S
+
     def goal_write_unseen_by(self, sim_time_s: float, clock_s: float, spans: tuple[tuple[int, int], ...]) -> bool:
         """Whether a write of Goal or profile registers (none of the frame's or the torque's) taken now, with
         the catch-up it earns, would leave ``spans`` (see :meth:`sensed_spans`) as they are: a read of them
@@ -346,9 +350,9 @@ class Plant2(SteppedPlant):
         """
         if not self._unchanged_unless_stepped(sim_time_s, spans):
             return False
-        model = self.firmware
-        if model.time_s <= clock_s + GRID_SLACK_S:
+        if self.write_earns_step(clock_s):
             return False  # the write would earn a step before the read
+        model = self.firmware
         keeps_sensing = getattr(model, "keeps_sensing", None)
         if keeps_sensing is None:
             return False

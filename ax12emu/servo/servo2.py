@@ -58,6 +58,11 @@ class Servo2Options:
     reply_on_crc_error: bool = True
 
 
+def _byte_at(entry: Entry | None) -> int | None:
+    """The address of a one-byte unsigned register, read as ``row[address]``; None for any other (or none)."""
+    return entry.address if entry is not None and entry.size == 1 and not entry.signed else None
+
+
 class Servo2(TableServo):
     """Firmware-side state of one Protocol 2.0 servo on the bus (ID, Return Delay Time, Status Return Level,
     the registered write: :class:`~.table_servo.TableServo`)."""
@@ -75,6 +80,9 @@ class Servo2(TableServo):
         self._hardware_error = by_name.get("hardware_error_status")
         self._watchdog = by_name.get("bus_watchdog")
         self._tick = by_name.get("realtime_tick")
+        # Where these one-byte registers are read straight from the row (None: the model has none, or they are wider).
+        self._watchdog_at = _byte_at(self._watchdog)
+        self._hardware_error_at = _byte_at(self._hardware_error)
         self._bauds_bps = tuple(float(bps) for bps in spec.baud_rates_bps)
         if spec.firmware_version is not None and self.table.has("firmware_version"):
             self.table.set("firmware_version", spec.firmware_version)
@@ -105,7 +113,15 @@ class Servo2(TableServo):
     @property
     def alert(self) -> bool:
         """The status packets' Alert bit: set while Hardware Error Status(70) is non-zero."""
+        if self._hardware_error_at is not None:
+            return self.table.row[self._hardware_error_at] != 0
         return self._hardware_error is not None and self._hardware_error.value_in(self.table.row) != 0
+
+    def _watchdog_value(self) -> int:
+        """Bus Watchdog(98)'s value (0 where the model has none)."""
+        if self._watchdog_at is not None:
+            return self.table.row[self._watchdog_at]
+        return 0 if self._watchdog is None else self._watchdog.value_in(self.table.row)
 
     def start_at_baud(self, bps: float) -> None:
         """Set Baud Rate to the value whose rate is ``bps`` (a bus started at another rate than the factory's)."""
@@ -151,12 +167,12 @@ class Servo2(TableServo):
         is larger than the set value of Bus Watchdog(98), the DYNAMIXEL will stop. Bus Watchdog(98)
         will be changed to '-1'", and the Goal registers become read-only until it is written 0.
         """
-        table, watchdog = self.table, self._watchdog
-        if watchdog is None or self.last_instruction_s is None:
+        if self.last_instruction_s is None:
             return
-        value = watchdog.value_in(table.row)
+        value = self._watchdog_value()
         if not value:
-            return  # off (the usual case: checked for every servo on every packet)
+            return  # off, or no such register (the usual case: checked for every servo on every packet)
+        table = self.table
         if not 1 <= value < WATCHDOG_ERROR or not table.torque_on:
             return
         if now_s - self.last_instruction_s > value * WATCHDOG_UNIT_S:
@@ -166,11 +182,11 @@ class Servo2(TableServo):
     @property
     def watchdog_off(self) -> bool:
         """Bus Watchdog(98) is 0 (or the model has none): silence stops nothing, and an instruction's time is not measured."""
-        return self._watchdog is None or self._watchdog.value_in(self.table.row) == 0
+        return self._watchdog_value() == 0
 
     @property
     def watchdog_error(self) -> bool:
-        return self._watchdog is not None and self._watchdog.value_in(self.table.row) == WATCHDOG_ERROR
+        return self._watchdog is not None and self._watchdog_value() == WATCHDOG_ERROR
 
     def write(self, address: int, data: bytes) -> int:
         """A client's write, all or nothing, with the firmware's side effects; returns the error number."""
