@@ -150,9 +150,10 @@ def emulator() -> Iterator[Callable[..., Served]]:
 # -- The parallel pass (``-n 2 --dist loadfile``): which files go together, and which start first ----------------------
 
 #: Files whose tests share one session fixture too costly to make twice (tests/tools/conftest.py's fitted twin of
-#: the real AX-12A): the parallel pass gives each group to one worker, which makes the fixture once.
+#: the real AX-12A, tests/firmware_model/diagnose/conftest.py's synthetic diagnoses): the parallel pass gives each group to one worker, which makes the fixture once.
 SCHEDULED_TOGETHER = {
     "tests/tools/test_real_ax12a_inertia.py": "tests/tools/test_real_ax12a.py",
+    "tests/firmware_model/diagnose/test_search_state.py": "tests/firmware_model/diagnose/test_search.py",
 }
 
 #: The files whose shared setup runs longest (CPU-bound diagnoses and fits, tens of seconds each), slowest first.

@@ -11,67 +11,28 @@ steps and moderate-speed moves (excitation.BREAKAWAY).  For ``sample_hold``
 the position channel carries no signal, so the shrink is checked on the
 speed channel instead.
 
-All diagnoses are made once by a module fixture, in two worker processes
-(the machine has two cores; one diagnosis uses one).
+All diagnoses are made once, in two fresh processes that also make
+test_search_state.py's (see conftest.py: SEARCH_CASES, two_orders).
 """
 
-import os
-from concurrent.futures import ProcessPoolExecutor
-
-import numpy as np
 import pytest
 
 from firmware_model.diagnose.effects import LIBRARY
-from firmware_model.diagnose.search import diagnose, residual_structure
-from firmware_model.diagnose.synthetic import COGGING_AMPLITUDE_NM, draw_effect, make_trace
+from firmware_model.diagnose.search import residual_structure
+from firmware_model.diagnose.synthetic import COGGING_AMPLITUDE_NM
 
 #: The diagnoses below are made once, in one fixture, two at a time (one per core); setup may take minutes.
 pytestmark = pytest.mark.timeout(900)
 
-DURATION_S = 10.0
-#: Effects whose test trace needs the breakaway block: (total seconds, of which breakaway block).
-BREAKAWAY_S = {"stribeck_friction": (14.0, 6.0)}
-#: Every diagnosis the tests look at: key -> (hidden effects, seed); the slowest first, to balance the workers.
-CASES = {
-    "delay+extra_inertia": (("delay", "extra_inertia"), 2),
-    **{name: ((name,), 7) for name in ("compliance_deadband", "stribeck_friction", "extra_inertia")},
-    **{name: ((name,), 7) for name in LIBRARY},
-    "cogging": (("cogging",), 5),
-    "clean": ((), 12),
-}
-
-
-def _run(case):
-    """(measured position, diagnosis) of one synthetic trace; runs in a worker process."""
-    hidden_names, seed = case
-    rng = np.random.default_rng(seed + 100_000)
-    hidden = {n: draw_effect(n, rng) for n in hidden_names}
-    single = len(hidden_names) == 1
-    duration, block = BREAKAWAY_S.get(hidden_names[0], (DURATION_S, 0.0)) if single else (DURATION_S, 0.0)
-    trace, _ = make_trace(hidden, seed, duration, breakaway_s=block)
-    return trace["present_position"], diagnose(trace, progress=lambda m: None)
-
 
 @pytest.fixture(scope="module")
-def results():
-    """All CASES diagnosed once, in parallel (an exception is kept and re-raised by the test that needs it)."""
-    workers = max(1, min(2, os.cpu_count() or 1))
-    with ProcessPoolExecutor(workers) as pool:
-        futures = {key: pool.submit(_run, case) for key, case in CASES.items()}
-        out = {}
-        for key, fut in futures.items():
-            try:
-                out[key] = fut.result()
-            except Exception as exc:  # noqa: BLE001 - reported by the test for this case
-                out[key] = exc
-    return out
+def results(two_orders):
+    """conftest.py's two_orders: ``search_result(key)`` is a SEARCH_CASES key's (measured position, diagnosis)."""
+    return two_orders
 
 
 def _get(results, key):
-    r = results[key]
-    if isinstance(r, Exception):
-        raise r
-    return r
+    return results.search_result(key)
 
 
 @pytest.mark.parametrize("name", list(LIBRARY))
