@@ -270,6 +270,12 @@ class Bus2(ServosById[Servo2], DecodedBus):
         overtaken it, it is no longer waiting, and the serving loop's settling takes it at once."""
         return self._parked is not None and self._waiting
 
+    def close(self) -> None:
+        """Take a Sync Write still held for the next packet, then save state (``DecodedBus.close``)."""
+        if not self._closed:
+            self.take_parked()
+        super().close()
+
     def take_parked(self) -> None:
         """Take the Sync Write held for the next packet, if any (see :meth:`answer`)."""
         parked = self._parked

@@ -154,7 +154,8 @@ class Servo2(TableServo):
 
     def heard(self, now_s: float) -> None:
         """An instruction packet reached this servo at ``now_s`` (bus clock): the Bus Watchdog's interval restarts."""
-        self.check_watchdog(now_s)
+        if self._watchdog_at is None or self.table.row[self._watchdog_at]:
+            self.check_watchdog(now_s)  # (a Bus Watchdog of 0 is off: nothing to check)
         self.last_instruction_s = now_s
         tick = self._tick
         if tick is not None:  # as Table2.set does
