@@ -22,9 +22,9 @@ numbers that tell them apart, per AX-12A recording:
    reading times, whitened soft-L1 cost on the training rows), from the twin plus each value:
 
    * *write fixed*: the goal write's time (not recorded in a Wizard export, a nuisance the
-     base fit places) held where the twin put it, as the search screens and fits effects
-     without ``nuisances``.  Inertia slows the start, so held there it is charged for a lag
-     the write time would absorb;
+     base fit places) held where the twin put it, as the search once screened and fitted
+     effects (it now re-fits the write with each, ``selection.WRITE_SHIFT``).  Inertia slows
+     the start, so held there it is charged for a lag the write time would absorb;
    * *write re-fitted*: the write time re-fitted at each value (:func:`fit_onsets`);
    * *move rows*: only the rows from the first movement to :data:`AFTER_PEAK_S` after the
      peak, the write time re-fitted for them; the rows at rest, where the settled level (one

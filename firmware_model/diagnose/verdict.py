@@ -122,6 +122,9 @@ def wald(effect: Effect, values: dict[str, float], linear: Linearisation, n_eff:
     w = 1.0 / np.sqrt(1.0 + (r0 / F_SCALE) ** 2)  # soft-L1 IRLS weights: the robust fit's curvature
     jw = jac * w[:, None] ** 0.5
     s2 = float(np.sum((r0 * w**0.5) ** 2)) / max(n - p, 1)
+    if s2 == 0.0:  # an exact fit (a noise-free recording): no spread, the null is excluded if the fit left it
+        d = np.array([values[t] - effect.param(t).null for t in effect.tested])
+        return {name: 0.0 for name in names}, bool(np.any(d != 0.0))
     cov = np.linalg.pinv(jw.T @ jw) * s2 * (n / max(n_eff, 1.0))
     sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     unc = {name: float(1.96 * sd[i]) for i, name in enumerate(names)}

@@ -34,13 +34,16 @@ def _step(params: ServoParams, duration_ms: int) -> np.ndarray:
     return np.array([1.0] + [model.advance(i * 1e-3, cmds).present_position[0] for i in range(1, duration_ms + 1)])
 
 
-def _wizard_export(path, params: ServoParams, head_ms: float, tail_ms: float, phase_ms: float = 7.3):
-    """The step read every 20 ms and stamped on the first 16 ms tick after each reading (the newest one wins)."""
+def _wizard_export(path, params: ServoParams, head_ms: float, tail_ms: float, phase_ms: float = 7.3, seed: int = 0):
+    """The step read every 20 ms and stamped on the first 16 ms tick after each reading (the newest one wins), the
+    pot's noise (0.25 units) added before the reading is rounded."""
     sim = _step(params, int(tail_ms) + 900)
+    rng = np.random.default_rng(seed)
     rows = {}
     for read_ms in np.arange(phase_ms, head_ms + len(sim) - 1, 20.0):
         k = int(read_ms - head_ms)
-        rows[int(np.ceil(read_ms / 16.0) * 16)] = 1 if k < 0 else int(sim[min(k, len(sim) - 1)])
+        rows[int(np.ceil(read_ms / 16.0) * 16)] = int(round((1 if k < 0 else sim[min(k, len(sim) - 1)])
+                                                             + rng.normal(0.0, 0.25)))
     path.write_text("\n".join(HEADER + [f"{t},{v}" for t, v in sorted(rows.items())]) + "\n", encoding="utf-8")
     return path
 

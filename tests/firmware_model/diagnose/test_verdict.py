@@ -133,6 +133,15 @@ def test_wald_widens_the_interval_for_autocorrelated_residuals():
     assert unc_corr["backlash_rad"] == pytest.approx(10.0 * unc_white["backlash_rad"], rel=1e-6)
 
 
+def test_wald_on_an_exact_fit_excludes_a_null_the_fit_left():
+    """A fit that leaves no residual at all (a noise-free recording) has no spread to scale: the null is excluded
+    where the estimate is off it, and not where it is on it (a zero spread once read as "includes the null")."""
+    values, linear, _ = _linear(4.0)
+    exact = Linearisation(linear.names, np.zeros_like(linear.residual), linear.jacobian)
+    assert wald(BACKLASH, values, exact, n_eff=2000.0)[1]
+    assert not wald(BACKLASH, {**values, "backlash_rad": 0.0}, exact, n_eff=2000.0)[1]
+
+
 def test_judge_uses_the_wald_test_for_least_squares_fits():
     values, linear, _ = _linear(0.3)
     fit = Fit("backlash", {"backlash_rad": values["backlash_rad"]}, {"gearbox_efficiency": 0.76},
