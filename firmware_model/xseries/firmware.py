@@ -567,7 +567,7 @@ class XFirmware:
         cmd = self._cmd
         sign = self._sign()
         physics = self.physics
-        present = self._present_pulses()
+        present = sign * physics.angle_rad / PULSE_RAD - self._turn_base_pulses + self._homing_offset()  # _present_pulses()
         present_velocity = int(round(sign * physics.velocity_rad_s * _RAD_S_TO_VELOCITY_UNITS))
         current_a = sign * physics.current_a
         if self.current_unit_a:
@@ -584,19 +584,23 @@ class XFirmware:
                 status |= 0x01
             if abs(self._traj_pulses - present) > FOLLOWING_ERROR_PULSES:
                 status |= 0x08
+        # By position, in XSensed's field order (by keyword costs a dict per call, every step of every servo):
+        # present_position, present_velocity, present_current, present_pwm, velocity_trajectory,
+        # position_trajectory, moving, moving_status, present_input_voltage, present_temperature,
+        # hardware_error_status, torque_enable.
         sensed = XSensed(
-            present_position=_int32(present),
-            present_velocity=present_velocity,
-            present_current=present_current,
-            present_pwm=int(round(self._duty * PWM_FULL_SCALE)),
-            velocity_trajectory=int(round(self._traj_velocity_pulses_s / VELOCITY_UNIT_PULSES_S)),
-            position_trajectory=_int32(self._traj_pulses),
-            moving=1 if profile_on or abs(present_velocity) > cmd.moving_threshold else 0,
-            moving_status=status,
-            present_input_voltage=int(round(physics.supply_v * 10.0)),
-            present_temperature=int(round(self.temperature_c)),
-            hardware_error_status=self._hw_error,
-            torque_enable=1 if self._torque_on else 0,
+            _int32(present),
+            present_velocity,
+            present_current,
+            int(round(self._duty * PWM_FULL_SCALE)),
+            int(round(self._traj_velocity_pulses_s / VELOCITY_UNIT_PULSES_S)),
+            _int32(self._traj_pulses),
+            1 if profile_on or abs(present_velocity) > cmd.moving_threshold else 0,
+            status,
+            int(round(physics.supply_v * 10.0)),
+            int(round(self.temperature_c)),
+            self._hw_error,
+            1 if self._torque_on else 0,
         )
         if self._held_readings:
             sensed = dataclasses.replace(sensed, **self._held_readings)
