@@ -19,9 +19,18 @@ Sync Read and one Fast Sync Read (a share missing or out of range counts as lost
 handlers on one port, each servo moving; a reply of the other protocol's servos would show up as a
 wrong or lost one.
 
-A reply that does not come (any comm result but success) is *lost*; one
-with an error bit, a wrong value or an out-of-range position is *wrong*.
-Both must be 0.  Latency percentiles are printed per tenth of the run,
+A reply that does not come (any comm result but success, or dynamixel-sdk raising on what came)
+is *lost*; one with an error bit, a wrong value or an out-of-range position is *wrong*.
+Both must be 0, but for the losses the machine caused.  Why: on a loaded machine (2 cores, load 3
+to 8) now and then one of the emulator, the client, or the kernel worker that carries a pty's bytes
+from one side to the other (``flush_to_ldisc``, which a reader of the pty waits for in
+``__flush_work``, state D) gets no CPU for 35 to 350 ms, longer than dynamixel-sdk's ~34 ms timeout,
+whatever the emulator does.  So on Linux the soak reads, before each request and after a lost one,
+each process's time on a CPU, time waiting for one, and the number of times it got one
+(``/proc/PID/schedstat``); a loss during which the machine kept the emulator or the client from its
+CPU for ``STARVED_S`` or more (``OffCpu.held_off``) counts apart, as *starved*, and so do the
+wrong or unusable reply right after it (the late answer, taken for the next request's).  Each
+loss is listed with both processes' figures.  Latency percentiles are printed per tenth of the run,
 and the emulator's resident memory (VmRSS from /proc) at the start (after
 a warm-up) and at the end, whose difference must stay within 5 MB.
 
@@ -31,6 +40,7 @@ Usage: ``python tools/soak.py [--seconds 600] [--servos 4] [--protocol 1.0|2.0|m
 from __future__ import annotations
 
 import argparse
+import os
 import select
 import subprocess
 import sys
@@ -43,6 +53,14 @@ PRESENT_POSITION, GOAL_POSITION, MOVING, RETURN_DELAY, MODEL_NUMBER, TORQUE_ENAB
 #: After a one-byte EEPROM write an AX-12 ignores packets for about 6 ms (9 ms by the ATMega8 datasheet).
 EEPROM_WAIT_S = 0.009
 RSS_LIMIT_KB = 5 * 1024
+#: dynamixel-sdk's packet timeout is (bytes x byte time) + 2 x LATENCY_TIMER (16 ms) + 2 ms
+#: (dynamixel_sdk/port_handler.py, ``setPacketTimeout``), ~34 ms for the soak's packets at 1 Mbps.
+#: A request during which the emulator or the client was kept off its CPU this long (waiting for
+#: one, or blocked on the pty's kernel worker) left at most the 2 ms and the bytes' time to answer
+#: or to read the answer: a loss then is the machine's.
+STARVED_S = 2 * 0.016
+#: dynamixel-sdk's result for a reply it could not use; also what a call that raised counts as.
+COMM_RX_CORRUPT = COMM_RAISED = -3002
 
 
 @dataclass(frozen=True)
@@ -88,6 +106,72 @@ def percentile(sorted_values: list[float], q: float) -> float:
     return sorted_values[min(len(sorted_values) - 1, int(q * len(sorted_values)))]
 
 
+class SchedStat:
+    """One thread's time on a CPU, time runnable but waiting for one (seconds), and how many times it got one.
+
+    From ``/proc/PID/schedstat`` (Linux, ``CONFIG_SCHED_INFO``: run time ns, run delay ns, timeslices;
+    the thread group leader's, which is the thread that serves in ``ax12emu serve`` and the one that
+    soaks here), through a descriptor kept open: ``pread`` regenerates the line, about 3 us a read.
+    ``read()`` is None where there is no such file (not Linux) or the process has ended.
+    """
+
+    def __init__(self, pid: int) -> None:
+        try:
+            self._fd: int | None = os.open(f"/proc/{pid}/schedstat", os.O_RDONLY)
+        except OSError:
+            self._fd = None
+        if self._fd is not None and self.read() is None:
+            self.close()
+
+    def read(self) -> tuple[float, float, int] | None:
+        """(on a CPU s, waiting for a CPU s, timeslices) so far."""
+        if self._fd is None:
+            return None
+        try:
+            run_ns, wait_ns, slices = os.pread(self._fd, 128, 0).split()[:3]
+            return int(run_ns) * 1e-9, int(wait_ns) * 1e-9, int(slices)
+        except (OSError, ValueError):
+            return None
+
+    def close(self) -> None:
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
+
+
+@dataclass(frozen=True)
+class OffCpu:
+    """What kept one process from its CPU during a request: ``off_s`` not on a CPU (waiting for one,
+    or blocked in the kernel), in ``stretches`` (the times it got one back); ``waiting_s`` runnable,
+    which the kernel adds up when a wait ends, so a wait begun before the request counts whole."""
+
+    off_s: float
+    waiting_s: float
+    stretches: int
+    #: Whether the process sleeps by its own choice during a request: the emulator does, up to its
+    #: 1 ms physics period at a time (its loop's longest ``select``); the client does not
+    #: (dynamixel-sdk polls the port, pyserial's read with timeout 0 never blocks).
+    sleeps: bool = True
+
+    @classmethod
+    def between(cls, before: tuple[float, float, int], after: tuple[float, float, int], wall_s: float, *,
+                sleeps: bool = True) -> OffCpu:
+        return cls(max(0.0, wall_s - (after[0] - before[0])), after[1] - before[1], after[2] - before[2], sleeps)
+
+    @property
+    def held_off(self) -> bool:
+        """Kept from its CPU ``STARVED_S`` or more by the machine: runnable and waiting for a CPU, or, for
+        a process that never sleeps by choice, off it at all; or off it in stretches of half that on average,
+        far longer than any sleep it chooses (blocked in the kernel, on the pty's worker)."""
+        if self.off_s < STARVED_S:
+            return False
+        return (not self.sleeps or min(self.waiting_s, self.off_s) >= STARVED_S
+                or self.off_s / max(1, self.stretches) >= STARVED_S / 2)
+
+    def __str__(self) -> str:
+        return f"{self.off_s * 1e3:.1f} ms in {max(1, self.stretches)} ({self.waiting_s * 1e3:.1f} ms waiting for a CPU)"
+
+
 @dataclass
 class Slice:
     """One tenth of the run."""
@@ -107,6 +191,14 @@ class SoakResult:
     #: Wrong replies right after a lost one: the late reply, taken by dynamixel-sdk for the next
     #: request to the same ID (it matches replies by ID only).
     wrong_after_lost: int = 0
+    #: Of ``lost``, those during whose request the emulator or the client was held off its CPU
+    #: (``OffCpu.held_off``); of ``wrong_after_lost``, those right after such a loss.
+    lost_starved: int = 0
+    wrong_after_starved: int = 0
+    #: Whether the processes' CPU figures could be read (Linux); without them no loss counts as starved.
+    waits_known: bool = False
+    #: How the reply before the one being counted went: None (it came), "lost" or "starved".
+    _previous: str | None = field(default=None, repr=False)
     moving_seen: int = 0
     moving_checks: int = 0
     rss_start_kb: int = 0
@@ -120,10 +212,44 @@ class SoakResult:
         return self.rss_end_kb - self.rss_start_kb
 
     @property
+    def lost_by_emulator(self) -> int:
+        """Lost replies but those the machine's scheduler explains (``OffCpu.held_off``)."""
+        return self.lost - self.lost_starved
+
+    @property
+    def wrong_by_emulator(self) -> int:
+        """Wrong replies but the late answers right after a starved loss."""
+        return self.wrong - self.wrong_after_starved
+
+    @property
     def ok(self) -> bool:
-        """No lost or wrong reply, memory flat, and the servos moved."""
-        return (not self.lost and not self.wrong and abs(self.rss_growth_kb) <= RSS_LIMIT_KB
+        """No lost or wrong reply the machine does not explain, memory flat, and the servos moved."""
+        return (not self.lost_by_emulator and not self.wrong_by_emulator and abs(self.rss_growth_kb) <= RSS_LIMIT_KB
                 and self.moving_seen > 0)
+
+    def count(self, what: str, at_s: float, comm: int, error: int, bad: bool,
+              off_cpu: tuple[OffCpu, OffCpu] | None = None) -> None:
+        """Count one reply: ``comm`` dynamixel-sdk's result, ``bad`` a wrong value; ``off_cpu`` the
+        emulator's and the client's time off their CPUs during its request (None: not known)."""
+        previous = self._previous
+        starved = off_cpu is not None and (off_cpu[0].held_off or off_cpu[1].held_off)
+        waits = "" if off_cpu is None else f"; off its CPU: emulator {off_cpu[0]}, client {off_cpu[1]}"
+        if comm != COMM_SUCCESS:
+            # A reply dynamixel-sdk could not use right after a starved loss: the late answer, mixed in.
+            starved = starved or (comm == COMM_RX_CORRUPT and previous == "starved")
+            self.lost += 1
+            self.lost_starved += starved
+            if len(self.problems) < 20:
+                self.problems.append(f"lost at {at_s:.1f} s: {what} (comm {comm}{waits})")
+            self._previous = "starved" if starved else "lost"
+            return
+        if error or bad:
+            self.wrong += 1
+            self.wrong_after_lost += previous is not None
+            self.wrong_after_starved += previous == "starved"
+            if len(self.problems) < 20:
+                self.problems.append(f"wrong at {at_s:.1f} s: {what} (error {error:#x})")
+        self._previous = None
 
 
 def serve_args(servos: int, protocol: str = "1.0") -> list[str]:
@@ -158,6 +284,8 @@ def soak(path: str, pid: int, seconds: float, servos: int, *, goal_period_s: flo
     #: (kind, ID) of every servo: IDs are per protocol, so a mixed wire has ID 1 twice.
     targets = [(kind, servo_id) for kind in kinds for servo_id in range(1, servos + 1)]
     clock = time.perf_counter
+    emulator_stat, client_stat = SchedStat(pid), SchedStat(os.getpid())
+    result.waits_known = emulator_stat.read() is not None and client_stat.read() is not None
     readers = {}
     for kind in kinds:
         if kind.protocol == 2.0:
@@ -189,29 +317,39 @@ def soak(path: str, pid: int, seconds: float, servos: int, *, goal_period_s: flo
         rss_at = started + min(warmup_s, seconds / 10)
         rounds = 0
 
-        def timed(call, *args):
+        #: Both threads' CPU figures and the clock when the last request began, and their time off
+        #: their CPUs during it once a loss asked for it (a Sync Read's shares share one request).
+        stats_before: list = [None, None, 0.0]
+        off_during: list = [None]
+
+        def timed(call, *args, raised=COMM_RAISED):
+            if result.waits_known:
+                stats_before[0], stats_before[1], stats_before[2] = emulator_stat.read(), client_stat.read(), clock()
+                off_during[0] = None
             t0 = clock()
-            out = call(*args)
+            try:
+                out = call(*args)
+            except Exception as exc:  # dynamixel-sdk indexing a reply that is not the one it waits for
+                if len(result.problems) < 20:
+                    result.problems.append(f"dynamixel-sdk raised at {t0 - started:.1f} s: {exc!r}")
+                out = raised
             elapsed = clock() - t0
             index = min(9, int((t0 - started) / seconds * 10))
             result.slices[index].latencies_s.append(elapsed)
             result.requests += 1
             return out
 
-        previous_lost = [False]
+        def off_cpu_of_request() -> tuple[OffCpu, OffCpu] | None:
+            if off_during[0] is None and result.waits_known:
+                emulator, client, wall_s = emulator_stat.read(), client_stat.read(), clock() - stats_before[2]
+                if None not in (emulator, client, stats_before[0], stats_before[1]):
+                    off_during[0] = (OffCpu.between(stats_before[0], emulator, wall_s),
+                                     OffCpu.between(stats_before[1], client, wall_s, sleeps=False))
+            return off_during[0]
 
         def check(what: str, comm: int, error: int, bad: bool) -> None:
-            elapsed_s = clock() - started
-            if comm != COMM_SUCCESS:
-                result.lost += 1
-                if len(result.problems) < 20:
-                    result.problems.append(f"lost at {elapsed_s:.1f} s: {what} (comm {comm})")
-            elif error or bad:
-                result.wrong += 1
-                result.wrong_after_lost += previous_lost[0]
-                if len(result.problems) < 20:
-                    result.problems.append(f"wrong at {elapsed_s:.1f} s: {what} (error {error:#x})")
-            previous_lost[0] = comm != COMM_SUCCESS
+            result.count(what, clock() - started, comm, error, bad,
+                         off_cpu_of_request() if comm != COMM_SUCCESS else None)
 
         while True:
             now = clock()
@@ -225,19 +363,22 @@ def soak(path: str, pid: int, seconds: float, servos: int, *, goal_period_s: flo
                     kind, servo_id = target
                     low, high = kind.goals
                     goals[target] = high if goals[target] < (low + high) // 2 else low
-                    comm, error = timed(write, kind, servo_id, kind.goal_position, kind.position_bytes, goals[target])
+                    comm, error = timed(write, kind, servo_id, kind.goal_position, kind.position_bytes, goals[target],
+                                        raised=(COMM_RAISED, 0))
                     check(f"WRITE goal {goals[target]} to ID {servo_id} (Protocol {kind.protocol})", comm, error, False)
                 for kind, servo_id in targets:
-                    value, comm, error = timed(read, kind, servo_id, kind.moving, 1)
+                    value, comm, error = timed(read, kind, servo_id, kind.moving, 1, raised=(0, COMM_RAISED, 0))
                     check(f"READ Moving of ID {servo_id} (Protocol {kind.protocol})", comm, error, value not in (0, 1))
                     result.moving_checks += 1
                     result.moving_seen += value == 1
             for target in targets:
                 kind, servo_id = target
-                value, comm, error = timed(read, kind, servo_id, kind.present_position, kind.position_bytes)
+                value, comm, error = timed(read, kind, servo_id, kind.present_position, kind.position_bytes,
+                                           raised=(0, COMM_RAISED, 0))
                 check(f"READ Present Position of ID {servo_id} = {value} (Protocol {kind.protocol})", comm, error,
                       not 0 <= value <= kind.position_max)
-                value, comm, error = timed(read, kind, servo_id, kind.goal_position, kind.position_bytes)
+                value, comm, error = timed(read, kind, servo_id, kind.goal_position, kind.position_bytes,
+                                           raised=(0, COMM_RAISED, 0))
                 check(f"READ Goal Position of ID {servo_id} = {value}, wrote {goals[target]} (Protocol {kind.protocol})",
                       comm, error, value != goals[target])
             for kind, reader in readers.items():
@@ -247,12 +388,13 @@ def soak(path: str, pid: int, seconds: float, servos: int, *, goal_period_s: flo
                     available = comm == COMM_SUCCESS and reader.isAvailable(servo_id, kind.present_position,
                                                                             kind.position_bytes)
                     value = reader.getData(servo_id, kind.present_position, kind.position_bytes) if available else 0
-                    check(f"{how} of Present Position, ID {servo_id} = {value}", comm if available else -1001, 0,
+                    check(f"{how} of Present Position, ID {servo_id} = {value}",
+                          comm if comm != COMM_SUCCESS else (COMM_SUCCESS if available else -1001), 0,
                           not 0 <= value <= kind.position_max)
             rounds += 1
             if rounds % 100 == 0:
                 for kind in kinds:
-                    value, comm, error = timed(read, kind, 1, MODEL_NUMBER, 2)
+                    value, comm, error = timed(read, kind, 1, MODEL_NUMBER, 2, raised=(0, COMM_RAISED, 0))
                     check(f"READ Model Number = {value} (Protocol {kind.protocol})", comm, error,
                           value != kind.model_number)
             index = min(9, int((now - started) / seconds * 10))
@@ -263,6 +405,8 @@ def soak(path: str, pid: int, seconds: float, servos: int, *, goal_period_s: flo
             result.rss_start_kb = result.rss_end_kb
     finally:
         port.closePort()
+        emulator_stat.close()
+        client_stat.close()
     return result
 
 
@@ -273,6 +417,10 @@ def report(result: SoakResult, servos: int, protocol: str = "1.0") -> str:
         f"soak: {result.seconds:.0f} s, {models} moving (goal flips every 0.5 s), dynamixel-sdk over the pty",
         f"requests: {result.requests:,} ({result.requests / result.seconds:,.0f}/s); lost replies: {result.lost}; "
         f"wrong replies: {result.wrong} ({result.wrong_after_lost} right after a lost one); Moving read 1 in {result.moving_seen} of {result.moving_checks} checks",
+        (f"starved (the emulator or this client off its CPU {STARVED_S * 1e3:.0f} ms or more of the request, in long stretches): "
+         f"{result.lost_starved} of the lost, {result.wrong_after_starved} of the wrong right after them; "
+         f"the emulator's: {result.lost_by_emulator} lost, {result.wrong_by_emulator} wrong"
+         if result.waits_known else "time off the CPU not readable here (no /proc/PID/schedstat): every loss counts"),
         "latency per tenth of the run (ms):  requests    p50     p90     p99   p99.9     max   RSS MB",
     ]
     for k, part in enumerate(result.slices):
@@ -289,7 +437,8 @@ def report(result: SoakResult, servos: int, protocol: str = "1.0") -> str:
     lines.append(f"emulator RSS: {result.rss_start_kb / 1024:.1f} MB after warm-up, {result.rss_end_kb / 1024:.1f} MB "
                  f"at the end ({result.rss_growth_kb / 1024:+.2f} MB; limit +/-{RSS_LIMIT_KB / 1024:.0f} MB)")
     lines.extend(result.problems)
-    lines.append("PASS" if result.ok else "FAIL")
+    starved = f" ({result.lost_starved} lost while starved of a CPU)" if result.lost_starved else ""
+    lines.append(("PASS" if result.ok else "FAIL") + starved)
     return "\n".join(lines)
 
 
