@@ -163,6 +163,8 @@ class Bus2(ServosById[Servo2], DecodedBus):
         #: whether it still waits for that packet (False once a read went before it).
         self._parked: tuple[InstructionPacket2, float | None] | None = None
         self._waiting = False
+        #: What :meth:`_may_hold` held the write by: (address, length, the IDs listed, line speed).
+        self._parked_key: tuple = ()
         #: What :meth:`_may_hold` and :meth:`_read_unchanged_by` find from the IDs and layouts alone, per write
         #: (and read), with the lookup (``_by_id``) they were found under.
         self._holdable: dict[tuple, tuple[dict, list[Servo2], bool]] = {}
@@ -321,7 +323,10 @@ class Bus2(ServosById[Servo2], DecodedBus):
         # A write that earns its servo a step now is taken now: no read could go before it, and the loop
         # takes the step while the host prepares its next packet.
         clock_s = self.clock.now_s()
-        return not any(servo.plant.write_earns_step(clock_s) for servo in known[1])
+        if any(servo.plant.write_earns_step(clock_s) for servo in known[1]):
+            return False
+        self._parked_key = key
+        return True
 
     def _read_unchanged_by(self, packet: InstructionPacket2, write: InstructionPacket2, line_bps: float | None) -> bool:
         """Whether ``packet`` is a Sync/Bulk Read whose answer and effects are the same before ``write`` (a
@@ -339,12 +344,12 @@ class Bus2(ServosById[Servo2], DecodedBus):
         spec = INSTRUCTION_SPECS.get(packet.instruction)
         if spec is None or spec.broadcast not in _LISTED_READS:
             return False
-        params = parsed_params(packet.instruction, packet.params if type(packet.params) is bytes else bytes(packet.params))
-        written = parsed_params(write.instruction, write.params if type(write.params) is bytes else bytes(write.params))
-        key = (params, written.address, written.length, tuple(servo_id for servo_id, _ in written.writes), line_bps)
+        raw = packet.params if type(packet.params) is bytes else bytes(packet.params)
+        key = (packet.instruction, raw, self._parked_key)  # the read's bytes; what _may_hold found of the write
         known = self._overtaking.get(key)
         if known is None or known[0] is not self._by_id:
-            known = (self._by_id, self._servos_to_judge(params, written, line_bps))
+            written = parsed_params(write.instruction, write.params if type(write.params) is bytes else bytes(write.params))
+            known = (self._by_id, self._servos_to_judge(parsed_params(packet.instruction, raw), written, line_bps))
             if len(self._overtaking) >= _MAX_REMEMBERED:
                 self._overtaking.clear()
             self._overtaking[key] = known
