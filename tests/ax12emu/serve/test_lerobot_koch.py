@@ -43,9 +43,10 @@ from dynamixel_sdk import (
 from emu_testkit import PatientPortHandler
 
 #: The wall-clock tier (real time, margins meant for one test at a time; CI runs it on its own) takes the
-#: scenarios whose outcome hangs on how soon something happens: broadcast Pings' fixed reply windows, a
-#: teleoperation loop at 30 Hz for 2 s.  The handshake and the calibration file time nothing (each
-#: reply waits lerobot's 1,000 ms), so they run in parallel with the other tests.
+#: scenario whose outcome hangs on how soon something happens: a teleoperation loop at 30 Hz for 2 s.
+#: The handshake, the calibration file and the broadcast Pings time nothing (each reply, and each
+#: broadcast Ping's replies, wait lerobot's 1,000 ms; see LerobotPort), so they run in parallel with
+#: the other tests.
 wallclock = pytest.mark.wallclock
 
 #: How ``ax12emu serve`` is asked for the Koch follower's six servos.
@@ -341,7 +342,6 @@ def _served_koch(emulator):
     return emulator(*KOCH_SERVE_ARGS)
 
 
-@wallclock
 def test_setup_motors_finds_a_lone_servo_by_broadcast_ping_and_moves_it_to_1_mbps(emulator):
     """``lerobot-setup-motors``: one XL330-M288 at the factory ID 1 and 57,600 bps, found by broadcast ping
     (9,600 bps first: silence), given the gripper's ID 6 and 1 Mbps, then answers there."""
