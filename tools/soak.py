@@ -59,6 +59,9 @@ RSS_LIMIT_KB = 5 * 1024
 #: one, or blocked on the pty's kernel worker) left at most the 2 ms and the bytes' time to answer
 #: or to read the answer: a loss then is the machine's.
 STARVED_S = 2 * 0.016
+#: The longest the emulator sleeps by its own choice: its serving loop's ``select`` is capped at one
+#: physics period (``BusServer.run_once``, ``physics_period_s`` 1 ms by default).
+EMULATOR_LONGEST_SLEEP_S = 1e-3
 #: dynamixel-sdk's result for a reply it could not use; also what a call that raised counts as.
 COMM_RX_CORRUPT = COMM_RAISED = -3002
 
@@ -148,25 +151,29 @@ class OffCpu:
     off_s: float
     waiting_s: float
     stretches: int
-    #: Whether the process sleeps by its own choice during a request: the emulator does, up to its
-    #: 1 ms physics period at a time (its loop's longest ``select``); the client does not
-    #: (dynamixel-sdk polls the port, pyserial's read with timeout 0 never blocks).
-    sleeps: bool = True
+    #: The longest the process sleeps at a time by its own choice during a request: the emulator up to
+    #: ``EMULATOR_LONGEST_SLEEP_S``; the client never (dynamixel-sdk polls the port, and pyserial's
+    #: read with timeout 0 does not block).
+    longest_sleep_s: float = EMULATOR_LONGEST_SLEEP_S
 
     @classmethod
     def between(cls, before: tuple[float, float, int], after: tuple[float, float, int], wall_s: float, *,
-                sleeps: bool = True) -> OffCpu:
-        return cls(max(0.0, wall_s - (after[0] - before[0])), after[1] - before[1], after[2] - before[2], sleeps)
+                longest_sleep_s: float = EMULATOR_LONGEST_SLEEP_S) -> OffCpu:
+        return cls(max(0.0, wall_s - (after[0] - before[0])), after[1] - before[1], after[2] - before[2],
+                   longest_sleep_s)
+
+    @property
+    def kept_off_s(self) -> float:
+        """The least of ``off_s`` that was not the process's choice: each stretch off its CPU holds at
+        most one sleep it chose (the rest: waiting for a CPU, or blocked in the kernel, as on the pty's
+        worker); and at least the wait for a CPU, as far as it fell in the request."""
+        chosen_s = max(1, self.stretches) * self.longest_sleep_s
+        return max(self.off_s - chosen_s, min(self.waiting_s, self.off_s))
 
     @property
     def held_off(self) -> bool:
-        """Kept from its CPU ``STARVED_S`` or more by the machine: runnable and waiting for a CPU, or, for
-        a process that never sleeps by choice, off it at all; or off it in stretches of half that on average,
-        far longer than any sleep it chooses (blocked in the kernel, on the pty's worker)."""
-        if self.off_s < STARVED_S:
-            return False
-        return (not self.sleeps or min(self.waiting_s, self.off_s) >= STARVED_S
-                or self.off_s / max(1, self.stretches) >= STARVED_S / 2)
+        """Kept from its CPU by the machine for ``STARVED_S`` or more of the request."""
+        return self.kept_off_s >= STARVED_S
 
     def __str__(self) -> str:
         return f"{self.off_s * 1e3:.1f} ms in {max(1, self.stretches)} ({self.waiting_s * 1e3:.1f} ms waiting for a CPU)"
@@ -239,16 +246,17 @@ class SoakResult:
             starved = starved or (comm == COMM_RX_CORRUPT and previous == "starved")
             self.lost += 1
             self.lost_starved += starved
-            if len(self.problems) < 20:
-                self.problems.append(f"lost at {at_s:.1f} s: {what} (comm {comm}{waits})")
+            if len(self.problems) < (10 if starved else 40):  # the emulator's own come first when reading
+                self.problems.append(f"lost at {at_s:.1f} s{', starved' if starved else ''}: {what} (comm {comm}{waits})")
             self._previous = "starved" if starved else "lost"
             return
         if error or bad:
             self.wrong += 1
             self.wrong_after_lost += previous is not None
             self.wrong_after_starved += previous == "starved"
-            if len(self.problems) < 20:
-                self.problems.append(f"wrong at {at_s:.1f} s: {what} (error {error:#x})")
+            if len(self.problems) < 40:
+                self.problems.append(f"wrong at {at_s:.1f} s{', after a starved loss' if previous == 'starved' else ''}: "
+                                     f"{what} (error {error:#x})")
         self._previous = None
 
 
@@ -344,7 +352,7 @@ def soak(path: str, pid: int, seconds: float, servos: int, *, goal_period_s: flo
                 emulator, client, wall_s = emulator_stat.read(), client_stat.read(), clock() - stats_before[2]
                 if None not in (emulator, client, stats_before[0], stats_before[1]):
                     off_during[0] = (OffCpu.between(stats_before[0], emulator, wall_s),
-                                     OffCpu.between(stats_before[1], client, wall_s, sleeps=False))
+                                     OffCpu.between(stats_before[1], client, wall_s, longest_sleep_s=0.0))
             return off_during[0]
 
         def check(what: str, comm: int, error: int, bad: bool) -> None:
@@ -417,7 +425,7 @@ def report(result: SoakResult, servos: int, protocol: str = "1.0") -> str:
         f"soak: {result.seconds:.0f} s, {models} moving (goal flips every 0.5 s), dynamixel-sdk over the pty",
         f"requests: {result.requests:,} ({result.requests / result.seconds:,.0f}/s); lost replies: {result.lost}; "
         f"wrong replies: {result.wrong} ({result.wrong_after_lost} right after a lost one); Moving read 1 in {result.moving_seen} of {result.moving_checks} checks",
-        (f"starved (the emulator or this client off its CPU {STARVED_S * 1e3:.0f} ms or more of the request, in long stretches): "
+        (f"starved (the machine kept the emulator or this client from its CPU {STARVED_S * 1e3:.0f} ms or more of the request): "
          f"{result.lost_starved} of the lost, {result.wrong_after_starved} of the wrong right after them; "
          f"the emulator's: {result.lost_by_emulator} lost, {result.wrong_by_emulator} wrong"
          if result.waits_known else "time off the CPU not readable here (no /proc/PID/schedstat): every loss counts"),

@@ -39,16 +39,22 @@ def test_a_loss_while_a_process_was_held_off_its_cpu_is_the_machines():
 
 def test_the_clients_wait_counts_as_well():
     result = _passing()
-    result.count("READ", 1.0, LOST, 0, False, (ON_CPU, soak.OffCpu(soak.STARVED_S, 0.01, 2, sleeps=False)))
+    result.count("READ", 1.0, LOST, 0, False, (ON_CPU, soak.OffCpu(soak.STARVED_S, 0.01, 2, longest_sleep_s=0.0)))
     assert result.lost_starved == 1 and result.ok
 
 
 def test_many_short_absences_of_the_emulator_are_not_a_hold_off():
-    """Off its CPU as long in total, not waiting for one, back on it every 2 ms: the emulator sleeps up
-    to its 1 ms physics period by its own choice, so it could have answered; the loss is its own."""
+    """Off its CPU 40 ms in 20 stretches, not waiting for one: up to 20 ms of that may be the sleeps it
+    chooses (1 ms each at most, its physics period), so only 20 ms were surely the machine's: the loss is its own."""
     result = _passing()
     result.count("READ", 1.0, LOST, 0, False, (held_off(0.04, stretches=20), ON_CPU))
     assert result.lost_starved == 0 and not result.ok
+
+
+def test_each_stretch_off_the_cpu_holds_at_most_one_chosen_sleep():
+    assert held_off(0.04, stretches=5).kept_off_s == pytest.approx(0.04 - 5 * soak.EMULATOR_LONGEST_SLEEP_S)
+    assert held_off(0.04, stretches=5).held_off
+    assert not held_off(0.04, stretches=9).held_off
 
 
 def test_the_emulator_waiting_for_a_cpu_in_many_stretches_is_held_off():
@@ -60,9 +66,9 @@ def test_a_wait_begun_before_the_request_counts_only_as_far_as_the_request_was_o
 
 
 def test_the_client_never_sleeps_by_choice_so_any_absence_counts():
-    scattered = soak.OffCpu(0.04, 0.0, 20, sleeps=False)
+    scattered = soak.OffCpu(0.04, 0.0, 20, longest_sleep_s=0.0)
     assert scattered.held_off
-    assert not soak.OffCpu(soak.STARVED_S * 0.9, 0.0, 1, sleeps=False).held_off
+    assert not soak.OffCpu(soak.STARVED_S * 0.9, 0.0, 1, longest_sleep_s=0.0).held_off
 
 
 def test_an_unusable_reply_right_after_a_starved_loss_is_the_late_answer():
