@@ -124,8 +124,8 @@ def wald(effect: Effect, values: dict[str, float], linear: Linearisation, n_eff:
     the plain form, one spread for every row, credits the rows that decide a
     parameter with the rest rows' small one.  On Wizard-style steps made by the
     model with the supply off by up to 2 %, the plain form's inertia intervals
-    held the bar in 3 of 9, the sandwich's in 8 of 8 named.  With an even
-    spread the two agree.
+    held the bar in 3 of 9, the sandwich's in 8 of 9 (the ninth an exact fit of
+    a noise-free recording, no spread at all).  With an even spread the two agree.
     """
     r0, jac, names = linear.residual, linear.jacobian, linear.names
     n, p = jac.shape
