@@ -299,7 +299,8 @@ class Bus2(ServosById[Servo2], DecodedBus):
         return self.dispatch(packet, line_bps=line_bps)
 
     def _may_hold(self, packet: InstructionPacket2, line_bps: float | None) -> bool:
-        """A broadcast Sync Write, good CRC, no faults, storing only Goal and profile registers on every servo it reaches."""
+        """A broadcast Sync Write, good CRC, no faults, storing only Goal and profile registers on every servo it
+        lists, no Bus Watchdog on, and none of those servos earning a step by it now."""
         if not (packet.instruction == Instruction2.SYNC_WRITE and packet.crc_ok and packet.id == BROADCAST_ID
                 and self.faults is None):
             return False
@@ -318,8 +319,8 @@ class Bus2(ServosById[Servo2], DecodedBus):
             if len(self._holdable) >= _MAX_REMEMBERED:
                 self._holdable.clear()
             self._holdable[key] = known
-        if not known[2]:
-            return False
+        if not known[2] or not all(servo.watchdog_off for servo in self.servos):
+            return False  # (a Bus Watchdog that is on times every instruction: a held one would reach it late)
         # A write that earns its servo a step now is taken now: no read could go before it, and the loop
         # takes the step while the host prepares its next packet.
         clock_s = self.clock.now_s()
