@@ -254,7 +254,7 @@ class SoakResult:
             self.wrong += 1
             self.wrong_after_lost += previous is not None
             self.wrong_after_starved += previous == "starved"
-            if len(self.problems) < 40:
+            if len(self.problems) < (10 if previous == "starved" else 40):  # the emulator's own first, as above
                 self.problems.append(f"wrong at {at_s:.1f} s{', after a starved loss' if previous == 'starved' else ''}: "
                                      f"{what} (error {error:#x})")
         self._previous = None
