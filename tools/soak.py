@@ -206,6 +206,9 @@ class SoakResult:
     waits_known: bool = False
     #: How the reply before the one being counted went: None (it came), "lost" or "starved".
     _previous: str | None = field(default=None, repr=False)
+    #: The last starved loss, listed or not: shown before a problem the machine does not explain,
+    #: since late answers may trail it by several requests.
+    _last_starved: str | None = field(default=None, repr=False)
     moving_seen: int = 0
     moving_checks: int = 0
     rss_start_kb: int = 0
@@ -246,18 +249,33 @@ class SoakResult:
             starved = starved or (comm == COMM_RX_CORRUPT and previous == "starved")
             self.lost += 1
             self.lost_starved += starved
-            if len(self.problems) < (10 if starved else 40):  # the emulator's own come first when reading
-                self.problems.append(f"lost at {at_s:.1f} s{', starved' if starved else ''}: {what} (comm {comm}{waits})")
+            line = f"lost at {at_s:.1f} s{', starved' if starved else ''}: {what} (comm {comm}{waits})"
+            if starved:
+                self._last_starved = line
+                if len(self.problems) < 10:  # the emulator's own come first when reading
+                    self.problems.append(line)
+            else:
+                self._list_own(line)
             self._previous = "starved" if starved else "lost"
             return
         if error or bad:
             self.wrong += 1
             self.wrong_after_lost += previous is not None
             self.wrong_after_starved += previous == "starved"
-            if len(self.problems) < (10 if previous == "starved" else 40):  # the emulator's own first, as above
-                self.problems.append(f"wrong at {at_s:.1f} s{', after a starved loss' if previous == 'starved' else ''}: "
-                                     f"{what} (error {error:#x})")
+            line = f"wrong at {at_s:.1f} s{', after a starved loss' if previous == 'starved' else ''}: {what} (error {error:#x})"
+            if previous == "starved":
+                if len(self.problems) < 10:
+                    self.problems.append(line)
+            else:
+                self._list_own(line)
         self._previous = None
+
+    def _list_own(self, line: str) -> None:
+        """List a problem the machine does not explain, after the last starved loss if that is not listed."""
+        if self._last_starved is not None and self._last_starved not in self.problems and len(self.problems) < 39:
+            self.problems.append(f"(the last starved loss before it) {self._last_starved}")
+        if len(self.problems) < 40:
+            self.problems.append(line)
 
 
 def serve_args(servos: int, protocol: str = "1.0") -> list[str]:

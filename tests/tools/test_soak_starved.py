@@ -124,6 +124,18 @@ def test_the_verdict_line_says_how_many_losses_were_starved():
     assert soak.report(result, 1).splitlines()[-1] == "PASS (1 lost while starved of a CPU)"
 
 
+def test_a_problem_of_its_own_is_listed_after_the_last_starved_loss():
+    """Late answers may trail a starved loss by several requests, so the list shows it before the problem."""
+    result = _passing()
+    for k in range(12):
+        result.count(f"READ {k}", 1.0, LOST, 0, False, (held_off(1.0), ON_CPU))
+    result.count("READ", 1.0, soak.COMM_SUCCESS, 0, False)
+    result.count("READ Moving", 2.0, soak.COMM_SUCCESS, 0, True)
+    assert len(result.problems) == 12
+    assert result.problems[-2].startswith("(the last starved loss before it) lost at 1.0 s, starved: READ 11")
+    assert result.problems[-1].startswith("wrong at 2.0 s: READ Moving")
+
+
 def test_no_such_process_has_no_figures():
     stat = soak.SchedStat(2**22 + 12345)  # above Linux's largest pid
     assert stat.read() is None
