@@ -111,6 +111,15 @@ _REQUIRED_BROADCAST = _LISTED_READS | {Broadcast.REQUIRED_SILENT}
 _status_packet = functools.lru_cache(maxsize=1024)(encode_status2)
 
 
+def _listed_reads(params: object) -> list[tuple[int, int, int]] | None:
+    """A Sync or Bulk Read's parameters as (ID, address, length) per read; None for any other parameters."""
+    if isinstance(params, SyncRead):
+        return [(servo_id, params.address, params.length) for servo_id in params.ids]
+    if isinstance(params, BulkRead):
+        return list(params.reads)
+    return None
+
+
 class Bus2(ServosById[Servo2], DecodedBus):
     """Protocol 2.0 servos on one wire, each with its own model file and firmware model (bytes in and
     the life cycle: :class:`~.decoded.DecodedBus`)."""
@@ -372,11 +381,8 @@ class Bus2(ServosById[Servo2], DecodedBus):
         stores into whose registers the read reads, with the sensed spans it reads (``Plant2.sensed_spans``);
         None if the read reads bytes the write stores, Indirect Data or a trajectory register of such a servo,
         or is malformed."""
-        if isinstance(params, SyncRead):
-            reads = [(servo_id, params.address, params.length) for servo_id in params.ids]
-        elif isinstance(params, BulkRead):
-            reads = list(params.reads)
-        else:
+        reads = _listed_reads(params)
+        if reads is None:
             return None
         start, end = written.address, written.address + written.length
         listed = {servo_id for servo_id, _ in written.writes}
@@ -456,11 +462,8 @@ class Bus2(ServosById[Servo2], DecodedBus):
         known = self._sensed_by_read.get(params)
         if known is not None and known[0] is self._by_id:  # no ID changed since: the same servos, the same tables
             return known[1]
-        if isinstance(params, SyncRead):
-            reads = [(servo_id, params.address, params.length) for servo_id in params.ids]
-        elif isinstance(params, BulkRead):
-            reads = list(params.reads)
-        else:
+        reads = _listed_reads(params)
+        if reads is None:
             return None
         spans_by_servo: dict[Servo2, tuple[tuple[int, int], ...] | None] = {}
         by_id = self._by_id
