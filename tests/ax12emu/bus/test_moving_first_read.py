@@ -21,14 +21,13 @@ checked as its e-manual page words it:
 from __future__ import annotations
 
 import pytest
+from emu_testkit import RegisterLink
 
 from ax12emu.bus.bus import Bus
 from ax12emu.bus.clock import VirtualClock
 from ax12emu.harness.servos2 import build_wire
 from ax12emu.protocol.control_table import AX12_MODEL
-from ax12emu.protocol.packets import Instruction, encode_instruction
-from ax12emu.protocol.packets2 import Instruction2, decode_packet2, encode_instruction2
-from ax12emu.protocol.servo_models import model, model_names
+from ax12emu.protocol.servo_models import model_names
 
 #: Moves a little beyond every table's position margin (the AX's Compliance Margin of a unit or two, the
 #: X firmware's In-Position window of 10 pulses, 0.9 deg) and a long one, in degrees so every table's units serve.
@@ -39,43 +38,12 @@ PROFILE_ONGOING = 0x02
 PROFILE_TYPE_BITS = 0x30
 
 
-class Link:
+class Link(RegisterLink):
     """One servo, ID 1, of ``key``'s model on the bus the served wire would use, spoken to in its protocol."""
 
     def __init__(self, key: str) -> None:
-        self.spec = model(key)
         clock = VirtualClock()
-        self.bus = Bus([1], clock=clock) if key == AX12_MODEL else build_wire(f"1:{key}", clock=clock)
-        self.by_name = {entry.name: entry for entry in self.spec.entries}
-        self.protocol2 = "2.0" in self.spec.protocols
-
-    def write(self, name: str, value: int) -> None:
-        entry = self.by_name[name]
-        data = value.to_bytes(entry.size, "little")
-        if self.protocol2:
-            (reply,) = self.bus.receive(encode_instruction2(1, Instruction2.WRITE, entry.address.to_bytes(2, "little") + data))
-            assert decode_packet2(reply.data).error == 0, (name, value)
-        else:
-            (reply,) = self.bus.receive(encode_instruction(1, Instruction.WRITE, bytes([entry.address]) + data))
-            assert reply.data[4] == 0, (name, value)
-
-    def read(self, *names: str) -> dict[str, int]:
-        """The registers ``names`` in one READ (one instant), by name."""
-        entries = [self.by_name[name] for name in names]
-        start = min(entry.address for entry in entries)
-        size = max(entry.address + entry.size for entry in entries) - start
-        if self.protocol2:
-            (reply,) = self.bus.receive(encode_instruction2(1, Instruction2.READ, start.to_bytes(2, "little") + size.to_bytes(2, "little")))
-            data = decode_packet2(reply.data).params
-        else:
-            (reply,) = self.bus.receive(encode_instruction(1, Instruction.READ, bytes([start, size])))
-            data = reply.data[5:-1]
-        return {entry.name: int.from_bytes(data[entry.address - start : entry.address - start + entry.size], "little",
-                                           signed=entry.signed) for entry in entries}
-
-    def run_s(self, seconds: float) -> None:
-        self.bus.clock.advance(seconds)
-        self.bus.advance()
+        super().__init__(key, Bus([1], clock=clock) if key == AX12_MODEL else build_wire(f"1:{key}", clock=clock))
 
 
 @pytest.mark.parametrize("speed", SPEEDS, ids=lambda s: f"speed{s}")
@@ -87,20 +55,20 @@ def test_the_first_read_after_a_goal_beyond_the_margin_says_moving(key, move_deg
     link.write("profile_velocity" if profiled else "moving_speed", speed)
     link.write("torque_enable", 1)
     link.run_s(0.5)
-    start = link.read("present_position")["present_position"]
-    assert link.read("moving")["moving"] == 0, "at rest before the goal"
+    start = link.read("present_position")
+    assert link.read("moving") == 0, "at rest before the goal"
     # Toward the middle of the range, whichever side the servo rests on.
     units = round(move_deg / link.spec.physical.resolution_deg)
     middle = round(link.spec.physical.position_range_deg / link.spec.physical.resolution_deg) // 2
     link.write("goal_position", start + units if start < middle else start - units)
     if profiled and speed == 0:
-        first = link.read("moving_threshold", "moving", "moving_status", "present_velocity")
+        first = link.registers("moving_threshold", "moving", "moving_status", "present_velocity")
         assert first["moving_status"] & (PROFILE_ONGOING | PROFILE_TYPE_BITS) == 0, first
         assert first["moving"] == int(abs(first["present_velocity"]) > first["moving_threshold"]), first
     else:
-        first = link.read("moving", *(("moving_status",) if profiled else ()))
+        first = link.registers("moving", *(("moving_status",) if profiled else ()))
         assert first["moving"] == 1, first
         if profiled:
             assert first["moving_status"] & PROFILE_ONGOING, first
     link.run_s(3.0)
-    assert link.read("moving")["moving"] == 0, "the move is over"
+    assert link.read("moving") == 0, "the move is over"

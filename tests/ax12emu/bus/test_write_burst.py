@@ -15,6 +15,7 @@ Every served model, on the bus the served wire would use, with physics up to dat
 from __future__ import annotations
 
 import pytest
+from emu_testkit import RegisterLink
 
 from ax12emu.bus.bus import Bus
 from ax12emu.bus.bus1x import Bus1X
@@ -22,8 +23,8 @@ from ax12emu.bus.bus2 import Bus2
 from ax12emu.bus.clock import VirtualClock
 from ax12emu.bus.wire import build_wire_of
 from ax12emu.protocol.packets import BROADCAST_ID, Instruction, encode_instruction
-from ax12emu.protocol.packets2 import Instruction2, decode_packet2, encode_instruction2
-from ax12emu.protocol.servo_models import model, model_names
+from ax12emu.protocol.packets2 import Instruction2, encode_instruction2
+from ax12emu.protocol.servo_models import model_names
 from ax12emu.servo.model_factory import ModelChoice, build_model
 
 #: Goal writes in one burst, all at one instant of the clock.
@@ -33,17 +34,14 @@ SLACK_S = 1e-9
 LAGS = pytest.mark.parametrize("lag_steps", [0, 1], ids=["up-to-date", "a-step-behind"])
 
 
-class Link:
+class Link(RegisterLink):
     """One servo, ID 1, of ``key``'s model on its wire, spoken to in its protocol, in virtual time."""
 
     def __init__(self, key: str, lag_steps: int, bus: Bus | None = None) -> None:
-        self.spec = model(key)
-        self.bus = bus if bus is not None else build_wire_of([(1, key)], clock=VirtualClock())
+        super().__init__(key, bus if bus is not None else build_wire_of([(1, key)], clock=VirtualClock()))
         self.clock = self.bus.clock
         self.step_s = self.bus.physics_step_s
         self.bus.request_lag_s = lag_steps * self.step_s
-        self.by_name = {entry.name: entry for entry in self.spec.entries}
-        self.protocol2 = "2.0" in self.spec.protocols
         profiled = "profile_velocity" in self.by_name
         self.write("profile_velocity" if profiled else "moving_speed", 100)
         self.write("torque_enable", 1)
@@ -64,16 +62,6 @@ class Link:
         """How far the furthest model is past the clock."""
         return max(self.model_times_s()) - self.clock.now_s()
 
-    def write(self, name: str, value: int) -> None:
-        entry = self.by_name[name]
-        data = (value & ((1 << (8 * entry.size)) - 1)).to_bytes(entry.size, "little")
-        if self.protocol2:
-            (reply,) = self.bus.receive(encode_instruction2(1, Instruction2.WRITE, entry.address.to_bytes(2, "little") + data))
-            assert decode_packet2(reply.data).error == 0, (name, value)
-        else:
-            (reply,) = self.bus.receive(encode_instruction(1, Instruction.WRITE, bytes([entry.address]) + data))
-            assert reply.data[4] == 0, (name, value)
-
     def sync_write(self, name: str, value: int) -> None:
         """A Sync Write of one register to ID 1: nobody answers."""
         entry = self.by_name[name]
@@ -84,22 +72,6 @@ class Link:
         else:
             packet = encode_instruction(BROADCAST_ID, Instruction.SYNC_WRITE, bytes([entry.address, entry.size, 1]) + data)
         assert self.bus.receive(packet) == []
-
-    def read(self, name: str) -> int:
-        entry = self.by_name[name]
-        if self.protocol2:
-            (reply,) = self.bus.receive(encode_instruction2(1, Instruction2.READ, entry.address.to_bytes(2, "little")
-                                                            + entry.size.to_bytes(2, "little")))
-            data = decode_packet2(reply.data).params
-        else:
-            (reply,) = self.bus.receive(encode_instruction(1, Instruction.READ, bytes([entry.address, entry.size])))
-            data = reply.data[5:-1]
-        return int.from_bytes(data, "little", signed=entry.signed)
-
-    def run_s(self, seconds: float) -> None:
-        """Time passes and the physics follows it, as the serving loop's tick brings it to the clock."""
-        self.clock.advance(seconds)
-        self.bus.advance()
 
     def goals(self, count: int) -> list[int]:
         """``count`` goals alternating 20 degrees either side of where the servo rests: each one a new move."""
