@@ -69,13 +69,48 @@ class Recording:
     readme_dip: int
 
 
-#: The recordings and their loads (README of the data folder).  The AX-18A has another motor: shown, not modelled.
-RECORDINGS = (
-    Recording("AX12A_NOLOAD_1.csv", "AX-12A", 0.0, 19, 3),
-    Recording("AX12A_LOAD3_1.csv", "AX-12A", 7.27e-4, 23, 3),
-    Recording("AX12A_LOAD2_1.csv", "AX-12A", 1.019e-3, 24, 3),
-    Recording("AX18A_NOLOAD_1.csv", "AX-18A", 0.0, 2, 0),
-)
+#: The README's table columns this tool reads, by the start of their header cell.
+README_COLUMNS = {"file": "file", "servo": "servo", "load_kg_m2": "J (", "readme_overshoot": "overshoot",
+                  "readme_dip": "undershoot"}
+
+
+def read_recordings(data: Path) -> tuple[Recording, ...]:
+    """The recordings the data folder's README lists, in its table's order; () where there is no README.
+
+    Why from the README and not a list here: the loads are the README's (bar masses and sizes measured by
+    whoever recorded them), and a folder holding more recordings of the same kinds (more bars, repeats)
+    is read the same way without a change to this tool.  A table row this tool cannot read raises
+    ValueError naming the line.
+    """
+    readme = data / "README.md"
+    if not readme.exists():
+        return ()
+    header: dict[str, int] | None = None
+    out = []
+    for number, line in enumerate(readme.read_text(encoding="utf-8").splitlines(), 1):
+        cells = [c.strip() for c in line.strip().strip("|").split("|")] if line.lstrip().startswith("|") else []
+        if not cells:  # a table ends at the first line that is not a row of it
+            header = None
+            continue
+        if header is None:
+            found = {key: next((i for i, c in enumerate(cells) if c.lower().startswith(start.lower())), None)
+                     for key, start in README_COLUMNS.items()}
+            header = found if None not in found.values() else None
+            continue
+        if not cells[header["file"]].lower().endswith(".csv"):
+            continue  # the separator row
+        try:
+            values = {key: cells[i] for key, i in header.items()}
+            out.append(Recording(values["file"], values["servo"], float(values["load_kg_m2"]),
+                                 int(values["readme_overshoot"]), int(values["readme_dip"])))
+        except (IndexError, ValueError) as exc:
+            raise ValueError(f"{readme}:{number}: cannot read this recording's row ({exc}): {line.strip()}") from None
+    return tuple(out)
+
+
+#: The recordings and their loads, as the README of the default data folder lists them (see
+#: :func:`read_recordings`).  The AX-18A has another motor: shown, not modelled.
+RECORDINGS = read_recordings(DEFAULT_DATA)
 #: The recording the twin is fitted on.
 FIT_ON = "AX12A_NOLOAD_1.csv"
 #: The model before the bridge-decay change: a bridge that shorts the winding, rotor inertia 3.265e-3.
@@ -237,7 +272,8 @@ def _row(name: str, r: dict, real: dict | None = None) -> str:
 
 def run(data: Path, goal: int, plot: Path | None) -> int:
     try:
-        recs = {r.file: load(data / r.file) for r in RECORDINGS if (data / r.file).exists()}
+        recordings = read_recordings(data)
+        recs = {r.file: load(data / r.file) for r in recordings if (data / r.file).exists()}
     except (ValueError, OSError) as exc:  # WizardFormatError is a ValueError
         print(f"real_ax12a: {exc}", file=sys.stderr)
         return 2
@@ -256,7 +292,7 @@ def run(data: Path, goal: int, plot: Path | None) -> int:
         print(f"{label}: bridge braking fraction {braking:g}, fitted on {FIT_ON}: supply {volts:.2f} V, rotor and gear "
               f"inertia x{scale:.1f} ({params.rotor_inertia_reflected_kg_m2:.3g} kg m^2)")
     curves = {}
-    for r in RECORDINGS:
+    for r in recordings:
         if r.file not in recs:
             print(f"{r.file}: not found, skipped")
             continue

@@ -171,7 +171,7 @@ def run_joint(data: Path, goal: int) -> None:
     play = twin.effects.value("backlash_rad", 0.0)
     print(f"\njoint twin ({real_ax12a.FIT_ON}, the diagnosis's cost {cost:.0f}): {twin.supply_voltage_v:.2f} V, rotor and "
           f"gear inertia {1e3 * twin.rotor_inertia_reflected_kg_m2:.2f}e-3 kg m^2, gear play {play:g} rad")
-    for r in real_ax12a.RECORDINGS:
+    for r in real_ax12a.read_recordings(data):
         path = data / r.file
         if r.servo != "AX-12A" or not path.exists():
             continue
@@ -196,7 +196,7 @@ def run(data: Path, goal: int, joint: bool = False) -> int:
     print(f"twin ({real_ax12a.FIT_ON}, as tools/real_ax12a.py fits it): {volts:.2f} V, rotor and gear inertia x{scale:.1f} "
           f"(total {1e3 * (twin.rotor_inertia_reflected_kg_m2 + twin.load_inertia_kg_m2):.2f}e-3 kg m^2)")
     grid = "  ".join(f"{1e3 * j:+5.2f}" for j in EXTRA_GRID_KG_M2)
-    for r in real_ax12a.RECORDINGS:
+    for r in real_ax12a.read_recordings(data):
         path = data / r.file
         if r.servo != "AX-12A" or not path.exists():
             continue
