@@ -100,10 +100,13 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 def load_input(args: argparse.Namespace, params: ServoParams, say=lambda msg: None) -> Input:
     """The trace named on the command line, in either format; raises ValueError / OSError on bad input."""
     given = [f"--{n.replace('_', '-')}" for n in _WIZARD_OPTIONS if getattr(args, n, None) is not None]
+    # opened first: a file that cannot be read is neither format, and saying which it is would mislead
+    with open(args.trace, "rb"):
+        pass
     if not is_wizard_export(args.trace):
         if given:
-            raise ValueError(f"{', '.join(given)} only apply to Wizard 2 graph exports; {args.trace} is a trace CSV, "
-                             "which records its own commands")
+            raise ValueError(f"{', '.join(given)} {'applies' if len(given) == 1 else 'apply'} only to Wizard 2 graph "
+                             f"exports; {args.trace} is a trace CSV, which records its own commands")
         trace = read_trace(args.trace)
         notes = [f"{args.trace}: trace CSV, {len(trace)} rows"]
         if not trace.records_command_times:

@@ -84,7 +84,10 @@ def test_wizard_options_refused_for_a_trace_and_bad_voltage(tmp_path, capsys):
     tr = tmp_path / "t.csv"
     tr.write_text("t,goal_position,moving_speed,present_position\n0,512,0,512\n0.01,512,0,512\n")
     assert main([str(tr), "--out", str(tmp_path / "o"), "--goal", "500"]) == 2
-    assert "--goal only apply to Wizard 2 graph exports" in capsys.readouterr().err
+    assert "--goal applies only to Wizard 2 graph exports" in capsys.readouterr().err
+    assert main([str(tmp_path / "absent.csv"), "--out", str(tmp_path / "o"), "--goal", "500"]) == 2
+    err = capsys.readouterr().err
+    assert "No such file" in err and "trace CSV" not in err, err
     f = _wizard_file(tmp_path / "w.csv")
     assert main([str(f), "--out", str(tmp_path / "o"), "--voltage", "30"]) == 2
     assert "--voltage 30.0 V is outside" in capsys.readouterr().err
