@@ -33,7 +33,13 @@ numbers that tell them apart, per AX-12A recording:
      chi-squared quantile, as :func:`firmware_model.diagnose.verdict.grid_profile` reads a
      grid) says what the move itself pins down.
 
-4. With ``--joint``: a twin fitted on the unloaded step as the diagnosis scores it (the rebuilt
+4. **The return from the peak, model-free.**  How long the step takes to fall through
+   :data:`RETURN_LEVELS_UNITS` after its peak (interpolated between rows; both levels lie below
+   every peak and above every dip), real and the twin with the bar's J at 1 ms.  The held-out
+   rows of a single step are the peak and the return (:mod:`firmware_model.diagnose.evaluate`),
+   and a bar that the model returns slower with than the real servo does makes them worse there.
+
+5. With ``--joint``: a twin fitted on the unloaded step as the diagnosis scores it (the rebuilt
    reading times, the write time re-fitted), over supply, rotor and gear inertia *and* gear
    play together (every real gear train has some; the unloaded step names about 0.01 rad from
    the plain twin), and what the diagnosis names on each step from it.
@@ -121,6 +127,25 @@ def crossings_ms(times_ms: np.ndarray, pos: np.ndarray) -> np.ndarray:
             raise ValueError(f"the step never crosses {level} units from below")
         out.append(times_ms[i - 1] + (level - pos[i - 1]) * (times_ms[i] - times_ms[i - 1]) / (pos[i] - pos[i - 1]))
     return np.array(out[1:]) - out[0]
+
+
+#: The return from the peak is timed between these readings on the way down (units; below every recorded peak,
+#: 517-522, and above every dip, 495).
+RETURN_LEVELS_UNITS = (512, 500)
+
+
+def return_ms(times_ms: np.ndarray, pos: np.ndarray) -> float:
+    """How long ``pos`` takes, after its peak, to fall from the first to the second of :data:`RETURN_LEVELS_UNITS`
+    (interpolated between rows)."""
+    top = int(np.argmax(pos))
+    at = []
+    for level in RETURN_LEVELS_UNITS:
+        below = np.flatnonzero(pos[top:] <= level)
+        if pos[top] <= level or not len(below):
+            raise ValueError(f"the step does not fall through {level} units after its peak")
+        j = top + int(below[0])
+        at.append(times_ms[j - 1] + (level - pos[j - 1]) * (times_ms[j] - times_ms[j - 1]) / (pos[j] - pos[j - 1]))
+    return float(at[1] - at[0])
 
 
 def peaks(params: ServoParams, rec: real_ax12a.Measured, extra_kg_m2: float, period_ms: float, goal: int
@@ -216,6 +241,9 @@ def run(data: Path, goal: int, joint: bool = False) -> int:
               + f"; real cruise {LEVELS_UNITS[2]}-{LEVELS_UNITS[3]} in {real_ms[2] - real_ms[1]:.1f} ms")
         print(f"  peak: real {rec.pos.max():.0f} (settles at {final:.0f}); twin + bar {at_1ms:.1f} at 1 ms, "
               f"{read_lo:.0f}-{read_hi:.0f} read every {period_ms:.0f} ms")
+        real_return = return_ms(1000.0 * ex.times_s, ex.values["present_position"].astype(float))
+        print(f"  return from the peak, {RETURN_LEVELS_UNITS[0]} to {RETURN_LEVELS_UNITS[1]} units: real "
+              f"{real_return:.1f} ms; twin + bar {return_ms(np.arange(len(sim), dtype=float), sim):.1f} ms")
         p = profile(twin, path, goal)
         print(f"  extra J (e-3 kg m^2)   {grid}")
         for label, key in (("write fixed", "fixed"), ("write re-fitted", "refit"), (f"move rows ({p['move_rows']})", "move")):
