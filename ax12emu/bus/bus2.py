@@ -179,6 +179,9 @@ class Bus2(ServosById[Servo2], DecodedBus):
         self._holdable: dict[tuple, tuple[dict, list[Servo2], bool]] = {}
         self._overtaking: dict[tuple, tuple[dict, list | None]] = {}
         self._sensed_by_read: dict[object, tuple[dict, dict]] = {}
+        #: A Sync/Bulk Read's answers per (instruction, parameters, line speed): the lookup they were found under,
+        #: each servo consulted with a copy of its row then, and the replies (see :meth:`_listed`).
+        self._listed_answers: dict[tuple, tuple[dict, tuple[tuple[Servo2, bytes], ...], list[Reply]]] = {}
         self._closed = False
 
     # -- lookup (reindex, servo, ids: ServosById) ---------------------------------------
@@ -504,8 +507,38 @@ class Bus2(ServosById[Servo2], DecodedBus):
         return replies
 
     def _listed(self, packet: InstructionPacket2, line_bps: float | None) -> list[Reply]:
-        """Sync/Bulk Read and their fast forms: the listed servos answer in list order (see the module docstring)."""
-        params = parsed_params(packet.instruction, packet.params if type(packet.params) is bytes else bytes(packet.params))
+        """Sync/Bulk Read and their fast forms: the listed servos answer in list order (see the module docstring).
+
+        Remembered: a robot sends the same Sync Read every cycle, and its answers are a function of the
+        instruction, its parameters, the line speed, which servo has each ID and the rows of the servos
+        consulted (what each answers, its ID, baud, Return Delay Time, Status Return Level and Alert bit
+        all live in its row).  So while no fault is set, the lookup is the same and every consulted row
+        holds the same bytes as when the answers were made, they are those answers again; any step,
+        write, reboot or torque change that touches such a row (or a tick of Realtime Tick) makes them anew.
+        """
+        raw = packet.params if type(packet.params) is bytes else bytes(packet.params)
+        key = (packet.instruction, raw, line_bps)
+        if self.faults is None:
+            known = self._listed_answers.get(key)
+            if known is not None and known[0] is self._by_id:
+                for servo, row in known[1]:
+                    if servo.table.row != row:
+                        break
+                else:
+                    return list(known[2])
+        consulted: list[tuple[Servo2, ...]] = []
+        replies = self._listed_anew(packet, raw, line_bps, consulted)
+        if self.faults is None and all(len(found) == 1 for found in consulted):  # (servos sharing an ID: a fault)
+            if len(self._listed_answers) >= _MAX_REMEMBERED:
+                self._listed_answers.clear()
+            self._listed_answers[key] = (self._by_id, tuple((servo, bytes(servo.table.row)) for servo, in consulted),
+                                         list(replies))
+        return replies
+
+    def _listed_anew(self, packet: InstructionPacket2, raw: bytes, line_bps: float | None,
+                     consulted: list[tuple[Servo2, ...]]) -> list[Reply]:
+        """:meth:`_listed` made from the servos' rows; ``consulted`` gets the servos under each ID it looked at."""
+        params = parsed_params(packet.instruction, raw)
         if isinstance(params, SyncRead):
             reads = [(servo_id, params.address, params.length) for servo_id in params.ids]
         elif isinstance(params, BulkRead):
@@ -519,6 +552,8 @@ class Bus2(ServosById[Servo2], DecodedBus):
         by_id, faults = self._by_id, self.faults
         for servo_id, address, length in reads:
             found = by_id.get(servo_id, ())
+            if found:
+                consulted.append(tuple(found))
             servo = found[0] if found else None
             if (servo is None or not (line_bps is None or self._hears(servo, line_bps))
                     or not answers(servo, packet.instruction) or (faults is not None and not faults.admit(servo))):
