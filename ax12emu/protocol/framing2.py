@@ -102,25 +102,46 @@ class Framer2(FrameBuffer):
     def __init__(self, *, silence_timeout_s: float = DEFAULT_SILENCE_TIMEOUT_S, max_length: int = DEFAULT_MAX_LENGTH) -> None:
         super().__init__(silence_timeout_s=silence_timeout_s, max_length=max_length,
                          length_span=(MIN_STATUS_LENGTH, 0xFFFF))
+        #: The last input that was whole frames only, and its packets (see :meth:`feed`).
+        self._last_whole = b""
+        self._last_packets: tuple[InstructionPacket2 | StatusPacket2, ...] = ()
 
     def feed(self, data: bytes | bytearray, now_s: float | None = None) -> list[InstructionPacket2 | StatusPacket2]:
         """Add bytes received at ``now_s`` (None: ignore timing); return the packets completed."""
         self.expire(now_s)
         if now_s is not None and data:
             self._last_byte_s = now_s
-        # Fast path: exactly one plausible frame and nothing pending (the usual request); the CRC is
-        # still checked by packet_from_frame, so a corrupt one is reported as on the slow path.
+        # Fast path: whole plausible frames only and nothing pending (the usual request, or a robot's Sync
+        # Write and Sync Read read at once); the CRC is still checked by packet_from_frame, so a corrupt one
+        # is reported as on the slow path.  The same bytes as the last such input are the same packets: a
+        # robot sends the same cycle again and again.
         if not self._buf and len(data) >= _PREAMBLE_BYTES and data.startswith(HEADER2):
-            length = data[5] | (data[6] << 8)
-            if (
-                len(data) == _HEADER_BYTES + 3 + length
-                and is_valid_packet_id(data[4])
-                and (MIN_STATUS_LENGTH if data[7] == Instruction2.STATUS else MIN_INSTRUCTION_LENGTH) <= length <= self.max_length
-            ):
-                return [packet_from_frame(data)]
+            if data == self._last_whole:
+                return list(self._last_packets)
+            packets = self._whole_frames(data)
+            if packets is not None:
+                self._last_whole, self._last_packets = bytes(data), tuple(packets)
+                return packets
         if data:
             self._buf += data
         return self._extract()
+
+    def _whole_frames(self, data: bytes | bytearray) -> list[InstructionPacket2 | StatusPacket2] | None:
+        """``data`` as the packets of plausible frames back to back that end with it; None if it is anything else."""
+        packets: list[InstructionPacket2 | StatusPacket2] = []
+        at, end = 0, len(data)
+        while at < end:
+            if end - at < _PREAMBLE_BYTES or data[at : at + 4] != HEADER2:
+                return None
+            length = data[at + 5] | (data[at + 6] << 8)
+            total = _HEADER_BYTES + 3 + length
+            if (at + total > end or not is_valid_packet_id(data[at + 4])
+                    or not (MIN_STATUS_LENGTH if data[at + 7] == Instruction2.STATUS else MIN_INSTRUCTION_LENGTH)
+                    <= length <= self.max_length):
+                return None
+            packets.append(packet_from_frame(data if total == end else data[at : at + total]))
+            at += total
+        return packets
 
     def _drop(self, count: int) -> None:
         self.discarded_bytes += count

@@ -80,6 +80,21 @@ def test_emanual_packets_back_to_back():
     assert [p.crc_ok for p in packets].count(False) == len(EMANUAL_ERRATA)
 
 
+def test_the_same_whole_frames_again_are_the_same_packets():
+    """Whole frames fed at once (a robot's Sync Write and Sync Read read together), again and again: the same
+    packets each time, a corrupt copy reported as corrupt, a part frame still buffered."""
+    stream = b"".join(SAMPLES)
+    framer = Framer2()
+    assert framer.feed(stream) == EXPECTED
+    assert framer.feed(stream) == EXPECTED
+    corrupt = bytearray(stream)
+    corrupt[-1] ^= 0xFF
+    assert [p.crc_ok for p in framer.feed(bytes(corrupt))] == [True, True, True, False]
+    assert framer.feed(stream[:-3]) == EXPECTED[:-1] and framer.buffered == len(SAMPLES[-1]) - 3
+    assert framer.feed(stream[-3:]) == EXPECTED[-1:] and framer.buffered == 0
+    assert framer.feed(stream) == EXPECTED
+
+
 def test_byte_by_byte():
     framer = Framer2()
     out = [p for byte in b"".join(SAMPLES) for p in framer.feed(bytes((byte,)))]
