@@ -64,11 +64,15 @@ def test_the_return_from_the_peak_is_timed_between_its_levels():
         tool.return_ms(t[:25], pos[:25])
 
 
+#: The loaded steps whose return from the peak docs/diagnosis.md quotes (the figures of a known miss, not a goal).
+RETURN_QUOTED = ("AX12A_LOAD3_1.csv", "AX12A_LOAD2_1.csv")
+
+
 def test_the_real_servo_returns_from_a_bars_peak_faster_than_the_twin_with_the_bar(twin):
     """Why the held-out rows (the peak and the return) reject the bar from the twin: the real loaded steps fall
     from 512 to 500 units at least 4 ms sooner than the twin with the bar's J does (measured 28.0 vs 34.0 and
     23.2 vs 32.0 ms), where the unloaded step is within the readings' few ms (33.7 vs 37.0)."""
-    for rec in (r for r in real.RECORDINGS if r.servo == "AX-12A" and r.load_kg_m2 > 0):
+    for rec in (r for r in real.RECORDINGS if r.file in RETURN_QUOTED):
         if not (DATA / rec.file).exists():
             pytest.skip(f"{rec.file} not found in {DATA}")
         ex = tool.read_wizard(DATA / rec.file)
