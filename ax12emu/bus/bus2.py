@@ -63,6 +63,7 @@ from __future__ import annotations
 
 import functools
 import logging
+import operator
 from collections.abc import Callable, Iterable, Iterator
 
 from ax12emu.protocol.crc16 import crc16
@@ -510,34 +511,43 @@ class Bus2(ServosById[Servo2], DecodedBus):
         """Sync/Bulk Read and their fast forms: the listed servos answer in list order (see the module docstring).
 
         Remembered: a robot sends the same Sync Read every cycle, and its answers are a function of the
-        instruction, its parameters, the line speed, which servo has each ID and the rows of the servos
-        consulted (what each answers, its ID, baud, Return Delay Time, Status Return Level and Alert bit
-        all live in its row).  So while no fault is set, the lookup is the same and every consulted row
-        holds the same bytes as when the answers were made, they are those answers again; any step,
-        write, reboot or torque change that touches such a row (or a tick of Realtime Tick) makes them anew.
+        instruction, its parameters, the line speed, which servo has each ID and, in the row of each servo
+        consulted, the bytes it reads and the registers that decide whether and how it answers (ID, Baud
+        Rate, Return Delay Time, Status Return Level, Hardware Error Status for the Alert bit:
+        :func:`_answer_spans`).  So while no fault is set, the lookup is the same and all those bytes are
+        as they were when the answers were made, they are those answers again; a step, write, reboot or
+        torque change that changes any of them makes them anew, and a new goal in a register the read
+        does not read does not.
         """
         raw = packet.params if type(packet.params) is bytes else bytes(packet.params)
         key = (packet.instruction, raw, line_bps)
         if self.faults is None:
             known = self._listed_answers.get(key)
             if known is not None and known[0] is self._by_id:
-                for servo, row in known[1]:
-                    if servo.table.row != row:
+                for servo, pick, seen in known[1]:
+                    if pick(servo.table.row) != seen:
                         break
                 else:
                     return list(known[2])
-        consulted: list[tuple[Servo2, ...]] = []
+        consulted: list[tuple[tuple[Servo2, ...], int, int]] = []
         replies = self._listed_anew(packet, raw, line_bps, consulted)
-        if self.faults is None and all(len(found) == 1 for found in consulted):  # (servos sharing an ID: a fault)
+        if self.faults is None and all(len(found) == 1 for found, _, _ in consulted):  # (servos sharing an ID: a fault)
+            spans: dict[Servo2, list[tuple[int, int]]] = {}
+            for (servo,), address, length in consulted:
+                spans.setdefault(servo, []).append((address, length))
+            checks = []
+            for servo, reads in spans.items():
+                pick = _answer_spans(servo, reads)
+                checks.append((servo, pick, pick(servo.table.row)))
             if len(self._listed_answers) >= _MAX_REMEMBERED:
                 self._listed_answers.clear()
-            self._listed_answers[key] = (self._by_id, tuple((servo, bytes(servo.table.row)) for servo, in consulted),
-                                         list(replies))
+            self._listed_answers[key] = (self._by_id, tuple(checks), list(replies))
         return replies
 
     def _listed_anew(self, packet: InstructionPacket2, raw: bytes, line_bps: float | None,
-                     consulted: list[tuple[Servo2, ...]]) -> list[Reply]:
-        """:meth:`_listed` made from the servos' rows; ``consulted`` gets the servos under each ID it looked at."""
+                     consulted: list[tuple[tuple[Servo2, ...], int, int]]) -> list[Reply]:
+        """:meth:`_listed` made from the servos' rows; ``consulted`` gets the servos under each ID it looked at,
+        with the address and length read there."""
         params = parsed_params(packet.instruction, raw)
         if isinstance(params, SyncRead):
             reads = [(servo_id, params.address, params.length) for servo_id in params.ids]
@@ -553,7 +563,7 @@ class Bus2(ServosById[Servo2], DecodedBus):
         for servo_id, address, length in reads:
             found = by_id.get(servo_id, ())
             if found:
-                consulted.append(tuple(found))
+                consulted.append((tuple(found), address, length))
             servo = found[0] if found else None
             if (servo is None or not (line_bps is None or self._hears(servo, line_bps))
                     or not answers(servo, packet.instruction) or (faults is not None and not faults.admit(servo))):
@@ -597,6 +607,31 @@ class Bus2(ServosById[Servo2], DecodedBus):
             replies.append(reply)
             wire_s += len(status) * BITS_PER_BYTE / baud
         return replies
+
+
+def _answer_spans(servo: Servo2, reads: list[tuple[int, int]]) -> Callable[[bytearray], tuple]:
+    """A function picking from ``servo``'s row every byte its answers to ``reads`` (address, length) depend on.
+
+    Those are the bytes read and the registers the bus and the status packet consult: ID, Baud Rate,
+    Return Delay Time, Status Return Level and Hardware Error Status (the Alert bit).  A read of Indirect
+    Data depends on the Indirect Addresses and what they point at, so it picks the whole row.  Adjacent
+    spans are picked as one.
+    """
+    table = servo.table
+    if any(table.reads_indirect(address, length) for address, length in reads):
+        return lambda row: (bytes(row),)
+    spans = [(address, address + length) for address, length in reads]
+    spans += [(at, at + 1) for at in (servo._id_at, servo._baud_at, servo._return_delay_at, servo._level_at)]
+    error = servo._hardware_error
+    if error is not None:
+        spans.append((error.address, error.end))
+    merged: list[list[int]] = []
+    for start, end in sorted(spans):
+        if merged and start <= merged[-1][1]:
+            merged[-1][1] = max(merged[-1][1], end)
+        else:
+            merged.append([start, end])
+    return operator.itemgetter(*(slice(start, end) for start, end in merged), slice(0, 0))
 
 
 def _fast_shares_on_wire(pieces: list[bytes], parts: list[FastStatusPart],

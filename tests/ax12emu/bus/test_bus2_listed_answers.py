@@ -1,9 +1,10 @@
 """A Sync/Bulk Read's answers remembered by ``Bus2._listed`` are never stale.
 
-The bus hands out the answers it made for the same read while every row they came from holds the same
-bytes.  Here a step, a write, a torque change, a changed ID, Status Return Level or Return Delay Time and a
-fault between two identical reads must each change the answer exactly as a bus that remembers nothing
-would, and a long mixed stream must answer byte for byte as such a bus does.
+The bus hands out the answers it made for the same read while the bytes they came from (those read, and the
+registers that decide whether and how each servo answers) are the same.  Here a step, a write, a torque
+change, a changed ID, Status Return Level or Return Delay Time, a hardware error and a fault between two
+identical reads must each change the answer exactly as a bus that remembers nothing would, and a long mixed
+stream must answer byte for byte as such a bus does.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from ax12emu.protocol.packets import BROADCAST_ID
 from ax12emu.protocol.packets2 import Instruction2, encode_instruction2
 from ax12emu.protocol.servo_models import model
 from ax12emu.servo.model_factory2 import build_x_firmware
+from firmware_model.xseries.interface import HW_ERROR_OVERHEATING
 
 IDS = (1, 2, 3, 4, 5, 6)
 #: X-series addresses (e-manual, XL430-W250 control table).
@@ -122,6 +124,27 @@ def test_what_the_bus_reads_per_servo_changed_between_two_identical_reads(change
     assert second == fresh(bus, sync_read(PRESENT_POSITION, 4))
     if change[8] != TORQUE_ENABLE:  # (the address: header 4, ID, LENGTH 2, instruction)
         assert second != first
+
+
+def test_a_hardware_error_between_two_identical_reads_sets_the_alert_bit_in_the_second():
+    bus = new_bus()
+    first = bus.receive(sync_read(PRESENT_POSITION, 4))
+    bus.servos[3].plant.firmware.raise_error(HW_ERROR_OVERHEATING)
+    bus.clock.advance(0.005)  # the firmware's next step copies Hardware Error Status into the table
+    second = bus.receive(sync_read(PRESENT_POSITION, 4))
+    assert [reply.data[8] & 0x80 for reply in first] == [0] * len(IDS)
+    assert [reply.data[8] & 0x80 for reply in second] == [0, 0, 0, 0x80, 0, 0]
+    assert wire(second) == fresh(bus, sync_read(PRESENT_POSITION, 4))
+
+
+def test_a_new_goal_between_two_reads_of_present_position_leaves_the_answer_as_made_anew():
+    """A goal is not among the bytes a read of Present Position depends on: whether remembered or not, the
+    answer is the one a bus that remembers nothing gives."""
+    bus = new_bus(defer=True)
+    for goal in (1000, 1001, 3000, 3001):
+        bus.receive(sync_write(GOAL_POSITION, {servo_id: u32(goal) for servo_id in IDS}))
+        answer = wire(bus.receive(sync_read(PRESENT_POSITION, 4)))
+        assert answer == fresh(bus, sync_read(PRESENT_POSITION, 4))
 
 
 def test_a_fault_set_between_two_identical_reads_acts_on_the_second():
