@@ -181,8 +181,9 @@ class Bus2(ServosById[Servo2], DecodedBus):
         self._overtaking: dict[tuple, tuple[dict, list | None]] = {}
         self._sensed_by_read: dict[object, tuple[dict, dict]] = {}
         #: A Sync/Bulk Read's answers per (instruction, parameters, line speed): the lookup they were found under,
-        #: each servo consulted with a copy of its row then, and the replies (see :meth:`_listed`).
-        self._listed_answers: dict[tuple, tuple[dict, tuple[tuple[Servo2, bytes], ...], list[Reply]]] = {}
+        #: per servo consulted [servo, the picker of the bytes its answer depends on, those bytes, its whole row as
+        #: last seen with them], and the replies (see :meth:`_listed`).
+        self._listed_answers: dict[tuple, tuple[dict, tuple[list, ...], list[Reply]]] = {}
         self._closed = False
 
     # -- lookup (reindex, servo, ids: ServosById) ---------------------------------------
@@ -524,9 +525,13 @@ class Bus2(ServosById[Servo2], DecodedBus):
         if self.faults is None:
             known = self._listed_answers.get(key)
             if known is not None and known[0] is self._by_id:
-                for servo, pick, seen in known[1]:
-                    if pick(servo.table.row) != seen:
+                for check in known[1]:
+                    row = check[0].table.row
+                    if row == check[3]:
+                        continue  # the whole row as it was last seen here: one comparison instead of several
+                    if check[1](row) != check[2]:
                         break
+                    check[3] = bytes(row)
                 else:
                     return list(known[2])
         consulted: list[tuple[tuple[Servo2, ...], int, int]] = []
@@ -538,7 +543,7 @@ class Bus2(ServosById[Servo2], DecodedBus):
             checks = []
             for servo, reads in spans.items():
                 pick = _answer_spans(servo, reads)
-                checks.append((servo, pick, pick(servo.table.row)))
+                checks.append([servo, pick, pick(servo.table.row), bytes(servo.table.row)])
             if len(self._listed_answers) >= _MAX_REMEMBERED:
                 self._listed_answers.clear()
             self._listed_answers[key] = (self._by_id, tuple(checks), list(replies))
