@@ -184,6 +184,8 @@ class Bus2(ServosById[Servo2], DecodedBus):
         #: per servo consulted [servo, the picker of the bytes its answer depends on, those bytes, its whole row as
         #: last seen with them], and the replies (see :meth:`_listed`).
         self._listed_answers: dict[tuple, tuple[dict, tuple[list, ...], list[Reply]]] = {}
+        #: Those pickers per (servo, its reads): they depend on the servo's layout alone.
+        self._answer_pickers: dict[tuple, Callable[[bytearray], tuple]] = {}
         self._closed = False
 
     # -- lookup (reindex, servo, ids: ServosById) ---------------------------------------
@@ -541,8 +543,13 @@ class Bus2(ServosById[Servo2], DecodedBus):
             for (servo,), address, length in consulted:
                 spans.setdefault(servo, []).append((address, length))
             checks = []
+            pickers = self._answer_pickers
             for servo, reads in spans.items():
-                pick = _answer_spans(servo, reads)
+                pick = pickers.get((servo, *reads))
+                if pick is None:
+                    if len(pickers) >= _MAX_REMEMBERED:
+                        pickers.clear()
+                    pick = pickers[(servo, *reads)] = _answer_spans(servo, reads)
                 checks.append([servo, pick, pick(servo.table.row), bytes(servo.table.row)])
             if len(self._listed_answers) >= _MAX_REMEMBERED:
                 self._listed_answers.clear()
