@@ -64,9 +64,9 @@ class Recording:
     servo: str
     #: Bar inertia on the horn, kg m**2 (J = m (h**2 + b**2) / 12, pivoted at its centre).
     load_kg_m2: float
-    #: Overshoot and dip as the README lists them (raw units), for reference.
-    readme_overshoot: int
-    readme_dip: int
+    #: Overshoot and dip as the README lists them (raw units), for reference; None where it does not list them.
+    readme_overshoot: int | None
+    readme_dip: int | None
 
 
 #: The README's table columns this tool reads, by the start of their header cell.
@@ -273,6 +273,8 @@ def _row(name: str, r: dict, real: dict | None = None) -> str:
 def run(data: Path, goal: int, plot: Path | None) -> int:
     try:
         recordings = read_recordings(data)
+        if FIT_ON not in {r.file for r in recordings}:  # the unloaded step the twin is fitted on, listed or not
+            recordings = (Recording(FIT_ON, "AX-12A", 0.0, None, None),) + recordings
         recs = {r.file: load(data / r.file) for r in recordings if (data / r.file).exists()}
     except (ValueError, OSError) as exc:  # WizardFormatError is a ValueError
         print(f"real_ax12a: {exc}", file=sys.stderr)
@@ -298,8 +300,9 @@ def run(data: Path, goal: int, plot: Path | None) -> int:
             continue
         rec = recs[r.file]
         real = real_features(rec)
-        print(f"\n{r.file} ({r.servo}, bar J {r.load_kg_m2:.3g} kg m^2; README: overshoot {r.readme_overshoot}, "
-              f"dip {r.readme_dip})")
+        listed = ("not in the README" if r.readme_overshoot is None
+                  else f"README: overshoot {r.readme_overshoot}, dip {r.readme_dip}")
+        print(f"\n{r.file} ({r.servo}, bar J {r.load_kg_m2:.3g} kg m^2; {listed})")
         print(_row("real", real))
         if r.servo != "AX-12A":
             print("  (another motor: not modelled)")
