@@ -10,7 +10,7 @@ from dynamixel_sdk import COMM_SUCCESS, PacketHandler, PortHandler
 
 from ax12emu.bus.bus import Bus
 from ax12emu.conformance.checks import EEPROM_WAIT_S_PER_BYTE
-from ax12emu.protocol.packets import Instruction, encode_instruction
+from ax12emu.protocol.packets import BROADCAST_ID, Instruction, encode_instruction
 from ax12emu.protocol.packets2 import Instruction2, decode_packet2, encode_instruction2
 from ax12emu.protocol.servo_models import model
 
@@ -148,3 +148,43 @@ class RegisterLink:
         """Time passes and the physics follows it, as the serving loop's tick brings it to the clock."""
         self.bus.clock.advance(seconds)
         self.bus.advance()
+
+
+def u16(value: int) -> bytes:
+    """A 2-byte little-endian field (Protocol 2.0's addresses and lengths)."""
+    return (value & 0xFFFF).to_bytes(2, "little")
+
+
+def u32(value: int) -> bytes:
+    """A 4-byte little-endian register value."""
+    return (value & 0xFFFFFFFF).to_bytes(4, "little")
+
+
+class Packets2:
+    """Protocol 2.0 instruction packets a host sends a bus of servos ``ids`` (the broadcast reads list them all
+    by default), as the bus tests in virtual time build them."""
+
+    def __init__(self, ids: tuple[int, ...]) -> None:
+        self.ids = ids
+
+    def write(self, servo_id: int, address: int, data: bytes) -> bytes:
+        return encode_instruction2(servo_id, Instruction2.WRITE, u16(address) + data)
+
+    def sync_write(self, address: int, values: dict[int, bytes]) -> bytes:
+        length = len(next(iter(values.values())))
+        params = u16(address) + u16(length) + b"".join(bytes((servo_id,)) + data for servo_id, data in values.items())
+        return encode_instruction2(BROADCAST_ID, Instruction2.SYNC_WRITE, params)
+
+    def sync_read(self, address: int, length: int, ids: tuple[int, ...] | None = None) -> bytes:
+        return self._listed_read(Instruction2.SYNC_READ, address, length, ids)
+
+    def fast_sync_read(self, address: int, length: int, ids: tuple[int, ...] | None = None) -> bytes:
+        return self._listed_read(Instruction2.FAST_SYNC_READ, address, length, ids)
+
+    def bulk_read(self, reads: list[tuple[int, int, int]]) -> bytes:
+        params = b"".join(bytes((servo_id,)) + u16(address) + u16(length) for servo_id, address, length in reads)
+        return encode_instruction2(BROADCAST_ID, Instruction2.BULK_READ, params)
+
+    def _listed_read(self, instruction: int, address: int, length: int, ids: tuple[int, ...] | None) -> bytes:
+        listed = self.ids if ids is None else ids
+        return encode_instruction2(BROADCAST_ID, instruction, u16(address) + u16(length) + bytes(listed))

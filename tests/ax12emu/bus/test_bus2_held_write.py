@@ -17,10 +17,10 @@ from __future__ import annotations
 import random
 
 import pytest
+from emu_testkit import Packets2, u16, u32
 
 from ax12emu.bus.bus2 import Bus2
 from ax12emu.bus.clock import VirtualClock
-from ax12emu.protocol.packets import BROADCAST_ID
 from ax12emu.protocol.packets2 import Instruction2, encode_instruction2
 from ax12emu.protocol.servo_models import model
 from ax12emu.servo.model_factory2 import build_x_firmware
@@ -31,14 +31,12 @@ IDS = (1, 2, 3, 4, 5, 6)
 OPERATING_MODE, HOMING_OFFSET, SHUTDOWN, TORQUE_ENABLE = 11, 20, 63, 64
 BUS_WATCHDOG, PROFILE_ACCELERATION, PROFILE_VELOCITY, GOAL_POSITION = 98, 108, 112, 116
 MOVING, VELOCITY_TRAJECTORY, PRESENT_POSITION, RETURN_DELAY_TIME = 122, 136, 132, 9
-
-
-def u16(value: int) -> bytes:
-    return (value & 0xFFFF).to_bytes(2, "little")
-
-
-def u32(value: int) -> bytes:
-    return (value & 0xFFFFFFFF).to_bytes(4, "little")
+#: The packets a host sends these servos.
+_PACKETS = Packets2(IDS)
+sync_write = _PACKETS.sync_write
+sync_read = _PACKETS.sync_read
+bulk_read = _PACKETS.bulk_read
+write = _PACKETS.write
 
 
 def new_bus(defer: bool) -> Bus2:
@@ -48,25 +46,6 @@ def new_bus(defer: bool) -> Bus2:
     bus.request_lag_s = 0.001  # as the serving loop sets it
     bus.defer_settling = defer
     return bus
-
-
-def sync_write(address: int, values: dict[int, bytes]) -> bytes:
-    length = len(next(iter(values.values())))
-    params = u16(address) + u16(length) + b"".join(bytes((servo_id,)) + data for servo_id, data in values.items())
-    return encode_instruction2(BROADCAST_ID, Instruction2.SYNC_WRITE, params)
-
-
-def sync_read(address: int, length: int, ids=IDS) -> bytes:
-    return encode_instruction2(BROADCAST_ID, Instruction2.SYNC_READ, u16(address) + u16(length) + bytes(ids))
-
-
-def bulk_read(reads: list[tuple[int, int, int]]) -> bytes:
-    params = b"".join(bytes((servo_id,)) + u16(address) + u16(length) for servo_id, address, length in reads)
-    return encode_instruction2(BROADCAST_ID, Instruction2.BULK_READ, params)
-
-
-def write(servo_id: int, address: int, data: bytes) -> bytes:
-    return encode_instruction2(servo_id, Instruction2.WRITE, u16(address) + data)
 
 
 def packets(rng: random.Random):

@@ -12,12 +12,11 @@ from __future__ import annotations
 import random
 
 import pytest
+from emu_testkit import Packets2, u32
 
 from ax12emu.bus.bus2 import Bus2
 from ax12emu.bus.clock import VirtualClock
 from ax12emu.faults.injection import Faults2
-from ax12emu.protocol.packets import BROADCAST_ID
-from ax12emu.protocol.packets2 import Instruction2, encode_instruction2
 from ax12emu.protocol.servo_models import model
 from ax12emu.servo.model_factory2 import build_x_firmware
 from firmware_model.xseries.interface import HW_ERROR_OVERHEATING
@@ -26,37 +25,13 @@ IDS = (1, 2, 3, 4, 5, 6)
 #: X-series addresses (e-manual, XL430-W250 control table).
 ID, RETURN_DELAY_TIME, STATUS_RETURN_LEVEL, TORQUE_ENABLE = 7, 9, 68, 64
 PROFILE_VELOCITY, GOAL_POSITION, PRESENT_POSITION = 112, 116, 132
-
-
-def u16(value: int) -> bytes:
-    return (value & 0xFFFF).to_bytes(2, "little")
-
-
-def u32(value: int) -> bytes:
-    return (value & 0xFFFFFFFF).to_bytes(4, "little")
-
-
-def sync_read(address: int, length: int, ids=IDS) -> bytes:
-    return encode_instruction2(BROADCAST_ID, Instruction2.SYNC_READ, u16(address) + u16(length) + bytes(ids))
-
-
-def fast_sync_read(address: int, length: int, ids=IDS) -> bytes:
-    return encode_instruction2(BROADCAST_ID, Instruction2.FAST_SYNC_READ, u16(address) + u16(length) + bytes(ids))
-
-
-def bulk_read(reads: list[tuple[int, int, int]]) -> bytes:
-    params = b"".join(bytes((servo_id,)) + u16(address) + u16(length) for servo_id, address, length in reads)
-    return encode_instruction2(BROADCAST_ID, Instruction2.BULK_READ, params)
-
-
-def write(servo_id: int, address: int, data: bytes) -> bytes:
-    return encode_instruction2(servo_id, Instruction2.WRITE, u16(address) + data)
-
-
-def sync_write(address: int, values: dict[int, bytes]) -> bytes:
-    length = len(next(iter(values.values())))
-    params = u16(address) + u16(length) + b"".join(bytes((servo_id,)) + data for servo_id, data in values.items())
-    return encode_instruction2(BROADCAST_ID, Instruction2.SYNC_WRITE, params)
+#: The packets a host sends these servos.
+_PACKETS = Packets2(IDS)
+sync_write = _PACKETS.sync_write
+sync_read = _PACKETS.sync_read
+fast_sync_read = _PACKETS.fast_sync_read
+bulk_read = _PACKETS.bulk_read
+write = _PACKETS.write
 
 
 def new_bus(defer: bool = False) -> Bus2:
