@@ -44,9 +44,18 @@ numbers that tell them apart, per AX-12A recording:
    play together (every real gear train has some; the unloaded step names about 0.01 rad from
    the plain twin), and what the diagnosis names on each step from it.
 
+6. With ``--synthetic``: whether the workflow could name the bars at all on recordings like these.
+   Each loaded step's Present Position is replaced by what the closed twin
+   (:func:`real_ax12a.close_twin`) with :data:`SYNTHETIC_SCALES` times the bar's J reads at the
+   same rows (the diagnosis's own evaluator: the rebuilt reading times, the goal write fitted),
+   plus Gaussian noise of :data:`SYNTHETIC_SIGMA_UNITS`, rounded, and the diagnosis runs on it from
+   the closed twin.  A recording the model made itself holds the bar and nothing else, so what the
+   workflow misses there is beyond its reach on a single step read every 20 ms, whatever the
+   model's physics, unless the model's response to inertia changes.
+
 Usage::
 
-    python tools/real_ax12a_inertia.py [--data DIR] [--goal 500] [--joint]
+    python tools/real_ax12a_inertia.py [--data DIR] [--goal 500] [--joint] [--synthetic]
 
 Exit status 2 with a message if the data folder is missing.
 """
@@ -86,6 +95,12 @@ LEVEL = 0.95
 JOINT_SUPPLY_V = (8.75, 9.0, 9.25)
 JOINT_EXTRA_KG_M2 = np.round(np.arange(-1.0e-3, 3.001e-3, 0.25e-3), 6)
 JOINT_PLAY_RAD = (0.0, 0.005, 0.01, 0.015)
+
+
+#: The synthetic check: the bars' J times these, noise on the readings (units, SD), seeds per file and scale.
+SYNTHETIC_SCALES = (1.0, 2.0)
+SYNTHETIC_SIGMA_UNITS = 0.5
+SYNTHETIC_SEEDS = 3
 
 
 def _trace(params: ServoParams, path: Path, goal: int):
@@ -191,6 +206,46 @@ def profile(params: ServoParams, path: Path, goal: int) -> dict:
             "move_best": float(EXTRA_GRID_KG_M2[b]), "move_region": (float(inside.min()), float(inside.max()))}
 
 
+def synthetic_trace(params: ServoParams, path: Path, goal: int, extra_kg_m2: float, sigma_units: float, seed: int):
+    """The recording at ``path`` with its Present Position replaced by what ``params`` with ``extra_kg_m2`` more
+    inertia reads at the same rows (the diagnosis's evaluator, the goal write fitted), plus Gaussian noise of
+    ``sigma_units``, rounded as the servo reports it."""
+    trace = _trace(params, path, goal)
+    loaded = dataclasses.replace(params, load_inertia_kg_m2=params.load_inertia_kg_m2 + extra_kg_m2)
+    sel = Selection(trace, loaded, lambda msg: None)
+    sel.fit_nuisance()
+    ch = sel.ev.channels.index("present_position")
+    sim = sel.ev.measured[:, ch] + sel.residual()[:, ch] * sel.ev.sd[ch]  # residual() is (sim - measured) / sd
+    noisy = np.rint(sim + np.random.default_rng(seed).normal(0.0, sigma_units, len(sim)))
+    columns = dict(trace.columns)
+    columns["present_position"] = noisy.astype(trace.columns["present_position"].dtype)
+    return dataclasses.replace(trace, columns=columns)
+
+
+def run_synthetic(data: Path, goal: int) -> None:
+    twin, _, _, _ = real_ax12a.fit_twin(ServoParams(), real_ax12a.load(data / real_ax12a.FIT_ON), goal)
+    closed, closing = real_ax12a.close_twin(twin, data / real_ax12a.FIT_ON, goal)
+    print(f"\nsynthetic steps from the closed twin (the unloaded step names {', '.join(closing.named) or 'nothing'}), "
+          f"noise {SYNTHETIC_SIGMA_UNITS} units SD, {SYNTHETIC_SEEDS} seeds:")
+    for r in real_ax12a.read_recordings(data):
+        path = data / r.file
+        if r.servo != "AX-12A" or r.load_kg_m2 <= 0 or not path.exists():
+            continue
+        for scale in SYNTHETIC_SCALES:
+            extra = scale * r.load_kg_m2
+            found = []
+            for seed in range(SYNTHETIC_SEEDS):
+                d = diagnose(synthetic_trace(closed, path, goal, extra, SYNTHETIC_SIGMA_UNITS, seed), closed)
+                first = d.accepted[0] if d.accepted else None
+                if first is not None and first.effect == "extra_inertia":
+                    j, half = first.values["extra_inertia_kg_m2"], first.uncertainty["extra_inertia_kg_m2"]
+                    found.append(f"{1e3 * j:.2f} +- {1e3 * half:.2f}{' (holds it)' if abs(j - extra) <= half else ''}")
+                else:
+                    found.append("names " + (", ".join(d.named) or "nothing"))
+            print(f"  {r.file} with {scale:g} x the bar ({1e3 * extra:.2f}e-3 kg m^2): "
+                  f"{sum(f[0].isdigit() for f in found)}/{len(found)} name extra_inertia first: " + "; ".join(found))
+
+
 def run_joint(data: Path, goal: int) -> None:
     twin, cost = fit_joint(data / real_ax12a.FIT_ON, goal)
     play = twin.effects.value("backlash_rad", 0.0)
@@ -211,7 +266,7 @@ def run_joint(data: Path, goal: int) -> None:
               f"{d.gaps_after['present_position']['rms']:.2f} units RMS; twin + bar {with_bar:.2f}")
 
 
-def run(data: Path, goal: int, joint: bool = False) -> int:
+def run(data: Path, goal: int, joint: bool = False, synthetic: bool = False) -> int:
     fit_on = data / real_ax12a.FIT_ON
     if not fit_on.exists():
         print(f"real_ax12a_inertia: {fit_on} not found (the recordings live in ../shared/reference/real-ax12a)",
@@ -254,6 +309,8 @@ def run(data: Path, goal: int, joint: bool = False) -> int:
               f"{'holds' if lo <= 0.0 <= hi else 'excludes'} none)")
     if joint:
         run_joint(data, goal)
+    if synthetic:
+        run_synthetic(data, goal)
     return 0
 
 
@@ -263,10 +320,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--goal", type=int, default=500, help="the Goal Position the step went to (not recorded)")
     ap.add_argument("--joint", action="store_true", help="also fit supply, inertia and gear play together on the "
                                                          "unloaded step and diagnose every step from that twin")
+    ap.add_argument("--synthetic", action="store_true", help="also diagnose each loaded step as the closed twin with "
+                                                             "the bar would have recorded it (can the workflow see it?)")
     args = ap.parse_args(argv)
     if not 0 <= args.goal <= 1023:
         ap.error(f"--goal must be 0..1023, got {args.goal}")
-    return run(args.data, args.goal, args.joint)
+    return run(args.data, args.goal, args.joint, args.synthetic)
 
 
 if __name__ == "__main__":

@@ -57,7 +57,11 @@ def test_twin_predicts_every_other_step_with_only_the_bar_inertia(twin, rec):
 #: no mark that the unrecorded supply and the shared base parameter do not leave as well.  The settled reading no
 #: longer outweighs the move (a Wizard export's rests count as 0.25 s each) and the goal write is re-fitted with
 #: every candidate, yet the base re-fit makes each loaded step *stronger* (efficiency 0.764 -> 0.780 and 0.770), where
-#: a bar would make it slower.
+#: a bar would make it slower.  Recordings the closed twin made itself with each bar (read at the same rows, 0.5 units
+#: of noise) name extra_inertia on 0 of 3 seeds each, with twice the bar's J on 3 of 3
+#: (``tools/real_ax12a_inertia.py --synthetic``): with the model's response to inertia (about 2 units of overshoot per
+#: 1e-3 kg m^2, where the real servo gains 4-5), the bars are below what the workflow resolves on one step read every
+#: 20 ms, whatever makes the real return from the peak faster.
 NAMED_FROM_TWIN_MISSES = {
     "AX12A_LOAD3_1.csv": "names nothing from the twin carrying the unloaded step's play: extra_inertia fits "
                          "0.90e-3 +- 0.87e-3 kg m^2 (the bar inside, dBIC 37.4, 25 % of the cost) but the held-out "
