@@ -221,6 +221,7 @@ class XFirmware:
         self._profile: Profile | None = None
         self._profile_start_s = self.time_s
         self._profile_kind = PROFILE_STEP
+        self._planned_from: tuple[float, float, float] | None = None
         self._traj_pulses = self._present_pulses()
         self._traj_velocity_pulses_s = 0.0
         self._traj_accel_pulses_s2 = 0.0
@@ -312,10 +313,18 @@ class XFirmware:
             return
         if cmd.operating_mode not in _POSITION_MODES:
             return
-        if self._profile_running():
+        planned = self._planned_from
+        if planned is not None and planned[0] == self.time_s:
+            # A goal written again before the control loop ran (a host faster than 1 kHz): the loop plans
+            # once, from the trajectory's state at its tick, so the profile the first goal started leaves
+            # no trace; planning from that profile's own start would differ when it has no length
+            # (not running, so the present position would stand in for the trajectory's).
+            _, start, v0 = planned
+        elif self._profile_running():
             start, v0 = self._traj_pulses, self._traj_velocity_pulses_s
         else:
             start, v0 = self._present_pulses(), 0.0
+        self._planned_from = (self.time_s, start, v0)
         goal = self._goal_pulses()
         if time_based:
             profile = plan_time_based(start, v0, goal, cmd.profile_velocity, cmd.profile_acceleration)
@@ -624,6 +633,7 @@ class XFirmware:
         self._reset_turns()
         self._traj_pulses -= self._turn_base_pulses - before
         self._profile = None
+        self._planned_from = None
         self._traj_velocity_pulses_s = 0.0
         self._traj_accel_pulses_s2 = 0.0
 

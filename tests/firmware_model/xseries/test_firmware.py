@@ -153,6 +153,25 @@ def test_velocity_override_keeps_the_trajectory_velocity_continuous():
     assert abs(trace[-1].present_position - (start + 500)) <= 5
 
 
+def test_goals_written_again_before_a_step_leave_no_trace_of_the_earlier_ones():
+    """Two writes between two control ticks: the loop plans once, from its tick's state, so the servo moves as if
+    only the last had come.  The earlier one here is a step profile (Profile Velocity 0), which has no length and
+    so is never running: planning the last from it would start from the present position at rest instead of
+    the running trapezoid's point and speed."""
+    moves = []
+    for earlier in (None, dict(profile_velocity=0, goal_position=0)):
+        servo, cmd = make(torque_enable=1, profile_velocity=100, profile_acceleration=20)
+        start = servo.sense().present_position
+        write(servo, cmd, goal_position=start + 3000)
+        run(servo, 0.3)  # the trapezoid is running at speed
+        if earlier is not None:
+            write(servo, cmd, **earlier)
+        write(servo, cmd, profile_velocity=100, goal_position=start + 1000)
+        moves.append([(s.position_trajectory, s.velocity_trajectory, s.present_position) for s in run(servo, 0.8)])
+    assert moves[0][0][1] > 50  # (it was running at speed, so the start matters)
+    assert moves[1] == moves[0]
+
+
 # ---------------------------------------------------------------------------- control loops
 
 
