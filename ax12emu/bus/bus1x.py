@@ -160,7 +160,7 @@ class Bus1X(DecodedBus):
     # -- time --------------------------------------------------------------------------
     def catch_up(self, sim_time_s: float, clock_s: float | None = None) -> None:
         for servo in self.servos_mx:
-            if servo.plant.due(sim_time_s):
+            if servo.plant.due(sim_time_s, clock_s):
                 servo.plant.catch_up(sim_time_s, clock_s)
 
     def advance(self) -> bool:

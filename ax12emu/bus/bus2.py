@@ -71,6 +71,7 @@ from ax12emu.protocol.framing2 import Framer2
 from ax12emu.protocol.packets import BROADCAST_ID
 from ax12emu.protocol.packets2 import (
     MAX_ID2,
+    ErrorNumber,
     FastStatusPart,
     Instruction2,
     InstructionPacket2,
@@ -80,7 +81,7 @@ from ax12emu.protocol.packets2 import (
 )
 from ax12emu.protocol.params2 import INSTRUCTION_SPECS, Broadcast, BulkRead, SyncRead, SyncWrite
 from ax12emu.protocol.servo_models import ServoModel
-from ax12emu.servo.plant2 import plant_for
+from ax12emu.servo.plant2 import GRID_SLACK_S, plant_for
 from ax12emu.servo.request_handler2 import answers, handle2, listed_read, parsed_params, status_byte, sync_write_all
 from ax12emu.servo.servo2 import Servo2, Servo2Options
 from firmware_model.xseries.interface import XServoModel
@@ -101,6 +102,9 @@ FirmwareFactory = Callable[[ServoModel, int], XServoModel]
 
 #: More distinct Sync Writes (and reads after them) than a client sends; past it the remembered ones start over.
 _MAX_REMEMBERED = 64
+#: More Sync Writes than a robot sends in one control step, each superseding the one before (see
+#: ``Bus2._answer_holding``); past it the held ones are taken.
+_MAX_SUPERSEDED = 32
 #: The largest LENGTH a packet can announce.
 MAX_LENGTH = 0xFFFF
 _EXECUTED_SILENTLY = frozenset({Broadcast.SILENT, Broadcast.EACH_ANSWERS})
@@ -169,10 +173,20 @@ class Bus2(ServosById[Servo2], DecodedBus):
         #: (``settle_in_pieces``): a Sync/Bulk Read may then leave a servo's catch-up for after its reply
         #: where the reply cannot tell (``Plant2.defer_catch_up``).  Off, every request catches up first.
         self.defer_settling = False
-        #: A Sync Write held until the next packet (see :meth:`answer`): (packet, line speed), or None; and
-        #: whether it still waits for that packet (False once a read went before it).
-        self._parked: tuple[InstructionPacket2, float | None] | None = None
+        #: A Sync Write held (see :meth:`answer`): (packet, line speed, the bus time it was heard at), or None;
+        #: and whether it still waits for the read a robot sends after it (False once a read went before it).
+        self._parked: tuple[InstructionPacket2, float | None, float] | None = None
         self._waiting = False
+        #: Older held Sync Writes the held one supersedes (see :meth:`_answer_holding`), oldest first.
+        self._superseded: list[InstructionPacket2] = []
+        #: Counts what may have changed a servo since (packets handled, catch-ups, steps, writes taken, callers'
+        #: turns): a remembered answer (:meth:`_overtaking_again`) holds only while it stands still.
+        self._changes = 0
+        #: (read, its parameters, line speed, the held write's shape) -> (changes, clock time it holds until, the
+        #: servos that hear it, replies) of a read that overtook the held write.
+        self._overtaken: dict[tuple, tuple[int, float, list[Servo2], tuple[Reply, ...]]] = {}
+        #: The read that last overtook a held write: (read, line speed, that write, its shape), or None.
+        self._last_overtaking: tuple[InstructionPacket2, float | None, InstructionPacket2, tuple] | None = None
         #: What :meth:`_may_hold` held the write by: (address, length, the IDs listed, line speed).
         self._parked_key: tuple = ()
         #: What :meth:`_may_hold` and :meth:`_read_unchanged_by` find from the IDs and layouts alone, per write
@@ -215,9 +229,10 @@ class Bus2(ServosById[Servo2], DecodedBus):
         listed servo's answer reads of its sensed registers (None: it reads one it cannot leave); a servo
         whose catch-up would change none of them takes it after the reply (``Plant2.defer_catch_up``).
         """
+        self._changes += 1
         for servo in self.servos:
             plant = servo.plant
-            if plant.due(sim_time_s):
+            if plant.due(sim_time_s, clock_s):
                 spans = reads.get(servo) if reads is not None else None
                 if spans is None or clock_s is None or not plant.defer_catch_up(sim_time_s, clock_s, spans):
                     plant.catch_up(sim_time_s, clock_s)
@@ -232,12 +247,20 @@ class Bus2(ServosById[Servo2], DecodedBus):
         return due
 
     def advance_in_pieces(self) -> Iterator[None]:
-        """:meth:`advance` one servo piece at a time, for a serving loop to interleave with packets."""
-        self.take_parked()
+        """:meth:`advance` one servo piece at a time, for a serving loop to interleave with packets.
+
+        Held Sync Writes are taken first, their commands shown by the step that follows rather than by a copy
+        of their own (``take_parked(show=False)``: a servo whose step is not yet due copies them when it is
+        next caught up, as it would have right after them)."""
+        self.take_parked(show=False)
         sim_time_s = self.clock.now_s()
         for servo in self.servos:
-            yield from servo.plant.tick(sim_time_s)
+            for _ in servo.plant.tick(sim_time_s):
+                self._changes += 1  # a packet may come between the pieces: nothing remembered of before holds
+                yield
             servo.check_watchdog(sim_time_s)
+        self._changes += 1
+        self._prepare_overtaking()
 
     def settle_in_pieces(self) -> Iterator[None]:
         """The steps the servos owe, one servo at a time: a client's write earns one (``Plant2.catch_up``).
@@ -251,8 +274,9 @@ class Bus2(ServosById[Servo2], DecodedBus):
         for servo in self.servos:
             plant, clock_s = servo.plant, self.clock.now_s()
             sim_time_s = clock_s - self.request_lag_s
-            if plant.due(sim_time_s):
+            if plant.due(sim_time_s, clock_s):
                 plant.catch_up(sim_time_s, clock_s)
+                self._changes += 1  # (before the pause: a packet may come between the pieces)
                 yield
 
     def take_deferred(self) -> None:
@@ -261,9 +285,15 @@ class Bus2(ServosById[Servo2], DecodedBus):
         For a serving loop before it hands the bus to a caller, who may read any register; a Sync Write
         held for the next packet is taken too.
         """
+        self._changes += 1
         self.take_parked()
         for servo in self.servos:
             servo.plant.catch_up_deferred()
+
+    def changed_outside(self) -> None:
+        """A caller may have changed servos outside the packets (a serving loop's calls, a fault acting): what
+        was remembered of them before (:meth:`_overtaking_again`) no longer holds."""
+        self._changes += 1
 
     # -- bytes in, replies out (receive, answer, expire: DecodedBus) ---------------------
     def answer(self, data: bytes, now_s: float | None = None, *, line_bps: float | None = None,
@@ -271,12 +301,15 @@ class Bus2(ServosById[Servo2], DecodedBus):
         """Feed bytes; return the replies to each packet they completed, one list per packet.
 
         With :attr:`defer_settling` (a serving loop that settles after each packet), a broadcast Sync
-        Write of Goal and profile registers only (``Servo2.writes_goals_only``) is held until the next
-        packet or the loop's next settling (:meth:`take_parked`).  Why: a robot's cycle sends it and at
-        once a Sync Read, and the host waits for the read's answer while the write is handled.  If the
-        next packet is a Sync/Bulk Read whose answer the write provably cannot change
-        (:meth:`_read_unchanged_by`), the read is answered first and the write taken right after;
-        otherwise the write is taken first, as it came.  Either way the replies are the bytes they would be.
+        Write of Goal and profile registers only (``Servo2.writes_goals_only``) that comes while the servos'
+        models are ahead of the clock is held (:attr:`parked`) until a packet or a step needs it taken.  Why:
+        a robot's cycle sends it and at once a Sync Read, and the host waits for the read's answer while the
+        write is handled.  If the next packet is a Sync/Bulk Read whose answer the write provably cannot change
+        (:meth:`_read_unchanged_by`), the read is answered first; a Sync Write of the same registers for the
+        same servos after such a read supersedes the held one (:meth:`_answer_holding`), so a robot writing
+        faster than the servos' 1 kHz control loop pays for one write a control step, not one a cycle;
+        anything else takes the held writes first, as they came.  Either way the replies and the tables are
+        the bytes they would be (``tests/ax12emu/bus/test_bus2_held_write.py``).
         """
         if self._parked is None and not self.defer_settling:
             return [self.dispatch(packet, line_bps=line_bps) for packet in self.framer.feed(data, now_s)]
@@ -284,9 +317,9 @@ class Bus2(ServosById[Servo2], DecodedBus):
 
     @property
     def parked(self) -> bool:
-        """Whether a Sync Write is held waiting for the next packet (see :meth:`answer`); once a read has
-        overtaken it, it is no longer waiting, and the serving loop's settling takes it at once."""
-        return self._parked is not None and self._waiting
+        """Whether a Sync Write is held (see :meth:`answer`): a serving loop leaves it to the next packet or the
+        next physics step (:meth:`advance_in_pieces`), which take it before anything else."""
+        return self._parked is not None
 
     def close(self) -> None:
         """Take a Sync Write still held for the next packet, then save state (``DecodedBus.close``)."""
@@ -294,25 +327,157 @@ class Bus2(ServosById[Servo2], DecodedBus):
             self.take_parked()
         super().close()
 
-    def take_parked(self) -> None:
-        """Take the Sync Write held for the next packet, if any (see :meth:`answer`)."""
+    def take_parked(self, *, show: bool = True) -> None:
+        """Take the held Sync Writes, if any (see :meth:`answer`), as if each had been taken when it came.
+
+        Each servo takes the newest held write it accepts (those it refuses change nothing) and, with
+        ``show``, reads its commands back at once, the step they earn owed (``Plant2.show_unstepped``): when
+        each came the models were ahead of the clock, so the catch-up right after it would have copied and
+        not stepped, and none has stepped since.  Writing the same registers again before a step leaves no
+        trace of the earlier goals: the table keeps the last bytes and the firmware plans from its tick's
+        state (``XFirmware._start_profile``).  The servos hear the newest write when it came (Realtime
+        Tick), unless a later packet reached them since.
+        """
         parked = self._parked
-        if parked is not None:
-            self._parked = None
-            self.dispatch(parked[0], line_bps=parked[1])
+        if parked is None:
+            return
+        self._parked = None
+        self._changes += 1
+        packet, line_bps, heard_s = parked
+        writes = [*self._superseded, packet]
+        self._superseded = []
+        targets = [servo for servo in self.servos if self._hears(servo, line_bps)]
+        for servo in targets:
+            last_s = servo.last_instruction_s
+            if last_s is None or heard_s > last_s:
+                servo.heard(heard_s)
+        tried: list[tuple[int, dict[int, bytes]]] = []  # newest first, each read when a servo first needs it
+        for servo in targets:
+            for k in range(len(writes)):
+                if k == len(tried):
+                    tried.append(_writes_by_id(writes[-1 - k]))
+                address, by_id = tried[k]
+                data = by_id.get(servo.id)
+                if data is not None and servo.write(address, data) == ErrorNumber.NONE:
+                    if show:
+                        servo.plant.show_unstepped()
+                    break
+        self._after_writes()
 
     def _answer_holding(self, packet: InstructionPacket2 | StatusPacket2, line_bps: float | None) -> list[Reply]:
         parked = self._parked
         if parked is not None:
-            if (isinstance(packet, InstructionPacket2) and parked[1] == line_bps
-                    and self._read_unchanged_by(packet, parked[0], line_bps)):
-                self._waiting = False  # overtaken: the loop's settling takes the write right after this reply
-                return self.dispatch(packet, line_bps=line_bps)
+            if (not self._waiting and self._supersedes(packet, parked, line_bps)
+                    and len(self._superseded) < _MAX_SUPERSEDED and self._may_hold(packet, line_bps)):
+                # Nothing could see the held write (a read went before it), and this one stores the same
+                # registers of the same servos and may be held itself: it supersedes the held one.
+                self._superseded.append(parked[0])
+                self._parked, self._waiting = (packet, line_bps, self._heard_now_s()), True
+                return []
+            if isinstance(packet, InstructionPacket2) and parked[1] == line_bps:
+                replies = self._overtaking_again(packet, line_bps)
+                if replies is not None:
+                    self._waiting = False
+                    return replies
+                if self._read_unchanged_by(packet, parked[0], line_bps):
+                    self._waiting = False  # overtaken: held on for the next packet or step
+                    changes = self._changes
+                    replies = self.dispatch(packet, line_bps=line_bps)
+                    if self._changes == changes + 2:  # (its own dispatch and catch-up; nothing else changed)
+                        self._remember_overtaking(packet, line_bps, replies)
+                    self._last_overtaking = (packet, line_bps, parked[0], self._parked_key)
+                    return replies
             self.take_parked()
         if self.defer_settling and isinstance(packet, InstructionPacket2) and self._may_hold(packet, line_bps):
-            self._parked, self._waiting = (packet, line_bps), True
+            self._parked, self._waiting = (packet, line_bps, self._heard_now_s()), True
             return []
         return self.dispatch(packet, line_bps=line_bps)
+
+    def _overtaking_again(self, packet: InstructionPacket2, line_bps: float | None) -> list[Reply] | None:
+        """The replies a read that overtook the held write gave last time, if nothing has changed since and the
+        clock has not reached a servo's next step (:meth:`_remember_overtaking`); None otherwise.
+
+        Why: between two control steps a robot's cycle finds the same state each time (its Sync Write is held
+        and superseded, its Sync Read overtakes it), so the read's checks and answers come out the same; only
+        the servos' hearing it (Realtime Tick, the last instruction's time) is new.
+        """
+        if not (packet.crc_ok and packet.id == BROADCAST_ID):
+            return None
+        raw = packet.params if type(packet.params) is bytes else bytes(packet.params)
+        known = self._overtaken.get((packet.instruction, raw, line_bps, self._parked_key))
+        if known is None or known[0] != self._changes or self.faults is not None:
+            return None
+        clock_s = self.clock.now_s()
+        if clock_s >= known[1]:
+            return None
+        heard_s = clock_s - self.request_lag_s
+        for servo in known[2]:
+            servo.heard(heard_s)
+        return list(known[3])
+
+    def _remember_overtaking(self, packet: InstructionPacket2, line_bps: float | None, replies: list[Reply]) -> None:
+        """Remember what a read that overtook the held write answered, for :meth:`_overtaking_again`.
+
+        Its answer depends on the servos' state and on the clock: so remembered with the count of changes as
+        it stands after the answer, and with the time the first servo's model falls due (no step due, none
+        owed, no write earning one: :meth:`_read_unchanged_by`).  Not for a read of Realtime Tick, which each
+        hearing changes.
+        """
+        if self.faults is not None:
+            return
+        raw = packet.params if type(packet.params) is bytes else bytes(packet.params)
+        heard = [servo.heard_span for servo in self.servos if servo.heard_span is not None]
+        reads = _listed_reads(parsed_params(packet.instruction, raw))
+        if reads is None or any(address < end and start < address + length
+                                for _, address, length in reads for start, end in heard):
+            return
+        until_s = min(servo.plant.firmware.time_s for servo in self.servos) - GRID_SLACK_S
+        targets = [servo for servo in self.servos if self._hears(servo, line_bps)]
+        if len(self._overtaken) >= _MAX_REMEMBERED:
+            self._overtaken.clear()
+        self._overtaken[(packet.instruction, raw, line_bps, self._parked_key)] = (
+            self._changes, until_s, targets, tuple(replies))
+
+    def _prepare_overtaking(self) -> None:
+        """After a step, when the host is busy elsewhere: answer the read that last overtook a held write as it
+        would be answered now, and remember it (:meth:`_remember_overtaking`), so that when the robot's next
+        cycle brings the same write and read, the read finds its answer ready.
+
+        Only when nothing is held (the step took it), the read could overtake a write of the same shape now,
+        and no servo is due a catch-up, so the read's own handling would change nothing but what the servos
+        hear (which :meth:`_overtaking_again` does when it comes).
+        """
+        last = self._last_overtaking
+        if last is None or self._parked is not None or self.faults is not None:
+            return
+        packet, line_bps, write, key = last
+        clock_s = self.clock.now_s()
+        sim_time_s = clock_s - self.request_lag_s
+        if any(servo.plant.due(sim_time_s, clock_s) for servo in self.servos):
+            return
+        held_key, self._parked_key = self._parked_key, key
+        try:
+            if self._read_unchanged_by(packet, write, line_bps):
+                self._remember_overtaking(packet, line_bps, self._listed(packet, line_bps))
+        finally:
+            self._parked_key = held_key
+
+    def _supersedes(self, packet: InstructionPacket2 | StatusPacket2, parked: tuple, line_bps: float | None) -> bool:
+        """Whether ``packet`` is a broadcast Sync Write, good CRC, at the held one's line speed, of the same
+        address and length to the same IDs in the same order (the parameters' layout: address, length,
+        then each ID followed by its data)."""
+        if not (isinstance(packet, InstructionPacket2) and packet.instruction == Instruction2.SYNC_WRITE
+                and packet.crc_ok and packet.id == BROADCAST_ID and parked[1] == line_bps):
+            return False
+        mine, held = bytes(packet.params), bytes(parked[0].params)
+        if len(mine) != len(held) or len(mine) < 4 or mine[:4] != held[:4]:
+            return False
+        stride = 1 + int.from_bytes(mine[2:4], "little")
+        return mine[4::stride] == held[4::stride]
+
+    def _heard_now_s(self) -> float:
+        """The bus time a packet heard now is heard at (as :meth:`dispatch` takes it)."""
+        return self.clock.now_s() - self.request_lag_s
 
     def _may_hold(self, packet: InstructionPacket2, line_bps: float | None) -> bool:
         """A broadcast Sync Write, good CRC, no faults, storing only Goal and profile registers on every servo it
@@ -416,6 +581,7 @@ class Bus2(ServosById[Servo2], DecodedBus):
         """Run one decoded packet on the servos it reaches; return their replies, timed."""
         if isinstance(packet, StatusPacket2):
             return []  # another device's answer: every servo hears it, none acts
+        self._changes += 1
         clock_s = self.clock.now_s()
         now_s = clock_s - self.request_lag_s
         broadcast = packet.id == BROADCAST_ID
@@ -619,6 +785,16 @@ class Bus2(ServosById[Servo2], DecodedBus):
             replies.append(reply)
             wire_s += len(status) * BITS_PER_BYTE / baud
         return replies
+
+
+def _writes_by_id(packet: InstructionPacket2) -> tuple[int, dict[int, bytes]]:
+    """A held Sync Write's address and the data it lists first under each ID (``sync_write_all``'s reading)."""
+    params = parsed_params(packet.instruction, bytes(packet.params))
+    assert isinstance(params, SyncWrite)  # only well-formed ones are held (Bus2._may_hold)
+    first: dict[int, bytes] = {}
+    for servo_id, data in params.writes:
+        first.setdefault(servo_id, data)
+    return params.address, first
 
 
 def _answer_spans(servo: Servo2, reads: list[tuple[int, int]]) -> Callable[[bytearray], tuple]:

@@ -13,7 +13,10 @@ tables: ``Bus.advance_in_pieces``), and while a host polls, each piece just
 after a packet was answered: the host is then busy with the reply, so the
 step costs it almost nothing.  The step a Protocol 2.0 client's write earns
 (``Bus2.settle_in_pieces``) is taken in the pass right after the packet
-that wrote, rather than when the next packet arrives.
+that wrote, rather than when the next packet arrives; while such a bus holds
+a robot's Sync Write for the next step (``Bus2.parked``), settling waits and
+the tick is taken whole the moment it is due, hot or not, since the host's
+next read needs the step.
 
 The wire, as it is modelled here:
 
@@ -63,10 +66,6 @@ HOT_S = 0.0002
 #: A physics step is put off while a reply is due sooner than this (a step of many servos takes
 #: ~0.1 ms), so it cannot delay the reply; a longer Return Delay Time hides the step inside it.
 PHYSICS_DEFER_S = 0.0003
-#: How long a packet the bus holds for the next one (``Bus2.parked``: a Sync Write that a read following it at
-#: once may overtake) waits for it before the loop settles it anyway: a robot's cycle sends its Sync Read
-#: within tens of microseconds of its Sync Write.
-PARKED_WAIT_S = 0.0002
 #: What ``next`` returns from a finished physics step.
 _DONE = object()
 
@@ -124,11 +123,12 @@ class BusServer:
         if self._settle is not None and hasattr(bus, "defer_settling"):
             # This loop settles right after each packet, so a read may leave for then what its reply cannot show.
             bus.defer_settling = True
-        #: Whether the bus holds a packet for the next one (``Bus2.parked``), and since when (None: it holds none).
-        self._bus_parked: Callable[[], bool] | None = (lambda: bus.parked) if hasattr(bus, "parked") else None
-        self._parked_at: float | None = None
+        #: Whether the bus holds a packet for the next one or the next physics step (``Bus2.parked``).
+        self._bus_parked: Callable[[], bool] = (lambda: bus.parked) if hasattr(bus, "parked") else (lambda: False)
         #: Takes what a reply went out before (``Bus2.take_deferred``), before a call sees the bus; None: nothing to take.
         self._take_deferred: Callable[[], None] | None = getattr(bus, "take_deferred", None)
+        #: Tells the bus a call may have changed its servos (``Bus2.changed_outside``); None: nothing to tell.
+        self._changed_outside: Callable[[], None] | None = getattr(bus, "changed_outside", None)
         #: Counters for diagnostics and tests.
         self.packets_in = 0
         self.bytes_dropped = 0
@@ -214,8 +214,6 @@ class BusServer:
             self.packets_in += 1
             self._answer(replies, now, end)
             self._unsettled = self._settle is not None
-        if self._bus_parked is not None:
-            self._parked_at = now if self._bus_parked() else None
 
     def _answer(self, replies: Sequence[Reply], now: float, end: float) -> None:
         """Put one packet's replies on the line: now, or queued for their delay (and pace)."""
@@ -304,11 +302,21 @@ class BusServer:
         # for a step (see Bus.request_lag_s).  The step comes in pieces, one per pass; while a
         # host is mid-conversation, a piece runs just after a packet was answered or a delayed
         # reply went out, when the host is busy with the reply rather than waiting for one.
-        if not (queue and queue[0][0] - now < PHYSICS_DEFER_S) and (answered or not hot):
+        # A bus holding a write (``Bus2.parked``) takes it with the step when that falls due, hot or not: the
+        # next read must see the step, so taking it the moment it is due leaves the host least to wait for.
+        if not (queue and queue[0][0] - now < PHYSICS_DEFER_S) and (answered or not hot or self._bus_parked()):
             if self._physics is None and now >= self._next_physics:
+                whole = self._bus_parked()
                 self._physics = self.bus.advance_in_pieces()
                 self.bus.expire(now)
                 self._next_physics = self._next_tick_s(now)
+                if whole:
+                    # All pieces at once: the host's next packets need the whole step (a write held over it
+                    # earns one now), and between pieces they would find some servos stepped and others
+                    # owing a step, which their own handling would then take while the host waits.
+                    for _ in self._physics:
+                        pass
+                    self._physics = None
             if self._physics is not None and next(self._physics, _DONE) is _DONE:
                 self._physics = None
         # The step a client's write earned, taken while the host is busy with the reply or its next
@@ -317,12 +325,11 @@ class BusServer:
         # pieces cost a poll and the loop's checks, about 2 us a piece, and the host's next packet meets
         # the same work either way); never inside a half-done physics step, whose copy back would then
         # follow a step it did not take, nor just before a reply.
-        # A packet the bus holds for the next one waits for it a moment (PARKED_WAIT_S) before it is settled.
+        # While the bus holds a packet (a Sync Write a read may overtake), settling waits: the next packet or
+        # the physics step takes it, and a robot's next Sync Write of the same goals supersedes it.
         if (self._physics is None and self._unsettled
-                and not (queue and queue[0][0] - now < PHYSICS_DEFER_S)
-                and not (self._parked_at is not None and now - self._parked_at < PARKED_WAIT_S and self._bus_parked())):
+                and not (queue and queue[0][0] - now < PHYSICS_DEFER_S) and not self._bus_parked()):
             self._unsettled = False
-            self._parked_at = None  # settling takes the held packet first
             for _ in self._settle():
                 pass
         if self._calls:
@@ -390,6 +397,14 @@ class BusServer:
         while self._calls:
             fn, future = self._calls.popleft()
             try:
-                future.set_result(fn(self.bus))
+                result = fn(self.bus)
             except BaseException as exc:  # handed to the caller, never kills the loop
-                future.set_exception(exc)
+                result, error = None, exc
+            else:
+                error = None
+            if self._changed_outside is not None:
+                self._changed_outside()  # before the caller hears back: its next packet meets the change
+            if error is None:
+                future.set_result(result)
+            else:
+                future.set_exception(error)

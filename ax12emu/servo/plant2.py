@@ -120,14 +120,20 @@ class SteppedPlant:
 
     firmware: XServoModel
     _write_unseen: bool
+    #: A client's write came while the model was ahead of the clock: its commands were read back at once and
+    #: the step it earns is taken as soon as the clock reaches the model's time (see :meth:`catch_up`).
+    _step_owed: bool = False
     #: The (sim_time_s, clock_s) of a catch-up left for after a reply it could not change (see
     #: :meth:`Plant2.defer_catch_up`), taken before anything else reaches the model; None: none.
     _deferred: tuple[float, float | None] | None = None
 
-    def due(self, sim_time_s: float) -> bool:
-        """Whether a whole step is due by ``sim_time_s`` or a client's write is not yet shown."""
+    def due(self, sim_time_s: float, clock_s: float | None = None) -> bool:
+        """Whether a whole step is due by ``sim_time_s``, a client's write is not yet shown, or the step a write
+        earned is owed and the clock (``clock_s``, else ``sim_time_s``) has reached the model's time."""
         model = self.firmware
-        return self._write_unseen or sim_time_s >= model.time_s + model.step_s
+        if self._write_unseen or sim_time_s >= model.time_s + model.step_s:
+            return True
+        return self._step_owed and model.time_s <= (sim_time_s if clock_s is None else clock_s) + GRID_SLACK_S
 
     def catch_up(self, sim_time_s: float, clock_s: float | None = None) -> None:
         """Step to ``sim_time_s``, and one step past a client's write, then copy the sensed registers.
@@ -140,35 +146,54 @@ class SteppedPlant:
         client faster than 1 kHz, possible over a pty, not over USB) is taken as the firmware takes
         a packet between two ticks: the commands it handed the model (:meth:`command`: profile
         restarted, torque and mode acted on, at the model's time) read back at once, and the
-        physics waits for the clock.
+        step waits for the clock: it is taken at the first catch-up or tick once the clock has reached
+        the model's time, as the servo's next tick runs with the last commands it was given.
         """
         if self._deferred is not None:
             self.catch_up_deferred()
         model = self.firmware
-        stepped = False
+        copy = False
         if sim_time_s >= model.time_s + model.step_s:
             model.step_to(sim_time_s)
-            stepped = True
-        if self._write_unseen and not stepped:
+            copy, self._step_owed = True, False
+        elif self._write_unseen or self._step_owed:
             if model.time_s <= (sim_time_s if clock_s is None else clock_s) + GRID_SLACK_S:
                 model.step_to(model.time_s + model.step_s)
-            stepped = True
+                copy, self._step_owed = True, False
+            else:
+                copy, self._step_owed = self._write_unseen, True
         self._write_unseen = False
-        if stepped:
+        if copy:
             self.write_back()
 
     def tick(self, sim_time_s: float) -> Iterator[None]:
-        """:meth:`catch_up` in two pieces (step, then the copy), for a serving loop to interleave with packets."""
+        """:meth:`catch_up` in two pieces (step, then the copy), for a serving loop to interleave with packets
+        (``sim_time_s``: the clock's present; the loop has no request lag)."""
         if self._deferred is not None:
             self.catch_up_deferred()
         model = self.firmware
-        if sim_time_s < model.time_s + model.step_s:
+        if sim_time_s >= model.time_s + model.step_s:
+            model.step_to(sim_time_s)
+        elif (self._write_unseen or self._step_owed) and model.time_s <= sim_time_s + GRID_SLACK_S:
+            model.step_to(model.time_s + model.step_s)
+        else:
             return
-        model.step_to(sim_time_s)
         yield
-        self._write_unseen = False
+        self._write_unseen = self._step_owed = False
         self.write_back()
 
+    def show_unstepped(self) -> None:
+        """What :meth:`catch_up` does after a client's write while the model is ahead of the clock: the commands
+        read back at once (the copy), the step owed for when the clock reaches the model's time.
+
+        For a bus that took the write later than it came (``Bus2``'s held Sync Write): when it came the model
+        was ahead, so the catch-up right after it would have copied and not stepped; the model has not
+        stepped since, so the copy is the same, whenever it is taken.
+        """
+        if self._write_unseen:
+            self._write_unseen = False
+            self._step_owed = True
+            self.write_back()
 
     def catch_up_deferred(self) -> None:
         """The catch-up a reply went out before, if any, at the times it was due (the model has not changed since)."""
@@ -311,7 +336,7 @@ class Plant2(SteppedPlant):
         later at the same times (``sim_time_s``, ``clock_s``) before anything else reaches the model, so
         the tables end as they would have.
         """
-        if not self._unchanged_unless_stepped(sim_time_s, spans):
+        if not self._unchanged_unless_stepped(sim_time_s, clock_s, spans):
             return False
         model = self.firmware
         if self._deferred is None:
@@ -321,10 +346,11 @@ class Plant2(SteppedPlant):
             self._deferred = (sim_time_s, clock_s)
         return True
 
-    def _unchanged_unless_stepped(self, sim_time_s: float, spans: tuple[tuple[int, int], ...]) -> bool:
-        """No step due by ``sim_time_s``, and a copy of what the firmware senses now would leave ``spans`` as they are."""
+    def _unchanged_unless_stepped(self, sim_time_s: float, clock_s: float, spans: tuple[tuple[int, int], ...]) -> bool:
+        """No step due by ``sim_time_s`` nor owed by ``clock_s``, and a copy of what the firmware senses now would
+        leave ``spans`` as they are."""
         model = self.firmware
-        if sim_time_s >= model.time_s + model.step_s:
+        if sim_time_s >= model.time_s + model.step_s or self._step_owed and model.time_s <= clock_s + GRID_SLACK_S:
             return False  # a step is due: the read must see it
         if self._written_back_epoch is None or getattr(model, "sensing_epoch", None) != self._written_back_epoch:
             return False
@@ -348,7 +374,7 @@ class Plant2(SteppedPlant):
         (as in :meth:`defer_catch_up`), and the firmware says the commands the write gives (the table's
         frame and torque registers, a goal written) change no sensed value but the trajectory ones.
         """
-        if not self._unchanged_unless_stepped(sim_time_s, spans):
+        if not self._unchanged_unless_stepped(sim_time_s, clock_s, spans):
             return False
         if self.write_earns_step(clock_s):
             return False  # the write would earn a step before the read

@@ -152,6 +152,12 @@ class Servo2(TableServo):
             table.set("backup_ready", int(self.backup is not None))
         self.plant.command()
 
+    @property
+    def heard_span(self) -> tuple[int, int] | None:
+        """The bytes :meth:`heard` writes (Realtime Tick: start, end), or None if the table has none."""
+        tick = self._tick
+        return None if tick is None else (tick.address, tick.end)
+
     def heard(self, now_s: float) -> None:
         """An instruction packet reached this servo at ``now_s`` (bus clock): the Bus Watchdog's interval restarts."""
         if self._watchdog_at is None or self.table.row[self._watchdog_at]:

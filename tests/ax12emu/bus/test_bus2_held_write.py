@@ -102,22 +102,50 @@ def settle(bus: Bus2) -> None:
         pass
 
 
+def settle_as_the_loop(bus: Bus2) -> None:
+    """What the serving loop does after a packet: it settles, unless the bus holds a write for the next
+    packet or the physics step (``Bus2.parked``)."""
+    if not bus.parked:
+        settle(bus)
+
+
 def tick(bus: Bus2) -> None:
     for _ in bus.advance_in_pieces():
         pass
 
 
-@pytest.mark.parametrize("seed", [1, 2, 3, 4])
-def test_the_shortcuts_answer_every_packet_byte_for_byte_as_the_plain_path(seed):
-    rng = random.Random(seed)
+def robot_cycles(rng: random.Random):
+    """Mostly a robot's cycle faster than the servos' 1 kHz loop (new goals, some out of range, then a Sync Read of
+    Present Position), so held writes supersede each other; the mix above now and then."""
+    others = packets(rng)
+    goals = {servo_id: 2048 for servo_id in IDS}
+    while True:
+        if rng.random() < 0.8:
+            for servo_id in IDS:
+                if rng.random() < 0.7:
+                    goals[servo_id] = min(max(goals[servo_id] + rng.randint(-40, 40), 0), 4095)
+            yield sync_write(GOAL_POSITION, {servo_id: u32(5000 if rng.random() < 0.03 else goal)
+                                             for servo_id, goal in goals.items()})
+            yield sync_read(PRESENT_POSITION, 4)
+        else:
+            yield next(others)
+
+
+def compare_with_the_plain_path(stream, rng: random.Random, packets_sent: int,
+                                profile_velocity: int = 0) -> tuple[int, int, int, int]:
+    """Feed ``stream`` to a bus with the shortcuts and one without, settled and ticked at the same points as
+    the serving loop does (time passing only once both have settled), compare every reply and, at the end,
+    every table; return how often a held write was overtaken, superseded, a catch-up left for later and a read
+    answered as the last time, nothing having changed since."""
     plain, quick = new_bus(defer=False), new_bus(defer=True)
     setup = [write(servo_id, RETURN_DELAY_TIME, b"\x00") for servo_id in IDS]
+    if profile_velocity:  # goals then start profiles: a new goal plans from the trajectory where it is
+        setup += [write(servo_id, PROFILE_VELOCITY, u32(profile_velocity)) for servo_id in IDS]
     setup += [write(servo_id, TORQUE_ENABLE, b"\x01") for servo_id in IDS]
     for data in setup:
         assert plain.receive(data) == quick.receive(data)
-    overtaken = deferred = 0
-    stream = packets(rng)
-    for step in range(2500):
+    overtaken = superseded = deferred = replayed = 0
+    for step in range(packets_sent):
         data = next(stream)
         if data == "raise":
             servo_index = rng.randrange(len(IDS))
@@ -125,22 +153,32 @@ def test_the_shortcuts_answer_every_packet_byte_for_byte_as_the_plain_path(seed)
                 settle(bus)  # a fault acts between packets, once the loop has settled (it runs as a call)
                 bus.take_deferred()
                 bus.servos[servo_index].plant.firmware.raise_error(HW_ERROR_OVERHEATING)
+                bus.changed_outside()  # as the serving loop says after each call
             continue
-        held_before = quick.parked
+        waiting_before, superseded_before = quick.parked and quick._waiting, len(quick._superseded)
+        changes_before = quick._changes
         replies_plain, replies_quick = plain.receive(data), quick.receive(data)
         assert [(r.data, r.delay_s) for r in replies_quick] == [(r.data, r.delay_s) for r in replies_plain], (step, data.hex())
-        overtaken += held_before and quick._parked is not None and not quick.parked
+        overtaken += waiting_before and quick.parked and not quick._waiting
+        superseded += len(quick._superseded) > superseded_before
+        replayed += bool(replies_quick) and quick._changes == changes_before  # answered as last time (nothing changed)
         deferred += any(servo.plant._deferred is not None for servo in quick.servos)
         roll = rng.random()
         if roll < 0.6:  # the loop settles right after the packet (or the next packet comes first)
             settle(plain)
-            settle(quick)
+            settle_as_the_loop(quick)
         if roll < 0.15:  # the physics tick, then time passes
             settle(plain)
-            settle(quick)
+            settle_as_the_loop(quick)
             tick(plain)
             tick(quick)
             dt_s = rng.choice((0.0001, 0.0003, 0.001, 0.0025))
+            plain.clock.advance(dt_s)
+            quick.clock.advance(dt_s)
+        elif roll < 0.35:  # time passes between packets, before the next tick (a held write waits meanwhile)
+            settle(plain)
+            settle_as_the_loop(quick)
+            dt_s = rng.choice((0.00005, 0.0002, 0.0006))
             plain.clock.advance(dt_s)
             quick.clock.advance(dt_s)
     settle(plain)
@@ -148,8 +186,23 @@ def test_the_shortcuts_answer_every_packet_byte_for_byte_as_the_plain_path(seed)
     quick.take_deferred()
     for a, b in zip(plain.servos, quick.servos):
         assert bytes(a.table.row) == bytes(b.table.row)
+    return overtaken, superseded, deferred, replayed
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3, 4])
+def test_the_shortcuts_answer_every_packet_byte_for_byte_as_the_plain_path(seed):
+    rng = random.Random(seed)
+    overtaken, superseded, deferred, _ = compare_with_the_plain_path(packets(rng), rng, 2500)
     # The shortcuts were taken (or this compared the plain path with itself).
-    assert overtaken > 20 and deferred > 20, (overtaken, deferred)
+    assert overtaken > 5 and superseded > 1 and deferred > 20, (overtaken, superseded, deferred)
+
+
+@pytest.mark.parametrize("seed, profile_velocity", [(1, 0), (2, 200), (3, 30)])
+def test_a_robot_cycle_faster_than_the_control_loop_answers_as_the_plain_path(seed, profile_velocity):
+    rng = random.Random(seed)
+    overtaken, superseded, deferred, replayed = compare_with_the_plain_path(robot_cycles(rng), rng, 3000,
+                                                                            profile_velocity)
+    assert overtaken > 200 and superseded > 100 and replayed > 50, (overtaken, superseded, deferred, replayed)
 
 
 def test_a_held_goal_write_is_visible_to_a_read_of_what_it_changes():

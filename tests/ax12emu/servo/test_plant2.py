@@ -67,3 +67,32 @@ def test_sensed_registers_are_stored_as_table_set_stores_them(key):
     row = bytearray(16)
     _writer(overlapping)(row, (0x11223344, -1))
     assert row[10:14] == bytes((0x44, 0x33, 0xFF, 0xFF))
+
+
+def test_a_write_while_the_model_is_ahead_is_shown_at_once_and_stepped_when_the_clock_reaches_it():
+    """A second goal within one control period: its commands read back at once (Goal, the trajectory), and the
+    servo's next tick, taken at the first catch-up once the clock has reached the model's time (not a period
+    later), runs with it, as the servo's own 1 ms loop would."""
+    spec = model("xl430-w250")
+    table = Table2(spec.layout())
+    plant = Plant2(build_x_firmware(spec), table)
+    table.set("goal_pwm", table.get("pwm_limit"))  # as the servo sets it at power-on (Servo2.power_on)
+    table.set("torque_enable", 1)
+    plant.command()
+    plant.catch_up(0.010, 0.010)
+    start = table.get("present_position")
+    table.set("goal_position", start + 400)
+    plant.command(goal_written=True)
+    plant.catch_up(0.0101, 0.0101)  # the write earns a step: the model runs one step past the clock
+    assert plant.firmware.time_s == pytest.approx(0.011)
+    table.set("goal_position", start - 400)  # a second goal before the clock reaches the model's time
+    plant.command(goal_written=True)
+    plant.catch_up(0.0102, 0.0102)
+    assert plant.firmware.time_s == pytest.approx(0.011)  # shown, not stepped: the loop waits for the clock
+    assert table.get("position_trajectory") == start - 400
+    assert not plant.due(0.0105, 0.0105)
+    assert plant.due(0.0110, 0.0110)  # the clock reached the model's time: the step the write earned is due
+    plant.catch_up(0.0110, 0.0110)
+    assert plant.firmware.time_s == pytest.approx(0.012)
+    assert table.get("present_pwm") < 0  # that step drove towards the second goal
+    assert not plant.due(0.0111, 0.0111)
