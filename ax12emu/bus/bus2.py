@@ -185,6 +185,8 @@ class Bus2(ServosById[Servo2], DecodedBus):
         #: (read, its parameters, line speed, the held write's shape) -> (changes, clock time it holds until, the
         #: servos that hear it, replies) of a read that overtook the held write.
         self._overtaken: dict[tuple, tuple[int, float, list[Servo2], tuple[Reply, ...]]] = {}
+        #: Per (read, its parameters): whether it reads what hearing a packet changes (or is malformed).
+        self._reads_heard: dict[tuple, bool] = {}
         #: The read that last overtook a held write: (read, line speed, that write, its shape), or None.
         self._last_overtaking: tuple[InstructionPacket2, float | None, InstructionPacket2, tuple] | None = None
         #: What :meth:`_may_hold` held the write by: (address, length, the IDs listed, line speed).
@@ -426,10 +428,16 @@ class Bus2(ServosById[Servo2], DecodedBus):
         if self.faults is not None:
             return
         raw = packet.params if type(packet.params) is bytes else bytes(packet.params)
-        heard = [servo.heard_span for servo in self.servos if servo.heard_span is not None]
-        reads = _listed_reads(parsed_params(packet.instruction, raw))
-        if reads is None or any(address < end and start < address + length
-                                for _, address, length in reads for start, end in heard):
+        reads_heard = self._reads_heard.get((packet.instruction, raw))
+        if reads_heard is None:  # (the tables' layouts decide it: the same for a read each time)
+            heard = [servo.heard_span for servo in self.servos if servo.heard_span is not None]
+            reads = _listed_reads(parsed_params(packet.instruction, raw))
+            reads_heard = reads is None or any(address < end and start < address + length
+                                               for _, address, length in reads for start, end in heard)
+            if len(self._reads_heard) >= _MAX_REMEMBERED:
+                self._reads_heard.clear()
+            self._reads_heard[(packet.instruction, raw)] = reads_heard
+        if reads_heard:
             return
         until_s = min(servo.plant.firmware.time_s for servo in self.servos) - GRID_SLACK_S
         targets = [servo for servo in self.servos if self._hears(servo, line_bps)]
