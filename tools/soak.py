@@ -13,8 +13,11 @@ to back through dynamixel-sdk over the pty:
 
 With ``--protocol 2.0`` the servos are XL430-W250s (``serve --servo xl430-w250 --baud 1000000``)
 driven by dynamixel-sdk's Protocol 2.0 handler through the X series' registers (4-byte positions,
-goals between 1500 and 2500), and every round also reads every servo's Present Position with one
-Sync Read and one Fast Sync Read (a share missing or out of range counts as lost or wrong).  With
+goals between 1500 and 2500), and every round also sends the goals twice as a robot's cycle does,
+each time one Sync Write of them all and at once a read of every servo's Present Position, a Sync
+Read then a Fast Sync Read (a share missing or out of range counts as lost or wrong): the emulator
+holds such a Sync Write, lets the read go first and lets the next write replace it, so the
+per-servo READ of Goal Position in the next round checks that none of that shows.  With
 ``--protocol mixed`` N AX-12As and N XL430-W250s share the wire (IDs 1..N in each protocol), both
 handlers on one port, each servo moving; a reply of the other protocol's servos would show up as a
 wrong or lost one.
@@ -47,7 +50,7 @@ import sys
 import time
 from dataclasses import dataclass, field
 
-from dynamixel_sdk import COMM_SUCCESS, GroupSyncRead, PacketHandler, PortHandler
+from dynamixel_sdk import COMM_SUCCESS, GroupSyncRead, GroupSyncWrite, PacketHandler, PortHandler
 
 PRESENT_POSITION, GOAL_POSITION, MOVING, RETURN_DELAY, MODEL_NUMBER, TORQUE_ENABLE = 36, 30, 46, 5, 0, 24
 #: After a one-byte EEPROM write an AX-12 ignores packets for about 6 ms (9 ms by the ATMega8 datasheet).
@@ -312,13 +315,14 @@ def soak(path: str, pid: int, seconds: float, servos: int, *, goal_period_s: flo
     clock = time.perf_counter
     emulator_stat, client_stat = SchedStat(pid), SchedStat(os.getpid())
     result.waits_known = emulator_stat.read() is not None and client_stat.read() is not None
-    readers = {}
+    readers, writers = {}, {}
     for kind in kinds:
         if kind.protocol == 2.0:
             reader = GroupSyncRead(port, handlers[kind], kind.present_position, kind.position_bytes)
             for servo_id in range(1, servos + 1):
                 reader.addParam(servo_id)
             readers[kind] = reader
+            writers[kind] = GroupSyncWrite(port, handlers[kind], kind.goal_position, kind.position_bytes)
 
     def read(kind: Kind, servo_id: int, address: int, size: int):
         call = {1: handlers[kind].read1ByteTxRx, 2: handlers[kind].read2ByteTxRx, 4: handlers[kind].read4ByteTxRx}[size]
@@ -408,15 +412,22 @@ def soak(path: str, pid: int, seconds: float, servos: int, *, goal_period_s: flo
                 check(f"READ Goal Position of ID {servo_id} = {value}, wrote {goals[target]} (Protocol {kind.protocol})",
                       comm, error, value != goals[target])
             for kind, reader in readers.items():
-                how = "Fast Sync Read" if rounds % 2 else "Sync Read"
-                comm = timed(reader.fastSyncRead if rounds % 2 else reader.txRxPacket)
-                for servo_id in range(1, servos + 1):
-                    available = comm == COMM_SUCCESS and reader.isAvailable(servo_id, kind.present_position,
-                                                                            kind.position_bytes)
-                    value = reader.getData(servo_id, kind.present_position, kind.position_bytes) if available else 0
-                    check(f"{how} of Present Position, ID {servo_id} = {value}",
-                          comm if comm != COMM_SUCCESS else (COMM_SUCCESS if available else -1001), 0,
-                          not 0 <= value <= kind.position_max)
+                writer = writers[kind]
+                for fast in (False, True):  # twice: the second write replaces the first, held after its read
+                    writer.clearParam()  # the goals again, as a robot's cycle sends them before its read
+                    for servo_id in range(1, servos + 1):
+                        writer.addParam(servo_id, list(goals[(kind, servo_id)].to_bytes(kind.position_bytes, "little")))
+                    comm = timed(writer.txPacket)
+                    check("Sync Write of the goals (Protocol 2.0)", comm, 0, False)
+                    how = "Fast Sync Read" if fast else "Sync Read"
+                    comm = timed(reader.fastSyncRead if fast else reader.txRxPacket)
+                    for servo_id in range(1, servos + 1):
+                        available = comm == COMM_SUCCESS and reader.isAvailable(servo_id, kind.present_position,
+                                                                                kind.position_bytes)
+                        value = reader.getData(servo_id, kind.present_position, kind.position_bytes) if available else 0
+                        check(f"{how} of Present Position, ID {servo_id} = {value}",
+                              comm if comm != COMM_SUCCESS else (COMM_SUCCESS if available else -1001), 0,
+                              not 0 <= value <= kind.position_max)
             rounds += 1
             if rounds % 100 == 0:
                 for kind in kinds:

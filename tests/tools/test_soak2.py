@@ -13,8 +13,9 @@ soak = load_tool("soak")
 
 @pytest.mark.parametrize("protocol", ["2.0", "mixed"])
 def test_three_second_soak_loses_nothing(emulator, protocol):
-    """3 s of back-to-back requests (Read, Write, Sync Read, Fast Sync Read) to moving servos: every reply arrives and is right
-    (but those the machine kept a process from, see ``soak.STARVED_S``)."""
+    """3 s of back-to-back requests (Read, Write, Sync Writes each followed by a Sync Read or a Fast Sync Read) to
+    moving servos: every reply arrives and is right (but those the machine kept a process from, see
+    ``soak.STARVED_S``)."""
     served = emulator(*soak.serve_args(2, protocol))
     result = soak.soak(served.port, served.process.pid, 3.0, 2, goal_period_s=0.3, warmup_s=0.5, protocol=protocol)
     text = soak.report(result, 2, protocol)
