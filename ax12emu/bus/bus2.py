@@ -105,6 +105,9 @@ _MAX_REMEMBERED = 64
 #: More Sync Writes than a robot sends in one control step, each superseding the one before (see
 #: ``Bus2._answer_holding``); past it the held ones are taken.
 _MAX_SUPERSEDED = 32
+#: How recently a read must have overtaken a held write for a step to have its next answer ready
+#: (``Bus2._prepare_overtaking``): a robot's cycle comes every few milliseconds at most.
+_PREPARE_WITHIN_S = 0.005
 #: The largest LENGTH a packet can announce.
 MAX_LENGTH = 0xFFFF
 _EXECUTED_SILENTLY = frozenset({Broadcast.SILENT, Broadcast.EACH_ANSWERS})
@@ -187,8 +190,8 @@ class Bus2(ServosById[Servo2], DecodedBus):
         self._overtaken: dict[tuple, tuple[int, float, list[Servo2], tuple[Reply, ...]]] = {}
         #: Per (read, its parameters): whether it reads what hearing a packet changes (or is malformed).
         self._reads_heard: dict[tuple, bool] = {}
-        #: The read that last overtook a held write: (read, line speed, that write, its shape), or None.
-        self._last_overtaking: tuple[InstructionPacket2, float | None, InstructionPacket2, tuple] | None = None
+        #: The read that last overtook a held write: (read, line speed, that write, its shape, clock time), or None.
+        self._last_overtaking: tuple[InstructionPacket2, float | None, InstructionPacket2, tuple, float] | None = None
         #: What :meth:`_may_hold` held the write by: (address, length, the IDs listed, line speed).
         self._parked_key: tuple = ()
         #: What :meth:`_may_hold` and :meth:`_read_unchanged_by` find from the IDs and layouts alone, per write
@@ -387,7 +390,7 @@ class Bus2(ServosById[Servo2], DecodedBus):
                     replies = self.dispatch(packet, line_bps=line_bps)
                     if self._changes == changes + 2:  # (its own dispatch and catch-up; nothing else changed)
                         self._remember_overtaking(packet, line_bps, replies)
-                    self._last_overtaking = (packet, line_bps, parked[0], self._parked_key)
+                    self._last_overtaking = (packet, line_bps, parked[0], self._parked_key, self.clock.now_s())
                     return replies
             self.take_parked()
         if self.defer_settling and isinstance(packet, InstructionPacket2) and self._may_hold(packet, line_bps):
@@ -458,8 +461,10 @@ class Bus2(ServosById[Servo2], DecodedBus):
         last = self._last_overtaking
         if last is None or self._parked is not None or self.faults is not None:
             return
-        packet, line_bps, write, key = last
+        packet, line_bps, write, key, at_s = last
         clock_s = self.clock.now_s()
+        if clock_s - at_s > _PREPARE_WITHIN_S:
+            return  # no robot cycling now: no answer to have ready
         sim_time_s = clock_s - self.request_lag_s
         if any(servo.plant.due(sim_time_s, clock_s) for servo in self.servos):
             return
