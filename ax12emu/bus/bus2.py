@@ -190,8 +190,10 @@ class Bus2(ServosById[Servo2], DecodedBus):
         self._overtaken: dict[tuple, tuple[int, float, list[Servo2], tuple[Reply, ...]]] = {}
         #: Per (read, its parameters): whether it reads what hearing a packet changes (or is malformed).
         self._reads_heard: dict[tuple, bool] = {}
-        #: The read that last overtook a held write: (read, line speed, that write, its shape, clock time), or None.
-        self._last_overtaking: tuple[InstructionPacket2, float | None, InstructionPacket2, tuple, float] | None = None
+        #: The read that last overtook a held write the long way: (read, line speed, that write, its shape), or None;
+        #: and when a read last overtook one, either way (clock time).
+        self._last_overtaking: tuple[InstructionPacket2, float | None, InstructionPacket2, tuple] | None = None
+        self._overtook_at_s = 0.0
         #: What :meth:`_may_hold` held the write by: (address, length, the IDs listed, line speed).
         self._parked_key: tuple = ()
         #: What :meth:`_may_hold` and :meth:`_read_unchanged_by` find from the IDs and layouts alone, per write
@@ -390,7 +392,8 @@ class Bus2(ServosById[Servo2], DecodedBus):
                     replies = self.dispatch(packet, line_bps=line_bps)
                     if self._changes == changes + 2:  # (its own dispatch and catch-up; nothing else changed)
                         self._remember_overtaking(packet, line_bps, replies)
-                    self._last_overtaking = (packet, line_bps, parked[0], self._parked_key, self.clock.now_s())
+                    self._last_overtaking = (packet, line_bps, parked[0], self._parked_key)
+                    self._overtook_at_s = self.clock.now_s()
                     return replies
             self.take_parked()
         if self.defer_settling and isinstance(packet, InstructionPacket2) and self._may_hold(packet, line_bps):
@@ -418,6 +421,7 @@ class Bus2(ServosById[Servo2], DecodedBus):
         heard_s = clock_s - self.request_lag_s
         for servo in known[2]:
             servo.heard(heard_s)
+        self._overtook_at_s = clock_s
         return list(known[3])
 
     def _remember_overtaking(self, packet: InstructionPacket2, line_bps: float | None, replies: list[Reply]) -> None:
@@ -461,9 +465,9 @@ class Bus2(ServosById[Servo2], DecodedBus):
         last = self._last_overtaking
         if last is None or self._parked is not None or self.faults is not None:
             return
-        packet, line_bps, write, key, at_s = last
+        packet, line_bps, write, key = last
         clock_s = self.clock.now_s()
-        if clock_s - at_s > _PREPARE_WITHIN_S:
+        if clock_s - self._overtook_at_s > _PREPARE_WITHIN_S:
             return  # no robot cycling now: no answer to have ready
         sim_time_s = clock_s - self.request_lag_s
         if any(servo.plant.due(sim_time_s, clock_s) for servo in self.servos):
