@@ -82,7 +82,15 @@ from ax12emu.protocol.packets2 import (
 from ax12emu.protocol.params2 import INSTRUCTION_SPECS, Broadcast, BulkRead, SyncRead, SyncWrite
 from ax12emu.protocol.servo_models import ServoModel
 from ax12emu.servo.plant2 import GRID_SLACK_S, plant_for
-from ax12emu.servo.request_handler2 import answers, handle2, listed_read, parsed_params, status_byte, sync_write_all
+from ax12emu.servo.request_handler2 import (
+    answers,
+    first_writes,
+    handle2,
+    listed_read,
+    parsed_params,
+    status_byte,
+    sync_write_all,
+)
 from ax12emu.servo.servo2 import Servo2, Servo2Options
 from firmware_model.xseries.interface import XServoModel
 
@@ -374,13 +382,15 @@ class Bus2(ServosById[Servo2], DecodedBus):
     def _answer_holding(self, packet: InstructionPacket2 | StatusPacket2, line_bps: float | None) -> list[Reply]:
         parked = self._parked
         if parked is not None:
-            if (not self._waiting and self._supersedes(packet, parked, line_bps)
-                    and len(self._superseded) < _MAX_SUPERSEDED and self._may_hold(packet, line_bps)):
-                # Nothing could see the held write (a read went before it), and this one stores the same
-                # registers of the same servos and may be held itself: it supersedes the held one.
-                self._superseded.append(parked[0])
-                self._parked, self._waiting = (packet, line_bps, self._heard_now_s()), True
-                return []
+            if not self._waiting and len(self._superseded) < _MAX_SUPERSEDED and isinstance(packet, InstructionPacket2):
+                held_key = self._parked_key
+                if self._may_hold(packet, line_bps) and self._parked_key == held_key:
+                    # Nothing could see the held write (a read went before it), and this one may be held itself
+                    # and stores the same registers of the same servos at the same speed: it supersedes the held one.
+                    self._superseded.append(parked[0])
+                    self._parked, self._waiting = (packet, line_bps, self._heard_now_s()), True
+                    return []
+                self._parked_key = held_key
             if isinstance(packet, InstructionPacket2) and parked[1] == line_bps:
                 replies = self._overtaking_again(packet, line_bps)
                 if replies is not None:
@@ -478,19 +488,6 @@ class Bus2(ServosById[Servo2], DecodedBus):
                 self._remember_overtaking(packet, line_bps, self._listed(packet, line_bps))
         finally:
             self._parked_key = held_key
-
-    def _supersedes(self, packet: InstructionPacket2 | StatusPacket2, parked: tuple, line_bps: float | None) -> bool:
-        """Whether ``packet`` is a broadcast Sync Write, good CRC, at the held one's line speed, of the same
-        address and length to the same IDs in the same order (the parameters' layout: address, length,
-        then each ID followed by its data)."""
-        if not (isinstance(packet, InstructionPacket2) and packet.instruction == Instruction2.SYNC_WRITE
-                and packet.crc_ok and packet.id == BROADCAST_ID and parked[1] == line_bps):
-            return False
-        mine, held = bytes(packet.params), bytes(parked[0].params)
-        if len(mine) != len(held) or len(mine) < 4 or mine[:4] != held[:4]:
-            return False
-        stride = 1 + int.from_bytes(mine[2:4], "little")
-        return mine[4::stride] == held[4::stride]
 
     def _heard_now_s(self) -> float:
         """The bus time a packet heard now is heard at (as :meth:`dispatch` takes it)."""
@@ -805,13 +802,10 @@ class Bus2(ServosById[Servo2], DecodedBus):
 
 
 def _writes_by_id(packet: InstructionPacket2) -> tuple[int, dict[int, bytes]]:
-    """A held Sync Write's address and the data it lists first under each ID (``sync_write_all``'s reading)."""
+    """A held Sync Write's address and the data it lists first under each ID (as ``sync_write_all`` reads it)."""
     params = parsed_params(packet.instruction, bytes(packet.params))
     assert isinstance(params, SyncWrite)  # only well-formed ones are held (Bus2._may_hold)
-    first: dict[int, bytes] = {}
-    for servo_id, data in params.writes:
-        first.setdefault(servo_id, data)
-    return params.address, first
+    return params.address, first_writes(params)
 
 
 def _answer_spans(servo: Servo2, reads: list[tuple[int, int]]) -> Callable[[bytearray], tuple]:

@@ -61,8 +61,8 @@ from ax12emu.protocol.params2 import (
 
 from .servo2 import Servo2
 
-__all__ = ["HANDLERS", "READ_INSTRUCTIONS", "Outcome2", "answers", "handle2", "listed_read", "parsed_params", "status_byte",
-           "sync_write_all"]
+__all__ = ["HANDLERS", "READ_INSTRUCTIONS", "Outcome2", "answers", "first_writes", "handle2", "listed_read", "parsed_params",
+           "status_byte", "sync_write_all"]
 
 #: ``parse_params`` remembered for the last packets: a broadcast Sync/Bulk Write reaches every servo,
 #: and each would parse the same parameters again, and a robot sends the same Sync Read every cycle
@@ -189,14 +189,20 @@ def sync_write_all(servos: Iterable[Servo2], packet: InstructionPacket2) -> None
     params = parsed_params(packet.instruction, packet.params if type(packet.params) is bytes else bytes(packet.params))
     if isinstance(params, Malformed):
         return  # Result Fail on every servo, which nobody reports
-    first: dict[int, bytes] = {}
-    for servo_id, data in params.writes:
-        first.setdefault(servo_id, data)
+    first = first_writes(params)
     address = params.address
     for servo in servos:
         data = first.get(servo.id)  # its ID now: a servo ahead of it may have taken another one
         if data is not None:
             servo.write(address, data)
+
+
+def first_writes(params: SyncWrite) -> dict[int, bytes]:
+    """Each ID's data in a Sync Write: the first listed under it (a servo listed twice takes its first)."""
+    first: dict[int, bytes] = {}
+    for servo_id, data in params.writes:
+        first.setdefault(servo_id, data)
+    return first
 
 
 def _bulk_write(servo: Servo2, params: BulkWrite) -> tuple[int, bytes]:
