@@ -87,6 +87,7 @@ from ax12emu.servo.request_handler2 import (
     first_writes,
     handle2,
     listed_read,
+    params_bytes,
     parsed_params,
     status_byte,
     sync_write_all,
@@ -421,7 +422,7 @@ class Bus2(ServosById[Servo2], DecodedBus):
         """
         if not (packet.crc_ok and packet.id == BROADCAST_ID):
             return None
-        raw = packet.params if type(packet.params) is bytes else bytes(packet.params)
+        raw = params_bytes(packet)
         known = self._overtaken.get((packet.instruction, raw, line_bps, self._parked_key))
         if known is None or known[0] != self._changes or self.faults is not None:
             return None
@@ -444,7 +445,7 @@ class Bus2(ServosById[Servo2], DecodedBus):
         """
         if self.faults is not None:
             return
-        raw = packet.params if type(packet.params) is bytes else bytes(packet.params)
+        raw = params_bytes(packet)
         reads_heard = self._reads_heard.get((packet.instruction, raw))
         if reads_heard is None:  # (the tables' layouts decide it: the same for a read each time)
             heard = [servo.heard_span for servo in self.servos if servo.heard_span is not None]
@@ -499,7 +500,7 @@ class Bus2(ServosById[Servo2], DecodedBus):
         if not (packet.instruction == Instruction2.SYNC_WRITE and packet.crc_ok and packet.id == BROADCAST_ID
                 and self.faults is None):
             return False
-        params = parsed_params(packet.instruction, packet.params if type(packet.params) is bytes else bytes(packet.params))
+        params = parsed_params(packet.instruction, params_bytes(packet))
         if not isinstance(params, SyncWrite):
             return False
         ids = tuple(servo_id for servo_id, _ in params.writes)
@@ -540,11 +541,11 @@ class Bus2(ServosById[Servo2], DecodedBus):
         spec = INSTRUCTION_SPECS.get(packet.instruction)
         if spec is None or spec.broadcast not in _LISTED_READS:
             return False
-        raw = packet.params if type(packet.params) is bytes else bytes(packet.params)
+        raw = params_bytes(packet)
         key = (packet.instruction, raw, self._parked_key)  # the read's bytes; what _may_hold found of the write
         known = self._overtaking.get(key)
         if known is None or known[0] is not self._by_id:
-            written = parsed_params(write.instruction, write.params if type(write.params) is bytes else bytes(write.params))
+            written = parsed_params(write.instruction, params_bytes(write))
             known = (self._by_id, self._servos_to_judge(parsed_params(packet.instruction, raw), written, line_bps))
             if len(self._overtaking) >= _MAX_REMEMBERED:
                 self._overtaking.clear()
@@ -645,7 +646,7 @@ class Bus2(ServosById[Servo2], DecodedBus):
     def _sensed_reads(self, packet: InstructionPacket2) -> dict[Servo2, tuple[tuple[int, int], ...] | None] | None:
         """For a Sync/Bulk Read (or a fast one): each listed servo's sensed-register spans its answer reads
         (``Plant2.sensed_spans``; None where it reads Indirect Data or a register a command changes at once)."""
-        params = parsed_params(packet.instruction, packet.params if type(packet.params) is bytes else bytes(packet.params))
+        params = parsed_params(packet.instruction, params_bytes(packet))
         known = self._sensed_by_read.get(params)
         if known is not None and known[0] is self._by_id:  # no ID changed since: the same servos, the same tables
             return known[1]
@@ -702,7 +703,7 @@ class Bus2(ServosById[Servo2], DecodedBus):
         torque change that changes any of them makes them anew, and a new goal in a register the read
         does not read does not.
         """
-        raw = packet.params if type(packet.params) is bytes else bytes(packet.params)
+        raw = params_bytes(packet)
         key = (packet.instruction, raw, line_bps)
         if self.faults is None:
             known = self._listed_answers.get(key)
@@ -803,7 +804,7 @@ class Bus2(ServosById[Servo2], DecodedBus):
 
 def _writes_by_id(packet: InstructionPacket2) -> tuple[int, dict[int, bytes]]:
     """A held Sync Write's address and the data it lists first under each ID (as ``sync_write_all`` reads it)."""
-    params = parsed_params(packet.instruction, bytes(packet.params))
+    params = parsed_params(packet.instruction, params_bytes(packet))
     assert isinstance(params, SyncWrite)  # only well-formed ones are held (Bus2._may_hold)
     return params.address, first_writes(params)
 

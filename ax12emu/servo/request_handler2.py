@@ -61,8 +61,8 @@ from ax12emu.protocol.params2 import (
 
 from .servo2 import Servo2
 
-__all__ = ["HANDLERS", "READ_INSTRUCTIONS", "Outcome2", "answers", "first_writes", "handle2", "listed_read", "parsed_params",
-           "status_byte", "sync_write_all"]
+__all__ = ["HANDLERS", "READ_INSTRUCTIONS", "Outcome2", "answers", "first_writes", "handle2", "listed_read", "params_bytes",
+           "parsed_params", "status_byte", "sync_write_all"]
 
 #: ``parse_params`` remembered for the last packets: a broadcast Sync/Bulk Write reaches every servo,
 #: and each would parse the same parameters again, and a robot sends the same Sync Read every cycle
@@ -186,7 +186,7 @@ def sync_write_all(servos: Iterable[Servo2], packet: InstructionPacket2) -> None
     a robot's control cycle sends one every cycle, and the parameters are looked at once here instead
     of once per servo, each searching the list for its ID.
     """
-    params = parsed_params(packet.instruction, packet.params if type(packet.params) is bytes else bytes(packet.params))
+    params = parsed_params(packet.instruction, params_bytes(packet))
     if isinstance(params, Malformed):
         return  # Result Fail on every servo, which nobody reports
     first = first_writes(params)
@@ -195,6 +195,11 @@ def sync_write_all(servos: Iterable[Servo2], packet: InstructionPacket2) -> None
         data = first.get(servo.id)  # its ID now: a servo ahead of it may have taken another one
         if data is not None:
             servo.write(address, data)
+
+
+def params_bytes(packet: InstructionPacket2) -> bytes:
+    """A packet's parameters as ``bytes`` (hashable, as ``parsed_params`` needs them), copied only if they are not."""
+    return params_bytes(packet)
 
 
 def first_writes(params: SyncWrite) -> dict[int, bytes]:
@@ -291,7 +296,7 @@ def handle2(servo: Servo2, packet: InstructionPacket2, *, secondary: bool = Fals
         error, data = ErrorNumber.CRC, bytes(_read_length(servo, packet))
         talks = talks and servo.options.reply_on_crc_error
     else:
-        params = parsed_params(instruction, packet.params if type(packet.params) is bytes else bytes(packet.params))
+        params = parsed_params(instruction, params_bytes(packet))
         handler = HANDLERS.get(instruction)
         if handler is None:
             error, data = ErrorNumber.INSTRUCTION, bytes(_read_length(servo, packet))
