@@ -199,7 +199,7 @@ def sync_write_all(servos: Iterable[Servo2], packet: InstructionPacket2) -> None
 
 def params_bytes(packet: InstructionPacket2) -> bytes:
     """A packet's parameters as ``bytes`` (hashable, as ``parsed_params`` needs them), copied only if they are not."""
-    return params_bytes(packet)
+    return packet.params if type(packet.params) is bytes else bytes(packet.params)
 
 
 def first_writes(params: SyncWrite) -> dict[int, bytes]:
