@@ -159,7 +159,7 @@ def test_writes_judged_from_the_layout_alone_agree_with_the_byte_by_byte_rules(k
         torque = int(rng.random() < 0.3)
         for table in (short, long):
             table.row[table._torque_enable] = torque
-        address = rng.choice([rng.randrange(short.size), 64, 65, 84, 104, 108, 112, 116, 7, 11, 12])
+        address = rng.choice([rng.randrange(short.size), 64, 65, 84, 104, 108, 112, 116, 116, 7, 11, 12, 48, 52])
         data = bytes(rng.randrange(256) if rng.random() < 0.5 else rng.choice((0, 1, 255))
                      for _ in range(rng.choice((1, 2, 4, rng.randrange(1, 12)))))
         a, b = short.check_write(address, data), long.check_write(address, data)
