@@ -262,19 +262,26 @@ class Bus2(ServosById[Servo2], DecodedBus):
         self.catch_up(sim_time_s)
         return due
 
-    def advance_in_pieces(self) -> Iterator[None]:
+    def advance_in_pieces(self, lead_s: float = 0.0) -> Iterator[None]:
         """:meth:`advance` one servo piece at a time, for a serving loop to interleave with packets.
 
         Held Sync Writes are taken first, their commands shown by the step that follows rather than by a copy
         of their own (``take_parked(show=False)``: a servo whose step is not yet due copies them when it is
-        next caught up, as it would have right after them)."""
+        next caught up, as it would have right after them).
+
+        ``lead_s``: steps falling due within this much bus time are taken now, as if the clock were that far
+        on.  Why: a robot cycling faster than 1 kHz sends its next packets at once after each reply, and a
+        step taken when it falls due lands on them; taken right after a reply, in the time the host spends on
+        it, the step shows the servo's next 1 ms loop a fraction of a period early, which no host can tell
+        from a loop running at another phase.
+        """
         self.take_parked(show=False)
         sim_time_s = self.clock.now_s()
         for servo in self.servos:
-            for _ in servo.plant.tick(sim_time_s):
+            for _ in servo.plant.tick(sim_time_s + lead_s):
                 self._changes += 1  # a packet may come between the pieces: nothing remembered of before holds
                 yield
-            servo.check_watchdog(sim_time_s)
+            servo.check_watchdog(sim_time_s)  # (silence is timed on the clock itself)
         self._changes += 1
         self._prepare_overtaking()
 

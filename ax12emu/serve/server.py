@@ -66,6 +66,10 @@ HOT_S = 0.0002
 #: A physics step is put off while a reply is due sooner than this (a step of many servos takes
 #: ~0.1 ms), so it cannot delay the reply; a longer Return Delay Time hides the step inside it.
 PHYSICS_DEFER_S = 0.0003
+#: How early a physics step is taken right after a reply while a robot cycles with its Sync Writes held
+#: (``Bus2.parked``): about one host cycle (a Sync Read and Sync Write of six servos take ~0.12 ms), so the
+#: step lands in the time the host spends on the reply rather than on its next packet.
+EARLY_STEP_S = 0.00015
 #: What ``next`` returns from a finished physics step.
 _DONE = object()
 
@@ -304,12 +308,19 @@ class BusServer:
         # reply went out, when the host is busy with the reply rather than waiting for one.
         # A bus holding a write (``Bus2.parked``) takes it with the step when that falls due, hot or not: the
         # next read must see the step, so taking it the moment it is due leaves the host least to wait for.
+        # A step due before the host's next packet is taken right after the reply to its last one (see
+        # ``Bus2.advance_in_pieces``), while a robot cycles with its writes held: in the host's own time.
         if not (queue and queue[0][0] - now < PHYSICS_DEFER_S) and (answered or not hot or self._bus_parked()):
-            if self._physics is None and now >= self._next_physics:
-                whole = self._bus_parked()
-                self._physics = self.bus.advance_in_pieces()
+            whole = self._bus_parked()
+            lead_s = EARLY_STEP_S if whole and answered and self._time_scale is not None else 0.0
+            if self._physics is None and now + lead_s >= self._next_physics:
+                if lead_s:
+                    lead_s = max(0.0, self._next_physics - now)
+                    self._physics = self.bus.advance_in_pieces(lead_s * self._time_scale)
+                else:
+                    self._physics = self.bus.advance_in_pieces()
                 self.bus.expire(now)
-                self._next_physics = self._next_tick_s(now)
+                self._next_physics = self._next_tick_s(now, lead_s)
                 if whole:
                     # All pieces at once: the host's next packets need the whole step (a write held over it
                     # earns one now), and between pieces they would find some servos stepped and others
@@ -335,21 +346,22 @@ class BusServer:
         if self._calls:
             self._run_calls()
 
-    def _next_tick_s(self, now: float) -> float:
+    def _next_tick_s(self, now: float, lead_s: float = 0.0) -> float:
         """When the physics tick after the one starting now falls due (``now``: the pass's clock).
 
         On the model's own step grid: the tick comes as soon as its whole steps
         are due, so at real time a request pays for a step only when the loop
         was held up (a tick on a free-running 1 ms beat could fall up to a
         whole step after the step was due, and a request just before it paid).
+        ``lead_s``: the tick starting now was taken that much wall time early.
         """
         scale = self._time_scale
         if scale is None:  # virtual time: the clock moves only when a test moves it
             return max(self._next_physics + self.physics_period_s, now)
         step_s = self.bus.physics_step_s
         steps = max(1, round(self.physics_period_s * scale / step_s))  # one at real time, more when faster
-        sim_now_s = self.bus.clock.now_s()
-        wall_s = time.monotonic()  # read second: the tick may come a hair late, never early
+        sim_now_s = self.bus.clock.now_s() + lead_s * scale
+        wall_s = time.monotonic() + lead_s  # read second: the tick may come a hair late, never early
         due_sim_s = (math.floor(sim_now_s / step_s + 1e-9) + steps) * step_s
         return wall_s + (due_sim_s - sim_now_s) / scale
 

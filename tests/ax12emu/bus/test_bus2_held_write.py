@@ -219,3 +219,29 @@ def test_a_held_goal_write_is_visible_to_a_read_of_what_it_changes():
     bus.receive(sync_write(GOAL_POSITION, {servo_id: u32(1000) for servo_id in IDS}))
     replies = bus.receive(sync_read(MOVING, 1))
     assert [reply.data[9] for reply in replies] == [1] * len(IDS)
+
+
+def test_a_step_falling_due_within_the_lead_is_taken_now_with_the_held_write():
+    """The serving loop takes a step falling due just after a reply at once (``advance_in_pieces(lead_s)``): the
+    held write is taken and the step it earned shows; with a lead short of the step's time, nothing steps."""
+    bus = new_bus(defer=True)
+    for servo_id in IDS:
+        bus.receive(write(servo_id, PROFILE_VELOCITY, u32(100)))
+        bus.receive(write(servo_id, TORQUE_ENABLE, b"\x01"))
+    bus.receive(sync_write(GOAL_POSITION, {servo_id: u32(2048) for servo_id in IDS}))  # earns a step now
+    settle(bus)
+    bus.receive(sync_write(GOAL_POSITION, {servo_id: u32(3000) for servo_id in IDS}))
+    assert bus.parked  # the models are a step ahead of the clock: the write waits for it
+    firmware = [servo.plant.firmware for servo in bus.servos]
+    model_s = firmware[0].time_s
+    bus.clock.advance(model_s - bus.clock.now_s() - 0.0003)  # the step falls due in 0.3 ms
+    for _ in bus.advance_in_pieces(0.0002):
+        pass
+    assert [model.time_s for model in firmware] == [model_s] * len(IDS)  # not yet: only the write taken
+    assert not bus.parked
+    for _ in bus.advance_in_pieces(0.0004):
+        pass
+    assert all(model.time_s > model_s for model in firmware)
+    replies = bus.receive(sync_read(MOVING, 1))
+    assert [reply.data[9] for reply in replies] == [1] * len(IDS)  # the move the write started shows
+    assert bus.clock.now_s() < model_s  # before the step's own time
