@@ -82,6 +82,10 @@ class Servo2(TableServo):
         self._tick = by_name.get("realtime_tick")
         # Where these one-byte registers are read straight from the row (None: the model has none, or they are wider).
         self._watchdog_at = _byte_at(self._watchdog)
+        #: Realtime Tick's bytes in the row, and the millisecond count last written there with its bytes: a
+        #: robot's Sync Read is heard by every servo several times within one millisecond.
+        self._tick_span = (self._tick.address, self._tick.end) if self._tick is not None else None
+        self._tick_ms: tuple[int, bytes] = (-1, b"")
         self._hardware_error_at = _byte_at(self._hardware_error)
         self._bauds_bps = tuple(float(bps) for bps in spec.baud_rates_bps)
         if spec.firmware_version is not None and self.table.has("firmware_version"):
@@ -163,9 +167,13 @@ class Servo2(TableServo):
         if self._watchdog_at is None or self.table.row[self._watchdog_at]:
             self.check_watchdog(now_s)  # (a Bus Watchdog of 0 is off: nothing to check)
         self.last_instruction_s = now_s
-        tick = self._tick
-        if tick is not None:  # as Table2.set does
-            self.table.row[tick.address : tick.end] = tick.to_bytes(int(now_s * 1000.0) % REALTIME_TICK_PERIOD)
+        span = self._tick_span
+        if span is not None:  # as Table2.set does
+            ms = int(now_s * 1000.0) % REALTIME_TICK_PERIOD
+            known = self._tick_ms
+            if known[0] != ms:
+                known = self._tick_ms = (ms, self._tick.to_bytes(ms))
+            self.table.row[span[0] : span[1]] = known[1]
 
     def check_watchdog(self, now_s: float) -> None:
         """Bus Watchdog(98): with the torque on, a silence longer than its value x 20 ms stops the servo.
