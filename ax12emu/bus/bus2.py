@@ -63,6 +63,7 @@ from __future__ import annotations
 
 import functools
 import logging
+import math
 import operator
 from collections.abc import Callable, Iterable, Iterator
 
@@ -208,6 +209,9 @@ class Bus2(ServosById[Servo2], DecodedBus):
         #: What :meth:`_may_hold` and :meth:`_read_unchanged_by` find from the IDs and layouts alone, per write
         #: (and read), with the lookup (``_by_id``) they were found under.
         self._holdable: dict[tuple, tuple[dict, list[Servo2], bool]] = {}
+        #: What :meth:`_may_hold` found of the servos' state under a count of changes (``_changes``): that count,
+        #: the listed servos it was found for, whether every Bus Watchdog is off, from when a write earns one a step.
+        self._hold_state: tuple[int, list[Servo2], bool, float] | None = None
         self._overtaking: dict[tuple, tuple[dict, list | None]] = {}
         self._sensed_by_read: dict[object, tuple[dict, dict]] = {}
         #: A Sync/Bulk Read's answers per (instruction, parameters, line speed): the lookup they were found under,
@@ -522,12 +526,21 @@ class Bus2(ServosById[Servo2], DecodedBus):
             if len(self._holdable) >= _MAX_REMEMBERED:
                 self._holdable.clear()
             self._holdable[key] = known
-        if not known[2] or not all(servo.watchdog_off for servo in self.servos):
+        if not known[2]:
+            return False
+        # Both below change only with what the count of changes counts (a packet handled, a step, a caller):
+        # found once while a robot's cycles supersede and overtake, which change nothing.
+        state = self._hold_state
+        if state is None or state[0] != self._changes or state[1] is not known[1]:
+            state = self._hold_state = (self._changes, known[1], all(servo.watchdog_off for servo in self.servos),
+                                        min((servo.plant.writes_earn_step_from_s() for servo in known[1]),
+                                            default=math.inf))
+        if not state[2]:
             return False  # (a Bus Watchdog that is on times every instruction: a held one would reach it late)
-        # A write that earns its servo a step now is taken now: no read could go before it, and the loop
-        # takes the step while the host prepares its next packet.
-        clock_s = self.clock.now_s()
-        if any(servo.plant.write_earns_step(clock_s) for servo in known[1]):
+        # A write that earns its servo a step now (``Plant2.write_earns_step``: its model is not ahead of the
+        # clock) is taken now: no read could go before it, and the loop takes the step while the host prepares
+        # its next packet.
+        if self.clock.now_s() >= state[3]:
             return False
         self._parked_key = key
         return True

@@ -362,7 +362,11 @@ class Plant2(SteppedPlant):
 
     def write_earns_step(self, clock_s: float) -> bool:
         """Whether a client's write now would earn a step of the model (:meth:`catch_up`: it is not ahead of ``clock_s``)."""
-        return self.firmware.time_s <= clock_s + GRID_SLACK_S
+        return clock_s >= self.writes_earn_step_from_s()
+
+    def writes_earn_step_from_s(self) -> float:
+        """From which clock time on a client's write earns a step (:meth:`write_earns_step`), until the model moves."""
+        return self.firmware.time_s - GRID_SLACK_S
 
     def goal_write_unseen_by(self, sim_time_s: float, clock_s: float, spans: tuple[tuple[int, int], ...]) -> bool:
         """Whether a write of Goal or profile registers (none of the frame's or the torque's) taken now, with
