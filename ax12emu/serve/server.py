@@ -108,6 +108,8 @@ class BusServer:
         self._stop = False
         self._rx_busy_until = 0.0
         self._hot_until = 0.0
+        #: Whether the pass under way put a status packet on the line.
+        self._replied = False
         self._connections = getattr(transport, "connections", None)
         self._yield_after_reply = getattr(transport, "yield_after_reply", False) and hasattr(os, "sched_yield")
         #: The bus times several replies to one packet one after another (see ``merge_replies``).
@@ -158,6 +160,7 @@ class BusServer:
         if not count:
             return False
         data = queue[0][2] if count == 1 else b"".join(item[2] for item in queue[:count])
+        self._replied = self._replied or any(item[3] for item in queue[:count])
         del queue[:count]
         self._emit(bytes(data), now)
         # The host's next packet follows a reply within tens of microseconds: meet it spinning, not
@@ -169,6 +172,7 @@ class BusServer:
 
     def _send_now(self, data: bytes, now: float) -> None:
         """:meth:`_flush` of ``data`` alone, with nothing queued."""
+        self._replied = True
         self._emit(data, now)
         self._hot_until = now + HOT_S
         if self._yield_after_reply and not self.pace:
@@ -225,6 +229,7 @@ class BusServer:
             return
         if len(replies) == 1 and replies[0].delay_s == 0.0 and not (self.pace or self._queue):
             data = replies[0].data  # the common case at Return Delay Time 0: _emit, one call shorter
+            self._replied = True
             sent = self.transport.write(data)
             if sent < len(data) or self.trace is not None:
                 self._account(data, sent, now)
@@ -266,6 +271,7 @@ class BusServer:
         now = time.monotonic()
         queue = self._queue
         answered = False  # a pass that put a reply on the line counts as one that answered a packet
+        self._replied = False  # (a status packet among what it put on the line)
         # A release a few microseconds away is met on the clock, with no system call (host bytes
         # that come meanwhile are read just after it: with pace, a collision window at most
         # EXACT_S short, where checking for them first would put a system call before every
@@ -312,7 +318,8 @@ class BusServer:
         # ``Bus2.advance_in_pieces``), while a robot cycles with its writes held: in the host's own time.
         if not (queue and queue[0][0] - now < PHYSICS_DEFER_S) and (answered or not hot or self._bus_parked()):
             whole = self._bus_parked()
-            lead_s = EARLY_STEP_S if whole and answered and self._time_scale is not None else 0.0
+            # (After a status packet only: after a write with none, the host's next packet is on its way.)
+            lead_s = EARLY_STEP_S if whole and self._replied and self._time_scale is not None else 0.0
             if self._physics is None and now + lead_s >= self._next_physics:
                 if lead_s:
                     lead_s = max(0.0, self._next_physics - now)
