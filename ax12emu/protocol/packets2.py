@@ -260,7 +260,25 @@ def encode_status2(packet_id: int, error: int, params: bytes | bytearray = b"") 
     if not 0 <= packet_id <= MAX_ID2:
         raise ValueError(f"a status packet comes from a servo ID 0..{MAX_ID2}, got {packet_id} (combined statuses: encode_fast_status)")
     _check_byte("error", error)
+    if error != 0xFF and _STUFFING_PATTERN not in params:
+        # Nothing to stuff (0x55 and an ERR below 0xFF cannot begin the pattern): the bytes before the data
+        # depend on the ID, ERR and the data's length alone, so their CRC is carried on over the data.
+        key = (packet_id, error, len(params))
+        known = _STATUS_PREFIXES.get(key)
+        if known is None:
+            if len(_STATUS_PREFIXES) >= _MAX_STATUS_PREFIXES:
+                _STATUS_PREFIXES.clear()
+            length = len(params) + 4
+            prefix = HEADER2 + bytes((packet_id, length & 0xFF, length >> 8, Instruction2.STATUS, error))
+            known = _STATUS_PREFIXES[key] = (prefix, crc16(prefix))
+        prefix, crc = known
+        return b"".join((prefix, params, crc16(params, crc).to_bytes(2, "little")))
     return _frame(packet_id, stuff(bytes((Instruction2.STATUS, error)) + bytes(params)))
+
+
+#: (ID, ERR, data length) -> a status packet's bytes before its data and their CRC (``encode_status2``).
+_STATUS_PREFIXES: dict[tuple[int, int, int], tuple[bytes, int]] = {}
+_MAX_STATUS_PREFIXES = 4096
 
 
 class FastStatusPart(NamedTuple):

@@ -192,6 +192,23 @@ def test_status_encode_decode_identity(packet_id, error, params):
     assert decode_packet2(packet.encode()) == packet
 
 
+@given(
+    packet_id=st.integers(0, 0xFC),
+    error=st.sampled_from([0, 0x80, 0x7F, 0xFE, 0xFF]) | st.integers(0, 0xFF),
+    params=st.binary(max_size=12) | st.lists(st.sampled_from([0xFD, 0xFF, 0x00]), max_size=12).map(bytes),
+)
+def test_status_packets_carry_one_crc_over_every_byte_from_the_header(packet_id, error, params):
+    """The encoder carries a remembered CRC of the bytes before the data over the data: the same CRC, over the
+    stuffed bytes from the header on, as the e-manual's, computed whole (a second time, to check the first)."""
+    from ax12emu.protocol.crc16 import crc16
+
+    first = encode_status2(packet_id, error, params)
+    assert encode_status2(packet_id, error, bytearray(params)) == first
+    assert int.from_bytes(first[-2:], "little") == crc16(first[:-2])
+    length = len(stuff(bytes((0x55, error)) + params)) + 2
+    assert first[:7] == bytes((0xFF, 0xFF, 0xFD, 0x00, packet_id, length & 0xFF, length >> 8))
+
+
 def test_error_byte():
     """Alert is bit 7, the error number bits 0..6 (e-manual, Status Packet > Error)."""
     assert status_error(4, alert=True) == 0x84
