@@ -389,7 +389,7 @@ class Bus2(ServosById[Servo2], DecodedBus):
                     if show:
                         servo.plant.show_unstepped()
                     break
-        self._after_writes()
+        # (No IDs to look up again nor EEPROM to save: only writes of Goal and profile registers are held.)
 
     def _answer_holding(self, packet: InstructionPacket2 | StatusPacket2, line_bps: float | None) -> list[Reply]:
         parked = self._parked
