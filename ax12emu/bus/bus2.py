@@ -266,7 +266,7 @@ class Bus2(ServosById[Servo2], DecodedBus):
         self.catch_up(sim_time_s)
         return due
 
-    def advance_in_pieces(self, lead_s: float = 0.0) -> Iterator[None]:
+    def advance_in_pieces(self, lead_s: float = 0.0, *, take: bool = True) -> Iterator[None]:
         """:meth:`advance` one servo piece at a time, for a serving loop to interleave with packets.
 
         Held Sync Writes are taken first, their commands shown by the step that follows rather than by a copy
@@ -278,8 +278,12 @@ class Bus2(ServosById[Servo2], DecodedBus):
         step taken when it falls due lands on them; taken right after a reply, in the time the host spends on
         it, the step shows the servo's next 1 ms loop a fraction of a period early, which no host can tell
         from a loop running at another phase.
+
+        ``take``: False after :meth:`take_parked_early` for this step, whose goals the step then acts on; a write
+        held since is left for the next step.
         """
-        self.take_parked(show=False)
+        if take:
+            self.take_parked(show=False)
         sim_time_s = self.clock.now_s()
         for servo in self.servos:
             for _ in servo.plant.tick(sim_time_s + lead_s):
@@ -353,6 +357,28 @@ class Bus2(ServosById[Servo2], DecodedBus):
         if not self._closed:
             self.take_parked()
         super().close()
+
+    def take_parked_early(self) -> None:
+        """Take the held Sync Writes now for the next physics step, which follows with ``take=False``
+        (:meth:`advance_in_pieces`), keeping the answer remembered for the read that overtook them.
+
+        Why: a host cycling faster than 1 kHz leaves the serving loop one short pause after each reply, too
+        short for taking the write, stepping six servos and making the next answer ready at once; in the pause
+        before, the take fits alone.  So the step acts on the goals held one host cycle before it is taken,
+        as from a servo whose loop reads its goal registers that long before it shows the step's result (a
+        write held meanwhile is the next step's).  Their commands are read back by that step, not by a copy
+        of their own (as ``take_parked(show=False)``; a packet that must see them first catches up itself).
+        The read that overtook them is answered as before: when it was remembered, taking a write of these
+        registers for these servos was found to leave every byte it answers as it is
+        (:meth:`_read_unchanged_by`), and nothing else has changed since.
+        """
+        if self._parked is None:
+            return
+        before, key = self._changes, self._parked_key
+        self.take_parked(show=False)
+        for known_key, known in self._overtaken.items():
+            if known_key[3] == key and known[0] == before:
+                self._overtaken[known_key] = (self._changes, *known[1:])
 
     def take_parked(self, *, show: bool = True) -> None:
         """Take the held Sync Writes, if any (see :meth:`answer`), as if each had been taken when it came.
@@ -480,14 +506,17 @@ class Bus2(ServosById[Servo2], DecodedBus):
         would be answered now, and remember it (:meth:`_remember_overtaking`), so that when the robot's next
         cycle brings the same write and read, the read finds its answer ready.
 
-        Only when nothing is held (the step took it), the read could overtake a write of the same shape now,
-        and no servo is due a catch-up, so the read's own handling would change nothing but what the servos
+        Only when nothing is held but a write like the one it overtook (the step took the rest, or left that
+        one for the next step: :meth:`take_parked_early`), the read could overtake such a write now, and no
+        servo is due a catch-up, so the read's own handling would change nothing but what the servos
         hear (which :meth:`_overtaking_again` does when it comes).
         """
         last = self._last_overtaking
-        if last is None or self._parked is not None or self.faults is not None:
+        if last is None or self.faults is not None:
             return
         packet, line_bps, write, key = last
+        if self._parked is not None and self._parked_key != key:
+            return  # (a write of those registers held for the next step is what the read overtakes next)
         clock_s = self.clock.now_s()
         if clock_s - self._overtook_at_s > _PREPARE_WITHIN_S:
             return  # no robot cycling now: no answer to have ready

@@ -110,6 +110,8 @@ class BusServer:
         self._hot_until = 0.0
         #: Whether the pass under way put a status packet on the line.
         self._replied = False
+        #: The due time of the physics step whose held goals were taken early (``Bus2.take_parked_early``).
+        self._taken_early_for: float | None = None
         self._connections = getattr(transport, "connections", None)
         self._yield_after_reply = getattr(transport, "yield_after_reply", False) and hasattr(os, "sched_yield")
         #: The bus times several replies to one packet one after another (see ``merge_replies``).
@@ -320,10 +322,20 @@ class BusServer:
             whole = self._bus_parked()
             # (After a status packet only: after a write with none, the host's next packet is on its way.)
             lead_s = EARLY_STEP_S if whole and self._replied and self._time_scale is not None else 0.0
-            if self._physics is None and now + lead_s >= self._next_physics:
+            if (lead_s and self._physics is None and self._taken_early_for != self._next_physics
+                    and lead_s < self._next_physics - now <= 2 * lead_s):
+                # The step is two host cycles off: its goals taken in this pause, the step in the next (see
+                # ``Bus2.take_parked_early``); nothing left for settling to copy meanwhile.
+                self.bus.take_parked_early()
+                self._taken_early_for = self._next_physics
+                self._unsettled = False
+            elif self._physics is None and now + lead_s >= self._next_physics:
+                early = self._taken_early_for == self._next_physics
                 if lead_s:
                     lead_s = max(0.0, self._next_physics - now)
-                    self._physics = self.bus.advance_in_pieces(lead_s * self._time_scale)
+                    self._physics = self.bus.advance_in_pieces(lead_s * self._time_scale, take=not early)
+                elif early:
+                    self._physics = self.bus.advance_in_pieces(take=False)
                 else:
                     self._physics = self.bus.advance_in_pieces()
                 self.bus.expire(now)

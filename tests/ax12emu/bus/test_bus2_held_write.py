@@ -245,3 +245,94 @@ def test_a_step_falling_due_within_the_lead_is_taken_now_with_the_held_write():
     replies = bus.receive(sync_read(MOVING, 1))
     assert [reply.data[9] for reply in replies] == [1] * len(IDS)  # the move the write started shows
     assert bus.clock.now_s() < model_s  # before the step's own time
+
+
+def compare_early_takes_with_the_plain_path(rng: random.Random, packets_sent: int,
+                                            profile_velocity: int) -> tuple[int, int]:
+    """A robot's cycle served as the loop serves it when the step is two host cycles off: the held goals
+    taken early (``Bus2.take_parked_early``), the step then taken without what was held since (``take=False``),
+    which is left for the next step.  The plain bus gets each packet as it comes, except the writes held at
+    such a step, which it gets right after its own step: so both act on the same goals at every step, and
+    every reply and, at the end, every table must match.  No time passes between an early take and its step
+    (in the loop it is one host cycle).  Returns (early takes, reads answered as the last time between an early
+    take and its step)."""
+    plain, quick = new_bus(defer=False), new_bus(defer=True)
+    setup = [write(servo_id, RETURN_DELAY_TIME, b"\x00") for servo_id in IDS]
+    if profile_velocity:
+        setup += [write(servo_id, PROFILE_VELOCITY, u32(profile_velocity)) for servo_id in IDS]
+    setup += [write(servo_id, TORQUE_ENABLE, b"\x01") for servo_id in IDS]
+    for data in setup:
+        assert plain.receive(data) == quick.receive(data)
+    taken_during = []
+    take_parked = quick.take_parked
+
+    def spy(**kwargs):
+        taken_during.append(quick._parked is not None)
+        take_parked(**kwargs)
+    quick.take_parked = spy
+    stream = robot_cycles(rng)
+    early_takes = replayed = 0
+    waiting_is_on = False  # between an early take and its step
+    waiting_for_step: list[bytes] = []  # writes quick holds since its early take, the plain bus's after its step
+    for step in range(packets_sent):
+        data = next(stream)
+        if data == "raise":  # as in compare_with_the_plain_path: settling takes what quick holds first
+            for held in waiting_for_step:
+                assert plain.receive(held) == []
+            waiting_for_step.clear()
+            servo_index = rng.randrange(len(IDS))
+            for bus in (plain, quick):
+                settle(bus)
+                bus.take_deferred()
+                bus.servos[servo_index].plant.firmware.raise_error(HW_ERROR_OVERHEATING)
+                bus.changed_outside()
+            continue
+        parked_before, changes_before = quick._parked, quick._changes
+        taken_during.clear()
+        replies_quick = quick.receive(data)
+        if any(taken_during):  # the packet needed the held writes taken first (as they came)
+            for held in waiting_for_step:
+                assert plain.receive(held) == []
+            waiting_for_step.clear()
+        if waiting_is_on and quick._parked is not None and quick._parked is not parked_before:
+            waiting_for_step.append(data)  # held for the next step
+        else:
+            replies_plain = plain.receive(data)
+            assert [(r.data, r.delay_s) for r in replies_quick] == [(r.data, r.delay_s) for r in replies_plain], (
+                step, data.hex())
+        replayed += bool(replies_quick) and quick._changes == changes_before and waiting_is_on
+        settle(plain)
+        settle_as_the_loop(quick)
+        roll = rng.random()
+        if roll < 0.3 and quick.parked and not waiting_for_step and not waiting_is_on:
+            quick.take_parked_early()
+            early_takes += 1
+            waiting_is_on = True
+        elif roll < 0.45:  # the step (with the lead the loop gives it), then time passes
+            lead_s = max(0.0, min(servo.plant.firmware.time_s for servo in quick.servos) - quick.clock.now_s())
+            for _ in quick.advance_in_pieces(lead_s, take=not waiting_is_on):
+                pass
+            for _ in plain.advance_in_pieces(lead_s):
+                pass
+            for held in waiting_for_step:
+                assert plain.receive(held) == []
+            waiting_for_step.clear()
+            waiting_is_on = False
+            dt_s = rng.choice((0.0001, 0.0003, 0.001))
+            plain.clock.advance(dt_s)
+            quick.clock.advance(dt_s)
+    for held in waiting_for_step:
+        plain.receive(held)
+    settle(plain)
+    quick.take_parked()
+    settle(quick)
+    quick.take_deferred()
+    for a, b in zip(plain.servos, quick.servos):
+        assert bytes(a.table.row) == bytes(b.table.row)
+    return early_takes, replayed
+
+
+@pytest.mark.parametrize("seed, profile_velocity", [(1, 0), (2, 200), (3, 30)])
+def test_goals_taken_a_host_cycle_before_their_step_act_on_it_as_if_they_came_last(seed, profile_velocity):
+    early_takes, replayed = compare_early_takes_with_the_plain_path(random.Random(seed), 3000, profile_velocity)
+    assert early_takes > 100 and replayed > 100, (early_takes, replayed)
