@@ -35,7 +35,9 @@ PacketHandler(2.0), a GroupSyncRead of Present Position from six X-series servos
 GroupSyncWrite of their Goal Positions, at Return Delay Time 0, against ``ax12emu serve --servo
 MODEL --ids 1-6`` and a bare Protocol 2.0 responder (a few lines answering each Sync Read with six
 fixed status packets at once and staying silent on the Sync Write), alternated in the same 0.2 s
-turns; goal: >= 80 % of the bare rate.  Served without ``--pace``, as here, bytes take no time: the
+turns; goal: >= 80 % of the bare rate.  The goals change every 500 cycles; the same loop with new goals
+every cycle, as a streamed trajectory sends them, is measured after it for information.  Served without
+``--pace``, as here, bytes take no time: the
 six status packets go out in list order, each Return Delay Time (0) after the one before it, so
 together, as the bare responder's do (``merge_replies(in_sequence=True)``); with ``--pace`` each
 would wait until the one before it had left the wire (150 us each at 1 Mbps).
@@ -276,6 +278,29 @@ def configure2(port: PortHandler, ph: PacketHandler) -> None:
         ph.write1ByteTxRx(port, servo_id, X_TORQUE_ENABLE, 1)
 
 
+def streamed_sync_cycle(port: PortHandler, ph: PacketHandler):
+    """:func:`sync_cycle` with new Goal Positions every cycle, as a streamed trajectory sends them (the
+    client's ``changeParam`` inside the cycle, for the bare responder and the emulator alike)."""
+    read = GroupSyncRead(port, ph, X_PRESENT_POSITION, 4)
+    write = GroupSyncWrite(port, ph, X_GOAL_POSITION, 4)
+    for servo_id in SYNC_IDS:
+        read.addParam(servo_id)
+        write.addParam(servo_id, [0, 0, 0, 0])
+    cycles = 0
+
+    def cycle() -> int:
+        nonlocal cycles
+        cycles += 1
+        comm = read.txRxPacket()
+        goal = 1024 + 3 * cycles % 2048  # a new goal each cycle, the servos moving across the range
+        for servo_id in SYNC_IDS:
+            write.changeParam(servo_id, list((goal + 50 * servo_id).to_bytes(4, "little")))
+        written = write.txPacket()
+        return comm if comm != COMM_SUCCESS else written
+
+    return cycle
+
+
 def sync_cycle(port: PortHandler, ph: PacketHandler):
     """A control cycle: GroupSyncRead of every servo's Present Position, then GroupSyncWrite of Goal Positions.
 
@@ -326,26 +351,31 @@ def compare_interleaved(servers: list[tuple[object, list[str], dict]], seconds: 
 
 
 def measure_protocol2(emulator: list[str], model: str, seconds: float) -> None:
-    """The Protocol 2.0 loop against a bare responder and ``ax12emu serve --servo MODEL``, in alternating turns."""
-    loop = {"protocol": 2.0, "transaction": sync_cycle}
-    with tempfile.TemporaryDirectory() as tmp:
-        script = Path(tmp, "bare2.py")
-        script.write_text(BARE_RESPONDER2)
-        result = compare_interleaved([
-            ("bare", [sys.executable, str(script), bare_sync_reply().hex()], loop),
-            ("emulator", emulator + ["--servo", model, "--ids", f"1-{len(SYNC_IDS)}", "--baud", "1000000"],
-             {**loop, "setup": configure2}),
-        ], seconds)
-    bare, emulated = result["bare"], result["emulator"]
+    """The Protocol 2.0 loop against a bare responder and ``ax12emu serve --servo MODEL``, in alternating turns:
+    the goal's loop (:func:`sync_cycle`), then, for information, the same with new goals every cycle."""
     what = f"GroupSyncRead + GroupSyncWrite x {len(SYNC_IDS)}, RDT 0"
-    print(row("reference: bare Protocol 2.0 responder", bare))
-    warn_if_loaded(bare)
-    print(row(f"ax12emu --servo {model}", emulated, bare["rate"]))
-    print()
-    print(f"{what}: {emulated['rate'] / bare['rate']:.1%} of bare (goal >= 80 %), p99 {emulated['p99_us']:.0f} us")
-    # Less at the mercy of the machine's load than the rates (the physics steps and the waiting spins count too).
-    print("server CPU per cycle in the timed turns: " + ", ".join(
-        f"{name} {result[name]['server_cpu_s'] / result[name]['count'] * 1e6:.0f} us" for name in ("bare", "emulator")))
+    for transaction, how in ((sync_cycle, f"goals swapped every {GOAL_SWAP_CYCLES} cycles"),
+                             (streamed_sync_cycle, "new goals every cycle")):
+        loop = {"protocol": 2.0, "transaction": transaction}
+        with tempfile.TemporaryDirectory() as tmp:
+            script = Path(tmp, "bare2.py")
+            script.write_text(BARE_RESPONDER2)
+            result = compare_interleaved([
+                ("bare", [sys.executable, str(script), bare_sync_reply().hex()], loop),
+                ("emulator", emulator + ["--servo", model, "--ids", f"1-{len(SYNC_IDS)}", "--baud", "1000000"],
+                 {**loop, "setup": configure2}),
+            ], seconds)
+        bare, emulated = result["bare"], result["emulator"]
+        print(f"-- {how}")
+        print(row("reference: bare Protocol 2.0 responder", bare))
+        warn_if_loaded(bare)
+        print(row(f"ax12emu --servo {model}", emulated, bare["rate"]))
+        goal = " (goal >= 80 %)" if transaction is sync_cycle else " (for information)"
+        print(f"{what}, {how}: {emulated['rate'] / bare['rate']:.1%} of bare{goal}, p99 {emulated['p99_us']:.0f} us")
+        # Less at the mercy of the machine's load than the rates (the physics steps and the waiting spins count too).
+        print("server CPU per cycle in the timed turns: " + ", ".join(
+            f"{name} {result[name]['server_cpu_s'] / result[name]['count'] * 1e6:.0f} us" for name in ("bare", "emulator")))
+        print()
 
 
 def warn_if_loaded(bare: dict) -> None:
