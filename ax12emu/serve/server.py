@@ -15,8 +15,12 @@ step costs it almost nothing.  The step a Protocol 2.0 client's write earns
 (``Bus2.settle_in_pieces``) is taken in the pass right after the packet
 that wrote, rather than when the next packet arrives; while such a bus holds
 a robot's Sync Write for the next step (``Bus2.parked``), settling waits and
-the tick is taken whole the moment it is due, hot or not, since the host's
-next read needs the step.
+the tick is taken whole, hot or not, since the host's next read needs the
+step.  Such a robot cycles faster than 1 kHz and leaves the loop one short
+pause after each reply (about 75 us), too short for the whole step; so the
+step is split over the two pauses before it falls due: the held goals taken
+in the first (``Bus2.take_parked_early``), the step and the next answer in
+the second, up to 0.15 ms early (``Bus2.advance_in_pieces``).
 
 The wire, as it is modelled here:
 
@@ -314,10 +318,10 @@ class BusServer:
         # for a step (see Bus.request_lag_s).  The step comes in pieces, one per pass; while a
         # host is mid-conversation, a piece runs just after a packet was answered or a delayed
         # reply went out, when the host is busy with the reply rather than waiting for one.
-        # A bus holding a write (``Bus2.parked``) takes it with the step when that falls due, hot or not: the
-        # next read must see the step, so taking it the moment it is due leaves the host least to wait for.
-        # A step due before the host's next packet is taken right after the reply to its last one (see
-        # ``Bus2.advance_in_pieces``), while a robot cycles with its writes held: in the host's own time.
+        # A bus holding a write (``Bus2.parked``) takes it with the step, whole, hot or not: the next read must
+        # see the step.  While a robot cycles with its writes held, the step is taken in the host's own time:
+        # right after the reply before it falls due (see ``Bus2.advance_in_pieces``), its goals right after
+        # the reply before that (the module docstring).
         if not (queue and queue[0][0] - now < PHYSICS_DEFER_S) and (answered or not hot or self._bus_parked()):
             whole = self._bus_parked()
             # (After a status packet only: after a write with none, the host's next packet is on its way.)
