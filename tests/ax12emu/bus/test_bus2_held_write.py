@@ -131,29 +131,42 @@ def robot_cycles(rng: random.Random):
             yield next(others)
 
 
+def plain_and_quick(profile_velocity: int) -> tuple[Bus2, Bus2]:
+    """A bus without the shortcuts and one with them, their servos alike: answering at once, torque on and,
+    with ``profile_velocity``, goals starting profiles (a new goal then plans from the trajectory where it is)."""
+    plain, quick = new_bus(defer=False), new_bus(defer=True)
+    setup = [write(servo_id, RETURN_DELAY_TIME, b"\x00") for servo_id in IDS]
+    if profile_velocity:
+        setup += [write(servo_id, PROFILE_VELOCITY, u32(profile_velocity)) for servo_id in IDS]
+    setup += [write(servo_id, TORQUE_ENABLE, b"\x01") for servo_id in IDS]
+    for data in setup:
+        assert plain.receive(data) == quick.receive(data)
+    return plain, quick
+
+
+def raise_on_both(rng: random.Random, plain: Bus2, quick: Bus2) -> None:
+    """A fault on the same servo of both buses, acting between packets once the loop has settled (it runs as a
+    call: what a held write and a reply left is taken first), told to the bus as the serving loop tells it."""
+    servo_index = rng.randrange(len(IDS))
+    for bus in (plain, quick):
+        settle(bus)
+        bus.take_deferred()
+        bus.servos[servo_index].plant.firmware.raise_error(HW_ERROR_OVERHEATING)
+        bus.changed_outside()
+
+
 def compare_with_the_plain_path(stream, rng: random.Random, packets_sent: int,
                                 profile_velocity: int = 0) -> tuple[int, int, int, int]:
     """Feed ``stream`` to a bus with the shortcuts and one without, settled and ticked at the same points as
     the serving loop does (time passing only once both have settled), compare every reply and, at the end,
     every table; return how often a held write was overtaken, superseded, a catch-up left for later and a read
     answered as the last time, nothing having changed since."""
-    plain, quick = new_bus(defer=False), new_bus(defer=True)
-    setup = [write(servo_id, RETURN_DELAY_TIME, b"\x00") for servo_id in IDS]
-    if profile_velocity:  # goals then start profiles: a new goal plans from the trajectory where it is
-        setup += [write(servo_id, PROFILE_VELOCITY, u32(profile_velocity)) for servo_id in IDS]
-    setup += [write(servo_id, TORQUE_ENABLE, b"\x01") for servo_id in IDS]
-    for data in setup:
-        assert plain.receive(data) == quick.receive(data)
+    plain, quick = plain_and_quick(profile_velocity)
     overtaken = superseded = deferred = replayed = 0
     for step in range(packets_sent):
         data = next(stream)
         if data == "raise":
-            servo_index = rng.randrange(len(IDS))
-            for bus in (plain, quick):
-                settle(bus)  # a fault acts between packets, once the loop has settled (it runs as a call)
-                bus.take_deferred()
-                bus.servos[servo_index].plant.firmware.raise_error(HW_ERROR_OVERHEATING)
-                bus.changed_outside()  # as the serving loop says after each call
+            raise_on_both(rng, plain, quick)
             continue
         waiting_before, superseded_before = quick.parked and quick._waiting, len(quick._superseded)
         changes_before = quick._changes
@@ -256,13 +269,7 @@ def compare_early_takes_with_the_plain_path(rng: random.Random, packets_sent: in
     every reply and, at the end, every table must match.  No time passes between an early take and its step
     (in the loop it is one host cycle).  Returns (early takes, reads answered as the last time between an early
     take and its step)."""
-    plain, quick = new_bus(defer=False), new_bus(defer=True)
-    setup = [write(servo_id, RETURN_DELAY_TIME, b"\x00") for servo_id in IDS]
-    if profile_velocity:
-        setup += [write(servo_id, PROFILE_VELOCITY, u32(profile_velocity)) for servo_id in IDS]
-    setup += [write(servo_id, TORQUE_ENABLE, b"\x01") for servo_id in IDS]
-    for data in setup:
-        assert plain.receive(data) == quick.receive(data)
+    plain, quick = plain_and_quick(profile_velocity)
     taken_during = []
     take_parked = quick.take_parked
 
@@ -280,12 +287,7 @@ def compare_early_takes_with_the_plain_path(rng: random.Random, packets_sent: in
             for held in waiting_for_step:
                 assert plain.receive(held) == []
             waiting_for_step.clear()
-            servo_index = rng.randrange(len(IDS))
-            for bus in (plain, quick):
-                settle(bus)
-                bus.take_deferred()
-                bus.servos[servo_index].plant.firmware.raise_error(HW_ERROR_OVERHEATING)
-                bus.changed_outside()
+            raise_on_both(rng, plain, quick)
             continue
         parked_before, changes_before = quick._parked, quick._changes
         taken_during.clear()
