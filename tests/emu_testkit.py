@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -13,6 +14,7 @@ from ax12emu.conformance.checks import EEPROM_WAIT_S_PER_BYTE
 from ax12emu.protocol.packets import BROADCAST_ID, Instruction, encode_instruction
 from ax12emu.protocol.packets2 import Instruction2, decode_packet2, encode_instruction2
 from ax12emu.protocol.servo_models import model
+from ax12emu.serve.transports.base import Transport
 
 #: How long a test's port waits for a status packet, at least.  dynamixel-sdk's own timeout is
 #: about 34 ms at 1 Mbps; a shared CI machine can hold the emulator up longer than that, and the
@@ -188,3 +190,31 @@ class Packets2:
     def _listed_read(self, instruction: int, address: int, length: int, ids: tuple[int, ...] | None) -> bytes:
         listed = self.ids if ids is None else ids
         return encode_instruction2(BROADCAST_ID, instruction, u16(address) + u16(length) + bytes(listed))
+
+
+class PipeTransport(Transport):
+    """A serving loop's transport for tests: the host's bytes come through a pipe; replies are collected."""
+
+    def __init__(self) -> None:
+        self.read_fd, self.write_fd = os.pipe()
+        os.set_blocking(self.read_fd, False)
+        self.replies = bytearray()
+        self.written_at: list[float] = []
+
+    def fds(self) -> list[int]:
+        return [self.read_fd]
+
+    def on_readable(self, fd: int) -> bytes:
+        try:
+            return os.read(fd, 4096)
+        except BlockingIOError:
+            return b""
+
+    def write(self, data: bytes) -> int:
+        self.replies += data
+        self.written_at.append(time.monotonic())
+        return len(data)
+
+    def close(self) -> None:
+        os.close(self.read_fd)
+        os.close(self.write_fd)

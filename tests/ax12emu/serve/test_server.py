@@ -8,14 +8,13 @@ import time
 
 import pytest
 import serial
-from emu_testkit import wait_eeprom
+from emu_testkit import PipeTransport, wait_eeprom
 
 from ax12emu.bus import Bus, Reply
 from ax12emu.bus.clock import WallClock
 from ax12emu.bus.reply import merge_replies
 from ax12emu.protocol.packets import encode_instruction, encode_status
 from ax12emu.serve.server import BusServer
-from ax12emu.serve.transports.base import Transport
 
 #: Real time and real ports: the wall-clock tier (CI runs it too).
 pytestmark = pytest.mark.wallclock
@@ -104,34 +103,6 @@ def test_pace_collision_garbles_both(emulator):
     assert any(garbled), garbled
 
 
-class _PipeTransport(Transport):
-    """The host's bytes come through a pipe; replies are collected."""
-
-    def __init__(self) -> None:
-        self.read_fd, self.write_fd = os.pipe()
-        os.set_blocking(self.read_fd, False)
-        self.replies = bytearray()
-        self.written_at: list[float] = []
-
-    def fds(self) -> list[int]:
-        return [self.read_fd]
-
-    def on_readable(self, fd: int) -> bytes:
-        try:
-            return os.read(fd, 4096)
-        except BlockingIOError:
-            return b""
-
-    def write(self, data: bytes) -> int:
-        self.replies += data
-        self.written_at.append(time.monotonic())
-        return len(data)
-
-    def close(self) -> None:
-        os.close(self.read_fd)
-        os.close(self.write_fd)
-
-
 @pytest.mark.parametrize("return_delay", [0, 250])
 def test_physics_steps_in_pieces_while_a_host_polls_without_pause(return_delay):
     """A host sending the next READ the moment a reply arrives keeps the loop busy: every read is
@@ -174,7 +145,7 @@ def test_physics_steps_in_pieces_while_a_host_polls_without_pause(return_delay):
         return stepped
 
     read = encode_instruction(1, 0x02, bytes([36, 2]))
-    with _PipeTransport() as transport:
+    with PipeTransport() as transport:
         server = BusServer(bus, transport)
         bus.plant.advance = _paid
         gc.disable()  # a full collection of pytest's heap holds a pass up for ms, on the core
@@ -219,7 +190,7 @@ def test_physics_ticks_land_when_the_models_next_step_falls_due(time_scale):
         yield from pieces()
 
     bus.advance_in_pieces = _counted
-    with _PipeTransport() as transport:
+    with PipeTransport() as transport:
         server = BusServer(bus, transport)
         end = time.monotonic() + 2.0  # 60 ticks take 60 to 120 ms, unless the machine stalls
         while len(starts) <= 60 and time.monotonic() < end:
@@ -235,7 +206,7 @@ def test_a_delayed_reply_is_released_after_its_return_delay_not_before():
     bus = Bus([1])
     bus.servos[0].table.set("return_delay_time", 100)
     read = encode_instruction(1, 0x02, bytes([36, 2]))
-    with _PipeTransport() as transport:
+    with PipeTransport() as transport:
         server = BusServer(bus, transport)
         delays = []
         for _ in range(50):
