@@ -334,7 +334,9 @@ class BusServer:
                 self._taken_early_for = self._next_physics
                 self._unsettled = False
             elif self._physics is None and now + lead_s >= self._next_physics:
-                early = self._taken_early_for == self._next_physics
+                # (A step taken more than a host cycle late, the loop held up past it, takes every write held: none
+                # is then deferred past the step that would have taken it, however many steps the catch-up runs.)
+                early = self._taken_early_for == self._next_physics and now < self._next_physics + EARLY_STEP_S
                 if lead_s:
                     lead_s = max(0.0, self._next_physics - now)
                     self._physics = self.bus.advance_in_pieces(lead_s * self._time_scale, take=not early)
