@@ -81,9 +81,9 @@ class Table2:
         self._bounds: dict[str, tuple[Entry, bool]] = {}
         #: (address, length) -> what :meth:`check_write` finds from the layout alone (see ``_plan``).
         self._plans: dict[tuple[int, int], tuple[int, bool, tuple[Entry, ...]] | None] = {}
-        #: (address, end, refused) -> the spans of the registers outside the write that its checks read, or
-        #: None when one lies inside it (see :meth:`_judge_span`).
-        self._judged_from: dict[tuple[int, int, frozenset[str]], tuple[tuple[int, int], ...] | None] = {}
+        #: (address, end, refused) -> the spans of the registers a write's bounds come from, and whether it covers
+        #: one of them (see :meth:`_judge_span`).
+        self._judged_from: dict[tuple[int, int, frozenset[str]], tuple[tuple[tuple[int, int], ...], bool]] = {}
         #: (address, end, refused, those registers' bytes) -> the checks with every bound read (``_span_checks``).
         self._span_checks: dict[tuple, tuple[bool, tuple, tuple]] = {}
 
@@ -275,107 +275,68 @@ class Table2:
     def _judge_span(self, address: int, data: bytes, touched: tuple[Entry, ...], refused: frozenset[str]) -> WriteCheck:
         """:meth:`_judge` of a write whose bytes are exactly the registers ``touched`` (no Indirect Data).
 
-        The same checks in the same order, without building the candidate table: a register lies wholly
-        inside the written bytes or wholly outside them (a write covering part of one is a Data Length
-        Error before this), so each value the checks read comes from ``data`` or from the table as it is.
+        The same checks in the same order: a register lies wholly inside the written bytes or wholly
+        outside them (a write covering part of one is a Data Length Error before this).  The bounds come
+        from a few registers (Operating Mode, the position limits): with their bytes, after the write, as
+        they were last time, every bound is as it was, and only the written values are compared.  The
+        table as it would be after the write is built only when the write covers one of those registers.
         Why: a robot's Sync Write judges every servo's goal every cycle.
         """
         end = address + len(data)
         key = (address, end, refused)
-        deps = self._judged_from.get(key, _UNPLANNED)
-        if deps is _UNPLANNED:
+        known_spans = self._judged_from.get(key)
+        if known_spans is None:
             if len(self._judged_from) >= MAX_PLANS:
                 self._judged_from.clear()
-            deps = self._judged_from[key] = self._judged_outside(address, end, touched)
-        if deps is not None:
-            # The checks read registers outside the write only (Operating Mode, the position limits): with
-            # those bytes as they were last time, every bound is as it was, and only the values are compared.
-            row = self.row
-            known_key = (key, b"".join([row[start:stop] for start, stop in deps]))
-            known = self._span_checks.get(known_key)
-            if known is None:
-                if len(self._span_checks) >= MAX_PLANS:
-                    self._span_checks.clear()
-                known = self._span_checks[known_key] = self._span_rules(address, touched, refused)
-            refused_any, in_range, in_limits = known
-            if refused_any:
+            known_spans = self._judged_from[key] = self._bounds_read(address, end, touched)
+        spans, written = known_spans
+        image = self.row
+        if written:
+            image = bytearray(image)
+            image[address:end] = data
+        known_key = (key, b"".join([image[start:stop] for start, stop in spans]))
+        known = self._span_checks.get(known_key)
+        if known is None:
+            if len(self._span_checks) >= MAX_PLANS:
+                self._span_checks.clear()
+            known = self._span_checks[known_key] = self._span_rules(address, touched, refused, image)
+        refused_any, in_range, in_limits = known
+        if refused_any:
+            return WriteCheck(ErrorNumber.DATA_RANGE)
+        for start, size, signed, minimum, maximum, allowed in in_range:
+            value = int.from_bytes(data[start : start + size], "little", signed=signed)
+            if not minimum <= value <= maximum or (allowed is not None and value not in allowed):
                 return WriteCheck(ErrorNumber.DATA_RANGE)
-            for start, size, signed, minimum, maximum, allowed in in_range:
-                value = int.from_bytes(data[start : start + size], "little", signed=signed)
-                if not minimum <= value <= maximum or (allowed is not None and value not in allowed):
-                    return WriteCheck(ErrorNumber.DATA_RANGE)
-            for start, size, signed, lowest, highest in in_limits:
-                value = int.from_bytes(data[start : start + size], "little", signed=signed)
-                if (lowest is not None and value < lowest) or (highest is not None and value > highest):
-                    return WriteCheck(ErrorNumber.DATA_LIMIT)
-            return WriteCheck(ErrorNumber.NONE, dict(zip(range(address, end), data)), touched)
-        limited: list[tuple[Entry, int]] = []
-        for entry in touched:
-            if entry.name in refused:
-                return WriteCheck(ErrorNumber.DATA_RANGE)
-            start = entry.address - address
-            value = int.from_bytes(data[start : start + entry.size], "little", signed=entry.signed)
-            minimum, maximum, limits = entry.minimum, entry.maximum, True
-            for mode in entry.mode_ranges:
-                if self._value_after(self.layout.by_name[mode.register], address, end, data) in mode.values:
-                    minimum, maximum, limits = mode.minimum, mode.maximum, mode.limits
-                    break
-            if not minimum <= value <= maximum or (entry.allowed is not None and value not in entry.allowed):
-                return WriteCheck(ErrorNumber.DATA_RANGE)
-            if limits and (entry.minimum_from is not None or entry.maximum_from is not None):
-                limited.append((entry, value))
-        for entry, value in limited:
-            if entry.minimum_from is not None and value < self._bound_after(entry.minimum_from, address, end, data):
-                return WriteCheck(ErrorNumber.DATA_LIMIT)
-            if entry.maximum_from is not None and value > self._bound_after(entry.maximum_from, address, end, data):
+        for start, size, signed, lowest, highest in in_limits:
+            value = int.from_bytes(data[start : start + size], "little", signed=signed)
+            if (lowest is not None and value < lowest) or (highest is not None and value > highest):
                 return WriteCheck(ErrorNumber.DATA_LIMIT)
         return WriteCheck(ErrorNumber.NONE, dict(zip(range(address, end), data)), touched)
 
-    def _judged_outside(self, address: int, end: int, touched: tuple[Entry, ...]) -> tuple[tuple[int, int], ...] | None:
-        """The byte spans of the registers :meth:`_judge_span` reads besides the written ones (mode selectors, limit
-        registers); None if one of them is among the written bytes (its value then comes with the write)."""
+    def _bounds_read(self, address: int, end: int, touched: tuple[Entry, ...]) -> tuple[tuple[tuple[int, int], ...], bool]:
+        """The byte spans of the registers :meth:`_judge_span`'s bounds come from (mode selectors, limit
+        registers), and whether the write to ``address``..``end`` covers one of them."""
         by_name = self.layout.by_name
         names = {mode.register for entry in touched for mode in entry.mode_ranges}
         names |= {ref.lstrip("-") for entry in touched for ref in (entry.minimum_from, entry.maximum_from) if ref}
-        spans = []
-        for name in sorted(names):
-            entry = by_name[name]
-            if entry.address < end and address < entry.end:
-                return None
-            spans.append((entry.address, entry.end))
-        return tuple(spans)
+        spans = tuple((by_name[name].address, by_name[name].end) for name in sorted(names))
+        return spans, any(start < end and address < stop for start, stop in spans)
 
-    def _span_rules(self, address: int, touched: tuple[Entry, ...], refused: frozenset[str]) -> tuple[bool, tuple, tuple]:
-        """:meth:`_judge_span`'s checks with every bound read from the table (none from the write: see
-        :meth:`_judged_outside`): whether a refused register is written, then (start in the data, size, signed,
-        minimum, maximum, allowed values) per register, then (start, size, signed, lowest, highest) per
-        register its limits bound."""
+    def _span_rules(self, address: int, touched: tuple[Entry, ...], refused: frozenset[str],
+                    image: bytearray) -> tuple[bool, tuple, tuple]:
+        """:meth:`_judge_span`'s checks with every bound read from ``image`` (the table after the write): whether a
+        refused register is written, then (start in the data, size, signed, minimum, maximum, allowed values)
+        per register, then (start, size, signed, lowest, highest) per register its limits bound."""
         in_range, in_limits = [], []
         for entry in touched:
-            minimum, maximum, limits = self.range_of(entry)
+            minimum, maximum, limits = self.range_of(entry, image)
             start = entry.address - address
             in_range.append((start, entry.size, entry.signed, minimum, maximum, entry.allowed))
             if limits and (entry.minimum_from is not None or entry.maximum_from is not None):
-                lowest = self._bound(entry.minimum_from, self.row) if entry.minimum_from is not None else None
-                highest = self._bound(entry.maximum_from, self.row) if entry.maximum_from is not None else None
+                lowest = self._bound(entry.minimum_from, image) if entry.minimum_from is not None else None
+                highest = self._bound(entry.maximum_from, image) if entry.maximum_from is not None else None
                 in_limits.append((start, entry.size, entry.signed, lowest, highest))
         return any(entry.name in refused for entry in touched), tuple(in_range), tuple(in_limits)
-
-    def _value_after(self, entry: Entry, address: int, end: int, data: bytes) -> int:
-        """``entry``'s value once ``data`` is written at ``address`` (``end``: one past it), the register wholly in or out."""
-        if address <= entry.address and entry.end <= end:
-            start = entry.address - address
-            return int.from_bytes(data[start : start + entry.size], "little", signed=entry.signed)
-        return entry.value_in(self.row)
-
-    def _bound_after(self, ref: str, address: int, end: int, data: bytes) -> int:
-        """:meth:`_bound` on the table as it would be after the write, as :meth:`_value_after` reads it."""
-        bound = self._bounds.get(ref)
-        if bound is None:
-            bound = self._bounds[ref] = (self.layout.by_name[ref.lstrip("-")], ref.startswith("-"))
-        entry, negate = bound
-        value = self._value_after(entry, address, end, data)
-        return -value if negate else value
 
     def range_of(self, entry: Entry, image: bytearray | None = None) -> tuple[int, int, bool]:
         """The entry's (minimum, maximum, limits apply) in ``image`` (default: the table): a mode's range where one is selected."""

@@ -169,3 +169,35 @@ def test_writes_judged_from_the_layout_alone_agree_with_the_byte_by_byte_rules(k
             short.apply(a)
             long.apply(b)
     assert {ErrorNumber.NONE, ErrorNumber.ACCESS, ErrorNumber.DATA_LENGTH, ErrorNumber.DATA_RANGE} <= outcomes
+
+
+def test_a_write_that_also_sets_its_own_bounds_is_judged_on_them_as_written(monkeypatch):
+    """A layout where the registers a goal's bounds come from sit beside it (no shipped model file has one,
+    but a model is data): one write of mode, limit and goal is judged on the mode and limit it writes, the
+    short way and the byte-by-byte way alike."""
+    import itertools
+
+    from ax12emu.protocol.registers import Access, Area, Entry, ModeRange, Profile, compile_layout
+
+    rw = {"access": Access.RW, "area": Area.RAM}
+    base = (
+        Entry(0, 1, "torque_enable", default=0, minimum=0, maximum=1, **rw),
+        Entry(1, 1, "operating_mode", default=3, minimum=0, maximum=4, allowed=(3, 4), **rw),
+        Entry(2, 2, "limit", default=1000, minimum=0, maximum=4000, **rw),
+        Entry(4, 2, "goal", default=0, minimum=0, maximum=4000, maximum_from="limit",
+              mode_ranges=(ModeRange("operating_mode", (4,), 0, 5000, limits=False),), **rw),
+    )
+    layout = compile_layout(Profile("test", "a layout for this test"), base, 6)
+    short, long = Table2(layout), Table2(layout)
+    monkeypatch.setattr(long, "_plan", lambda address, length: None)
+    outcomes = []
+    for mode, limit, goal in itertools.product((3, 4), (500, 3000), (400, 2000, 4500)):
+        data = bytes((mode,)) + limit.to_bytes(2, "little") + goal.to_bytes(2, "little")
+        for _ in range(2):  # the second time from what was remembered of the first
+            a, b = short.check_write(1, data), long.check_write(1, data)
+            assert (a.error, a.changes, a.entries) == (b.error, b.changes, b.entries), (mode, limit, goal)
+        outcomes.append(a.error)
+    assert outcomes == [ErrorNumber.NONE, ErrorNumber.DATA_LIMIT, ErrorNumber.DATA_RANGE,
+                        ErrorNumber.NONE, ErrorNumber.NONE, ErrorNumber.DATA_RANGE,
+                        ErrorNumber.NONE, ErrorNumber.NONE, ErrorNumber.NONE,
+                        ErrorNumber.NONE, ErrorNumber.NONE, ErrorNumber.NONE]
