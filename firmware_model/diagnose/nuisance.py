@@ -43,7 +43,7 @@ from ..units import RAD_PER_POSITION_UNIT
 from .batch import null_knobs, simulate
 from .metrics import robust_cost
 from .schedule import compile_schedule
-from .trace import Trace
+from .trace import Trace, departures, rest_level
 
 __all__ = ["Nuisance", "profile_hold_phase", "fit_onsets", "first_movement_onset", "locate_onset",
            "first_movement_row", "PROFILERS",
@@ -145,9 +145,10 @@ def fit_onsets(ev, knobs: dict[str, float], onsets: np.ndarray | None = None) ->
 
 
 def first_movement_row(trace: Trace) -> int:
-    """The first row read :data:`MOVEMENT_UNITS` or more from the first reading (ValueError if none)."""
+    """The first row read :data:`MOVEMENT_UNITS` or more from where it rests at first, the next row too
+    (:func:`.trace.departures`; ValueError if none)."""
     pos = trace["present_position"].astype(float)
-    moved = np.flatnonzero(np.abs(pos - pos[0]) >= MOVEMENT_UNITS)
+    moved = departures(pos, MOVEMENT_UNITS)
     if len(moved) == 0:
         raise ValueError("the servo never moves in this trace: the time the goal was written cannot be estimated")
     return int(moved[0])
@@ -157,7 +158,7 @@ def first_movement_onset(trace: Trace, params: ServoParams = ServoParams(), step
     """When the trace's one goal change was most likely written, from its first movement (s after the first row).
 
     The measured first movement (the first reading :data:`MOVEMENT_UNITS`
-    from the first one) lies between that row's time and the previous
+    from the resting one) lies between that row's time and the previous
     row's; the model says how long after a goal is written the shaft first
     gets that far, so the write lies that much earlier.  Returns the middle
     of that interval; :func:`fit_onsets` refines it within a sample.
@@ -171,7 +172,7 @@ def first_movement_onset(trace: Trace, params: ServoParams = ServoParams(), step
     schedule = compile_schedule(probe, step_s, params.supply_voltage_v)
     record = simulate(schedule, params, {k: np.array([v]) for k, v in null_knobs(params).items()}, 1)
     model = record.angle[:, 0] / float(RAD_PER_POSITION_UNIT)
-    reach = np.flatnonzero(np.abs(model - pos[0]) >= MOVEMENT_UNITS - 0.5)
+    reach = np.flatnonzero(np.abs(model - rest_level(pos)) >= MOVEMENT_UNITS - 0.5)
     if len(reach) == 0:
         raise ValueError("the model does not move under the assumed goal: check --goal")
     lag_s = reach[0] * step_s

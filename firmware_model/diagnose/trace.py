@@ -80,7 +80,8 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["Trace", "TraceFormatError", "read_trace", "write_trace", "REQUIRED", "OPTIONAL", "COLUMNS",
-           "COMMAND_COLUMNS", "command_time_errors", "TraceColumns", "FORMATS", "X_COLUMNS", "X_META"]
+           "COMMAND_COLUMNS", "command_time_errors", "TraceColumns", "FORMATS", "X_COLUMNS", "X_META", "REST_READINGS",
+           "rest_level", "departures"]
 
 #: Columns every trace has, in the order the writer uses.
 REQUIRED = ("t", "goal_position", "moving_speed", "present_position")
@@ -97,6 +98,29 @@ _FLOAT_COLUMNS = ("t", "external_torque_nm", "command_t")
 COMMAND_COLUMNS = ("goal_position", "moving_speed", "torque_limit", "voltage", "external_torque_nm")
 
 _INT32 = (-(2**31), 2**31 - 1)
+
+#: Readings at either end of a recording whose median is the level it rests at there.
+REST_READINGS = 5
+
+
+def rest_level(values: np.ndarray, end: bool = False) -> float:
+    """Where a recording rests at its start (``end``: at its end): the median of its first (last) few readings.
+
+    Why not the first (last) reading itself: a pot's noise puts a reading at rest a unit or two off, and a
+    first reading two units off made every later reading at rest look like a movement.
+    """
+    v = np.asarray(values, dtype=float)
+    k = max(1, min(REST_READINGS, len(v) // 4))  # a short trace's first readings may already be its move
+    return float(np.median(v[-k:] if end else v[:k]))
+
+
+def departures(values: np.ndarray, units: float) -> np.ndarray:
+    """Indices of the readings ``units`` or more from where the recording rests at first (:func:`rest_level`) whose
+    next reading is too (the last reading needs no next): a lone reading that far, back at rest the next time, is
+    the pot's noise, not a movement."""
+    v = np.asarray(values, dtype=float)
+    away = np.abs(v - rest_level(v)) >= units
+    return np.flatnonzero(away & np.append(away[1:], True))
 
 
 @dataclass(frozen=True)

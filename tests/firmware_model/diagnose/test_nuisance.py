@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from firmware_model.diagnose.batch import null_knobs, sample, simulate
-from firmware_model.diagnose.nuisance import first_movement_onset, locate_onset
+from firmware_model.diagnose.nuisance import first_movement_onset, first_movement_row, locate_onset
 from firmware_model.diagnose.schedule import compile_schedule
 from firmware_model.diagnose.search import diagnose
 from firmware_model.diagnose.synthetic import draw_effect, make_trace
@@ -123,3 +123,13 @@ def test_wrong_first_guess_is_walked_back():
     build, _, _ = _step_response(onset_s, 4)
     found, _ = locate_onset(build, guess_s=onset_s + 0.035)
     assert abs(found - 1.234) <= 0.002, found
+
+
+def test_a_first_reading_off_by_two_is_not_the_first_movement():
+    """The first movement is two units from where the trace rests, not from its first reading: a first reading two
+    units off (noise at rest) made the second row the "movement" and the whole rest a move."""
+    pos = np.array([3] + [1] * 30 + [2, 9, 40, 90])
+    t = np.arange(len(pos)) * 0.02
+    trace = Trace({"t": t, "goal_position": np.full(len(pos), 500), "moving_speed": np.zeros(len(pos)),
+                   "present_position": pos})
+    assert first_movement_row(trace) == 32

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from firmware_model.diagnose.trace import Trace, TraceFormatError, parse_trace, read_trace, write_trace
+from firmware_model.diagnose.trace import Trace, TraceFormatError, departures, parse_trace, read_trace, rest_level, write_trace
 
 GOOD = "# a comment\nt,goal_position,moving_speed,present_position,present_speed,present_load\n0.0,512,0,512,0,0\n0.01,600,100,513,-12,80\n"
 
@@ -49,3 +49,17 @@ def test_command_times():
     with pytest.raises(TraceFormatError) as info:
         parse_trace(text.replace("0.01,600,0,512,0.013", "0.01,600,0,512,0.021"), "c.csv")
     assert info.value.line == 3 and info.value.column == "command_t"
+
+
+def test_rest_level_is_the_median_of_the_first_or_last_readings():
+    """A first reading two units off (the pot's noise, rounded) does not move where the trace rests."""
+    pos = np.array([3, 1, 1, 0, 1, 1, 1, 50, 200, 400, 498, 499, 498, 498, 497, 498, 498, 498, 498, 498])
+    assert rest_level(pos) == 1.0
+    assert rest_level(pos, end=True) == 498.0
+    # a trace too short for five readings at rest: its first quarter
+    assert rest_level(np.array([1, 3, 300, 500, 500, 500])) == 1.0
+
+
+def test_a_departure_is_a_reading_away_from_rest_whose_next_reading_is_too():
+    pos = np.array([3, 1, 1, 1, 1, 1, 4, 1, 1, 2, 9, 40])
+    np.testing.assert_array_equal(departures(pos, 2), [10, 11])
