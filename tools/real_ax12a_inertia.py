@@ -215,7 +215,7 @@ def synthetic_trace(params: ServoParams, path: Path, goal: int, extra_kg_m2: flo
     sel = Selection(trace, loaded, lambda msg: None)
     sel.fit_nuisance()
     ch = sel.ev.channels.index("present_position")
-    sim = sel.ev.measured[:, ch] + sel.residual()[:, ch] * sel.ev.sd[ch]  # residual() is (sim - measured) / sd
+    sim = sel.ev.run([sel.knobs(sel.base, sel.chosen)])[0][:, ch]
     noisy = np.rint(sim + np.random.default_rng(seed).normal(0.0, sigma_units, len(sim)))
     columns = dict(trace.columns)
     columns["present_position"] = noisy.astype(trace.columns["present_position"].dtype)

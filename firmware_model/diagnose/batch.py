@@ -352,11 +352,15 @@ def _reference_path(column: np.ndarray, done: int, stop: int, ref: float, vel: f
 
 
 def sample(schedule: Schedule, record: Record, params: ServoParams, sensing: dict | None = None,
-           columns: np.ndarray | None = None) -> dict[str, np.ndarray]:
+           columns: np.ndarray | None = None, rounded: bool = True) -> dict[str, np.ndarray]:
     """Registers read at each row: ``present_position``, signed ``present_speed`` and ``present_load``, shape (n, M).
 
     ``columns`` picks which of the record's K simulations to read (default
     all); each sensing knob is a scalar or an array (M,), one per column.
+    ``rounded``: whole register units, as the servo reports them (a recording); False gives what the
+    registers would hold before the rounding, as floats (a prediction to compare a recording with: the
+    recording's rounding is part of its noise, :func:`.metrics.channel_scales`, and a rounded prediction
+    would count it twice and make the cost a staircase in every parameter).
     """
     cols = np.arange(record.angle.shape[1]) if columns is None else np.asarray(columns)
     m = len(cols)
@@ -365,9 +369,11 @@ def sample(schedule: Schedule, record: Record, params: ServoParams, sensing: dic
     dt = schedule.step_s
     steps = schedule.sample_steps
     n_rec = record.angle.shape[0]
-    pos = np.empty((len(steps), m), dtype=np.int64)
-    spd = np.empty((len(steps), m), dtype=np.int64)
-    load = np.empty((len(steps), m), dtype=np.int64)
+    kind = np.int64 if rounded else float
+    whole = np.rint if rounded else (lambda v: v)
+    pos = np.empty((len(steps), m), dtype=kind)
+    spd = np.empty((len(steps), m), dtype=kind)
+    load = np.empty((len(steps), m), dtype=kind)
     for j, c in enumerate(cols):
         ang, drv = record.angle[:, c], record.drive[:, c]
         delay_steps = sn["delay_s"][j] / dt
@@ -383,7 +389,7 @@ def sample(schedule: Schedule, record: Record, params: ServoParams, sensing: dic
         g, off = sn["position_gain"][j], sn["position_offset_units"][j]
         if g != 1.0 or off != 0.0:
             x = x * g + (511.5 * (1.0 - g) + off)
-        pos[:, j] = np.clip(np.rint(x), 0, 1023).astype(np.int64)
+        pos[:, j] = np.clip(whole(x), 0, 1023)
         hold = max(1, int(round(sn["hold_s"][j] / dt)))
         phase = int(round(sn["hold_phase_s"][j] / dt)) % hold
         # the latest latch at or before each read; latches at phase + i * hold (> 0).  The model latches
@@ -395,9 +401,9 @@ def sample(schedule: Schedule, record: Record, params: ServoParams, sensing: dic
         period = hold * dt
         held_speed = np.where(valid, (ang[last_c] - ang[prev]) / period, 0.0) * g
         held_drive = np.where(valid, drv[last_c], 0.0)
-        spd_mag = np.minimum(np.rint(np.abs(held_speed) / _SPEED_UNIT), 1023).astype(np.int64)
+        spd_mag = np.minimum(whole(np.abs(held_speed) / _SPEED_UNIT), 1023)
         spd[:, j] = np.where(held_speed < 0, -spd_mag, spd_mag)
-        load_mag = np.minimum(np.rint(np.abs(held_drive) * 1023.0), 1023).astype(np.int64)
+        load_mag = np.minimum(whole(np.abs(held_drive) * 1023.0), 1023)
         load[:, j] = np.where(held_drive < 0, -load_mag, load_mag)
     return {"present_position": pos, "present_speed": spd, "present_load": load}
 

@@ -12,12 +12,13 @@ base model bit for bit (a test checks each one).
 residual is not smooth in (delay, hold period, play, dead band; ``starts``
 fits from several grid points, for Stribeck friction, whose stick-slip makes
 the cost surface rough);
-``extra_inertia``'s grid starts at 0.002 kg m**2, about half the model's own: a grid from 0.0005 made
-the real bars (0.73e-3 and 1.0e-3 kg m**2) screenable, but named 3.3e-4 on a clean live recording, whose
-timing a small inertia absorbs; a bar of 12-17 % is not identified from one step anyway (see the
-diagnosis page, "Against a real AX-12A").  It is fitted from its three best grid points (half-steps between
-0.002 and 0.02): on a single step, where the servo settles a unit either way, its cost is rough (a fit of a bar
-of 3e-3 kg m**2 started at 0.002 stopped at 2.4e-3, at three times the cost of the one started at 0.003);
+``extra_inertia``'s grid starts at 0.0005 kg m**2, a tenth of the model's own, so that bars of 12-17 % of it
+(the real AX-12A steps', 0.73e-3 and 1.0e-3 kg m**2) are screened.  It started at 0.002 while the model's
+reading was compared rounded: the finer grid then named 3.3e-4 on a clean live recording, whose timing a small
+inertia absorbed; compared unrounded, and the rests by the reading's unit (:mod:`.evaluate`), clean live
+recordings name nothing from it (see the diagnosis page, "Against a real AX-12A").  It is fitted from its three
+best grid points: on a single step its cost is rough (a fit of a bar of 3e-3 kg m**2 started at 0.002 once
+stopped at 2.4e-3, at three times the cost of the one started at 0.003);
 ``fd_step`` is the finite-difference step of the fit (a position unit's worth
 for the quantised ones).  ``tested`` names the parameters whose joint 95 %
 confidence region must exclude the null for the effect to be accepted.
@@ -178,7 +179,7 @@ LIBRARY: dict[str, Effect] = {e.name: e for e in (
         "extra_inertia",
         "More mass on the shaft than the model has (a horn, a wheel, a link): slower to accelerate and brake.",
         "Lag while accelerating, overshoot when braking and settling; cruise speed unchanged.",
-        (Param("extra_inertia_kg_m2", 0.0, -0.002, 0.06, (0.002, 0.003, 0.005, 0.0075, 0.01, 0.015, 0.02, 0.035),
+        (Param("extra_inertia_kg_m2", 0.0, -0.002, 0.06, (0.0005, 0.001, 0.002, 0.003, 0.005, 0.0075, 0.01, 0.015, 0.02, 0.035),
                0.0005, (0.004, 0.02)),),
         lambda v, k: {"extra_inertia_kg_m2": _add("extra_inertia_kg_m2", v["extra_inertia_kg_m2"], k)},
         ("extra_inertia_kg_m2",), starts=3),

@@ -32,10 +32,10 @@ import numpy as np
 
 from ..params import ServoParams
 from .batch import DYNAMIC_KNOBS, SENSING_KNOBS, null_knobs, sample, simulate
-from .metrics import CHANNELS, channel_scales, robust_cost
+from .metrics import CHANNELS, QUANT_STEP, channel_scales, robust_cost
 from .phases import classify
 from .schedule import compile_schedule
-from .trace import Trace
+from .trace import Trace, departures, rest_level
 
 __all__ = ["Evaluator", "Lockstep", "HELD_OUT_BLOCKS", "REST_COUNTS_S", "rest_weights"]
 
@@ -46,23 +46,23 @@ HELD_OUT_BLOCKS = (1, 5)
 REST_COUNTS_S = 0.25
 #: A reading within this many position units of the final one is settled (the compliance margin's default, 1).
 SETTLED_UNITS = 1.0
-#: A reading this many units from the first one has moved (as :data:`.nuisance.MOVEMENT_UNITS`).
+#: A reading this many units from where the trace rests at first has moved (as :data:`.nuisance.MOVEMENT_UNITS`).
 MOVED_UNITS = 2.0
 
 
 def rest_weights(trace: Trace) -> np.ndarray:
     """Each row's weight: 1, except in a trace with arbitrary rests (module docstring), where the rows before the
-    first movement and those after the last reading more than :data:`SETTLED_UNITS` from the final one share
-    :data:`REST_COUNTS_S` worth of readings each."""
+    first movement and those after the last reading more than :data:`SETTLED_UNITS` from where it rests at the
+    end (:func:`.trace.rest_level`) share :data:`REST_COUNTS_S` worth of readings each."""
     n = len(trace)
     w = np.ones(n)
     if not trace.meta.get("rests_arbitrary") or not trace.has("present_position") or n < 3:
         return w
     pos = trace["present_position"].astype(float)
-    moved = np.flatnonzero(np.abs(pos - pos[0]) >= MOVED_UNITS)
+    moved = departures(pos, MOVED_UNITS)
     if len(moved) == 0:
         return w
-    away = np.flatnonzero(np.abs(pos - pos[-1]) > SETTLED_UNITS)
+    away = np.flatnonzero(np.abs(pos - rest_level(pos, end=True)) > SETTLED_UNITS)
     spacing_s = float(np.median(np.diff(trace.t)))
     # the row before the first movement may have started moving: it stays a move row
     for rows in (np.arange(0, max(int(moved[0]) - 1, 0)), np.arange(int(away[-1]) + 1 if len(away) else n, n)):
@@ -103,6 +103,15 @@ class Evaluator:
         self.train = ~self.held
         #: sqrt of each row's weight (:func:`rest_weights`): what :meth:`weigh` scales the whitened residual by.
         self.row_scale = np.sqrt(weight)
+        #: Each row's weight (:func:`rest_weights`).
+        self.weight = weight
+        # The model is read unrounded (a prediction: the reading's rounding is part of the noise the sd counts).  On
+        # a moving shaft successive readings round independently; through an arbitrary rest the shaft is still and
+        # every reading shares one rounding, so a model resting anywhere within the reading's unit fits them all
+        # and is compared by its distance to that unit: counted row by row, one rounding decided the fit (a bar's
+        # inertia and the gearbox efficiency traded to bring the settled level to a whole unit).
+        self.resting = weight < 1.0
+        self.half_step = np.array([QUANT_STEP[ch] / 2.0 for ch in channels])
 
     def weigh(self, z: np.ndarray) -> np.ndarray:
         """Whitened residuals (..., n, C) scaled by each row's weight, as every cost and count reads them."""
@@ -133,12 +142,16 @@ class Evaluator:
             self.simulations += 1
             self.columns += len(unique)
         sensing = {name: np.array([r[name] for r in full]) for name in SENSING_KNOBS}
-        out = sample(self.schedule, record, self.params, sensing, columns=np.array([index[k] for k in keys]))
+        out = sample(self.schedule, record, self.params, sensing, columns=np.array([index[k] for k in keys]), rounded=False)
         return np.stack([out[ch] for ch in self.channels], axis=2).astype(float).transpose(1, 0, 2)
 
     def whiten(self, simulated: np.ndarray) -> np.ndarray:
-        """(sim - measured) / channel sd, same shape as ``simulated``."""
-        return (simulated - self.measured) / self.sd
+        """(sim - measured) / channel sd, same shape as ``simulated``; on the rows of an arbitrary rest, the distance
+        to the reading's unit instead (see :meth:`_measure`)."""
+        d = simulated - self.measured
+        if self.resting.any():
+            d = np.where(self.resting[:, None], np.sign(d) * np.maximum(np.abs(d) - self.half_step, 0.0), d)
+        return d / self.sd
 
     def costs(self, z: np.ndarray) -> tuple[float, float]:
         """Robust cost of whitened residuals ``z`` (n, C) on the training rows and on the held-out rows."""

@@ -55,18 +55,22 @@ def robust_cost(z: np.ndarray) -> np.ndarray:
     return F_SCALE**2 * 2.0 * (np.sqrt(1.0 + u) - 1.0)
 
 
-def effective_count(z: np.ndarray) -> float:
+def effective_count(z: np.ndarray, weights: np.ndarray | None = None) -> float:
     """Samples corrected for autocorrelation, summed over channels: ``n (1 - rho) / (1 + rho)`` (lag-1 rho).
 
-    ``z`` is (n, C) whitened residuals of one model on contiguous rows.
+    ``z`` is (n, C) whitened residuals of one model on contiguous rows; ``weights`` (n,), each row's weight
+    in the cost (default 1): ``n`` is their sum, since a row of weight ``w`` counts as ``w`` readings (a long
+    rest counted as a fixed stretch of readings, :func:`.evaluate.rest_weights`).  Counting such rows as one
+    each would credit a single step's hundreds of rows at rest, which tell nothing of its motion, as samples.
     """
+    n = float(len(z)) if weights is None else float(np.sum(weights))
     total = 0.0
     for c in range(z.shape[1]):
         r = z[:, c] - z[:, c].mean()
         denom = float(np.dot(r, r))
         rho = float(np.dot(r[1:], r[:-1]) / denom) if denom > 0 else 0.0
         rho = min(max(rho, 0.0), 0.98)
-        total += len(r) * (1.0 - rho) / (1.0 + rho)
+        total += n * (1.0 - rho) / (1.0 + rho)
     return max(total, 2.0)
 
 

@@ -186,7 +186,7 @@ class Selection:
     def score(self, z: np.ndarray) -> Score:
         """Costs and effective training count of whitened residuals ``z`` (n, C)."""
         s, h = self.ev.costs(z)
-        return Score(s, h, effective_count(self.ev.weigh(z)[self.ev.train]))
+        return Score(s, h, effective_count(self.ev.weigh(z)[self.ev.train], self.ev.weight[self.ev.train]))
 
     # ------------------------------------------------------------------ screen
     def screen(self, remaining: list[str], round_no: int) -> dict[str, Screened]:
@@ -261,7 +261,8 @@ class Selection:
         values = {k: float(v) for k, v in screened.best_values.items()}
         refitted = {**{k: dict(v) for k, v in self.chosen.items()}, screened.effect: values}
         _, held = self.ev.costs(screened.best_z)
-        score = Score(screened.best_cost, held, effective_count(self.ev.weigh(screened.best_z)[self.ev.train]))
+        score = Score(screened.best_cost, held, effective_count(self.ev.weigh(screened.best_z)[self.ev.train],
+                                                                self.ev.weight[self.ev.train]))
         base = dict(self.base)
         if self.shifts_write:
             base[WRITE_SHIFT.name] = screened.shift.get(tuple(screened.best_values.values()), base[WRITE_SHIFT.name])

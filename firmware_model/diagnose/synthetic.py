@@ -19,14 +19,16 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..interface import Commands
 from ..params import ServoParams
+from ..physical import PhysicalModel
 from .batch import null_knobs, sample, simulate
 from .effects import BASE_PARAMS, LIBRARY, apply_effects
 from .excitation import commands_at, program
 from .schedule import compile_schedule
 from .trace import Trace
 
-__all__ = ["draw_effect", "make_trace", "OUT_OF_LIBRARY", "COGGING_AMPLITUDE_NM"]
+__all__ = ["draw_effect", "make_trace", "OUT_OF_LIBRARY", "COGGING_AMPLITUDE_NM", "wizard_step_export", "WIZARD_TICK_MS"]
 
 #: Effects the library does not contain, for negative tests.
 OUT_OF_LIBRARY = ("cogging",)
@@ -131,3 +133,41 @@ def _simulate_with_cogging(schedule, params, knobs, cog):
         return simulate(schedule, params, kn, 1)
     finally:
         batch.load_dv = original
+
+
+#: DYNAMIXEL Wizard 2's graph tick (ms): each row is stamped on the first tick after its reading.
+WIZARD_TICK_MS = 16.0
+_WIZARD_HEADER = ("DYNAMIXEL Graph,2", "AX-12A,12", "ItemCount,1", "Present Position,#ffff00,0,1,0",
+                  "Time[ms],Present Position")
+
+
+def _step_every_ms(params: ServoParams, start: int, goal: int, duration_ms: int) -> np.ndarray:
+    """Present Position every ms after ``goal`` is written (index 0) to a served servo holding ``start``, full speed,
+    the e-manual's default compliance."""
+    full = lambda v: np.full(1, v, dtype=np.int64)  # noqa: E731
+    cmds = Commands(torque_enable=full(1), goal_position=full(goal), moving_speed=full(0), torque_limit=full(1023),
+                    cw_angle_limit=full(0), ccw_angle_limit=full(1023), cw_compliance_margin=full(1),
+                    ccw_compliance_margin=full(1), cw_compliance_slope=full(32), ccw_compliance_slope=full(32),
+                    punch=full(32), temperature_limit=full(70), min_voltage_limit=full(60), max_voltage_limit=full(140))
+    model = PhysicalModel(1, params=params, initial_position_raw=start)
+    return np.array([float(start)] + [model.advance(i * 1e-3, cmds).present_position[0] for i in range(1, duration_ms + 1)])
+
+
+def wizard_step_export(params: ServoParams, head_ms: float, tail_ms: float, phase_ms: float = 7.3, seed: int = 0,
+                       noise_units: float = 0.25, read_every_ms: float = 20.0, start: int = 1, goal: int = 500) -> str:
+    """One step of Goal Position as DYNAMIXEL Wizard 2 exports it (:mod:`.wizard`), the answer known.
+
+    The served model (:class:`~firmware_model.physical.PhysicalModel`, not the diagnosis's own simulator) steps
+    from ``start`` to ``goal`` written ``head_ms`` after the first reading and is read every ``read_every_ms``
+    from ``phase_ms`` on until ``tail_ms`` after the write, the pot's noise (``noise_units`` SD) added before the
+    reading is rounded; each row is stamped on the first :data:`WIZARD_TICK_MS` tick after its reading, the
+    newest winning a tick, as the Wizard stamps them.  Returns the export's text.
+    """
+    sim = _step_every_ms(params, start, goal, int(tail_ms) + 900)
+    rng = np.random.default_rng(seed)
+    rows = {}
+    for read_ms in np.arange(phase_ms, head_ms + len(sim) - 1, read_every_ms):
+        k = int(read_ms - head_ms)
+        value = start if k < 0 else sim[min(k, len(sim) - 1)]
+        rows[int(np.ceil(read_ms / WIZARD_TICK_MS) * WIZARD_TICK_MS)] = int(round(value + rng.normal(0.0, noise_units)))
+    return "\n".join([*_WIZARD_HEADER, *(f"{t},{v}" for t, v in sorted(rows.items()))]) + "\n"

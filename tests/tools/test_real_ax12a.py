@@ -50,26 +50,19 @@ def test_twin_predicts_every_other_step_with_only_the_bar_inertia(twin, rec):
     assert result["rms"] < 5.0
 
 
-#: What the diagnosis names first on each loaded step from the closed twin, where it misses (measured 2026-11-23).
-#: Why, measured by tools/real_ax12a_inertia.py: the loaded steps are no slower than the unloaded (15 -> 480 units
-#: in 370.6, 369.9, 367.6 ms; the twin with the bars 1-3 ms slower, the unrecorded supply moving the cruise by up to
-#: 1.2 %) and their peaks read every 20 ms are the twin's (521, 522): the bars (12-17 % of the twin's inertia) leave
-#: no mark that the unrecorded supply and the shared base parameter do not leave as well.  The settled reading no
-#: longer outweighs the move (a Wizard export's rests count as 0.25 s each) and the goal write is re-fitted with
-#: every candidate, yet the base re-fit makes each loaded step *stronger* (efficiency 0.764 -> 0.780 and 0.770), where
-#: a bar would make it slower.  Recordings the closed twin made itself with each bar (read at the same rows, 0.5 units
-#: of noise) name extra_inertia on 0 of 3 seeds each, with twice the bar's J on 3 of 3
-#: (``tools/real_ax12a_inertia.py --synthetic``): with the model's response to inertia (about 2 units of overshoot per
-#: 1e-3 kg m^2, where the real servo gains 4-5), the bars are below what the workflow resolves on one step read every
-#: 20 ms, whatever makes the real return from the peak faster.
+#: What the diagnosis names first on each loaded step from the closed twin, where it misses (measured 2026-11-24).
+#: Why, measured by tools/real_ax12a_inertia.py: recordings the twin made itself with each bar (read at the same
+#: rows, 0.5 units of noise) name extra_inertia first on 5 of 6, the bar inside every interval (``--synthetic``), so
+#: the workflow resolves a bar of this size on one step read every 20 ms.  On the real steps it fits 2.8-3.6 times
+#: the bar, and the held-out rows (the peak and the return from it) get worse: the model's overshoot grows by about
+#: 2 units per 1e-3 kg m^2 where the real servo's grows by 4-5, and the real servo returns from a loaded peak faster
+#: (512 -> 500 units in 28.0 and 23.2 ms, the twin with the bar in 34.0 and 32.0).  The miss is the model's response
+#: to inertia at the end of a move, not the workflow's reach.
 NAMED_FROM_TWIN_MISSES = {
-    "AX12A_LOAD3_1.csv": "names nothing from the twin carrying the unloaded step's play: extra_inertia fits "
-                         "0.90e-3 +- 0.87e-3 kg m^2 (the bar inside, dBIC 37.4, 25 % of the cost) but the held-out "
-                         "rows of the move get worse (cost 53 vs 28: the real step falls from its peak, 512 to 500 "
-                         "units, in 28.0 ms, the twin with the bar in 34.0); gap 1.43 -> 0.95 from the base re-fit alone",
-    "AX12A_LOAD2_1.csv": "names nothing from the twin carrying the unloaded step's play: no effect's screen beats "
-                         "the base re-fit (gap 0.89 -> 0.82, efficiency 0.770; the real step falls from its peak, 512 "
-                         "to 500 units, in 23.2 ms, the twin with the bar in 32.0)",
+    "AX12A_LOAD3_1.csv": "names nothing from the twin: extra_inertia fits 2.6e-3 +- 6.0e-3 kg m^2 (3.6 x the bar; dBIC "
+                         "19.8, 46 % of the cost) but the held-out rows of the move get worse (cost 116 vs 42)",
+    "AX12A_LOAD2_1.csv": "names nothing from the twin: extra_inertia fits 2.8e-3 +- 1.8e-3 kg m^2 (2.8 x the bar, "
+                         "outside the interval; dBIC 16.4, 41 % of the cost) but the held-out rows get worse (217 vs 184)",
 }
 
 
@@ -124,19 +117,17 @@ def test_diagnosis_from_the_twin_names_the_bar_inertia(from_closed_twin, rec):
     assert abs(j - rec.load_kg_m2) <= half, (j, half, rec.load_kg_m2)
 
 
-def test_the_twin_closed_with_the_play_it_lacks_names_it_on_no_step(from_twin, closed, from_closed_twin):
-    """What the twin lacks on its own fit recording is the servo's gear play: named there, confident, leaving the
-    position within about a unit RMS (the Wizard's rows read on their own clock); measured 0.0097 +- 0.0057 rad,
-    gap 0.85 -> 0.56.  The twin closed with it (tool.close_twin) carries it, and names no play on any step."""
+def test_the_twin_leaves_nothing_to_name_on_its_own_step_and_names_no_play_anywhere(twin, from_twin, closed):
+    """The twin leaves nothing to name on the recording it was fitted on, so the closed twin is the twin, and no gear
+    play is named on any step.  (With the model's reading rounded, and every reading at rest counted as one, the same
+    twin named 0.0097 rad of play on its own step: its settled level half a unit off a whole reading.)"""
     own = from_twin(tool.FIT_ON)
-    assert own.named == ["backlash"] and own.accepted[0].confidence == "confident", own.named
+    assert own.named == [], own.named
     assert own.gaps_after["present_position"]["rms"] < 1.2, own.gaps_after["present_position"]
     params, closing = closed
-    assert closing.named == own.named
-    assert params.effects.value("backlash_rad", 0.0) == pytest.approx(own.accepted[0].values["backlash_rad"])
-    assert from_closed_twin(tool.FIT_ON).named == []
+    assert closing.named == [] and params == twin[0]
     for rec in (r for r in tool.RECORDINGS if r.servo == "AX-12A" and r.load_kg_m2 > 0):
-        assert "backlash" not in from_closed_twin(rec.file).named, rec.file
+        assert "backlash" not in from_twin(rec.file).named, rec.file
 
 
 def test_default_model_overshoots_like_the_real_servo():

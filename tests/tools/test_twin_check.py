@@ -101,8 +101,9 @@ def test_gear_play_is_found_and_replays_the_measurement_but_a_second_recording_d
     excitation differs by 2.8-7.4 units RMS (0.44-2.1 times the plain
     emulator's gap; seeds 11-14), so the recorded twin lands there too
     (ratio 0.61, 0.90, 1.25, 1.87), though the diagnosis finds the play
-    within 1.6 % every time.  Driven by the measurement's own command times,
-    the twin reads within 0.7 units of it (plain: 3.8).
+    within 3 % every time, its 95 % interval holding it.  Driven by the
+    measurement's own command times, the twin reads within 0.7 units of it
+    (plain: 3.8).
     """
     from firmware_model.diagnose.replay import replay
 
@@ -111,7 +112,8 @@ def test_gear_play_is_found_and_replays_the_measurement_but_a_second_recording_d
                                  tmp_path / "loop", floor=True, diagnose_args=("--effects", "backlash,coulomb_friction,delay"))
     assert [e["effect"] for e in result.verdict["named"]] == ["backlash"]
     twin = ServoParams.from_toml(result.params_file)
-    assert twin.effects.backlash_rad == pytest.approx(0.06, rel=0.03)
+    assert twin.effects.backlash_rad == pytest.approx(0.06, rel=0.04)
+    assert abs(twin.effects.backlash_rad - 0.06) <= result.verdict["named"][0]["uncertainty_95"]["backlash_rad"]
     measured = read_trace(tmp_path / "loop" / "measured.csv")
     replayed = {name: twin_check.aligned_gap(measured, replay(measured, p)) for name, p in
                 (("twin", twin), ("plain", ServoParams()))}

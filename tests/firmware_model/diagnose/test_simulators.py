@@ -33,6 +33,20 @@ def test_batch_equals_physical_model_replay():
     assert np.ptp(ref["present_position"]) > 300  # the trace really moves
 
 
+def test_an_unrounded_sample_is_the_rounded_one_before_its_rounding():
+    """A prediction reads the registers unrounded (floats); rounded, they are the recording's whole units."""
+    tr = _trace()
+    p = ServoParams()
+    s = compile_schedule(tr)
+    rec = simulate(s, p, {}, 1)
+    whole, exact = sample(s, rec, p), sample(s, rec, p, rounded=False)
+    for ch, step in (("present_position", 1.0), ("present_speed", 1.0), ("present_load", 1.0)):
+        assert whole[ch].dtype.kind == "i" and exact[ch].dtype.kind == "f"
+        np.testing.assert_array_equal(np.rint(exact[ch]), whole[ch])
+        assert np.abs(exact[ch] - whole[ch]).max() <= step / 2
+    assert np.any(exact["present_position"] != whole["present_position"])
+
+
 @pytest.mark.parametrize("name", list(LIBRARY))
 def test_null_value_is_the_base_model(name):
     """Each effect at its null values maps onto exactly the base knobs."""
