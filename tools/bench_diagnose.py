@@ -14,6 +14,12 @@ the summary show how often an unexplained residual was reported.  Seconds are wa
 2`` runs two traces at once (one per core), which is how the table is made
 faster, not how the per-trace time is measured.
 
+``--wizard-steps N`` adds single steps recorded like a DYNAMIXEL Wizard 2 export
+(``synthetic.wizard_step_export``: the served model read every 20 ms at a random phase, stamped on the
+16 ms tick, rests as long as a user waits), N per bar of :data:`WIZARD_BARS_KG_M2` on the horn and N
+without one, diagnosed from the default model: how often ``extra_inertia`` is named first, how often its
+95 % interval holds the bar, and what is named without a bar.
+
 ``--live`` records every trace like a real-time client (random hold phase, stamps after the read
 returns, commands a few ms after their rows and not recorded: ``synthetic.make_trace(live=True)``),
 whose traits the base fit must absorb without naming anything; ``delay`` is then not offered, so
@@ -32,12 +38,13 @@ any diagnosis starts (two at once, or a diagnosis beside one, would disturb the 
 
 Usage: ``python tools/bench_diagnose.py [--seeds 5] [--clean 20] [--cogging 5] [--duration 20] [--rate 100]
 [--jobs 2] [--live] [--effects LIST] [--recorded N] [--recorded-clean M] [--recorded-duration 10]
-[--recorded-dir DIR]``
+[--recorded-dir DIR] [--wizard-steps N]``
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 import tempfile
@@ -52,13 +59,63 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import live_dataset  # noqa: E402
 
+from firmware_model.diagnose.cli import load_input, parse_args  # noqa: E402
 from firmware_model.diagnose.effects import LIBRARY  # noqa: E402
 from firmware_model.diagnose.search import diagnose  # noqa: E402
-from firmware_model.diagnose.synthetic import draw_effect, make_trace  # noqa: E402
+from firmware_model.diagnose.synthetic import draw_effect, make_trace, wizard_step_export  # noqa: E402
 from firmware_model.diagnose.trace import read_trace, write_trace  # noqa: E402
+from firmware_model.params import ServoParams  # noqa: E402
 
 #: Seeds of the recorded set: hidden-effect recordings from the first, clean ones from the second.
 RECORDED_SEEDS = (3000, 4000)
+#: Bars on the horn of the Wizard-style steps (kg m^2): a quarter to three quarters of the model's own inertia.
+WIZARD_BARS_KG_M2 = (1.6e-3, 2.6e-3, 3.4e-3, 4.57e-3)
+#: Seeds of the Wizard-style steps (the reading clock's phase and the pot's noise).
+WIZARD_SEED = 5000
+
+
+def one_wizard(job: tuple[float, int]) -> tuple:
+    """Diagnose one Wizard-style step with ``bar`` on the horn: (bar, seed, named, estimate, half-width, seconds)."""
+    bar, seed = job
+    start = ServoParams()
+    servo = dataclasses.replace(start, load_inertia_kg_m2=start.load_inertia_kg_m2 + bar)
+    phase_ms = float(np.random.default_rng(seed).uniform(0.0, 20.0))
+    with tempfile.TemporaryDirectory(prefix="bench_wizard_") as tmp:
+        path = Path(tmp) / "step.csv"
+        path.write_text(wizard_step_export(servo, 1400.0, 3000.0, phase_ms, seed), encoding="utf-8")
+        args = parse_args([str(path), "--out", tmp, "--goal", "500", "--voltage", str(start.supply_voltage_v)])
+        trace = load_input(args, start).trace
+    t0 = time.perf_counter()
+    d = diagnose(trace, start, progress=lambda m: None)
+    sec = time.perf_counter() - t0
+    first = d.accepted[0] if d.named[:1] == ["extra_inertia"] else None
+    j = first.values["extra_inertia_kg_m2"] if first else float("nan")
+    half = first.uncertainty["extra_inertia_kg_m2"] if first else float("nan")
+    return bar, seed, d.named, j, half, sec
+
+
+def run_wizard(args: argparse.Namespace) -> None:
+    """Diagnose the Wizard-style steps; print, per bar, the first names and how often the interval holds it."""
+    jobs = [(bar, WIZARD_SEED + i) for bar in (0.0, *WIZARD_BARS_KG_M2) for i in range(args.wizard_steps)]
+    with Pool(args.jobs) as pool:
+        results = list(pool.imap_unordered(one_wizard, jobs))
+    print("\nsingle steps read like a Wizard export (synthetic.wizard_step_export), diagnosed from the default model")
+    print(f"{'bar (kg m^2)':>14}  extra_inertia first  interval holds the bar  estimates (1e-3 kg m^2)   other names")
+    for bar in (0.0, *WIZARD_BARS_KG_M2):
+        rows = sorted(r for r in results if r[0] == bar)
+        first = [r for r in rows if r[2][:1] == ["extra_inertia"]]
+        holds = [r for r in first if abs(r[3] - bar) <= r[4]]
+        other = [r[2][0] for r in rows if r[2] and r[2][:1] != ["extra_inertia"]]
+        est = ", ".join(f"{1e3 * r[3]:.2f}+-{1e3 * r[4]:.2f}" for r in first)
+        print(f"{bar:>14.2e}  {len(first):>8}/{len(rows):<10} {'-' if not bar else f'{len(holds)}/{len(first)}':>14}"
+              f"           {est or '-'}   {', '.join(other) or '-'}")
+    loaded = [r for r in results if r[0] > 0]
+    first = [r for r in loaded if r[2][:1] == ["extra_inertia"]]
+    print(f"bars named first: {len(first)}/{len(loaded)}; intervals holding the bar: "
+          f"{sum(abs(r[3] - r[0]) <= r[4] for r in first)}/{len(first)}; names without a bar: "
+          f"{sum(bool(r[2]) for r in results if r[0] == 0)}/{args.wizard_steps}")
+    secs = np.array([r[5] for r in results])
+    print(f"seconds per step ({args.jobs} at once): median {np.median(secs):.1f}, max {secs.max():.1f}")
 
 
 def one(job: tuple[str, int, float, float, bool]) -> tuple:
@@ -162,10 +219,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--recorded-duration", type=float, default=10.0, help="seconds of each recording's excitation "
                    "(default 10; Stribeck friction's adds a 6 s breakaway block)")
     p.add_argument("--recorded-dir", metavar="DIR", help="keep the recordings here and reuse those already there")
+    p.add_argument("--wizard-steps", type=int, default=0, metavar="N",
+                   help="Wizard-style single steps per bar and without one (default 0)")
     args = p.parse_args(argv)
     if args.recorded_clean is None:
         args.recorded_clean = args.recorded
-    if min(args.seeds, args.clean, args.cogging, args.recorded, args.recorded_clean) < 0 or args.jobs < 1:
+    if min(args.seeds, args.clean, args.cogging, args.recorded, args.recorded_clean, args.wizard_steps) < 0 or args.jobs < 1:
         p.error("counts must be >= 0 and --jobs >= 1")
     if not args.recorded_duration > 0 or not 0 < args.rate <= 1000:
         p.error("--recorded-duration must be positive and --rate in (0, 1000]")
@@ -182,6 +241,8 @@ def main(argv: list[str] | None = None) -> int:
     jobs += [("cogging", 2000 + s, args.duration, args.rate, args.live) for s in range(args.cogging)]
     if jobs:
         run_synthetic(args, jobs)
+    if args.wizard_steps:
+        run_wizard(args)
     return 0
 
 
