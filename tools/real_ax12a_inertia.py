@@ -41,17 +41,17 @@ numbers that tell them apart, per AX-12A recording:
 
 5. With ``--joint``: a twin fitted on the unloaded step as the diagnosis scores it (the rebuilt
    reading times, the write time re-fitted), over supply, rotor and gear inertia *and* gear
-   play together (every real gear train has some; the unloaded step names about 0.01 rad from
-   the plain twin), and what the diagnosis names on each step from it.
+   play together (every real gear train has some), and what the diagnosis names on each step
+   from it.
 
 6. With ``--synthetic``: whether the workflow could name the bars at all on recordings like these.
    Each loaded step's Present Position is replaced by what the closed twin
    (:func:`real_ax12a.close_twin`) with :data:`SYNTHETIC_SCALES` times the bar's J reads at the
    same rows (the diagnosis's own evaluator: the rebuilt reading times, the goal write fitted),
    plus Gaussian noise of :data:`SYNTHETIC_SIGMA_UNITS`, rounded, and the diagnosis runs on it from
-   the closed twin.  A recording the model made itself holds the bar and nothing else, so what the
-   workflow misses there is beyond its reach on a single step read every 20 ms, whatever the
-   model's physics, unless the model's response to inertia changes.
+   the closed twin.  A recording the model made itself holds the bar and nothing else: what the
+   workflow finds there and misses on the real step is the model's to explain, not beyond the
+   workflow's reach.
 
 Usage::
 

@@ -90,16 +90,20 @@ def closed(twin):
 
 
 @pytest.mark.parametrize("name", RETURN_QUOTED)
-def test_the_workflow_names_twice_a_bars_inertia_on_a_step_the_twin_recorded(closed, name):
-    """The synthetic check's control: on a loaded step re-made by the closed twin with twice the bar's J, read at
-    the real rows with 0.5 units of noise (seed 0), the diagnosis names extra_inertia first, within half the added
-    J.  So where it names nothing on the bars as they are (0 of 3 seeds on each step, measured by
-    ``tools/real_ax12a_inertia.py --synthetic``), the bar is too small for the workflow on such a step; the
-    machinery can find an inertia."""
+def test_the_workflow_names_a_bar_on_a_step_the_twin_recorded_with_it(closed, name):
+    """The synthetic check: a loaded step re-made by the closed twin with the bar's J, read at the real rows with
+    0.5 units of noise: on at least 2 of the 3 seeds the diagnosis names extra_inertia first with the bar inside
+    its interval (measured 2 of 3 on LOAD3_1, 3 of 3 on LOAD2_1; with the model's reading rounded, 0 of 3 on each).
+    So where it misses on the real steps, the model's response to inertia is what is missing, not the workflow's
+    reach."""
     rec = next(r for r in real.RECORDINGS if r.file == name)
     if not (DATA / rec.file).exists():
         pytest.skip(f"{rec.file} not found in {DATA}")
-    extra = 2.0 * rec.load_kg_m2
-    d = tool.diagnose(tool.synthetic_trace(closed, DATA / rec.file, 500, extra, tool.SYNTHETIC_SIGMA_UNITS, 0), closed)
-    assert d.named and d.named[0] == "extra_inertia", d.named
-    assert abs(d.accepted[0].values["extra_inertia_kg_m2"] - extra) <= 0.5 * extra, d.accepted[0].values
+    found = []
+    for seed in range(tool.SYNTHETIC_SEEDS):
+        d = tool.diagnose(tool.synthetic_trace(closed, DATA / rec.file, 500, rec.load_kg_m2, tool.SYNTHETIC_SIGMA_UNITS,
+                                               seed), closed)
+        first = d.accepted[0] if d.named[:1] == ["extra_inertia"] else None
+        found.append(first is not None and abs(first.values["extra_inertia_kg_m2"] - rec.load_kg_m2)
+                     <= first.uncertainty["extra_inertia_kg_m2"])
+    assert sum(found) >= 2, found
