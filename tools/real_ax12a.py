@@ -47,10 +47,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from firmware_model.diagnose.synthetic import step_response  # noqa: E402
 from firmware_model.diagnose.wizard import read_wizard  # noqa: E402
-from firmware_model.interface import Commands  # noqa: E402
 from firmware_model.params import ServoParams  # noqa: E402
-from firmware_model.physical import PhysicalModel  # noqa: E402
 
 #: Where the recordings live, relative to the repository (never copied into it).
 DEFAULT_DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "reference" / "real-ax12a"
@@ -162,25 +161,9 @@ def load(path: Path) -> Measured:
     return rec
 
 
-def _commands(goal: int) -> Commands:
-    full = lambda v: np.full(1, v, dtype=np.int64)  # noqa: E731
-    return Commands(
-        torque_enable=full(1), goal_position=full(goal), moving_speed=full(0), torque_limit=full(1023),
-        cw_angle_limit=full(0), ccw_angle_limit=full(1023), cw_compliance_margin=full(1), ccw_compliance_margin=full(1),
-        cw_compliance_slope=full(32), ccw_compliance_slope=full(32), punch=full(32), temperature_limit=full(70),
-        min_voltage_limit=full(60), max_voltage_limit=full(140),
-    )
-
-
 def simulate(params: ServoParams, start: int, goal: int, duration_ms: int) -> np.ndarray:
-    """Present Position every ms from the command (index 0) on, at the params' supply."""
-    model = PhysicalModel(1, params=params, initial_position_raw=start)
-    cmds = _commands(goal)
-    out = np.empty(duration_ms + 1)
-    out[0] = start
-    for i in range(1, duration_ms + 1):
-        out[i] = model.advance(i * 1e-3, cmds).present_position[0]
-    return out
+    """Present Position every ms from the command (index 0) on, at the params' supply (the served model)."""
+    return step_response(params, start, goal, duration_ms)
 
 
 def features(values: np.ndarray, times_ms: np.ndarray, settle_from_ms: float) -> tuple[float, float, float]:

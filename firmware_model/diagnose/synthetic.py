@@ -28,7 +28,8 @@ from .excitation import commands_at, program
 from .schedule import compile_schedule
 from .trace import Trace
 
-__all__ = ["draw_effect", "make_trace", "OUT_OF_LIBRARY", "COGGING_AMPLITUDE_NM", "wizard_step_export", "WIZARD_TICK_MS"]
+__all__ = ["draw_effect", "make_trace", "OUT_OF_LIBRARY", "COGGING_AMPLITUDE_NM", "wizard_step_export", "WIZARD_TICK_MS",
+           "step_response"]
 
 #: Effects the library does not contain, for negative tests.
 OUT_OF_LIBRARY = ("cogging",)
@@ -141,9 +142,9 @@ _WIZARD_HEADER = ("DYNAMIXEL Graph,2", "AX-12A,12", "ItemCount,1", "Present Posi
                   "Time[ms],Present Position")
 
 
-def _step_every_ms(params: ServoParams, start: int, goal: int, duration_ms: int) -> np.ndarray:
+def step_response(params: ServoParams, start: int, goal: int, duration_ms: int) -> np.ndarray:
     """Present Position every ms after ``goal`` is written (index 0) to a served servo holding ``start``, full speed,
-    the e-manual's default compliance."""
+    the e-manual's default compliance (margin 1, slope 32, punch 32), at the params' supply."""
     full = lambda v: np.full(1, v, dtype=np.int64)  # noqa: E731
     cmds = Commands(torque_enable=full(1), goal_position=full(goal), moving_speed=full(0), torque_limit=full(1023),
                     cw_angle_limit=full(0), ccw_angle_limit=full(1023), cw_compliance_margin=full(1),
@@ -163,7 +164,7 @@ def wizard_step_export(params: ServoParams, head_ms: float, tail_ms: float, phas
     reading is rounded; each row is stamped on the first :data:`WIZARD_TICK_MS` tick after its reading, the
     newest winning a tick, as the Wizard stamps them.  Returns the export's text.
     """
-    sim = _step_every_ms(params, start, goal, int(tail_ms) + 900)
+    sim = step_response(params, start, goal, int(tail_ms) + 900)
     rng = np.random.default_rng(seed)
     rows = {}
     for read_ms in np.arange(phase_ms, head_ms + len(sim) - 1, read_every_ms):
