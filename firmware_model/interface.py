@@ -29,6 +29,7 @@ __all__ = [
     "ALARM_OVERHEATING",
     "ALARM_OVERLOAD",
     "Commands",
+    "POWER_UP",
     "Sensed",
     "ServoModel",
     "SteppableTo",
@@ -75,6 +76,27 @@ class Commands:
     def field_names(cls) -> tuple[str, ...]:
         """Names of all command registers, in declaration order."""
         return tuple(f.name for f in fields(cls))
+
+    @classmethod
+    def power_up(cls, n: int = 1, **overrides) -> Commands:
+        """The registers as an AX-12A powers up, torque on, for ``n`` servos; each override is a scalar or a
+        sequence of length ``n`` (e.g. ``goal_position=500``).
+
+        Why here: a step at full speed with the e-manual's default compliance is what the data sheet, the 2008
+        report and the real recordings describe, and the tools, the diagnosis's synthetic recordings and the tests
+        step it alike.  The values are the e-manual's initial ones (``ax12emu/protocol/models/ax-12a.toml``, which
+        this layer does not read), over the full joint range, with Torque Enable 1 and Goal Position 512.
+        """
+        values = {**POWER_UP, **overrides}
+        return cls(**{k: np.broadcast_to(np.asarray(v, dtype=np.int64), (n,)).copy() for k, v in values.items()})
+
+
+#: :meth:`Commands.power_up`'s values: the e-manual's initial ones, torque on, goal at the centre.
+POWER_UP = dict(
+    torque_enable=1, goal_position=512, moving_speed=0, torque_limit=1023, cw_angle_limit=0, ccw_angle_limit=1023,
+    cw_compliance_margin=1, ccw_compliance_margin=1, cw_compliance_slope=32, ccw_compliance_slope=32, punch=32,
+    temperature_limit=70, min_voltage_limit=60, max_voltage_limit=140,
+)
 
 
 @dataclass

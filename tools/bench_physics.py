@@ -40,13 +40,7 @@ GOALS = {1: 100.0, 253: 20.0}
 
 def commands(n: int, goal: np.ndarray) -> Commands:
     """Joint-mode commands with e-manual defaults, Moving Speed 0 (full speed)."""
-    full = lambda v: np.full(n, v, dtype=np.int64)  # noqa: E731
-    return Commands(
-        torque_enable=full(1), goal_position=goal.astype(np.int64), moving_speed=full(0), torque_limit=full(1023),
-        cw_angle_limit=full(0), ccw_angle_limit=full(1023), cw_compliance_margin=full(1), ccw_compliance_margin=full(1),
-        cw_compliance_slope=full(32), ccw_compliance_slope=full(32), punch=full(32), temperature_limit=full(70),
-        min_voltage_limit=full(60), max_voltage_limit=full(140),
-    )
+    return Commands.power_up(n, goal_position=goal)
 
 
 def rate(n: int, seconds: float, step_s: float, poll_s: float, scenario: str = "moving") -> float:

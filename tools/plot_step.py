@@ -29,13 +29,7 @@ from firmware_model.units import RAD_PER_POSITION_UNIT, RAD_S_PER_SPEED_UNIT, si
 def simulate(params: ServoParams, volts: float, degrees: float, moving_speed: int, duration_s: float) -> dict:
     """Run one step from raw 512 and record everything at 1 kHz."""
     n_units = int(round(degrees / 300.0 * 1023))
-    full = lambda v: np.full(1, v, dtype=np.int64)  # noqa: E731
-    cmds = Commands(
-        torque_enable=full(1), goal_position=full(512 + n_units), moving_speed=full(moving_speed), torque_limit=full(1023),
-        cw_angle_limit=full(0), ccw_angle_limit=full(1023), cw_compliance_margin=full(1), ccw_compliance_margin=full(1),
-        cw_compliance_slope=full(32), ccw_compliance_slope=full(32), punch=full(32), temperature_limit=full(70),
-        min_voltage_limit=full(60), max_voltage_limit=full(140),
-    )
+    cmds = Commands.power_up(goal_position=512 + n_units, moving_speed=moving_speed)
     model = PhysicalModel(1, params=params)
     model.set_supply_voltage(volts)
     rec = {k: [] for k in ("t", "pos", "ref", "speed", "held_speed", "load", "drive")}

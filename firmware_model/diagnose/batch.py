@@ -30,12 +30,12 @@ import numpy as np
 
 from ..backend import SCALAR
 from ..controller import compliance_plan
+from ..interface import POWER_UP
 from ..motor import DryFriction, arm_gravity_torque_nm
 from ..params import ServoParams
 from ..setpoint import apply_dead_zone, setpoint_velocity
 from ..stepping import _clip as clip
 from ..units import RAD_PER_POSITION_UNIT, RAD_S_PER_SPEED_UNIT
-from .replay import DEFAULT_REGISTERS
 from .schedule import Schedule, Segment
 
 __all__ = ["DYNAMIC_KNOBS", "SENSING_KNOBS", "EFFECT_FIELD_KNOBS", "Record", "simulate", "sample", "null_knobs",
@@ -146,7 +146,7 @@ def simulate(schedule: Schedule, params: ServoParams, knobs: dict[str, np.ndarra
     p, dt = params, schedule.step_s
     null = null_knobs(p)
     kn = {name: _knob(knobs, name, k, null[name]) for name in DYNAMIC_KNOBS}
-    regs = DEFAULT_REGISTERS
+    regs = POWER_UP
     comp = compliance_plan(np.array([regs["ccw_compliance_margin"]]), np.array([regs["ccw_compliance_margin"]]),
                            np.array([regs["ccw_compliance_slope"]]), np.array([regs["ccw_compliance_slope"]]),
                            np.array([regs["punch"]]), np.array([1023]))

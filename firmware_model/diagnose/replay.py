@@ -21,23 +21,13 @@ from ..physical import PhysicalModel
 from ..units import signed_raw_to_value
 from .trace import Trace
 
-__all__ = ["replay", "DEFAULT_REGISTERS", "commands_for_row"]
-
-#: e-manual power-up values for registers a trace does not carry.
-DEFAULT_REGISTERS = dict(
-    torque_enable=1, goal_position=512, moving_speed=0, torque_limit=1023, cw_angle_limit=0, ccw_angle_limit=1023,
-    cw_compliance_margin=1, ccw_compliance_margin=1, cw_compliance_slope=32, ccw_compliance_slope=32, punch=32,
-    temperature_limit=70, min_voltage_limit=60, max_voltage_limit=140,
-)
+__all__ = ["replay", "commands_for_row"]
 
 
 def commands_for_row(trace: Trace, i: int) -> Commands:
-    """Commands for one servo from row ``i`` (defaults for the registers the trace lacks)."""
-    values = dict(DEFAULT_REGISTERS)
-    for name in ("goal_position", "moving_speed", "torque_limit"):
-        if trace.has(name):
-            values[name] = int(trace[name][i])
-    return Commands(**{k: np.array([v], dtype=np.int64) for k, v in values.items()})
+    """Commands for one servo from row ``i`` (the e-manual's power-up values for the registers the trace lacks)."""
+    return Commands.power_up(**{name: int(trace[name][i]) for name in ("goal_position", "moving_speed", "torque_limit")
+                                if trace.has(name)})
 
 
 def replay(trace: Trace, params: ServoParams = ServoParams(), step_s: float = 1e-3, arm_weight_nm: float = 0.0) -> Trace:

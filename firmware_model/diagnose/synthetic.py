@@ -145,11 +145,7 @@ _WIZARD_HEADER = ("DYNAMIXEL Graph,2", "AX-12A,12", "ItemCount,1", "Present Posi
 def step_response(params: ServoParams, start: int, goal: int, duration_ms: int) -> np.ndarray:
     """Present Position every ms after ``goal`` is written (index 0) to a served servo holding ``start``, full speed,
     the e-manual's default compliance (margin 1, slope 32, punch 32), at the params' supply."""
-    full = lambda v: np.full(1, v, dtype=np.int64)  # noqa: E731
-    cmds = Commands(torque_enable=full(1), goal_position=full(goal), moving_speed=full(0), torque_limit=full(1023),
-                    cw_angle_limit=full(0), ccw_angle_limit=full(1023), cw_compliance_margin=full(1),
-                    ccw_compliance_margin=full(1), cw_compliance_slope=full(32), ccw_compliance_slope=full(32),
-                    punch=full(32), temperature_limit=full(70), min_voltage_limit=full(60), max_voltage_limit=full(140))
+    cmds = Commands.power_up(goal_position=goal)
     model = PhysicalModel(1, params=params, initial_position_raw=start)
     return np.array([float(start)] + [model.advance(i * 1e-3, cmds).present_position[0] for i in range(1, duration_ms + 1)])
 

@@ -5,18 +5,10 @@ import pytest
 
 from firmware_model.interface import Commands
 
-#: e-manual power-up values (joint mode over the full range), overridden per test.
-DEFAULTS = dict(
-    torque_enable=1, goal_position=512, moving_speed=0, torque_limit=1023, cw_angle_limit=0, ccw_angle_limit=1023,
-    cw_compliance_margin=1, ccw_compliance_margin=1, cw_compliance_slope=32, ccw_compliance_slope=32, punch=32,
-    temperature_limit=70, min_voltage_limit=60, max_voltage_limit=140,
-)
-
 
 def make_commands(n: int = 1, **overrides) -> Commands:
     """Commands for ``n`` servos; each override is a scalar or a sequence of length ``n``."""
-    values = {**DEFAULTS, **overrides}
-    return Commands(**{k: np.broadcast_to(np.asarray(v, dtype=np.int64), (n,)).copy() for k, v in values.items()})
+    return Commands.power_up(n, **overrides)
 
 
 @pytest.fixture
