@@ -23,6 +23,7 @@ Sensing knobs (change only what is read, applied afterwards by
 
 from __future__ import annotations
 
+import threading
 from array import array
 from dataclasses import dataclass
 
@@ -266,6 +267,10 @@ REST_CHECK_EVERY = 8
 _PATHS: dict = {}
 #: Past this many paths the store is emptied (a diagnosis needs a few hundred; each is at most a segment long).
 _PATHS_KEPT = 2048
+#: Guards :data:`_PATHS`: a path is looked up, extended and read by one thread at a time.  Within a diagnosis
+#: one simulation runs at a time (:class:`.evaluate.Lockstep`), but diagnoses run in threads side by side share
+#: the store, and two threads extending one path interleaved their steps (IndexError, BufferError).
+_PATHS_LOCK = threading.Lock()
 
 
 def _reference_units(schedule: Schedule, params: ServoParams, on: np.ndarray) -> tuple[np.ndarray, list[int]]:
@@ -323,6 +328,13 @@ def _reference_path(column: np.ndarray, done: int, stop: int, ref: float, vel: f
     nor velocity: it rests on its goal) is stepped no further, since every
     step after it repeats it.
     """
+    with _PATHS_LOCK:
+        return _kept_path(column, done, stop, ref, vel, goal, vmax, a, dt)
+
+
+def _kept_path(column: np.ndarray, done: int, stop: int, ref: float, vel: float, goal: float, vmax: float,
+               a: float, dt: float) -> tuple[float, float]:
+    """:func:`_reference_path`'s work, with :data:`_PATHS_LOCK` held."""
     key = (a, dt, ref, vel, goal, vmax)
     path = _PATHS.get(key)
     if path is None:

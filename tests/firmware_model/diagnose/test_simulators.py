@@ -146,3 +146,45 @@ def test_shortcuts_give_the_records_of_stepping_every_step(monkeypatch):
         np.testing.assert_array_equal(a.angle, b.angle)
         np.testing.assert_array_equal(a.drive, b.drive)
     assert not np.array_equal(fast[0].angle, fast[1].angle)  # the onsets matter
+
+
+def test_reference_paths_stepped_by_threads_at_once_are_those_stepped_alone(monkeypatch):
+    """The kept reference paths are shared by every simulation in the process: diagnoses run in threads side by
+    side extend one path at once.  Each path is stepped by one thread at a time, so the references are those of
+    one thread alone (unguarded, threads switching every few steps raised IndexError and BufferError)."""
+    import sys
+    import threading
+
+    from firmware_model.diagnose import batch
+
+    s = compile_schedule(_trace(6.0))
+    p = ServoParams()
+    on = s.nominal_onsets()[:, None]
+    monkeypatch.setattr(batch, "_PATHS", {})
+    alone, _ = batch._reference_units(s, p, on)
+    results = []
+
+    def worker(starts):
+        starts.wait()
+        try:
+            results.append(batch._reference_units(s, p, on)[0])
+        except Exception as exc:  # noqa: BLE001 - reported by the assertion below
+            results.append(exc)
+
+    interval = sys.getswitchinterval()
+    sys.setswitchinterval(1e-6)  # threads switch every few steps of a path, not every 5 ms
+    try:
+        for _ in range(5):  # each round starts from no kept path, so the threads step the same paths together
+            monkeypatch.setattr(batch, "_PATHS", {})
+            starts = threading.Barrier(8)
+            threads = [threading.Thread(target=worker, args=(starts,)) for _ in range(8)]
+            for t in threads:
+                t.start()
+            for t in threads:
+                t.join()
+    finally:
+        sys.setswitchinterval(interval)
+    assert len(results) == 40
+    for table in results:
+        assert isinstance(table, np.ndarray), table
+        np.testing.assert_array_equal(table, alone)
