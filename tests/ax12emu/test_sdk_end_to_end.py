@@ -253,13 +253,14 @@ def test_return_delay_time_is_honoured(bus):
             ph.write1ByteTxRx(port, 1, 5, 250)
             wait_eeprom()
             slow = min(slow, fastest_ping_s(port, ph))
-    # No round trip is shorter than the delay; and the fastest ones differ by about the delay
-    # (it runs from the packet's arrival, so the emulator's own processing hides inside it).
-    # The upper bound is wide: a loaded machine can delay even the fastest of 100 round trips
-    # (a 0.8 ms bound failed once while other work loaded the machine); the precise figure is
-    # tools/bench_protocol.py's.
+    # No round trip is shorter than the delay; and the fastest ones differ by the delay less what
+    # hides inside it (it runs from the packet's arrival, so the emulator's own processing and
+    # part of the transport overlap it): under load the fastest undelayed round trip took 0.22 ms
+    # and the delayed one 0.51 ms, 0.29 ms apart.  Both bounds on the difference are wide: a
+    # loaded machine can delay even the fastest of 100 round trips (a 0.8 ms upper bound failed
+    # once that way); the precise figure is tools/bench_protocol.py's.
     assert slow >= 0.0005, (fast, slow)
-    assert 0.0004 < slow - fast < 0.002, (fast, slow)
+    assert 0.0002 < slow - fast < 0.002, (fast, slow)
 
 
 def test_sigterm_removes_link_and_exits_cleanly(emulator, tmp_path):
