@@ -9,7 +9,8 @@ One thing a pypot user meets on real servos as here: an AX-12 ignores packets fo
 byte after writing its EEPROM (``ServoOptions.eeprom_busy_s_per_byte``), and pypot reads right
 after a write's reply, so a read straight after ``set_angle_limit`` (four EEPROM bytes) goes
 unanswered.  The tests wait :data:`EEPROM_SETTLE_S` after such writes, as a pypot program on real
-servos must.
+servos must: pypot's own robot set-up (``pypot/robot/config.py``, ``check_motor_eprom_configuration``)
+sleeps 0.5 s after writing angle limits and after writing Return Delay Time.
 """
 
 from __future__ import annotations
