@@ -75,8 +75,10 @@ def twin_of(name: str) -> tuple[ServoParams, str]:
         path = _export(servo_params(name), SEED, Path(tmp))
         twin, volts, scale, result = real_ax12a.fit_twin(ServoParams(), real_ax12a.load(path), 500)
         closed, d = real_ax12a.close_twin(twin, path, 500)
-    return closed, (f"twin {volts:.2f} V, rotor and gear inertia x{scale:.1f}, RMS {result['rms']:.2f}; "
-                    f"its own step names {', '.join(d.named) or 'nothing'}")
+    truth = servo_params(name).total_inertia_kg_m2
+    return closed, (f"twin {volts:.2f} V, rotor and gear inertia x{scale:.1f} ({1e3 * closed.total_inertia_kg_m2:.2f}e-3 "
+                    f"kg m^2, the servo's {1e3 * truth:.2f}e-3), RMS {result['rms']:.2f}; its own step names "
+                    f"{', '.join(d.named) or 'nothing'}")
 
 
 def one(job: tuple[str, ServoParams, float, int]) -> tuple:
