@@ -90,23 +90,10 @@ TARGET_MODULES = ("protocol/framing2", "protocol/packets2", "protocol/params2", 
                   "servo/servo2", "servo/request_handler2", "servo/plant2", "bus/bus2", "bus/mixed")
 
 
-def _start_coverage() -> Any:
-    """Start coverage.py before ax12emu is imported, so module-level lines count too."""
-    try:
-        import coverage
-    except ImportError:
-        print("coverage is not installed (pip install coverage): no coverage figure")
-        return None
-    cov = coverage.Coverage(include=[f"*/ax12emu/{m}.py" for m in TARGET_MODULES], branch=True, data_file=None)
-    cov.start()
-    return cov
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from fuzz_coverage import start_coverage  # noqa: E402  (imports nothing of ax12emu)
 
-
-_COVERAGE = (
-    _start_coverage()
-    if __name__ == "__main__" and not {"--no-coverage", "--replay", "-h", "--help"} & set(sys.argv)
-    else None
-)
+_COVERAGE = start_coverage(TARGET_MODULES, sys.argv) if __name__ == "__main__" else None
 
 
 def _load_fuzz1() -> Any:
