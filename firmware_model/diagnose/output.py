@@ -156,17 +156,20 @@ def _report(trace: Trace, d: Diagnosis, files: list[str], source: str) -> str:
     md = [f"# Model discrepancy report: {source}", "", "## Verdict", "", "```", verdict_text(d), "```", ""]
     md += ["## Named effects", ""]
     if not d.accepted:
-        md.append("None.")
+        md += ["None.", ""]
     for c in d.accepted:
         e = FAMILIES[d.servo].library[c.effect]
         md += [f"### `{c.effect}` ({c.confidence})", "", f"*Physics:* {e.physics}", "", f"*Signature:* {e.signature}", "",
                "| parameter | fitted | ± 95 % | null |", "|---|---|---|---|"]
         md += [f"| {k} | {v:.5g} | {c.uncertainty.get(k, math.nan):.2g} | {e.param(k).null:g} |" for k, v in c.values.items()]
         md += ["", f"dBIC {c.delta_bic:.1f} (n_eff {c.n_eff:.0f}), share of cost removed {100 * c.share:.0f} %", ""]
-    md += ["## Candidates per round", "", "| round | effect | dBIC | held-out cost | null excluded | result |", "|---|---|---|---|---|---|"]
+    # each candidate's fit too, accepted or not: a rejected effect's value and interval say how far the trace got
+    md += ["## Candidates per round", "", "| round | effect | fitted (± 95 %) | dBIC | held-out cost | null excluded | result |",
+           "|---|---|---|---|---|---|---|"]
     for r, cands in enumerate(d.rounds, 1):
         for c in cands:
-            md.append(f"| {r} | {c.effect} | {c.delta_bic:.1f} | {c.cost_held:.0f} | {c.null_excluded} | "
+            fitted = ", ".join(f"{k} {v:.4g} ± {c.uncertainty.get(k, math.nan):.2g}" for k, v in c.values.items())
+            md.append(f"| {r} | {c.effect} | {fitted} | {c.delta_bic:.1f} | {c.cost_held:.0f} | {c.null_excluded} | "
                       f"{'accepted' if c.accepted else ('passes' if c.passed() else '; '.join(c.reasons))} |")
     md += ["", "## Gap per channel and phase (RMS, raw units)", "", "| channel | phase | before | after |", "|---|---|---|---|"]
     for ch in d.channels:

@@ -63,15 +63,23 @@ def fonts_loaded():
     plt.close(fig)
 
 
-def test_params_file_serves_the_fitted_twin(tmp_path, fonts_loaded):
-    """Diagnose a trace with hidden effects, write the outputs, load params.toml into the physical model:
-    it reads exactly what the diagnosis's fitted model read, every register, every row."""
+@pytest.fixture(scope="module")
+def written(tmp_path_factory, fonts_loaded):
+    """A trace with two hidden effects, diagnosed, its outputs written: (trace, diagnosis, folder)."""
     hidden = {"torque_saturation": {"drive_ceiling": 0.5}, "sensor_offset_gain": {"position_offset_units": 6.0,
                                                                                    "position_gain": 1.0}}
     trace, _ = make_trace(hidden, seed=5, duration_s=8.0)
     d = diagnose(trace, effects=["torque_saturation", "sensor_offset_gain", "compliance_deadband"])
     assert set(d.named) == set(hidden)
-    write_outputs(trace, d, tmp_path, source="synthetic")
+    out = tmp_path_factory.mktemp("outputs")
+    write_outputs(trace, d, out, source="synthetic")
+    return trace, d, out
+
+
+def test_params_file_serves_the_fitted_twin(written):
+    """Diagnose a trace with hidden effects, write the outputs, load params.toml into the physical model:
+    it reads exactly what the diagnosis's fitted model read, every register, every row."""
+    trace, d, tmp_path = written
     assert not (tmp_path / "effects.toml").exists()
     twin = ServoParams.from_toml(tmp_path / "params.toml")
     assert set(twin.effects.present()) == {"drive_ceiling_fraction", "position_offset_units", "position_gain"}
@@ -81,3 +89,16 @@ def test_params_file_serves_the_fitted_twin(tmp_path, fonts_loaded):
     plain_gap = np.sqrt(np.mean((replay(trace)["present_position"] - trace["present_position"]) ** 2.0))
     twin_gap = np.sqrt(np.mean((served["present_position"] - trace["present_position"]) ** 2.0))
     assert twin_gap < 0.1 * plain_gap
+
+
+def test_the_report_gives_every_candidates_fit_accepted_or_not(written):
+    """A candidate the verdict turned down still says what it fitted and how sure that was."""
+    _, d, folder = written
+    rows = (folder / "report.md").read_text(encoding="utf-8").splitlines()
+    rejected = [c for r in d.rounds for c in r if not c.accepted]
+    assert rejected  # a round ends when no candidate passes
+    for no, cands in enumerate(d.rounds, 1):
+        for c in cands:
+            row = next(r for r in rows if r.startswith(f"| {no} | {c.effect} | "))
+            for k, v in c.values.items():
+                assert f"{k} {v:.4g} ± {c.uncertainty[k]:.2g}" in row, row
