@@ -20,6 +20,10 @@ for the constants and their derivation):
   a bridge that shorted the winding (synchronous, "slow decay") would stop
   it within a few units.  ``ServoParams.bridge_braking_fraction`` blends the
   two: 0 coasts (the default), 1 brakes with the full back-EMF current.
+  Only up to the rail: a shaft a load turns faster than the supply could
+  drive it generates more than the supply, and the diodes then conduct
+  whatever the duty (:func:`rail_current_a`), so an overhauling load (a
+  wheel pushed downhill, an arm falling) brakes there instead of running away.
 * Friction: static ``t_s`` at rest; sliding ``sign(w) (t_c + (t_s - t_c)
   exp(-(w / v_s)**2)) + b w`` (Coulomb, Stribeck, viscous).
 * Load: the reflected rotor inertia plus the load's, an external torque (set
@@ -53,7 +57,7 @@ from dataclasses import dataclass
 
 from .units import POSITION_RANGE_RAD
 
-__all__ = ["GRAVITY_M_S2", "ARM_HORIZONTAL_RAD", "motor_current_a", "bridge_current_a", "arm_gravity_torque_nm", "DryFriction", "shaft_speed_step"]
+__all__ = ["GRAVITY_M_S2", "ARM_HORIZONTAL_RAD", "motor_current_a", "rail_current_a", "bridge_current_a", "arm_gravity_torque_nm", "DryFriction", "shaft_speed_step"]
 
 #: Standard gravity.
 GRAVITY_M_S2 = 9.80665
@@ -66,18 +70,32 @@ def motor_current_a(drive, supply_v, speed_rad_s, torque_constant: float, resist
     return (drive * supply_v - torque_constant * speed_rad_s) / resistance_ohm
 
 
-def bridge_current_a(current_a, drive, braking_fraction: float):
+def rail_current_a(xp, emf_a, supply_a):
+    """What the freewheeling diodes carry back to the supply once the back-EMF exceeds it, as currents
+    (``emf_a = k w / R``, ``supply_a = V / R``): ``-sign(e) max(|e| - V, 0) / R``, zero below the rail.
+
+    A shaft that a load turns faster than the supply could drive it (an overhauling load) generates
+    more than the supply's voltage, and the diodes across the switches conduct whatever the PWM does.
+    """
+    return -xp.copysign(xp.maximum(xp.abs(emf_a) - supply_a, 0.0), emf_a)
+
+
+def bridge_current_a(current_a, drive, braking_fraction: float, rail_a=None):
     """The share of ``current_a`` the H-bridge passes at ``drive`` (see the module docstring).
 
     Current in the drive's direction flows; current against it (braking, or any
     current at zero drive) is scaled by ``braking_fraction``: 0 blocks it (the
-    motor coasts), 1 passes it all.  Works on floats and on numpy arrays alike
-    (``current * drive > 0`` is a bool, multiplied as 0 or 1).
+    motor coasts), 1 passes it all.  Where it is blocked, ``rail_a``
+    (:func:`rail_current_a`; None: none) flows instead, on the blocked share.
+    Works on floats and on numpy arrays alike (``current * drive > 0`` is a
+    bool, multiplied as 0 or 1).
     """
     passes = current_a * drive > 0
     if braking_fraction == 0.0:
-        return current_a * passes
-    return current_a * (braking_fraction + (1.0 - braking_fraction) * passes)
+        out = current_a * passes
+        return out if rail_a is None else out + rail_a * (1.0 - passes)
+    out = current_a * (braking_fraction + (1.0 - braking_fraction) * passes)
+    return out if rail_a is None else out + rail_a * ((1.0 - braking_fraction) * (1.0 - passes))
 
 
 def arm_gravity_torque_nm(xp, angle_rad, weight_moment_nm):

@@ -63,7 +63,7 @@ import numpy as np
 
 from .backend import SCALAR
 from .controller import PidGains, compliance_drive, pid_drive, symmetric_compliance_drive
-from .motor import ARM_HORIZONTAL_RAD, DryFriction, arm_gravity_torque_nm, bridge_current_a, shaft_speed_step
+from .motor import ARM_HORIZONTAL_RAD, DryFriction, arm_gravity_torque_nm, bridge_current_a, rail_current_a, shaft_speed_step
 from .params import ServoParams
 from .sensors import DelayLine
 from .setpoint import setpoint_velocity
@@ -330,7 +330,8 @@ def generic_steps(xp, plan: StepPlan, k: StepConstants, s: ModelState, count: in
         else:
             current = drive * stall_a - k_r * speed
         if bridge_braking != 1.0:  # the bridge passes current against the drive only in part (or not at all)
-            current = bridge_current_a(current, drive, bridge_braking)
+            rail = rail_current_a(xp, k_r * speed, stall_a)  # but the diodes clamp the back-EMF at the supply
+            current = bridge_current_a(current, drive, bridge_braking, rail * en if any_disabled else rail)
         applied_dv = current * eta_k_dv
         if any_ext:
             applied_dv = applied_dv + ext_dv
@@ -395,10 +396,14 @@ def fused_scalar_steps(plan: StepPlan, k: StepConstants, s: ModelState, count: i
         current = drive * stall_a - k_r * speed
         if not enabled:
             current = current * en
-        if coast:  # motor.bridge_current_a
-            current = current * (current * drive > 0)
-        elif bridge != 1.0:
-            current = current * (bridge + against * (current * drive > 0))
+        if bridge != 1.0:  # motor.bridge_current_a with motor.rail_current_a (zero with torque off: the bridge is open)
+            emf = k_r * speed
+            rail = -copysign(max(abs(emf) - stall_a, 0.0), emf) if enabled else 0.0
+            passes = current * drive > 0
+            if coast:
+                current = current * passes + rail * (1.0 - passes)
+            else:
+                current = current * (bridge + against * passes) + rail * (against * (1.0 - passes))
         applied = current * eta_k_dv
         if ext_dv:
             applied = applied + ext_dv
@@ -437,8 +442,9 @@ class _NumpyConstants:
     step2_s: np.ndarray
     #: (2, N): position units per radian, for the reference and angle rows at once.
     units_per_rad2: np.ndarray
-    #: Zeros: ``heaviside(x, zero)`` is ``(x > 0)`` as 0.0 / 1.0.
+    #: Zeros: ``heaviside(x, zero)`` is ``(x > 0)`` as 0.0 / 1.0; ones.
     zero: np.ndarray
+    one: np.ndarray
     #: Wheel mode's speed gain and the drive's lower bound.
     kv_s_rad: np.ndarray
     neg_limit: np.ndarray
@@ -470,7 +476,7 @@ class _NumpyConstants:
         return cls(
             q_rad2_s2=full(k.q_rad2_s2), two_a_rad_s2=full(k.two_a_rad_s2), half_adt_rad_s=full(k.half_adt_rad_s),
             inv_step_per_s=full(k.inv_step_per_s), adt_rad_s=full(k.adt_rad_s), neg_adt_rad_s=full(-k.adt_rad_s),
-            step_s=full(k.step_s), step2_s=np.full((2, n), k.step_s), units_per_rad2=np.full((2, n), k.inv_unit), zero=zero,
+            step_s=full(k.step_s), step2_s=np.full((2, n), k.step_s), units_per_rad2=np.full((2, n), k.inv_unit), zero=zero, one=full(1.0),
             kv_s_rad=full(k.wheel_gain_s_rad), neg_limit=-plan.limit,
             disabled=~np.asarray(plan.enabled, dtype=bool) if plan.any_disabled else None,
             emf_stall_a=np.stack([full(k.k_over_r), np.asarray(plan.stall_current_a, dtype=float)]),
@@ -537,6 +543,7 @@ def _numpy_steps(c: _NumpyConstants, p: StepPlan, buf: _Scratch, ref_angle: np.n
     neg_adt, adt, dt, dt2, zero, units_per_rad2 = c.neg_adt_rad_s, c.adt_rad_s, c.step_s, c.step2_s, c.zero, c.units_per_rad2
     kv, neg_limit, disabled = c.kv_s_rad, c.neg_limit, c.disabled
     emf_stall, eta_k_dv, bridge_share, bridge_against = c.emf_stall_a, c.eta_k_dv, c.bridge_share, c.bridge_against
+    one, maximum = c.one, np.maximum
     ext_dv, neg_weight_dv, arm_at, free = c.ext_dv_rad_s, c.neg_weight_dv_rad_s, c.arm_at_rad, c.free
     keep, strib, dts, tc = c.keep, c.strib_s2_rad2, c.stribeck_dv_rad_s, c.coulomb_dv_rad_s
     # Row views made once: indexing a row costs about as much as a small ufunc call.
@@ -545,6 +552,7 @@ def _numpy_steps(c: _NumpyConstants, p: StepPlan, buf: _Scratch, ref_angle: np.n
     vel_speed, speed_drive = vel_speed_drive[:2], vel_speed_drive[1:]
     ref_units, angle_units = in_units
     emf_product, drive_product = products
+    stall_row = emf_stall[1]
     step_angle = moves[1]
 
     def steps(kind: int, heat_rows: list, first: int, stop: int) -> None:
@@ -607,10 +615,22 @@ def _numpy_steps(c: _NumpyConstants, p: StepPlan, buf: _Scratch, ref_angle: np.n
             if bridge_share is not None:  # motor.bridge_current_a: (current * drive > 0) as 0.0 / 1.0
                 mul(cur, drive, t)
                 heaviside(t, zero, t)
+                # motor.rail_current_a, on the share the bridge blocks (zero with torque off: the bridge is open)
+                absolute(emf_product, u)
+                sub(u, stall_row, u)
+                maximum(u, zero, out=u)
+                copysign(u, emf_product, u)
+                negative(u, u)
+                if disabled is not None:
+                    mul(u, en, u)
+                sub(one, t, d)
                 if bridge_share is not zero:
+                    mul(bridge_against, d, d)
                     mul(t, bridge_against, t)
                     add(bridge_share, t, t)
                 mul(cur, t, cur)
+                mul(u, d, u)
+                add(cur, u, cur)
             mul(cur, eta_k_dv, z)
             if ext_dv is not None:
                 add(z, ext_dv, z)

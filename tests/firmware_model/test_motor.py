@@ -3,13 +3,14 @@
 import numpy as np
 import pytest
 
-from firmware_model.backend import NUMPY
+from firmware_model.backend import NUMPY, SCALAR
 from firmware_model.motor import (
     ARM_HORIZONTAL_RAD,
     DryFriction,
     arm_gravity_torque_nm,
     bridge_current_a,
     motor_current_a,
+    rail_current_a,
     shaft_speed_step,
 )
 from firmware_model.params import ServoParams
@@ -106,3 +107,27 @@ def test_coasting_motor_keeps_its_speed_where_a_shorted_one_brakes():
     assert finals[1.0] < 0.5
     assert 6.0 - 0.1 * 25 < finals[0.0] < 6.0
 
+
+
+def test_the_diodes_carry_current_only_past_the_rail():
+    """Below the supply nothing flows back through the diodes; past it, the excess over the winding, against the
+    motion (as currents: e / R and V / R)."""
+    emf, supply = np.array([0.5, 1.2, -1.5, -0.9]), np.full(4, 1.0)
+    assert np.allclose(rail_current_a(NUMPY, emf, supply), [0.0, -0.2, 0.5, 0.0])
+    assert [rail_current_a(SCALAR, float(e), 1.0) for e in emf] == pytest.approx([0.0, -0.2, 0.5, 0.0])
+
+
+@pytest.mark.parametrize("fraction", [0.0, 0.5])
+def test_a_coasting_bridge_still_brakes_a_shaft_pushed_past_its_top_speed(fraction):
+    """Driven forward while a load pushes it faster than the supply could (an overhauling load): the blocked share
+    of the braking current returns through the diodes once the back-EMF passes the supply, so the shaft settles
+    just above its top speed instead of running away."""
+    k, r, eta = P.torque_constant_nm_a, P.winding_resistance_ohm, P.gearbox_efficiency
+    volts, push_nm, drive = 9.6, 0.6, 0.5
+    angle, speed = np.zeros(1), np.array([volts / k])  # at the rail
+    for _ in range(3000):
+        current = motor_current_a(drive, volts, speed, k, r)
+        rail = rail_current_a(NUMPY, k * speed / r, np.full(1, volts / r))
+        current = bridge_current_a(current, drive, fraction, rail)
+        angle, speed = _step(angle, speed, eta * k * current + push_nm)
+    assert volts / k < speed[0] < 1.5 * volts / k
