@@ -8,7 +8,10 @@ virtual and wall-clock time.
 What it models: with torque on, in joint mode (an angle limit non-zero) the
 shaft moves toward Goal Position at Moving Speed x 0.111 rpm (0 means the
 maximum, 114 rpm, per the e-manual); in wheel mode (both angle limits 0) it
-turns endlessly at the wheel speed with bit 10 as direction.  With torque off
+turns endlessly, bit 10 the direction, at Moving Speed's share of the output
+times 114 rpm: an ideal motor, whose speed is in proportion to the output
+(so Present Speed reads the same number the physical model's does, the
+output, though Present Load reads 0).  With torque off
 it stays where it is.  What it does not model: acceleration, load, friction,
 heating (Present Load reads 0 and the temperature stays at ambient).
 """

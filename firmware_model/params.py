@@ -231,6 +231,12 @@ class ServoEffects:
             raise ValueError(f"{where}: {exc}") from exc
 
 
+#: Keys older parameter files carry that no longer mean anything, read and ignored (key -> why).
+RETIRED_KEYS = {
+    "wheel_speed_gain_s_rad": "wheel mode has no speed loop: Moving Speed sets the output (e-manual)",
+}
+
+
 @dataclass(frozen=True)
 class ServoParams:
     """One AX-12+ in SI units; every default names its source."""
@@ -270,8 +276,6 @@ class ServoParams:
     max_supply_voltage_v: float = 12.0
     #: Present Speed / Present Load update period: report figure 2.5 (9-10 samples at 100 Hz).
     sample_hold_s: float = 0.1
-    #: Wheel-mode speed loop gain, drive per rad/s of speed error: ours (fast, stable at 1 kHz).
-    wheel_speed_gain_s_rad: float = 0.3
     #: Ambient temperature, degrees C: ours (a warm room; matches KinematicModel).
     ambient_temperature_c: float = 30.0
     #: Thermal resistance node to ambient, K/W: estimate for a small motor in a plastic case.
@@ -298,7 +302,7 @@ class ServoParams:
             "gear_ratio", "winding_resistance_ohm", "torque_constant_nm_a", "gearbox_efficiency",
             "rotor_inertia_reflected_kg_m2", "stribeck_velocity_rad_s", "max_acceleration_rad_s2",
             "setpoint_eps_rad", "supply_voltage_v", "min_supply_voltage_v", "sample_hold_s",
-            "wheel_speed_gain_s_rad", "thermal_resistance_k_w", "heat_capacity_j_k", "stall_speed_rad_s",
+            "thermal_resistance_k_w", "heat_capacity_j_k", "stall_speed_rad_s",
         )
         for name in positive:
             if getattr(self, name) <= 0:
@@ -469,6 +473,7 @@ class ServoParams:
         effects = ServoEffects.from_table(table, f"{path}: [effects]")
         known = {f.name for f in fields(cls)} - {"effects"}
         effect_names = {f.name for f in fields(ServoEffects)}
+        data = {k: v for k, v in data.items() if k not in RETIRED_KEYS}
         for key, value in data.items():
             if key in effect_names:
                 raise ValueError(f"{path}: {key!r} is an effect: put it under [effects]")

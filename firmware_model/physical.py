@@ -6,7 +6,7 @@ stalls, heating and the slow Present Speed / Load of the real servo.  It
 wires the one-job modules together; each step is
 
     setpoint velocity (joint)  ->  reference and shaft move
-    ->  controller drive (joint) or speed loop (wheel)
+    ->  controller drive (joint) or Moving Speed's output (wheel)
     ->  motor current and torque  ->  friction, stick-slip: the shaft's new speed
 
 and every thermal period (10 ms) heating and the overload timer, every
@@ -31,9 +31,10 @@ the reference in units.  Goal Position is clamped to the angle limits (the firmw
 move past them; the protocol side reports the Angle Limit error).  Moving
 Speed 0 means the register's full scale, 114 rpm, which no supply reaches, so
 the servo then runs at its top speed.  Wheel mode (both angle limits 0): the
-lower ten bits of Moving Speed ask for ``N * 0.111 rpm``, bit 10 for CW; a
-speed loop with feed-forward drives it, and the position wraps through the
-dead zone.  With torque off the bridge is open and the reference follows the
+lower ten bits of Moving Speed set the output, ``N / 1023`` of full drive
+(the e-manual's 0.1 % a unit), bit 10 for CW, within Torque Limit; there is no
+speed loop, so load slows the wheel.  The position wraps through the dead
+zone.  With torque off the bridge is open and the reference follows the
 shaft, so enabling torque never jumps.
 """
 
@@ -112,6 +113,14 @@ def _per_servo(values, n: int) -> np.ndarray:
     ``broadcast_to`` costs about 10 us a call), else broadcast."""
     array = np.asarray(values)
     return array if array.shape == (n,) else np.broadcast_to(array, (n,))
+
+
+def _wheel_speed_is_the_output(regs: dict[str, np.ndarray], sensing: _Sensing | None) -> None:
+    """In wheel mode Present Speed reads the output, as Present Load does (e-manual, Present Speed: "Wheel Mode:
+    The unit is about 0.1%. For example, if it is set to 512, it means that the torque is controlled by 50% of
+    the maximum torque to the CCW direction"); in joint mode the shaft's speed.  ``regs`` is changed in place."""
+    if sensing is not None and sensing.any_wheel:
+        regs["present_speed"] = np.where(sensing.wheel, regs["present_load"], regs["present_speed"])
 
 
 def _position_raw(angle_rad: float) -> int:
@@ -348,6 +357,7 @@ class PhysicalModel:
             seen, step = self._delay_line.read()
             held_speed, held_drive = self._latches.at(step)
             regs = registers(held_speed, held_drive, self.supply_voltage_v, self._array("temperature"))
+            _wheel_speed_is_the_output(regs, self._sensing)
             changes.update(present_speed=regs["present_speed"], present_load=regs["present_load"])
         x = seen / _UNIT_RAD
         c = self._sensing
@@ -403,6 +413,7 @@ class PhysicalModel:
         regs = registers(self._array("held_speed"), self._array("held_drive"), self.supply_voltage_v,
                          self._array("temperature"))
         c = self._sensing
+        _wheel_speed_is_the_output(regs, c)
         if c is None:
             regs["alarms"] = np.zeros(self.n, dtype=np.int64)
         else:
@@ -454,15 +465,16 @@ class PhysicalModel:
             comp.ccw_margin = comp.ccw_margin + self._extra_margin_units
         if self._drive_ceiling is not None:  # the drive tops out below full whatever Torque Limit says
             comp.limit = np.minimum(comp.limit, self._drive_ceiling)
-        c_hold = p.holding_slope_nm_v
         volts = self.supply_voltage_v
-        wheel_ref = np.where(speed_raw & DIRECTION_BIT, -magnitude, magnitude)
-        wheel_ff = (c_hold * p.torque_constant_nm_a * wheel_ref + p.viscous_friction_nm_s_rad * wheel_ref
-                    + p.coulomb_friction_nm * np.sign(wheel_ref)) / (c_hold * volts)
+        # Wheel mode is output control, not speed (e-manual, Moving Speed: "In Wheel Mode, only the output control
+        # is possible, not speed ... if it is set to 512, it means the output is controlled by 50% of the maximum
+        # output"; the 2006-era RX-64 manual's Endless Turn: "no speed control function").  The 2008 report calls
+        # the mode velocity controlled, which the e-manual, the authority on what a register means, contradicts.
+        output = (speed_raw & 0x3FF) / 1023.0
         per_servo = dict(
             goal_rad=goal_raw * RAD_PER_POSITION_UNIT,
             max_speed_rad_s=np.where((speed_raw & 0x3FF) == 0, FULL_SCALE_SPEED_RAD_S, magnitude),
-            wheel_ref_rad_s=wheel_ref, wheel_ff=wheel_ff, cw_margin=comp.cw_margin, ccw_margin=comp.ccw_margin,
+            wheel_output=np.where(speed_raw & DIRECTION_BIT, -output, output), cw_margin=comp.cw_margin, ccw_margin=comp.ccw_margin,
             cw_gain=comp.cw_gain, ccw_gain=comp.ccw_gain, punch=comp.punch, limit=comp.limit,
             en=enabled.astype(float), stall_current_a=np.where(enabled, volts / p.winding_resistance_ohm, 0.0),
         )

@@ -104,7 +104,6 @@ class StepConstants:
     friction: DryFriction
     #: ``1 - b step / J`` (None: no viscous friction).
     viscous_keep: float | None
-    wheel_gain_s_rad: float
     pid: bool
     gains: PidGains
     #: Share of the braking current the H-bridge passes (:func:`~firmware_model.motor.bridge_current_a`; 1: all).
@@ -146,7 +145,7 @@ class StepConstants:
             eta_k_dv=(p.gearbox_efficiency * p.torque_constant_nm_a) * dt_j, step_over_inertia=dt_j,
             friction=DryFriction.per_step(p.static_friction_nm, p.coulomb_friction_nm, p.stribeck_velocity_rad_s, dt_j),
             viscous_keep=1.0 - p.viscous_friction_nm_s_rad * dt_j if p.viscous_friction_nm_s_rad else None,
-            wheel_gain_s_rad=p.wheel_speed_gain_s_rad, pid=controller == "pid", gains=gains,
+            pid=controller == "pid", gains=gains,
             bridge_braking=p.bridge_braking_fraction,
         )
 
@@ -162,15 +161,14 @@ class StepPlan:
     """
 
     enabled: PerServoFlag
-    #: Wheel mode (both angle limits 0): a speed loop instead of setpoint and position controller.
+    #: Wheel mode (both angle limits 0): an open-loop output instead of setpoint and position controller.
     wheel: PerServoFlag
     #: Goal Position clamped to the angle limits.
     goal_rad: PerServo
     #: The setpoint's speed limit (Moving Speed; 0 asks for the register's full scale).
     max_speed_rad_s: PerServo
-    #: Wheel mode's asked speed, signed (CCW positive), and the drive that holds it in steady state.
-    wheel_ref_rad_s: PerServo
-    wheel_ff: PerServo
+    #: Wheel mode's output, a signed fraction of full drive (CCW positive): Moving Speed's ten bits over 1023.
+    wheel_output: PerServo
     #: The compliance constants (:class:`~firmware_model.controller.CompliancePlan`): dead band in position
     #: units, drive per unit beyond it, punch and Torque Limit as fractions of full drive.
     cw_margin: PerServo
@@ -282,7 +280,7 @@ def generic_steps(xp, plan: StepPlan, k: StepConstants, s: ModelState, count: in
     stall_a = plan.stall_current_a
     cw_margin, ccw_margin, cw_gain, ccw_gain, punch, limit = (plan.cw_margin, plan.ccw_margin, plan.cw_gain,
                                                               plan.ccw_gain, plan.punch, plan.limit)
-    wheel_ff, wheel_ref, kv = plan.wheel_ff, plan.wheel_ref_rad_s, k.wheel_gain_s_rad
+    wheel_output = plan.wheel_output
     angle, speed, ref, ref_vel = s.angle, s.speed, s.ref, s.ref_vel
     drive, demand, integral, prev_error, i2_sum = s.drive, s.demand, s.integral, s.prev_error, s.current_sq_sum
     any_ext, any_arm = plan.any_ext, plan.any_arm
@@ -319,11 +317,10 @@ def generic_steps(xp, plan: StepPlan, k: StepConstants, s: ModelState, count: in
                 drive, demand = symmetric_compliance_drive(xp, error, ccw_margin, ccw_gain, punch, limit)
             else:
                 drive, demand = compliance_drive(xp, error, cw_margin, ccw_margin, cw_gain, ccw_gain, punch, limit)
-        if any_wheel:
-            wanted = wheel_ff + kv * (wheel_ref - speed)
-            wheel_drive = xp.minimum(xp.maximum(wanted, -limit), limit)
+        if any_wheel:  # the output Moving Speed asks for, within Torque Limit (no speed loop: the e-manual's)
+            wheel_drive = xp.minimum(xp.maximum(wheel_output, -limit), limit)
             drive = xp.where(wheel, wheel_drive, drive) if mixed else wheel_drive
-            demand = xp.where(wheel, xp.abs(wanted), demand) if mixed else xp.abs(wanted)
+            demand = xp.where(wheel, xp.abs(wheel_output), demand) if mixed else xp.abs(wheel_output)
         if any_disabled:  # open bridge: no drive, no current (Present Load reads 0)
             drive = drive * en
             current = (drive * stall_a - k_r * speed) * en
@@ -366,7 +363,7 @@ def fused_scalar_steps(plan: StepPlan, k: StepConstants, s: ModelState, count: i
     f = k.friction
     tc, dts, strib = f.coulomb_dv_rad_s, k.stribeck_dv_rad_s, f.stribeck_coef_s2_rad2
     goal, max_speed, enabled, en, stall_a = plan.goal_rad, plan.max_speed_rad_s, plan.enabled, plan.en, plan.stall_current_a
-    wheel, wheel_ff, wheel_ref, kv = plan.wheel, plan.wheel_ff, plan.wheel_ref_rad_s, k.wheel_gain_s_rad
+    wheel, wheel_output = plan.wheel, plan.wheel_output
     margin, gain, punch, limit = plan.ccw_margin, plan.ccw_gain, plan.punch, plan.limit
     ext_dv = s.ext_nm * k.step_over_inertia if plan.any_ext else 0.0
     weight_dv = s.weight_nm * k.step_over_inertia if plan.any_arm else 0.0
@@ -374,10 +371,9 @@ def fused_scalar_steps(plan: StepPlan, k: StepConstants, s: ModelState, count: i
     angle, speed, ref, ref_vel, i2_sum = s.angle, s.speed, s.ref, s.ref_vel, s.current_sq_sum
     drive = demand = 0.0
     for _ in range(count):
-        if wheel:  # speed loop with feed-forward
+        if wheel:  # the output Moving Speed asks for, within Torque Limit
             angle = angle + speed * dt
-            wanted = wheel_ff + kv * (wheel_ref - speed)
-            drive, demand = min(max(wanted, -limit), limit) * en, abs(wanted)
+            drive, demand = min(max(wheel_output, -limit), limit) * en, abs(wheel_output)
         else:
             error = goal - ref  # setpoint.setpoint_velocity
             d = abs(error)
@@ -445,8 +441,7 @@ class _NumpyConstants:
     #: Zeros: ``heaviside(x, zero)`` is ``(x > 0)`` as 0.0 / 1.0; ones.
     zero: np.ndarray
     one: np.ndarray
-    #: Wheel mode's speed gain and the drive's lower bound.
-    kv_s_rad: np.ndarray
+    #: The drive's lower bound, minus Torque Limit.
     neg_limit: np.ndarray
     #: Where torque is off (None: on everywhere).
     disabled: np.ndarray | None
@@ -476,8 +471,8 @@ class _NumpyConstants:
         return cls(
             q_rad2_s2=full(k.q_rad2_s2), two_a_rad_s2=full(k.two_a_rad_s2), half_adt_rad_s=full(k.half_adt_rad_s),
             inv_step_per_s=full(k.inv_step_per_s), adt_rad_s=full(k.adt_rad_s), neg_adt_rad_s=full(-k.adt_rad_s),
-            step_s=full(k.step_s), step2_s=np.full((2, n), k.step_s), units_per_rad2=np.full((2, n), k.inv_unit), zero=zero, one=full(1.0),
-            kv_s_rad=full(k.wheel_gain_s_rad), neg_limit=-plan.limit,
+            step_s=full(k.step_s), step2_s=np.full((2, n), k.step_s), units_per_rad2=np.full((2, n), k.inv_unit), zero=zero,
+            one=full(1.0), neg_limit=-plan.limit,
             disabled=~np.asarray(plan.enabled, dtype=bool) if plan.any_disabled else None,
             emf_stall_a=np.stack([full(k.k_over_r), np.asarray(plan.stall_current_a, dtype=float)]),
             eta_k_dv=full(k.eta_k_dv),
@@ -538,10 +533,10 @@ def _numpy_steps(c: _NumpyConstants, p: StepPlan, buf: _Scratch, ref_angle: np.n
     minimum, copysign, heaviside, copyto, negative = np.minimum, np.copysign, np.heaviside, np.copyto, np.negative
     e, d, t, u, err, z, in_units, moves, products = buf.e, buf.d, buf.t, buf.u, buf.err, buf.z, buf.in_units, buf.moves, buf.products
     goal, max_speed, margin, gain, punch, limit, en = p.goal_rad, p.max_speed_rad_s, p.ccw_margin, p.ccw_gain, p.punch, p.limit, p.en
-    wheel_ref, wheel_ff, wheel = p.wheel_ref_rad_s, p.wheel_ff, p.any_wheel  # fusable(): all in wheel mode or none
+    wheel_output, wheel = p.wheel_output, p.any_wheel  # fusable(): all in wheel mode or none
     q, two_a, half_adt, inv_dt = c.q_rad2_s2, c.two_a_rad_s2, c.half_adt_rad_s, c.inv_step_per_s
     neg_adt, adt, dt, dt2, zero, units_per_rad2 = c.neg_adt_rad_s, c.adt_rad_s, c.step_s, c.step2_s, c.zero, c.units_per_rad2
-    kv, neg_limit, disabled = c.kv_s_rad, c.neg_limit, c.disabled
+    neg_limit, disabled = c.neg_limit, c.disabled
     emf_stall, eta_k_dv, bridge_share, bridge_against = c.emf_stall_a, c.eta_k_dv, c.bridge_share, c.bridge_against
     one, maximum = c.one, np.maximum
     ext_dv, neg_weight_dv, arm_at, free = c.ext_dv_rad_s, c.neg_weight_dv_rad_s, c.arm_at_rad, c.free
@@ -558,14 +553,11 @@ def _numpy_steps(c: _NumpyConstants, p: StepPlan, buf: _Scratch, ref_angle: np.n
     def steps(kind: int, heat_rows: list, first: int, stop: int) -> None:
         for row in range(first, stop):
             cur = heat_rows[row]
-            if wheel:  # the generic loop's speed loop with feed-forward
+            if wheel:  # the generic loop's open-loop output
                 mul(speed, dt, step_angle)
                 add(angle, step_angle, angle)
-                sub(wheel_ref, speed, t)
-                mul(kv, t, t)
-                add(wheel_ff, t, t)
-                _clip(t, neg_limit, limit, drive)
-                absolute(t, demand)
+                _clip(wheel_output, neg_limit, limit, drive)
+                absolute(wheel_output, demand)
             else:
                 if kind == _REF_RESTING:  # only the shaft moves
                     mul(speed, dt, step_angle)

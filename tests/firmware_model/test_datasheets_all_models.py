@@ -8,11 +8,8 @@ ROBOTIS e-manual); :meth:`ServoParams.from_datasheet` turns them into motor cons
   progress (its speed after 1 s is not above zero), found over 61 shafts at once loaded with
   0.85 .. 1.15 times the data-sheet figure (0.5 % steps; more would back-drive the shaft past static
   friction, which at the AX-12 share is 10 % of the stall torque);
-* no-load speed: the settled speed in wheel mode at full Moving Speed.  The AX-12 firmware's wheel
-  loop asks for at most 1023 x 0.111 rpm (114 rpm); a model whose no-load speed is above about 108
-  rpm (XL-320, XL330-M077) cannot be driven flat out that way, so its speed at full drive is found from
-  the drive the loop needs at two lower speeds (the motor line is straight: drive = (c k w + t_c) / c V),
-  extrapolated to full drive.
+* no-load speed: the settled speed in wheel mode at full Moving Speed, which is full output (the
+  AX-12's wheel mode sets the output, not a speed).
 
 Tolerance 5 %: the derivation inverts the same equations the model steps, so this checks that the
 simulated servo (controller, bridge, friction, stepping) delivers what the closed form promises; what
@@ -76,14 +73,11 @@ def _wheel(params: ServoParams, volts: float, setting: int, make_commands) -> tu
     return float(servo.speed_rad_s[0]), float(servo.drive[0])
 
 
-def measured_no_load_speed_rad_s(params: ServoParams, volts: float, make_commands) -> tuple[float, str]:
-    """Settled wheel-mode speed at full drive; extrapolated from two lower speeds where the register cannot ask for it."""
+def measured_no_load_speed_rad_s(params: ServoParams, volts: float, make_commands) -> float:
+    """Settled wheel-mode speed at full Moving Speed: full output."""
     speed, drive = _wheel(params, volts, 1023, make_commands)
-    if drive > 0.999:
-        return speed, "full drive"
-    assert speed == pytest.approx(FULL_SCALE_SPEED_RAD_S, rel=0.01)  # the loop holds the register's top speed
-    (w1, d1), (w2, d2) = _wheel(params, volts, 400, make_commands), _wheel(params, volts, 900, make_commands)
-    return w1 + (1.0 - d1) * (w2 - w1) / (d2 - d1), "extrapolated"
+    assert drive == 1.0, "Moving Speed 1023 in wheel mode is full output"
+    return speed
 
 
 CASES = [(key, rating.voltage_v) for key in model_names() for rating in model(key).physical.ratings]
@@ -94,9 +88,9 @@ def test_stall_torque_and_no_load_speed_match_the_data_sheet(key, volts, command
     """Stall torque and no-load speed at each rated voltage within 5 % of the model's data sheet."""
     params, rating = _params(key, volts)
     stall = measured_stall_torque_nm(params, volts, rating.stall_torque_nm, commands)
-    speed, how = measured_no_load_speed_rad_s(params, volts, commands)
+    speed = measured_no_load_speed_rad_s(params, volts, commands)
     assert stall == pytest.approx(rating.stall_torque_nm, rel=TOLERANCE), key
-    assert speed == pytest.approx(rating.no_load_speed_rad_s, rel=TOLERANCE), (key, how)
+    assert speed == pytest.approx(rating.no_load_speed_rad_s, rel=TOLERANCE), key
 
 
 #: Where one parameter set cannot follow the sheet's stall torque to another voltage (measured miss in
@@ -127,8 +121,8 @@ def test_one_parameter_set_predicts_the_no_load_speed_at_the_other_rated_voltage
     """Fitted at the recommended (or first) rating only, the model's no-load speed at each other rated voltage
     is within 7 % of the sheet (measured: within 3.4 % for every model)."""
     params, _ = _params(key, None)
-    speed, how = measured_no_load_speed_rad_s(params, volts, commands)
-    assert speed == pytest.approx(model(key).physical.rating_at(volts).no_load_speed_rad_s, rel=PREDICTION_TOLERANCE), how
+    speed = measured_no_load_speed_rad_s(params, volts, commands)
+    assert speed == pytest.approx(model(key).physical.rating_at(volts).no_load_speed_rad_s, rel=PREDICTION_TOLERANCE), key
 
 
 @pytest.mark.parametrize(

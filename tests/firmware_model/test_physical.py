@@ -8,7 +8,6 @@ import pytest
 from firmware_model.interface import ServoModel
 from firmware_model.params import ServoParams
 from firmware_model.physical import PhysicalModel
-from firmware_model.units import signed_raw_to_value
 
 
 def test_is_a_servo_model():
@@ -19,22 +18,45 @@ def test_is_a_servo_model():
 
 
 def test_wheel_mode_turns_endlessly_and_wraps(commands):
-    """Both angle limits 0: Moving Speed 400 CCW turns at 400 x 0.111 rpm, the position wraps 1023 -> 0."""
+    """Both angle limits 0: Moving Speed 400 CCW drives at 400/1023 of full output (the e-manual's wheel mode:
+    output control, not speed), so the shaft settles where that share of the supply holds it against its
+    friction, and the position wraps 1023 -> 0."""
     model = PhysicalModel(1)
+    p = model.params
     cmds = commands(cw_angle_limit=0, ccw_angle_limit=0, moving_speed=400)
     positions = [model.advance(i * 0.005, cmds).present_position[0] for i in range(1, 601)]
-    assert model.speed_rad_s[0] == pytest.approx(400 * 0.111 * 2 * np.pi / 60, rel=0.02)
+    assert model.drive[0] == pytest.approx(400 / 1023)
+    assert model.speed_rad_s[0] == pytest.approx(p.top_speed_rad_s(400 / 1023 * p.supply_voltage_v), rel=0.02)
     wraps = sum(1 for a, b in zip(positions, positions[1:]) if b < a - 500)
-    assert wraps >= 1  # 4.65 rad/s for 3 s is 2.2 turns
-    assert signed_raw_to_value(model.sense().present_speed)[0] > 0
+    assert wraps >= 1  # 2.5 rad/s for 3 s is 1.2 turns
+    # Present Speed reads the output in wheel mode, as Present Load does (the e-manual's 0.1 % a unit)
+    sensed = model.sense()
+    assert sensed.present_speed[0] == sensed.present_load[0] == 400
 
 
 def test_wheel_mode_direction_bit_turns_cw(commands):
     """Bit 10 of Moving Speed turns CW: Present Speed and Load carry the CW bit."""
     model = PhysicalModel(1)
-    sensed = model.advance(0.5, commands(cw_angle_limit=0, ccw_angle_limit=0, moving_speed=1024 | 300))
-    assert model.speed_rad_s[0] == pytest.approx(-300 * 0.111 * 2 * np.pi / 60, rel=0.02)
-    assert sensed.present_speed[0] & 1024 and sensed.present_load[0] & 1024
+    sensed = model.advance(0.5, commands(cw_angle_limit=0, ccw_angle_limit=0, moving_speed=1024 | 600))
+    assert model.drive[0] == pytest.approx(-600 / 1023)
+    assert model.speed_rad_s[0] < -1.0
+    assert sensed.present_speed[0] == sensed.present_load[0] == 1024 | 600
+
+
+def test_a_load_slows_a_wheel_and_torque_limit_caps_its_output(commands):
+    """No speed loop holds a wheel's speed: a torque against it slows it at the same output, and Torque Limit
+    below the asked output caps the output."""
+    free, loaded = PhysicalModel(1), PhysicalModel(1)
+    loaded.set_external_torque(np.array([-0.3]))
+    cmds = commands(cw_angle_limit=0, ccw_angle_limit=0, moving_speed=800)
+    for model in (free, loaded):
+        model.advance(1.0, cmds)
+        assert model.drive[0] == pytest.approx(800 / 1023)
+    assert loaded.speed_rad_s[0] < 0.8 * free.speed_rad_s[0]
+    capped = PhysicalModel(1)
+    capped.advance(1.0, commands(cw_angle_limit=0, ccw_angle_limit=0, moving_speed=800, torque_limit=400))
+    assert capped.drive[0] == pytest.approx(400 / 1023)
+    assert capped.speed_rad_s[0] < free.speed_rad_s[0]
 
 
 def test_same_result_whatever_the_advance_chunks(commands):

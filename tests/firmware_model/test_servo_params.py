@@ -55,6 +55,13 @@ def test_toml_round_trip(tmp_path):
     assert ServoParams.from_toml(path) == p
 
 
+def test_a_retired_key_of_an_older_file_is_read_and_ignored(tmp_path):
+    """Files written before wheel mode lost its speed loop carry its gain: they still load, the key ignored."""
+    path = tmp_path / "old.toml"
+    path.write_text("supply_voltage_v = 11.0\nwheel_speed_gain_s_rad = 0.3\n", encoding="utf-8")
+    assert ServoParams.from_toml(path) == ServoParams(supply_voltage_v=11.0)
+
+
 def test_toml_partial_file_keeps_defaults(tmp_path):
     """A file with a few keys overrides only those."""
     path = tmp_path / "fit.toml"

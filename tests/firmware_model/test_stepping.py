@@ -27,12 +27,14 @@ LOADS = {
 
 def _scenario(n: int, make_commands, wheel: bool) -> list[tuple[float, object]]:
     pick = lambda values: values[:n]  # noqa: E731
-    if wheel:  # both angle limits 0; Moving Speed's bit 10 turns CW
+    if wheel:  # both angle limits 0; Moving Speed sets the output, its bit 10 turns CW
         spin = dict(cw_angle_limit=0, ccw_angle_limit=0)
         return [
-            (0.3, make_commands(n, moving_speed=pick([300, 1024 + 200, 0]), **spin)),
+            # long enough for an open-loop wheel to settle to the bit (about 0.8 s): the kernels' cruise shortcut
+            (1.2, make_commands(n, moving_speed=pick([300, 1024 + 200, 0]), **spin)),
             (0.2, make_commands(n, moving_speed=pick([1024 + 500, 100, 700]), torque_enable=pick([0, 1, 0]), **spin)),
-            (0.3, make_commands(n, moving_speed=pick([1023, 0, 50]), torque_limit=pick([300, 1023, 600]), **spin)),
+            # the first turning CW against its load, so that with no output it stops and holds (0.1 < 0.13 N m static)
+            (0.3, make_commands(n, moving_speed=pick([1024 + 1023, 0, 50]), torque_limit=pick([300, 1023, 600]), **spin)),
             (0.6, make_commands(n, moving_speed=0, **spin)),  # long enough to stop
         ]
     return [
@@ -162,7 +164,7 @@ def test_fixed_point_shortcuts_run_in_the_scenarios_above(commands, kernels):
 
 def test_fused_kernel_equals_the_generic_loop_through_wraps_while_cruising(commands, kernels):
     """Wheels cruising turn after turn: each wrap (the thermal event rebinds the angle) lands mid-cruise."""
-    spin = commands(3, cw_angle_limit=0, ccw_angle_limit=0, moving_speed=[1023, 1024 + 800, 600])
+    spin = commands(3, cw_angle_limit=0, ccw_angle_limit=0, moving_speed=[1023, 1024 + 1000, 950])
     models = [PhysicalModel(3, fused=flag) for flag in (True, False)]
     turned_rad = np.zeros(3)
     for i in range(1, 2501):
