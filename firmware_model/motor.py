@@ -24,6 +24,10 @@ for the constants and their derivation):
   drive it generates more than the supply, and the diodes then conduct
   whatever the duty (:func:`rail_current_a`), so an overhauling load (a
   wheel pushed downhill, an arm falling) brakes there instead of running away.
+  The step kernels take this term only with such a load on (an external
+  torque or an arm; without one the drive cannot turn a shaft past its rail,
+  and the term cost the physics 6-14 % of its speed for zeros): a
+  supply lowered under a fast shaft is the one case left unbraked.
 * Friction: static ``t_s`` at rest; sliding ``sign(w) (t_c + (t_s - t_c)
   exp(-(w / v_s)**2)) + b w`` (Coulomb, Stribeck, viscous).
 * Load: the reflected rotor inertia plus the load's, an external torque (set

@@ -284,6 +284,7 @@ def generic_steps(xp, plan: StepPlan, k: StepConstants, s: ModelState, count: in
     angle, speed, ref, ref_vel = s.angle, s.speed, s.ref, s.ref_vel
     drive, demand, integral, prev_error, i2_sum = s.drive, s.demand, s.integral, s.prev_error, s.current_sq_sum
     any_ext, any_arm = plan.any_ext, plan.any_arm
+    overhaul = any_ext or any_arm  # a load that can turn a shaft past its rail (motor.rail_current_a)
     ext_dv = s.ext_nm * k.step_over_inertia if any_ext else None
     weight_dv = s.weight_nm * k.step_over_inertia if any_arm else None
     free, any_blocked = 1.0 - s.blocked, plan.any_blocked
@@ -327,8 +328,11 @@ def generic_steps(xp, plan: StepPlan, k: StepConstants, s: ModelState, count: in
         else:
             current = drive * stall_a - k_r * speed
         if bridge_braking != 1.0:  # the bridge passes current against the drive only in part (or not at all)
-            rail = rail_current_a(xp, k_r * speed, stall_a)  # but the diodes clamp the back-EMF at the supply
-            current = bridge_current_a(current, drive, bridge_braking, rail * en if any_disabled else rail)
+            if overhaul:  # but the diodes clamp the back-EMF at the supply, which only a load can drive a shaft past
+                rail = rail_current_a(xp, k_r * speed, stall_a)
+                current = bridge_current_a(current, drive, bridge_braking, rail * en if any_disabled else rail)
+            else:
+                current = bridge_current_a(current, drive, bridge_braking)
         applied_dv = current * eta_k_dv
         if any_ext:
             applied_dv = applied_dv + ext_dv
@@ -367,6 +371,7 @@ def fused_scalar_steps(plan: StepPlan, k: StepConstants, s: ModelState, count: i
     margin, gain, punch, limit = plan.ccw_margin, plan.ccw_gain, plan.punch, plan.limit
     ext_dv = s.ext_nm * k.step_over_inertia if plan.any_ext else 0.0
     weight_dv = s.weight_nm * k.step_over_inertia if plan.any_arm else 0.0
+    overhaul = plan.any_ext or plan.any_arm  # as generic_steps
     blocked = plan.any_blocked
     angle, speed, ref, ref_vel, i2_sum = s.angle, s.speed, s.ref, s.ref_vel, s.current_sq_sum
     drive = demand = 0.0
@@ -393,13 +398,18 @@ def fused_scalar_steps(plan: StepPlan, k: StepConstants, s: ModelState, count: i
         if not enabled:
             current = current * en
         if bridge != 1.0:  # motor.bridge_current_a with motor.rail_current_a (zero with torque off: the bridge is open)
-            emf = k_r * speed
-            rail = -copysign(max(abs(emf) - stall_a, 0.0), emf) if enabled else 0.0
             passes = current * drive > 0
-            if coast:
-                current = current * passes + rail * (1.0 - passes)
+            if overhaul and enabled and abs(k_r * speed) > stall_a:  # past the rail (a load did it): else a zero term
+                emf = k_r * speed
+                rail = -copysign(abs(emf) - stall_a, emf)
+                if coast:
+                    current = current * passes + rail * (1.0 - passes)
+                else:
+                    current = current * (bridge + against * passes) + rail * (against * (1.0 - passes))
+            elif coast:
+                current = current * passes
             else:
-                current = current * (bridge + against * passes) + rail * (against * (1.0 - passes))
+                current = current * (bridge + against * passes)
         applied = current * eta_k_dv
         if ext_dv:
             applied = applied + ext_dv
@@ -548,6 +558,7 @@ def _numpy_steps(c: _NumpyConstants, p: StepPlan, buf: _Scratch, ref_angle: np.n
     ref_units, angle_units = in_units
     emf_product, drive_product = products
     stall_row = emf_stall[1]
+    overhaul = ext_dv is not None or neg_weight_dv is not None  # as generic_steps
     step_angle = moves[1]
 
     def steps(kind: int, heat_rows: list, first: int, stop: int) -> None:
@@ -607,22 +618,26 @@ def _numpy_steps(c: _NumpyConstants, p: StepPlan, buf: _Scratch, ref_angle: np.n
             if bridge_share is not None:  # motor.bridge_current_a: (current * drive > 0) as 0.0 / 1.0
                 mul(cur, drive, t)
                 heaviside(t, zero, t)
-                # motor.rail_current_a, on the share the bridge blocks (zero with torque off: the bridge is open)
-                absolute(emf_product, u)
-                sub(u, stall_row, u)
-                maximum(u, zero, out=u)
-                copysign(u, emf_product, u)
-                negative(u, u)
-                if disabled is not None:
-                    mul(u, en, u)
-                sub(one, t, d)
+                # motor.rail_current_a, on the share the bridge blocks (zero with torque off: the bridge is open),
+                # as generic_steps: with a load on that can turn a shaft past its rail
+                if overhaul:
+                    absolute(emf_product, u)
+                    sub(u, stall_row, u)
+                    maximum(u, zero, out=u)
+                    copysign(u, emf_product, u)
+                    negative(u, u)
+                    if disabled is not None:
+                        mul(u, en, u)
+                    sub(one, t, d)
+                    if bridge_share is not zero:
+                        mul(bridge_against, d, d)
                 if bridge_share is not zero:
-                    mul(bridge_against, d, d)
                     mul(t, bridge_against, t)
                     add(bridge_share, t, t)
                 mul(cur, t, cur)
-                mul(u, d, u)
-                add(cur, u, cur)
+                if overhaul:
+                    mul(u, d, u)
+                    add(cur, u, cur)
             mul(cur, eta_k_dv, z)
             if ext_dv is not None:
                 add(z, ext_dv, z)

@@ -233,12 +233,15 @@ def simulate(schedule: Schedule, params: ServoParams, knobs: dict[str, np.ndarra
         current = drive * volts_r - k_r * speed
         if bridge_share is not None:  # motor.bridge_current_a, as generic_steps: the H-bridge's share of braking
             passes = heaviside(current * drive, zero)
-            emf = k_r * speed  # motor.rail_current_a: the diodes clamp the back-EMF at the supply, on the blocked share
-            rail = -np.copysign(maximum(np.abs(emf) - volts_r, 0.0), emf)
-            if bridge_share is zero:
-                current = current * passes + rail * (1.0 - passes)
+            if ext_dv is not None or any_arm:  # motor.rail_current_a, as generic_steps: with a load that can overhaul
+                emf = k_r * speed
+                rail = -np.copysign(maximum(np.abs(emf) - volts_r, 0.0), emf)
+                if bridge_share is zero:
+                    current = current * passes + rail * (1.0 - passes)
+                else:
+                    current = current * (bridge_share + bridge_against * passes) + rail * (bridge_against * (1.0 - passes))
             else:
-                current = current * (bridge_share + bridge_against * passes) + rail * (bridge_against * (1.0 - passes))
+                current = current * (passes if bridge_share is zero else bridge_share + bridge_against * passes)
         applied_dv = current * eta_k_dv
         if ext_dv is not None:
             applied_dv = applied_dv + ext_dv
