@@ -59,6 +59,22 @@ def test_a_load_slows_a_wheel_and_torque_limit_caps_its_output(commands):
     assert capped.speed_rad_s[0] < free.speed_rad_s[0]
 
 
+def test_a_wheel_a_load_pushes_past_its_top_speed_settles_there(commands):
+    """A wheel at a fifth of the output with a torque turning it the same way, well above its friction: the
+    coasting bridge passes no braking current, but past the supply the diodes do, so the wheel settles a little
+    above its top speed instead of running away."""
+    model = PhysicalModel(1)
+    p = model.params
+    model.set_external_torque(np.array([0.5]))
+    cmds = commands(cw_angle_limit=0, ccw_angle_limit=0, moving_speed=200)
+    model.advance(3.0, cmds)
+    settled = float(model.speed_rad_s[0])
+    model.advance(4.0, cmds)
+    top = p.supply_voltage_v / p.torque_constant_nm_a
+    assert float(model.speed_rad_s[0]) == pytest.approx(settled, rel=1e-3)
+    assert top < settled < 1.5 * top
+
+
 def test_same_result_whatever_the_advance_chunks(commands):
     """Deterministic fixed step: 1 ms, 7 ms or one 0.5 s advance give identical states."""
     cmds = commands(goal_position=800)
