@@ -399,8 +399,7 @@ def fused_scalar_steps(plan: StepPlan, k: StepConstants, s: ModelState, count: i
             current = current * en
         if bridge != 1.0:  # motor.bridge_current_a with motor.rail_current_a (zero with torque off: the bridge is open)
             passes = current * drive > 0
-            if overhaul and enabled and abs(k_r * speed) > stall_a:  # past the rail (a load did it): else a zero term
-                emf = k_r * speed
+            if overhaul and enabled and abs(emf := k_r * speed) > stall_a:  # past the rail (a load did it): else a zero
                 rail = -copysign(abs(emf) - stall_a, emf)
                 if coast:
                     current = current * passes + rail * (1.0 - passes)

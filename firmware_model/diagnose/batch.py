@@ -32,7 +32,7 @@ import numpy as np
 from ..backend import SCALAR
 from ..controller import compliance_plan
 from ..interface import POWER_UP
-from ..motor import DryFriction, arm_gravity_torque_nm
+from ..motor import DryFriction, arm_gravity_torque_nm, rail_current_a
 from ..params import ServoParams
 from ..setpoint import apply_dead_zone, setpoint_velocity
 from ..stepping import _clip as clip
@@ -234,8 +234,7 @@ def simulate(schedule: Schedule, params: ServoParams, knobs: dict[str, np.ndarra
         if bridge_share is not None:  # motor.bridge_current_a, as generic_steps: the H-bridge's share of braking
             passes = heaviside(current * drive, zero)
             if ext_dv is not None or any_arm:  # motor.rail_current_a, as generic_steps: with a load that can overhaul
-                emf = k_r * speed
-                rail = -np.copysign(maximum(np.abs(emf) - volts_r, 0.0), emf)
+                rail = rail_current_a(np, k_r * speed, volts_r)
                 if bridge_share is zero:
                     current = current * passes + rail * (1.0 - passes)
                 else:
