@@ -21,9 +21,8 @@ import pypot.dynamixel as pd
 import pytest
 from pypot.dynamixel.error import BaseErrorHandler
 
-#: After a write to the EEPROM area: pypot's own set-up's wait.  Four bytes at 6 ms each would do on a servo,
-#: but a starved emulator reads a write late and its deaf spell runs from then (a 0.1 s wait lost the next Sync
-#: Write once, on a loaded 2-core machine).
+#: After a write to the EEPROM area: pypot's own set-up's wait.  Four bytes at 6 ms each would do on a servo; the
+#: emulator times the deaf spell from when it reads the write, which a loaded machine may delay.
 EEPROM_SETTLE_S = 0.5
 #: After a write that gets no reply (every pypot setter is a Sync Write): pypot empties the port's output before
 #: its next packet, and on a pty the kernel discards a packet the emulator has not read yet (about one in three
