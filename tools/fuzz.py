@@ -295,8 +295,28 @@ class Oracle:
 
 
 # -- one case ---------------------------------------------------------------------------
+class Reproducible:
+    """A case as a JSON reproducer (for ``--replay FILE``): its options as they are, its inputs as
+    ``[hex bytes, pause before, physics step before]``; shared by both fuzzers' cases."""
+
+    inputs: list[tuple[bytes, float, float]]
+
+    def to_json(self) -> str:
+        """The reproducer's text."""
+        document = {k: v for k, v in self.__dict__.items() if k != "inputs"}
+        document["inputs"] = [[data.hex(), pause, dt] for data, pause, dt in self.inputs]
+        return json.dumps(document)
+
+    @classmethod
+    def from_json(cls, text: str):
+        """Read a reproducer written by :meth:`to_json`."""
+        document = json.loads(text)
+        inputs = [(bytes.fromhex(h), float(p), float(d)) for h, p, d in document.pop("inputs")]
+        return cls(**document, inputs=inputs)
+
+
 @dataclass
-class Case:
+class Case(Reproducible):
     """Options of the bus and the inputs fed to it: (bytes, pause before, physics step before)."""
 
     profile: str = "ax12a"
@@ -310,19 +330,6 @@ class Case:
     eeprom_busy_s_per_byte: float = 0.0
     line_bps: float | None = None
     inputs: list[tuple[bytes, float, float]] = field(default_factory=list)
-
-    def to_json(self) -> str:
-        """A reproducer: ``python tools/fuzz.py --replay FILE``."""
-        document = {k: v for k, v in self.__dict__.items() if k != "inputs"}
-        document["inputs"] = [[data.hex(), pause, dt] for data, pause, dt in self.inputs]
-        return json.dumps(document)
-
-    @classmethod
-    def from_json(cls, text: str) -> "Case":
-        """Read a reproducer written by :meth:`to_json`."""
-        document = json.loads(text)
-        inputs = [(bytes.fromhex(h), float(p), float(d)) for h, p, d in document.pop("inputs")]
-        return cls(**document, inputs=inputs)
 
 
 def _parse_status(reply: bytes) -> tuple[int, int, bytes]:

@@ -78,7 +78,6 @@ import collections
 import dataclasses
 import importlib.util
 import io
-import json
 import sys
 import time
 from dataclasses import dataclass, field
@@ -683,26 +682,13 @@ class Oracle2:
 
 # -- one case ---------------------------------------------------------------------------
 @dataclass
-class Case2:
+class Case2(fuzz1.Reproducible):
     """The bus and the inputs fed to it: (bytes, pause before, physics step before)."""
 
     bus: str = "2.0"
     reply_on_crc_error: bool = True
     line_bps: float | None = None
     inputs: list[tuple[bytes, float, float]] = field(default_factory=list)
-
-    def to_json(self) -> str:
-        """A reproducer: ``python tools/fuzz2.py --replay FILE``."""
-        document = {k: v for k, v in self.__dict__.items() if k != "inputs"}
-        document["inputs"] = [[data.hex(), pause, dt] for data, pause, dt in self.inputs]
-        return json.dumps(document)
-
-    @classmethod
-    def from_json(cls, text: str) -> "Case2":
-        """Read a reproducer written by :meth:`to_json`."""
-        document = json.loads(text)
-        inputs = [(bytes.fromhex(h), float(p), float(d)) for h, p, d in document.pop("inputs")]
-        return cls(**document, inputs=inputs)
 
 
 def build_bus(case: Case2) -> tuple[Any, Bus2, Bus | None, VirtualClock]:
