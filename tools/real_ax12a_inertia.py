@@ -31,7 +31,9 @@ numbers that tell them apart, per AX-12A recording:
      unit either way, decided by friction and play as much as by inertia) weighs a hundred
      rows, are left out.  Its 95 % region (cost rise times ``n_eff / cost`` below the
      chi-squared quantile, as :func:`firmware_model.diagnose.verdict.grid_profile` reads a
-     grid) says what the move itself pins down.
+     grid) says what the move itself pins down, and its BIC gain over no extra inertia
+     (:func:`firmware_model.diagnose.verdict.delta_bic`, one parameter, the best point's sample
+     count) whether the move alone carries enough to name it.
 
 4. **The return from the peak, model-free.**  How long the step takes to fall through
    :data:`RETURN_LEVELS_UNITS` after its peak (interpolated between rows; both levels lie below
@@ -80,6 +82,7 @@ from firmware_model.diagnose.metrics import effective_count, robust_cost  # noqa
 from firmware_model.diagnose.nuisance import fit_onsets  # noqa: E402
 from firmware_model.diagnose.search import diagnose  # noqa: E402
 from firmware_model.diagnose.selection import Selection  # noqa: E402
+from firmware_model.diagnose.verdict import BIC_MARGIN, delta_bic  # noqa: E402
 from firmware_model.diagnose.wizard import read_wizard  # noqa: E402
 from firmware_model.params import ServoEffects, ServoParams  # noqa: E402
 
@@ -202,8 +205,10 @@ def profile(params: ServoParams, path: Path, goal: int) -> dict:
     b = int(np.argmin(move_cost))
     scale = moving[b][1] / move_cost[b]
     inside = EXTRA_GRID_KG_M2[(move_cost - move_cost[b]) * scale <= chi2.ppf(LEVEL, 1)]
+    none = int(np.argmin(np.abs(EXTRA_GRID_KG_M2)))
     return {"fixed": np.array(fixed), "refit": np.array(refit), "move": move_cost, "move_rows": int(move.sum()),
-            "move_best": float(EXTRA_GRID_KG_M2[b]), "move_region": (float(inside.min()), float(inside.max()))}
+            "move_best": float(EXTRA_GRID_KG_M2[b]), "move_region": (float(inside.min()), float(inside.max())),
+            "move_dbic": float(delta_bic(1, move_cost[none], move_cost[b], moving[b][1]))}
 
 
 def synthetic_trace(params: ServoParams, path: Path, goal: int, extra_kg_m2: float, sigma_units: float, seed: int):
@@ -306,7 +311,8 @@ def run(data: Path, goal: int, joint: bool = False, synthetic: bool = False) -> 
         lo, hi = p["move_region"]
         print(f"  move rows: best {1e3 * p['move_best']:+.2f}e-3, {100 * LEVEL:.0f} % region {1e3 * lo:+.2f}..{1e3 * hi:+.2f}e-3 "
               f"({'holds' if lo <= r.load_kg_m2 <= hi else 'excludes'} the bar, "
-              f"{'holds' if lo <= 0.0 <= hi else 'excludes'} none)")
+              f"{'holds' if lo <= 0.0 <= hi else 'excludes'} none); BIC gain over none {p['move_dbic']:.1f} "
+              f"(the workflow names above {BIC_MARGIN:g})")
     if joint:
         run_joint(data, goal)
     if synthetic:

@@ -35,18 +35,34 @@ def test_the_twin_read_like_the_wizard_peaks_where_the_loaded_steps_peak(twin):
         assert lo - 1 <= measured.pos.max() <= hi + 1, (rec.file, measured.pos.max(), lo, hi)
 
 
-def test_refitting_the_goal_write_never_costs_more_than_holding_it(twin):
-    """The write time is a nuisance: re-fitted at each inertia it can only lower the cost (a single change owns
-    every row after its window), and it lowers it most where inertia delays the start."""
+@pytest.fixture(scope="module")
+def load3(twin):
+    """LOAD3_1's recording entry and tool.profile of it from the twin, made once."""
     rec = next(r for r in real.RECORDINGS if r.file == "AX12A_LOAD3_1.csv")
     if not (DATA / rec.file).exists():
         pytest.skip(f"{rec.file} not found in {DATA}")
-    p = tool.profile(twin, DATA / rec.file, 500)
+    return rec, tool.profile(twin, DATA / rec.file, 500)
+
+
+def test_refitting_the_goal_write_never_costs_more_than_holding_it(load3):
+    """The write time is a nuisance: re-fitted at each inertia it can only lower the cost (a single change owns
+    every row after its window), and it lowers it most where inertia delays the start."""
+    rec, p = load3
     assert np.all(p["refit"] <= p["fixed"] + 1e-6), (p["refit"], p["fixed"])
     at_bar = int(np.argmin(np.abs(tool.EXTRA_GRID_KG_M2 - rec.load_kg_m2)))
     assert p["refit"][at_bar] < 0.8 * p["fixed"][at_bar]
     lo, hi = p["move_region"]
     assert lo <= p["move_best"] <= hi
+
+
+def test_the_move_rows_alone_hold_the_bar_but_too_little_to_name_it(load3):
+    """On LOAD3_1's move rows (first movement to 120 ms after the peak) the 95 % region of extra inertia holds the
+    bar and excludes none, yet the best point's BIC gain over none (measured 1.2) is far below the margin the
+    workflow names at: one step's move does not carry this bar's signature strongly enough to name it."""
+    rec, p = load3
+    lo, hi = p["move_region"]
+    assert lo <= rec.load_kg_m2 <= hi and lo > 0.0, p["move_region"]
+    assert p["move_dbic"] < tool.BIC_MARGIN, p["move_dbic"]
 
 
 def test_missing_data_folder_is_a_clear_error(tmp_path, capsys):
