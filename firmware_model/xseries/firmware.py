@@ -211,6 +211,17 @@ class XFirmware:
         """Present Position before rounding: the shaft in the firmware's frame, less the whole turns dropped, plus Homing Offset."""
         return self._sign() * self.physics.angle_rad / PULSE_RAD - self._turn_base_pulses + self._homing_offset()
 
+    def _counted_pulses(self) -> float:
+        """Present Position as the firmware counts it: whole encoder pulses, the register's value.
+
+        Why the trajectory starts here and not at the shaft's exact angle: the firmware knows the shaft only
+        through its encoder's count, so a goal written as the Present Position just read is where the
+        trajectory already stands, and no profile runs.  From the exact angle, a fraction of a pulse away,
+        that goal started a profile of that fraction, still accelerating when the next goal came a few
+        milliseconds later; the next profile then started with its speed, ahead of one planned from rest.
+        """
+        return float(round(self._present_pulses()))
+
     def _reset_turns(self) -> None:
         """Present Position reset to within one turn (e-manual "Present Position(132)" note)."""
         shaft = self._sign() * self.physics.angle_rad / PULSE_RAD
@@ -222,7 +233,7 @@ class XFirmware:
         self._profile_start_s = self.time_s
         self._profile_kind = PROFILE_STEP
         self._planned_from: tuple[float, float, float] | None = None
-        self._traj_pulses = self._present_pulses()
+        self._traj_pulses = self._counted_pulses()
         self._traj_velocity_pulses_s = 0.0
         self._traj_accel_pulses_s2 = 0.0
         self._goal_velocity_pulses_s = 0.0
@@ -323,7 +334,7 @@ class XFirmware:
         elif self._profile_running():
             start, v0 = self._traj_pulses, self._traj_velocity_pulses_s
         else:
-            start, v0 = self._present_pulses(), 0.0
+            start, v0 = self._counted_pulses(), 0.0
         self._planned_from = (self.time_s, start, v0)
         goal = self._goal_pulses()
         if time_based:
@@ -449,7 +460,7 @@ class XFirmware:
         else:
             self._duty = 0.0
             physics.step(0.0, step_s, driven=False)
-            self._traj_pulses = self._present_pulses()
+            self._traj_pulses = self._counted_pulses()
             self._traj_velocity_pulses_s = 0.0
         self._protect(saturated, step_s)
         # A held servo at rest repeats its step exactly: same angle and speed (a creep too slow to move

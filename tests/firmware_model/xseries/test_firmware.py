@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from firmware_model.xseries.firmware import PULSES_PER_REV, ThermalParams, XFirmware, build_x_servo
+from firmware_model.xseries.firmware import PULSE_RAD, PULSES_PER_REV, ThermalParams, XFirmware, build_x_servo
 from firmware_model.xseries.interface import (
     HW_ERROR_INPUT_VOLTAGE,
     HW_ERROR_OVERHEATING,
@@ -151,6 +151,27 @@ def test_velocity_override_keeps_the_trajectory_velocity_continuous():
     assert before > 100 and abs(after - before) <= 2
     trace = run(servo, 5.0)
     assert abs(trace[-1].present_position - (start + 500)) <= 5
+
+
+def test_a_goal_at_the_read_position_starts_no_profile_so_the_next_starts_from_rest():
+    """The firmware knows the shaft by its encoder's whole count: Goal Position written as the Present Position just
+    read, then torque on, leaves the trajectory standing there (no profile), and a goal written a few milliseconds
+    later starts its trapezoid from rest.  (Planned from the exact angle, 0.44 of a pulse off the count, the first
+    goal ran a profile of that fraction, still accelerating 4 ms later, and the next trapezoid started with its
+    speed, about 4 ms ahead of the e-manual's from rest.)"""
+    servo, cmd = make("XL330-M288", torque_enable=0, profile_velocity=85, profile_acceleration=36)
+    servo.physics.angle_rad = (2048 + 0.44) * PULSE_RAD  # torque off, the shaft still between two counts
+    run(servo, 0.005)
+    present = servo.sense().present_position
+    write(servo, cmd, goal_position=present)
+    write(servo, cmd, torque_enable=1)
+    held = run(servo, 0.004)[-1]
+    assert not held.moving_status & 0x02 and held.velocity_trajectory == 0 and held.position_trajectory == present
+    write(servo, cmd, goal_position=present + 400)
+    trace = run(servo, 0.12)
+    accel = 85 * VELOCITY_UNIT_PULSES_S / (64 * 85 / 36 / 1000.0)  # pulses/s^2: Profile Velocity reached in t1
+    for ms in (40, 80, 120):
+        assert abs(trace[ms - 1].position_trajectory - present - 0.5 * accel * (ms / 1000.0) ** 2) <= 1, ms
 
 
 def test_goals_written_again_before_a_step_leave_no_trace_of_the_earlier_ones():
