@@ -510,6 +510,12 @@ class PhysicalModel:
         restart = wheel | was_wheel
         ref = np.where(restart, self._array("angle"), self._array("ref"))
         ref_vel = np.where(restart, 0.0, self._array("ref_vel"))
+        # A reference that followed the shaft (torque off, or wheel mode) starts from the pot as the controller
+        # reads it, in whole units: the shaft may sit between two readings, and a goal written as the Present
+        # Position just read then sent the reference travelling that fraction (Moving 1 for some 7 ms with
+        # nothing moving).  With torque on the reference is the setpoint's, and is left where it is.
+        was_off = ~self._sensing.enabled if self._sensing is not None else np.zeros(n, dtype=bool)
+        ref = np.where(restart | was_off, np.rint(ref / _UNIT_RAD) * _UNIT_RAD, ref)
         self._s.ref = self._to_backend(apply_dead_zone(ref, ref_vel, per_servo["goal_rad"], p.setpoint_eps_rad))
         self._s.ref_vel = self._to_backend(ref_vel)
         return plan

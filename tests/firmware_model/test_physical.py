@@ -127,6 +127,24 @@ def test_torque_off_servo_is_free_and_reference_follows(commands):
     assert abs(sensed.present_position[0] - pushed) <= 3
 
 
+@pytest.mark.parametrize("backend", ["scalar", "numpy"])
+def test_a_goal_at_the_read_position_with_torque_coming_on_moves_nothing(commands, backend):
+    """A shaft left between two readings with torque off: Goal Position written as the Present Position just read,
+    torque on, and Moving reads 0 from the first step (the reference starts from the reading, as the firmware's
+    does); from the shaft's exact angle it travelled the fraction, Moving 1 for 7 ms with nothing moving."""
+    unit_rad = 300.0 / 1023.0 * np.pi / 180.0
+    model = PhysicalModel(1, backend=backend, initial_position_raw=500)
+    model.advance(0.01, commands(torque_enable=0))
+    model.set_angle(0, 500.44 * unit_rad)  # turned by hand to between two readings (beyond the setpoint's dead zone)
+    sensed = model.advance(0.5, commands(torque_enable=0))
+    assert model.speed_rad_s[0] == 0.0
+    present = int(sensed.present_position[0])
+    assert present == 500
+    for k in range(1, 11):
+        sensed = model.advance(0.5 + k * 1e-3, commands(goal_position=present))
+        assert sensed.moving[0] == 0 and sensed.present_position[0] == present, k
+
+
 def test_arm_gravity_sags_into_the_compliance_slope(commands):
     """A 0.3 kg arm at 0.1 m held horizontally (0.29 N m) sags CW by a few units, more with a softer slope."""
     sags = []
