@@ -7,8 +7,12 @@ to back through dynamixel-sdk over the pty:
 * every round, for each servo: READ Present Position (2 bytes) and READ
   Goal Position, which must equal the value last written;
 * every ``--goal-period`` seconds, a WRITE of a new Goal Position to each
-  servo (between 200 and 800, alternating), so every servo keeps moving;
-  Moving is read back as a check that they do;
+  servo (between 200 and 800, alternating), so every servo keeps moving:
+  each one's Present Position must span at least half the distance between
+  its goals, and an AX-12A's Moving, read right after the write, must read 1
+  (its firmware's reference moves at once; an X-series servo with no profile
+  reads Moving by its speed, e-manual Moving(122), still low one step after
+  the write, so its count is only reported);
 * every 100 rounds, READ Model Number (must be the model's: 12 for the AX-12).
 
 With ``--protocol 2.0`` the servos are XL430-W250s (``serve --servo xl430-w250 --baud 1000000``)
@@ -214,10 +218,23 @@ class SoakResult:
     _last_starved: str | None = field(default=None, repr=False)
     moving_seen: int = 0
     moving_checks: int = 0
+    #: Of those, the Protocol 1.0 servos' (AX-12A): their Moving follows the firmware's reference, so it reads 1
+    #: on the first read after a goal beyond the margin.  An X-series servo with no profile (Profile Velocity 0)
+    #: reads Moving by its speed (e-manual, Moving(122)), which one control step after the write may be below
+    #: the threshold: for it only the positions below tell whether it moved.
+    moving_seen_1: int = 0
+    moving_checks_1: int = 0
+    #: Per servo ("ID n, Protocol p"): the lowest and highest Present Position read, and its goals' distance.
+    spans: dict[str, tuple[int, int, int]] = field(default_factory=dict)
     rss_start_kb: int = 0
     rss_end_kb: int = 0
     slices: list[Slice] = field(default_factory=list)
     problems: list[str] = field(default_factory=list)
+
+    @property
+    def still(self) -> list[str]:
+        """The servos whose Present Position never spanned half the distance between their two goals."""
+        return [name for name, (low, high, distance) in self.spans.items() if high - low < distance / 2]
 
     @property
     def rss_growth_kb(self) -> int:
@@ -236,9 +253,10 @@ class SoakResult:
 
     @property
     def ok(self) -> bool:
-        """No lost or wrong reply the machine does not explain, memory flat, and the servos moved."""
+        """No lost or wrong reply the machine does not explain, memory flat, the servos moved, and an AX-12A's Moving
+        read 1 right after a goal."""
         return (not self.lost_by_emulator and not self.wrong_by_emulator and abs(self.rss_growth_kb) <= RSS_LIMIT_KB
-                and self.moving_seen > 0)
+                and not self.still and (self.moving_checks_1 == 0 or self.moving_seen_1 > 0))
 
     def count(self, what: str, at_s: float, comm: int, error: int, bad: bool,
               off_cpu: tuple[OffCpu, OffCpu] | None = None) -> None:
@@ -401,12 +419,19 @@ def soak(path: str, pid: int, seconds: float, servos: int, *, goal_period_s: flo
                     check(f"READ Moving of ID {servo_id} (Protocol {kind.protocol})", comm, error, value not in (0, 1))
                     result.moving_checks += 1
                     result.moving_seen += value == 1
+                    if kind.protocol == 1.0:
+                        result.moving_checks_1 += 1
+                        result.moving_seen_1 += value == 1
             for target in targets:
                 kind, servo_id = target
                 value, comm, error = timed(read, kind, servo_id, kind.present_position, kind.position_bytes,
                                            raised=(0, COMM_RAISED, 0))
                 check(f"READ Present Position of ID {servo_id} = {value} (Protocol {kind.protocol})", comm, error,
                       not 0 <= value <= kind.position_max)
+                if comm == COMM_SUCCESS and not error and 0 <= value <= kind.position_max:
+                    name = f"ID {servo_id}, Protocol {kind.protocol}"
+                    low, high, distance = result.spans.get(name, (value, value, kind.goals[1] - kind.goals[0]))
+                    result.spans[name] = (min(low, value), max(high, value), distance)
                 value, comm, error = timed(read, kind, servo_id, kind.goal_position, kind.position_bytes,
                                            raised=(0, COMM_RAISED, 0))
                 check(f"READ Goal Position of ID {servo_id} = {value}, wrote {goals[target]} (Protocol {kind.protocol})",
@@ -453,7 +478,9 @@ def report(result: SoakResult, servos: int, protocol: str = "1.0") -> str:
     lines = [
         f"soak: {result.seconds:.0f} s, {models} moving (goal flips every 0.5 s), dynamixel-sdk over the pty",
         f"requests: {result.requests:,} ({result.requests / result.seconds:,.0f}/s); lost replies: {result.lost}; "
-        f"wrong replies: {result.wrong} ({result.wrong_after_lost} right after a lost one); Moving read 1 in {result.moving_seen} of {result.moving_checks} checks",
+        f"wrong replies: {result.wrong} ({result.wrong_after_lost} right after a lost one); Moving read 1 in {result.moving_seen} of {result.moving_checks} checks"
+        + (f" (AX-12A: {result.moving_seen_1} of {result.moving_checks_1})" if result.moving_checks_1 else "")
+        + ("; every servo moved" if not result.still else "; never moved half a goal flip: " + ", ".join(result.still)),
         (f"starved (the machine kept the emulator or this client from its CPU {STARVED_S * 1e3:.0f} ms or more of the request): "
          f"{result.lost_starved} of the lost, {result.wrong_after_starved} of the wrong right after them; "
          f"the emulator's: {result.lost_by_emulator} lost, {result.wrong_by_emulator} wrong"

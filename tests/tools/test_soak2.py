@@ -22,7 +22,8 @@ def test_three_second_soak_loses_nothing(emulator, protocol):
     assert result.requests > 200, text
     # Losses while the emulator or the client waited 32 ms or more for a CPU are the machine's (a loaded runner's).
     assert result.lost_by_emulator == 0 and result.wrong_by_emulator == 0, text
-    assert result.moving_seen > 0, text
+    assert result.spans and not result.still, text  # every servo went most of the way between its goals
+    assert protocol == "2.0" or result.moving_seen_1 > 0, text  # an AX-12A reads Moving 1 right after a goal
     assert result.rss_start_kb > 0 and abs(result.rss_growth_kb) <= soak.RSS_LIMIT_KB, text
 
 

@@ -173,3 +173,21 @@ def test_a_thread_sharing_its_cpu_with_busy_ones_is_seen_waiting():
     assert abs(ran_s - cpu_s) <= 0.02, text
     assert off.waiting_s >= 0.1 * wall_s, text
     assert abs(off.waiting_s - off.off_s) <= 0.03 + 0.1 * wall_s, text  # never blocked: off its CPU only waiting for it
+
+
+def test_a_servo_that_never_moved_half_a_goal_flip_fails_the_soak():
+    result = _passing()
+    result.spans = {"ID 1, Protocol 1.0": (200, 790, 600), "ID 1, Protocol 2.0": (1990, 2480, 1000)}
+    assert result.still == ["ID 1, Protocol 2.0"] and not result.ok
+    result.spans["ID 1, Protocol 2.0"] = (1500, 2010, 1000)
+    assert result.ok
+
+
+def test_an_ax12a_whose_moving_never_read_1_after_a_goal_fails_the_soak_an_x_series_one_need_not():
+    result = _passing()
+    result.moving_checks, result.moving_seen = 40, 0  # X-series, no profile: Moving follows the speed
+    assert result.ok
+    result.moving_checks_1, result.moving_seen_1 = 20, 0
+    assert not result.ok
+    result.moving_seen_1 = 20
+    assert result.ok
