@@ -199,6 +199,8 @@ class SoakResult:
     """Figures of one soak run."""
 
     seconds: float = 0.0
+    #: How often the goals flipped (s).
+    goal_period_s: float = 0.5
     requests: int = 0
     lost: int = 0
     wrong: int = 0
@@ -322,7 +324,7 @@ def start_emulator(servos: int, extra: list[str], protocol: str = "1.0") -> tupl
 def soak(path: str, pid: int, seconds: float, servos: int, *, goal_period_s: float = 0.5,
          warmup_s: float = 2.0, protocol: str = "1.0") -> SoakResult:
     """Run the request loop against the emulator at ``path`` (process ``pid``) for ``seconds``."""
-    result = SoakResult(slices=[Slice() for _ in range(10)])
+    result = SoakResult(slices=[Slice() for _ in range(10)], goal_period_s=goal_period_s)
     port = PortHandler(path)
     if not (port.openPort() and port.setBaudRate(1_000_000)):
         raise RuntimeError(f"cannot open {path}")
@@ -476,7 +478,7 @@ def report(result: SoakResult, servos: int, protocol: str = "1.0") -> str:
     """The figures as text."""
     models = " and ".join(f"{servos} {kind.serve_name} (Protocol {kind.protocol})" for kind in PROTOCOLS[protocol])
     lines = [
-        f"soak: {result.seconds:.0f} s, {models} moving (goal flips every 0.5 s), dynamixel-sdk over the pty",
+        f"soak: {result.seconds:.0f} s, {models} moving (goal flips every {result.goal_period_s:g} s), dynamixel-sdk over the pty",
         f"requests: {result.requests:,} ({result.requests / result.seconds:,.0f}/s); lost replies: {result.lost}; "
         f"wrong replies: {result.wrong} ({result.wrong_after_lost} right after a lost one); Moving read 1 in {result.moving_seen} of {result.moving_checks} checks"
         + (f" (AX-12A: {result.moving_seen_1} of {result.moving_checks_1})" if result.moving_checks_1 else "")
