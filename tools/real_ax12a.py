@@ -30,7 +30,9 @@ what tells mechanisms apart.
 
 Usage::
 
-    python tools/real_ax12a.py [--data DIR] [--goal 500] [--plot tools/figures/real_ax12a.png]
+    python tools/real_ax12a.py [--data DIR] [--goal 500] [--fit-on AX12A_NOLOAD_1.csv] [--plot tools/figures/real_ax12a.png]
+
+``--fit-on`` names the unloaded AX-12A step the twin is fitted on (a folder may hold repeats of it).
 
 Exit status 2 with a message if the data folder is missing or a recording in it cannot be read or is cut short.
 """
@@ -47,9 +49,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ax12emu.protocol.servo_models import model as servo_model  # noqa: E402
+from ax12emu.protocol.servo_models import model_names  # noqa: E402
+from ax12emu.servo.model_factory import datasheet_params  # noqa: E402
 from firmware_model.diagnose.synthetic import step_response  # noqa: E402
 from firmware_model.diagnose.wizard import read_wizard  # noqa: E402
 from firmware_model.params import ServoParams  # noqa: E402
+from firmware_model.units import RAD_PER_POSITION_UNIT, RAD_S_PER_SPEED_UNIT  # noqa: E402
 
 #: Where the recordings live, relative to the repository (never copied into it).
 DEFAULT_DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "reference" / "real-ax12a"
@@ -68,9 +74,34 @@ class Recording:
     readme_dip: int | None
 
 
-#: The README's table columns this tool reads, by the start of their header cell.
-README_COLUMNS = {"file": "file", "servo": "servo", "load_kg_m2": "J (", "readme_overshoot": "overshoot",
-                  "readme_dip": "undershoot"}
+#: The README's table columns this tool reads, by the start of their header cell: these three it needs ...
+README_COLUMNS = {"file": "file", "servo": "servo", "load_kg_m2": "J ("}
+#: ... and these it reads where the table has them (the load's name, the overshoot and dip as measured there).
+README_OPTIONAL_COLUMNS = {"load": "load", "readme_overshoot": "overshoot", "readme_dip": "undershoot"}
+#: A cell that says "nothing here" ("-", an en or em dash, "?", or empty).
+README_BLANKS = {"", "-", "\u2013", "\u2014", "?", "n/a"}
+
+
+def _readme_int(cell: str) -> int | None:
+    """An overshoot or dip cell: the whole number it holds, or None where it holds none (blank, dash, a range)."""
+    try:
+        value = float(cell)
+    except ValueError:
+        return None
+    return int(value) if value.is_integer() else None
+
+
+def _readme_load(cell: str, load: str | None) -> float:
+    """The J cell (kg m^2): its number, or 0 where it is blank and the load is none; ValueError otherwise."""
+    if cell.lower() in README_BLANKS and (load or "none").lower() in README_BLANKS | {"none", "no load"}:
+        return 0.0
+    return float(cell)
+
+
+def _columns(cells: list[str], starts: dict[str, str]) -> dict[str, int | None]:
+    """Where each column is in a header row (the first cell starting so), None where it has none."""
+    return {key: next((i for i, c in enumerate(cells) if c.lower().startswith(start.lower())), None)
+            for key, start in starts.items()}
 
 
 def read_recordings(data: Path) -> tuple[Recording, ...]:
@@ -78,13 +109,15 @@ def read_recordings(data: Path) -> tuple[Recording, ...]:
 
     Why from the README and not a list here: the loads are the README's (bar masses and sizes measured by
     whoever recorded them), and a folder holding more recordings of the same kinds (more bars, repeats)
-    is read the same way without a change to this tool.  A table row this tool cannot read raises
-    ValueError naming the line.
+    is read the same way without a change to this tool.  The table needs a file, a servo and a J column; the
+    overshoot and dip it lists are kept for reference where given (None where a cell holds no whole number),
+    and a J left blank or dashed counts as no load where the load column says none.  A row whose J cannot be
+    read raises ValueError naming the line.
     """
     readme = data / "README.md"
     if not readme.exists():
         return ()
-    header: dict[str, int] | None = None
+    header: dict[str, int | None] | None = None
     out = []
     for number, line in enumerate(readme.read_text(encoding="utf-8").splitlines(), 1):
         cells = [c.strip() for c in line.strip().strip("|").split("|")] if line.lstrip().startswith("|") else []
@@ -92,17 +125,16 @@ def read_recordings(data: Path) -> tuple[Recording, ...]:
             header = None
             continue
         if header is None:
-            found = {key: next((i for i, c in enumerate(cells) if c.lower().startswith(start.lower())), None)
-                     for key, start in README_COLUMNS.items()}
-            header = found if None not in found.values() else None
+            found = _columns(cells, README_COLUMNS)
+            header = {**found, **_columns(cells, README_OPTIONAL_COLUMNS)} if None not in found.values() else None
             continue
-        if not cells[header["file"]].lower().endswith(".csv"):
+        if header["file"] >= len(cells) or not cells[header["file"]].lower().endswith(".csv"):
             continue  # the separator row
         try:
-            values = {key: cells[i] for key, i in header.items()}
-            out.append(Recording(values["file"], values["servo"], float(values["load_kg_m2"]),
-                                 int(values["readme_overshoot"]), int(values["readme_dip"])))
-        except (IndexError, ValueError) as exc:
+            row = {key: None if i is None else cells[i] for key, i in header.items()}
+            out.append(Recording(row["file"], row["servo"], _readme_load(row["load_kg_m2"], row["load"]),
+                                 _readme_int(row["readme_overshoot"] or ""), _readme_int(row["readme_dip"] or "")))
+        except (IndexError, TypeError, ValueError) as exc:
             raise ValueError(f"{readme}:{number}: cannot read this recording's row ({exc}): {line.strip()}") from None
     return tuple(out)
 
@@ -161,9 +193,9 @@ def load(path: Path) -> Measured:
     return rec
 
 
-def simulate(params: ServoParams, start: int, goal: int, duration_ms: int) -> np.ndarray:
+def simulate(params: ServoParams, start: int, goal: int, duration_ms: int, moving_speed: int = 0) -> np.ndarray:
     """Present Position every ms from the command (index 0) on, at the params' supply (the served model)."""
-    return step_response(params, start, goal, duration_ms)
+    return step_response(params, start, goal, duration_ms, moving_speed)
 
 
 def features(values: np.ndarray, times_ms: np.ndarray, settle_from_ms: float) -> tuple[float, float, float]:
@@ -192,10 +224,10 @@ def align(sim: np.ndarray, rec: Measured) -> dict:
     return {"rms": float(rms[best]), "tick_rms": float(tick_rms[best]), "onset_ms": float(onsets[best])}
 
 
-def evaluate(params: ServoParams, rec: Measured, goal: int) -> dict:
+def evaluate(params: ServoParams, rec: Measured, goal: int, moving_speed: int = 0) -> dict:
     """Replay ``rec``'s step with ``params``: features of the model's own trajectory and the fit to the rows."""
     duration = int(min(rec.t_ms[-1] - rec.first_move_ms + ONSET_SEARCH_MS + 50, 4000))
-    sim = simulate(params, int(rec.pos[0]), goal, duration)
+    sim = simulate(params, int(rec.pos[0]), goal, duration, moving_speed)
     t_sim = np.arange(len(sim), dtype=float)
     moved = np.abs(sim - sim[0]) >= MOVED_UNITS
     model_first = float(np.argmax(moved)) if moved.any() else 0.0
@@ -206,6 +238,46 @@ def evaluate(params: ServoParams, rec: Measured, goal: int) -> dict:
 def real_features(rec: Measured) -> dict:
     over, dip, final = features(rec.pos, rec.t_ms, rec.first_move_ms + SETTLED_AFTER_MS)
     return {"overshoot": over, "dip": dip, "final": final}
+
+
+#: The cruise is read while the step crosses this share of its way (from the first reading to the settled value).
+CRUISE_SHARE = (0.2, 0.8)
+#: A cruise slower than this share of the model's top speed was not run at Moving Speed 0.
+SPEED_LIMITED_SHARE = 0.9
+
+
+def cruise_units_s(rec: Measured) -> float:
+    """The step's cruise speed (units/s, magnitude): the slope of a line through the rows crossing the middle of
+    the step (:data:`CRUISE_SHARE`); ValueError where fewer than three rows do."""
+    start, final = rec.pos[0], real_features(rec)["final"]
+    lo, hi = sorted(start + share * (final - start) for share in CRUISE_SHARE)
+    inside = (rec.pos >= lo) & (rec.pos <= hi) & (rec.t_ms >= rec.first_move_ms)
+    if inside.sum() < 3:
+        raise ValueError(f"only {int(inside.sum())} rows cross the middle of the step: no cruise to read")
+    return float(abs(np.polyfit(rec.t_ms[inside] / 1000.0, rec.pos[inside], 1)[0]))
+
+
+def datasheet_servo(name: str) -> ServoParams | None:
+    """The served model's parameters for another Protocol 1.0 servo named as the README names it (e.g. "AX-18A"):
+    its data sheet's motor, as ``ax12emu serve --servo`` runs it; None where no model file has that name."""
+    spec = next((servo_model(key) for key in model_names()
+                 if servo_model(key).name == name and "1.0" in servo_model(key).protocols), None)
+    return None if spec is None or spec.name == "AX-12A" else datasheet_params(spec)
+
+
+def other_servo_rows(r: Recording, rec: Measured, goal: int) -> dict[str, tuple[ServoParams, int]] | None:
+    """What another servo's step is replayed with: its served model at Moving Speed 0 (the README's presumption)
+    and, where the step cruised well below that model's top speed, at the Moving Speed of the cruise (a step
+    taken speed-limited: the export does not record Moving Speed).  None where the servo has no model file."""
+    params = datasheet_servo(r.servo)
+    if params is None:
+        return None
+    rows = {"served (data sheet), Moving Speed 0": (params, 0)}
+    cruise = cruise_units_s(rec) * RAD_PER_POSITION_UNIT
+    if cruise < SPEED_LIMITED_SHARE * params.top_speed_rad_s(params.supply_voltage_v):
+        speed = int(round(cruise / RAD_S_PER_SPEED_UNIT))
+        rows[f"served, Moving Speed {speed} (cruise)"] = (params, speed)
+    return rows
 
 
 def with_supply(params: ServoParams, volts: float, inertia_scale: float = 1.0, extra_kg_m2: float = 0.0) -> ServoParams:
@@ -244,6 +316,10 @@ def close_twin(twin: ServoParams, path: Path, goal: int) -> tuple[ServoParams, o
     return (fitted_params(d, twin) if d.named else twin), d
 
 
+def _or_dash(value: int | None) -> str:
+    return "-" if value is None else str(value)
+
+
 def _row(name: str, r: dict, real: dict | None = None) -> str:
     text = f"  {name:<34} overshoot {r['overshoot']:5.1f}  dip {r['dip']:4.1f}  final {r['final']:6.1f}"
     if "rms" in r:
@@ -253,17 +329,23 @@ def _row(name: str, r: dict, real: dict | None = None) -> str:
     return text
 
 
-def run(data: Path, goal: int, plot: Path | None) -> int:
+def run(data: Path, goal: int, plot: Path | None, fit_on: str = FIT_ON) -> int:
     try:
         recordings = read_recordings(data)
-        if FIT_ON not in {r.file for r in recordings}:  # the unloaded step the twin is fitted on, listed or not
-            recordings = (Recording(FIT_ON, "AX-12A", 0.0, None, None),) + recordings
+        in_readme = {r.file for r in recordings}
+        listed = next((r for r in recordings if r.file == fit_on), None)
+        if listed is None:  # the unloaded step the twin is fitted on, listed or not
+            recordings = (Recording(fit_on, "AX-12A", 0.0, None, None),) + recordings
+        elif listed.servo != "AX-12A" or listed.load_kg_m2 != 0:
+            print(f"real_ax12a: the twin is fitted on an unloaded AX-12A step; the README lists {fit_on} as an "
+                  f"{listed.servo} with J {listed.load_kg_m2:g} kg m^2", file=sys.stderr)
+            return 2
         recs = {r.file: load(data / r.file) for r in recordings if (data / r.file).exists()}
     except (ValueError, OSError) as exc:  # WizardFormatError is a ValueError
         print(f"real_ax12a: {exc}", file=sys.stderr)
         return 2
-    if FIT_ON not in recs:
-        print(f"real_ax12a: {data / FIT_ON} not found (the recordings live in ../shared/reference/real-ax12a)",
+    if fit_on not in recs:
+        print(f"real_ax12a: {data / fit_on} not found (the recordings live in ../shared/reference/real-ax12a)",
               file=sys.stderr)
         return 2
     default = ServoParams()
@@ -272,9 +354,9 @@ def run(data: Path, goal: int, plot: Path | None) -> int:
     twins = {}
     for label, braking in (("twin", default.bridge_braking_fraction), ("braking-bridge twin", 1.0)):
         base = dataclasses.replace(default, bridge_braking_fraction=braking)
-        params, volts, scale, _ = fit_twin(base, recs[FIT_ON], goal)
+        params, volts, scale, _ = fit_twin(base, recs[fit_on], goal)
         twins[label] = params
-        print(f"{label}: bridge braking fraction {braking:g}, fitted on {FIT_ON}: supply {volts:.2f} V, rotor and gear "
+        print(f"{label}: bridge braking fraction {braking:g}, fitted on {fit_on}: supply {volts:.2f} V, rotor and gear "
               f"inertia x{scale:.1f} ({params.rotor_inertia_reflected_kg_m2:.3g} kg m^2)")
     curves = {}
     for r in recordings:
@@ -283,16 +365,26 @@ def run(data: Path, goal: int, plot: Path | None) -> int:
             continue
         rec = recs[r.file]
         real = real_features(rec)
-        listed = ("not in the README" if r.readme_overshoot is None
-                  else f"README: overshoot {r.readme_overshoot}, dip {r.readme_dip}")
+        listed = ("not in the README" if r.file not in in_readme
+                  else f"README: overshoot {_or_dash(r.readme_overshoot)}, dip {_or_dash(r.readme_dip)}")
         print(f"\n{r.file} ({r.servo}, bar J {r.load_kg_m2:.3g} kg m^2; {listed})")
         print(_row("real", real))
         if r.servo != "AX-12A":
-            print("  (another motor: not modelled)")
+            others = other_servo_rows(r, rec, goal)
+            if others is None:
+                print(f"  (no servo model file is named {r.servo}: not replayed)")
+                continue
+            print(f"  (the served {r.servo}: its data sheet's motor, inertia and friction scaled from the AX-12A's; "
+                  f"cruise {cruise_units_s(rec):.0f} units/s)")
+            curves[r.file] = (rec, {})
+            for name, (params, speed) in others.items():
+                result = evaluate(params, rec, goal, speed)
+                curves[r.file][1][name] = result
+                print(_row(name, result, real))
             continue
         rows = {"before (shorting bridge, old J)": with_supply(BEFORE, BEFORE.supply_voltage_v, 1.0, r.load_kg_m2),
                 "default": with_supply(default, default.supply_voltage_v, 1.0, r.load_kg_m2)}
-        rows.update({name + (" (fitted here)" if r.file == FIT_ON else " (predicted)"):
+        rows.update({name + (" (fitted here)" if r.file == fit_on else " (predicted)"):
                      dataclasses.replace(p, load_inertia_kg_m2=p.load_inertia_kg_m2 + r.load_kg_m2)
                      for name, p in twins.items()})
         curves[r.file] = (rec, {})
@@ -340,10 +432,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--data", type=Path, default=DEFAULT_DATA, help="folder with the Wizard exports")
     ap.add_argument("--goal", type=int, default=500, help="the Goal Position the step went to (not recorded)")
     ap.add_argument("--plot", type=Path, default=None, help="write a figure (needs matplotlib)")
+    ap.add_argument("--fit-on", default=FIT_ON, metavar="FILE",
+                    help=f"the unloaded AX-12A step in --data the twin is fitted on (default {FIT_ON})")
     args = ap.parse_args(argv)
     if not 0 <= args.goal <= 1023:
         ap.error(f"--goal must be 0..1023, got {args.goal}")
-    return run(args.data, args.goal, args.plot)
+    if Path(args.fit_on).name != args.fit_on:
+        ap.error(f"--fit-on names a file in --data, not a path: {args.fit_on!r}")
+    return run(args.data, args.goal, args.plot, args.fit_on)
 
 
 if __name__ == "__main__":

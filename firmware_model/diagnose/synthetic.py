@@ -142,10 +142,11 @@ _WIZARD_HEADER = ("DYNAMIXEL Graph,2", "AX-12A,12", "ItemCount,1", "Present Posi
                   "Time[ms],Present Position")
 
 
-def step_response(params: ServoParams, start: int, goal: int, duration_ms: int) -> np.ndarray:
-    """Present Position every ms after ``goal`` is written (index 0) to a served servo holding ``start``, full speed,
-    the e-manual's default compliance (margin 1, slope 32, punch 32), at the params' supply."""
-    cmds = Commands.power_up(goal_position=goal)
+def step_response(params: ServoParams, start: int, goal: int, duration_ms: int, moving_speed: int = 0) -> np.ndarray:
+    """Present Position every ms after ``goal`` is written (index 0) to a served servo holding ``start``, at
+    ``moving_speed`` (0: full speed), the e-manual's default compliance (margin 1, slope 32, punch 32), at the
+    params' supply."""
+    cmds = Commands.power_up(goal_position=goal, moving_speed=moving_speed)
     model = PhysicalModel(1, params=params, initial_position_raw=start)
     return np.array([float(start)] + [model.advance(i * 1e-3, cmds).present_position[0] for i in range(1, duration_ms + 1)])
 
