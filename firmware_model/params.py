@@ -376,6 +376,7 @@ class ServoParams:
         static_friction_nm: float | None = None,
         coulomb_friction_nm: float | None = None,
         viscous_friction_nm_s_rad: float = 0.0,
+        rotor_inertia_at_motor_kg_m2: float | None = None,
     ) -> "ServoParams":
         """Parameters for another servo model from its data sheet, derived as the AX-12 defaults are.
 
@@ -392,8 +393,8 @@ class ServoParams:
 
         What no data sheet gives is taken from the AX-12 defaults, scaled: friction as the same share
         of the stall torque as the AX-12's at its recommended supply (unless given), the rotor inertia
-        as the AX-12's at the motor times ``gear_ratio**2``; the firmware and thermal constants as they
-        are.  A sheet whose figures cannot come from this model (efficiency above one, friction above
+        as the AX-12's at the motor (unless given) times ``gear_ratio**2``; the firmware and thermal
+        constants as they are.  A sheet whose figures cannot come from this model (efficiency above one, friction above
         the stall torque) gets a ``ValueError``.
         """
         base = cls()
@@ -420,7 +421,8 @@ class ServoParams:
         else:
             efficiency = float(gearbox_efficiency)
             resistance = efficiency * k / c
-        rotor_at_motor = base.rotor_inertia_reflected_kg_m2 / base.gear_ratio**2
+        rotor_at_motor = (base.rotor_inertia_reflected_kg_m2 / base.gear_ratio**2 if rotor_inertia_at_motor_kg_m2 is None
+                          else rotor_inertia_at_motor_kg_m2)
         return cls(
             gear_ratio=gear_ratio,
             winding_resistance_ohm=resistance,

@@ -268,7 +268,8 @@ def datasheet_servo(name: str) -> ServoParams | None:
 def other_servo_rows(r: Recording, rec: Measured, goal: int) -> dict[str, tuple[ServoParams, int]] | None:
     """What another servo's step is replayed with: its served model at Moving Speed 0 (the README's presumption)
     and, where the step cruised well below that model's top speed, at the Moving Speed of the cruise (a step
-    taken speed-limited: the export does not record Moving Speed).  None where the servo has no model file."""
+    taken speed-limited: the export does not record Moving Speed), that row last.  None where the servo has no
+    model file."""
     params = datasheet_servo(r.servo)
     if params is None:
         return None
@@ -374,7 +375,7 @@ def run(data: Path, goal: int, plot: Path | None, fit_on: str = FIT_ON) -> int:
             if others is None:
                 print(f"  (no servo model file is named {r.servo}: not replayed)")
                 continue
-            print(f"  (the served {r.servo}: its data sheet's motor, inertia and friction scaled from the AX-12A's; "
+            print(f"  (the served {r.servo}: its model file's motor, friction scaled from the AX-12A's; "
                   f"cruise {cruise_units_s(rec):.0f} units/s)")
             curves[r.file] = (rec, {})
             for name, (params, speed) in others.items():

@@ -42,6 +42,7 @@ The format (``models/ax-12a.toml`` is the worked example)::
     recommended_voltage_v = 11.1
     ratings = [ { voltage_v = 12.0, stall_torque_nm = 1.5, stall_current_a = 1.4, no_load_speed_rpm = 61 } ]
     current_unit_ma = 2.69       # optional: Goal/Present Current's unit, where the table has them
+    rotor_inertia_at_motor_kg_m2 = 2e-8   # optional: the motor's rotor (else the AX-12A's, scaled by the gearing)
 
     [controller]                 # optional: how a real unit's control loop departs from the e-manual
     source = "..."               # the measurement that shows it
@@ -116,7 +117,7 @@ _RANGE_WHEN_KEYS = {"register", "values", "min", "max", "limits"}
 _PROFILE_KEYS = {"source", "overrides", "extra_entries", "lock_writable", "shutdown_clears"}
 _OVERRIDE_KEYS = {"default": "default", "min": "minimum", "max": "maximum"}
 _PHYSICAL_KEYS = {"source", "gear_ratio", "weight_g", "resolution_deg", "position_range_deg", "operating_voltage_v",
-                  "recommended_voltage_v", "ratings", "current_unit_ma"}
+                  "recommended_voltage_v", "ratings", "current_unit_ma", "rotor_inertia_at_motor_kg_m2"}
 _RATING_KEYS = {"voltage_v", "stall_torque_nm", "stall_current_a", "no_load_speed_rpm", "note"}
 _CONTROLLER_KEYS = {"source", "position_output_scale"}
 _MODE_CHANGE_KEYS = {"source", "defaults", "from_registers"}
@@ -158,6 +159,8 @@ class Physical:
     position_range_deg: float | None = None
     #: Goal/Present Current's unit, mA (X series with current sensing); None where the table has no current.
     current_unit_ma: float | None = None
+    #: The motor's rotor inertia at the motor shaft, kg m^2; None: no source gives it (the physics assumes the AX-12A's).
+    rotor_inertia_at_motor_kg_m2: float | None = None
 
     def rating_at(self, voltage_v: float | None = None) -> Rating:
         """The rating at ``voltage_v``, or at the recommended supply, or the first one listed."""
@@ -486,7 +489,10 @@ def _physical(where: _Where, raw: Any) -> Physical:
         if not low <= rating.voltage_v <= high:
             raise where.error("physical.ratings", f"rating at {rating.voltage_v} V is outside the operating range {low}..{high} V")
     optional = {k: where.number(raw[k], f"physical.{k}") for k in
-                ("recommended_voltage_v", "weight_g", "resolution_deg", "position_range_deg", "current_unit_ma") if k in raw}
+                ("recommended_voltage_v", "weight_g", "resolution_deg", "position_range_deg", "current_unit_ma",
+                 "rotor_inertia_at_motor_kg_m2") if k in raw}
+    if optional.get("rotor_inertia_at_motor_kg_m2", 1.0) <= 0:
+        raise where.error("physical.rotor_inertia_at_motor_kg_m2", f"must be positive, got {optional['rotor_inertia_at_motor_kg_m2']}")
     return Physical(source=where.text(raw["source"], "physical.source"), gear_ratio=where.number(raw["gear_ratio"], "physical.gear_ratio"),
                     ratings=tuple(ratings), operating_voltage_v=(low, high), **optional)
 

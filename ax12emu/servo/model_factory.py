@@ -94,8 +94,9 @@ def datasheet_params(spec: ServoModelFile) -> ServoParams:
 
     Why: the AX-12A's defaults are fitted to measurements; another AX model has only its data sheet,
     so its motor comes from the sheet's stall torque, stall current and no-load speed at the rated
-    voltage (:meth:`ServoParams.from_datasheet`, friction and inertia scaled from the AX-12A's), and
-    it runs at the file's recommended supply (else the rating's voltage) until told otherwise.
+    voltage (:meth:`ServoParams.from_datasheet`, friction and, unless the file gives its rotor, inertia scaled
+    from the AX-12A's), and it runs at the file's recommended supply (else the rating's voltage) until told
+    otherwise.
     """
     physical = spec.physical
     rating = physical.ratings[0]
@@ -103,7 +104,8 @@ def datasheet_params(spec: ServoModelFile) -> ServoParams:
     params = ServoParams.from_datasheet(
         rating.stall_torque_nm, rating.no_load_speed_rad_s, rating.voltage_v, gear_ratio=physical.gear_ratio,
         min_supply_voltage_v=low_v, max_supply_voltage_v=high_v, stall_current_a=rating.stall_current_a,
-        gearbox_efficiency=None if rating.stall_current_a is not None else ServoParams().gearbox_efficiency)
+        gearbox_efficiency=None if rating.stall_current_a is not None else ServoParams().gearbox_efficiency,
+        rotor_inertia_at_motor_kg_m2=physical.rotor_inertia_at_motor_kg_m2)
     supply_v = physical.recommended_voltage_v or rating.voltage_v
     return replace(params, supply_voltage_v=supply_v)
 

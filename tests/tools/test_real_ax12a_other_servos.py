@@ -46,3 +46,21 @@ def test_a_full_speed_step_is_replayed_at_full_speed_only():
 def test_a_step_without_a_middle_has_no_cruise():
     with pytest.raises(ValueError, match="cross the middle"):
         tool.cruise_units_s(tool.Measured(np.array([0.0, 20.0, 40.0, 1100.0, 1200.0]), np.array([0.0, 0.0, 500.0, 500.0, 500.0])))
+
+
+OTHERS = [r for r in tool.RECORDINGS if r.servo != "AX-12A" and tool.datasheet_servo(r.servo) is not None]
+
+
+@pytest.mark.parametrize("rec", OTHERS, ids=lambda r: r.file)
+def test_the_served_servo_replays_a_real_step_of_its_model(rec):
+    """A real step of another AX servo (the README's AX-18A): the served model at the Moving Speed its cruise shows
+    (or at full speed, where it cruised at the top speed) comes into the goal as the real one does, within 3 units of its overshoot and 5 RMS at the best onset."""
+    path = tool.DEFAULT_DATA / rec.file
+    if not path.exists():
+        pytest.skip(f"{rec.file} not found in {tool.DEFAULT_DATA} (kept outside the repository)")
+    measured = tool.load(path)
+    real = tool.real_features(measured)
+    params, speed = list(tool.other_servo_rows(rec, measured, 500).values())[-1]  # at the cruise's speed, if slower
+    result = tool.evaluate(params, measured, 500, speed)
+    assert abs(result["overshoot"] - real["overshoot"]) <= 3, (result["overshoot"], real)
+    assert result["rms"] < 5.0

@@ -164,6 +164,9 @@ def test_bad_entries_are_refused_naming_file_and_field(extra, message):
              'ratings = [ { voltage_v = 24.0, stall_torque_nm = 1.0, no_load_speed_rpm = 1 } ]', r"outside the operating range"),
         ("", '[physical]\nsource = "s"\ngear_ratio = -3\noperating_voltage_v = [6.0, 12.0]\n'
              'ratings = [ { voltage_v = 12.0, stall_torque_nm = 1.0, no_load_speed_rpm = 1 } ]', r"physical.gear_ratio: must be positive"),
+        ("", '[physical]\nsource = "s"\ngear_ratio = 3\noperating_voltage_v = [6.0, 12.0]\nrotor_inertia_at_motor_kg_m2 = 0\n'
+             'ratings = [ { voltage_v = 12.0, stall_torque_nm = 1.0, no_load_speed_rpm = 1 } ]',
+         r"physical.rotor_inertia_at_motor_kg_m2: must be positive"),
     ],
 )
 def test_bad_model_or_physical_sections_are_refused(header, physical, message):
