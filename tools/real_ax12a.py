@@ -140,7 +140,7 @@ def read_recordings(data: Path) -> tuple[Recording, ...]:
 
 
 #: The recordings and their loads, as the README of the default data folder lists them (see
-#: :func:`read_recordings`).  The AX-18A has another motor: shown, not modelled.
+#: :func:`read_recordings`).  Another servo's steps (the AX-18A's) are replayed with its served model (:func:`other_servo_rows`).
 RECORDINGS = read_recordings(DEFAULT_DATA)
 #: The recording the twin is fitted on.
 FIT_ON = "AX12A_NOLOAD_1.csv"
@@ -260,20 +260,20 @@ def cruise_units_s(rec: Measured) -> float:
 def datasheet_servo(name: str) -> ServoParams | None:
     """The served model's parameters for another Protocol 1.0 servo named as the README names it (e.g. "AX-18A"):
     its data sheet's motor, as ``ax12emu serve --servo`` runs it; None where no model file has that name."""
-    spec = next((servo_model(key) for key in model_names()
-                 if servo_model(key).name == name and "1.0" in servo_model(key).protocols), None)
+    spec = next((s for s in map(servo_model, model_names()) if s.name == name and "1.0" in s.protocols), None)
     return None if spec is None or spec.name == "AX-12A" else datasheet_params(spec)
 
 
 def other_servo_rows(r: Recording, rec: Measured, goal: int) -> dict[str, tuple[ServoParams, int]] | None:
-    """What another servo's step is replayed with: its served model at Moving Speed 0 (the README's presumption)
-    and, where the step cruised well below that model's top speed, at the Moving Speed of the cruise (a step
-    taken speed-limited: the export does not record Moving Speed), that row last.  None where the servo has no
-    model file."""
+    """What another servo's step is replayed with: its served model with the recording's bar, at Moving Speed 0
+    (the README's presumption) and, where the step cruised well below that model's top speed, at the Moving Speed
+    of the cruise (a step taken speed-limited: the export does not record Moving Speed), that row last.  None
+    where the servo has no model file."""
     params = datasheet_servo(r.servo)
     if params is None:
         return None
-    rows = {"served (data sheet), Moving Speed 0": (params, 0)}
+    params = dataclasses.replace(params, load_inertia_kg_m2=params.load_inertia_kg_m2 + r.load_kg_m2)  # the bar, if any
+    rows = {"served, Moving Speed 0": (params, 0)}
     cruise = cruise_units_s(rec) * RAD_PER_POSITION_UNIT
     if cruise < SPEED_LIMITED_SHARE * params.top_speed_rad_s(params.supply_voltage_v):
         speed = int(round(cruise / RAD_S_PER_SPEED_UNIT))

@@ -64,3 +64,9 @@ def test_the_served_servo_replays_a_real_step_of_its_model(rec):
     result = tool.evaluate(params, measured, 500, speed)
     assert abs(result["overshoot"] - real["overshoot"]) <= 3, (result["overshoot"], real)
     assert result["rms"] < 5.0
+
+
+def test_a_bar_on_another_servo_is_replayed_with_the_bar():
+    params = tool.datasheet_servo("AX-18A")
+    rows = tool.other_servo_rows(tool.Recording("x.csv", "AX-18A", 2.0e-3, None, None), _rows(params, 0), 500)
+    assert [p.load_inertia_kg_m2 for p, _ in rows.values()] == [params.load_inertia_kg_m2 + 2.0e-3]
