@@ -62,13 +62,14 @@ def build_wire(spec: str, ids: list[int] | None = None, *, clock: WallClock | Vi
 
 def build_wire_of(models: Sequence[tuple[int, str]], *, clock: WallClock | VirtualClock,
                   baud_bps: float | None = None, choice: XModelChoice = XModelChoice(),
+                  choice1: ModelChoice | None = None,
                   options: Servo2Options = Servo2Options(), options1: ServoOptions = ServoOptions(),
                   options1x: Servo1XOptions = Servo1XOptions(), state_store1: StateStore | None = None,
                   state_store2: StateStore | None = None, load_state: bool = True) -> Bus | Bus1X | Bus2 | MixedBus:
     """The bus for these (ID, model key) servos.
 
-    Protocol 1.0: AX-12As and AX-18As on the AX-12 bus (:class:`Bus`, ``options1``; their physics takes
-    ``choice``'s supply and torque as the X series' does); MX servos on :class:`Bus1X` (``options1x``), which
+    Protocol 1.0: AX-12As and AX-18As on the AX-12 bus (:class:`Bus`, ``options1``; their physics is ``choice1``,
+    by default ``choice``'s supply and torque as the X series' takes them); MX servos on :class:`Bus1X` (``options1x``), which
     holds the AX bus inside when both are named.  Protocol 2.0: :class:`Bus2` (``options``).  Every servo
     starts at its model's factory rate (1,000,000 bps on the AX and MX series, 57,600 on the X series) unless
     ``baud_bps``, which each servo turns into its own Baud Rate value.  ``state_store1``/``state_store2``: where
@@ -81,8 +82,8 @@ def build_wire_of(models: Sequence[tuple[int, str]], *, clock: WallClock | Virtu
     bus1: Bus | Bus1X | None = None
     if ax:
         keys1 = [key for _, key in ax]
-        physics = build_protocol1_model(keys1, ModelChoice(voltage_v=choice.voltage_v,
-                                                           external_torque_nm=choice.external_torque_nm))
+        physics = build_protocol1_model(keys1, choice1 if choice1 is not None else ModelChoice(
+            voltage_v=choice.voltage_v, external_torque_nm=choice.external_torque_nm))
         bus1 = Bus([servo_id for servo_id, _ in ax], clock=clock, model=physics, options=options1,
                    state_store=state_store1 if load_state else None,
                    table_layout=[None if key == AX12_MODEL else model(key).layout() for key in keys1])

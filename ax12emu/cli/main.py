@@ -173,11 +173,15 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-#: Serve options that shape Protocol 1.0 servos only; with --servo each must keep its default.
+#: Serve options that shape some Protocol 1.0 servos only.  With --servo each applies to the servos on the wire
+#: that take it (AX: the AX-12A and AX-18A; MX: the MX series) and is refused on a wire that has none of them.
 #: (--trace, the live view --web --monitor and the faults, --drop --corrupt --delay --vanish --duplicate
-#: --alarm --stall, serve both.)
-_PROTOCOL1_ONLY = ("params", "arm", "model", "controller", "profile",
-                   "broadcast_ping", "reset_reply_id", "goal_torque", "eeprom_busy_ms")
+#: --alarm --stall, serve every servo.)
+_APPLIES_TO = {"params": ("AX",), "model": ("AX",), "controller": ("AX",), "reset_reply_id": ("AX",),
+               "eeprom_busy_ms": ("AX",), "broadcast_ping": ("AX", "MX"), "goal_torque": ("AX", "MX")}
+#: Serve options of the AX-12A bus that --servo does not take (yet): --arm hangs an arm on every shaft, which the
+#: X-series physics does not take, and --profile picks the AX-12A table's edition.
+_PROTOCOL1_ONLY = ("arm", "profile")
 
 
 def _check_servo_spec(parser: argparse.ArgumentParser, args: argparse.Namespace, argv: list[str]) -> None:
@@ -194,10 +198,26 @@ def _check_servo_spec(parser: argparse.ArgumentParser, args: argparse.Namespace,
     if all(key == AX12_MODEL for _, key in args.servo_models):
         parser.error("--servo: no Protocol 2.0 servo; serve AX-12As without --servo")
     defaults = parser.parse_args(["serve"])
-    for dest in _PROTOCOL1_ONLY:
-        if getattr(args, dest) != getattr(defaults, dest):
-            flag = "--" + dest.replace("_", "-")
-            parser.error(f"{flag} is not available with --servo yet (the Protocol 2.0 bus serves without it)")
+    families = {_family(key) for _, key in args.servo_models}
+    for dest in (*_PROTOCOL1_ONLY, *_APPLIES_TO):
+        if getattr(args, dest) == getattr(defaults, dest):
+            continue
+        flag = "--" + dest.replace("_", "-")
+        if dest in _PROTOCOL1_ONLY:
+            parser.error(f"{flag} is not available with --servo yet (the AX-12A bus alone takes it)")
+        if not families & set(_APPLIES_TO[dest]):
+            parser.error(f"{flag} applies to {' and '.join(f'{f} series' for f in _APPLIES_TO[dest])} servos; "
+                         "this --servo names none")
+
+
+def _family(key: str) -> str:
+    """A Protocol 1.0 model's series ("AX" or "MX"), as the flags above name them; "X" for the rest."""
+    from ax12emu.bus.wire import PROTOCOL1_MODELS
+    from ax12emu.protocol.servo_models import model
+
+    if key in PROTOCOL1_MODELS:
+        return "AX"
+    return "MX" if "2.0" not in model(key).protocols else "X"
 
 
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
@@ -250,11 +270,19 @@ def build_serve_wire(args: argparse.Namespace, clock):
     from ax12emu.servo.servo2 import Servo2Options
 
     reply = args.checksum_error == "reply"
+    broadcast_ping, goal_torque = args.broadcast_ping == "reply", args.goal_torque == "on"
     return build_wire_of(
         args.servo_models, clock=clock, baud_bps=args.baud,
         choice=XModelChoice(voltage_v=args.voltage, external_torque_nm=args.external_torque),
-        options=Servo2Options(reply_on_crc_error=reply), options1=ServoOptions(reply_on_checksum_error=reply),
-        options1x=Servo1XOptions(reply_on_checksum_error=reply),
+        choice1=ModelChoice(name=args.model, params_path=args.params, voltage_v=args.voltage,
+                            controller=args.controller, external_torque_nm=args.external_torque),
+        options=Servo2Options(reply_on_crc_error=reply),
+        options1=ServoOptions(reply_on_checksum_error=reply, reply_to_broadcast_ping=broadcast_ping,
+                              reset_reply_from_new_id=args.reset_reply_id == "new",
+                              goal_position_enables_torque=goal_torque,
+                              eeprom_busy_s_per_byte=args.eeprom_busy_ms * 1e-3),
+        options1x=Servo1XOptions(reply_on_checksum_error=reply, reply_to_broadcast_ping=broadcast_ping,
+                                 goal_position_enables_torque=goal_torque),
         # Protocol 2.0 servos keep their EEPROM in a directory of their own: IDs are per protocol.
         state_store1=StateStore(args.state_dir) if args.state_dir else None,
         state_store2=StateStore(Path(args.state_dir) / STATE_SUBDIR_2) if args.state_dir else None,

@@ -114,22 +114,29 @@ def build_protocol1_model(keys: Sequence[str], choice: ModelChoice = ModelChoice
     """The model behind Protocol 1.0 servos of these models (one key per servo, in bus order).
 
     The AX-12A runs ``choice`` as :func:`build_model` does; another model runs its data sheet's
-    parameters (:func:`datasheet_params`) with ``choice``'s supply, torque and arm.  Where the
-    models differ each group gets its own model, joined by :class:`GroupedModel`.
+    parameters (:func:`datasheet_params`) with ``choice``'s supply, torque and arm, or, on a wire of that
+    model alone, ``choice``'s parameters (a twin the diagnosis fitted to one of its recordings).  Where the
+    models differ each group gets its own model, joined by :class:`GroupedModel`; parameters given for such
+    a wire are refused, as they do not say whose they are.
     """
     groups: dict[str, list[int]] = {}
     for index, key in enumerate(keys):
         groups.setdefault(key, []).append(index)
 
+    given = choice.params is not None or choice.params_path is not None
+    if given and len(groups) > 1:
+        raise ValueError(f"--params on a wire of several models ({', '.join(groups)}): the file does not say whose "
+                         "parameters it holds; serve one model with it")
+
     def one(key: str, n: int) -> ServoModel:
         if key == AX12_MODEL:
             return build_model(choice, n)
-        if choice.name != "physical" or choice.params is not None or choice.params_path is not None:
-            raise ValueError(f"{key} runs the physical model from its data sheet: --model kinematic and --params "
-                             "apply to the AX-12A only")
+        if choice.name != "physical":
+            raise ValueError(f"{key} runs the physical model from its data sheet: --model kinematic applies to the "
+                             "AX-12A only")
         spec = model_file(key)
         try:
-            return build_model(replace(choice, params=datasheet_params(spec)), n)
+            return build_model(choice if given else replace(choice, params=datasheet_params(spec)), n)
         except ValueError as exc:
             raise ValueError(f"{spec.name}: {exc}") from None
 

@@ -37,6 +37,10 @@ def test_a_model_for_every_id_and_per_id_models():
         (["--servo", "1:ax-12a,2:xl430-w250", "--baud", "4500000"], "ID 1 (AX-12A) cannot run at 4500000 bps"),
         (["--servo", "1-2:ax-12a"], "no Protocol 2.0 servo"),
         (["--servo", "1:ax-12a,1:ax-12a,2:xl430-w250"], "ID 1 is given two models"),
+        (["--servo", "xl430-w250", "--goal-torque", "unchanged"], "--goal-torque applies to AX series and MX series"),
+        (["--servo", "mx-28", "--eeprom-busy-ms", "0"], "--eeprom-busy-ms applies to AX series servos"),
+        (["--servo", "1:ax-12a,2:ax-18a", "--params", "twin.toml"], "--params on a wire of several models (ax-12a, ax-18a)"),
+        (["--servo", "ax-18a", "--arm", "0.1,0.1"], "--arm is not available with --servo yet"),
     ],
 )
 def test_mistakes_are_one_line_and_exit_2(args, message):

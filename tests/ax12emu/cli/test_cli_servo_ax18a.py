@@ -68,3 +68,24 @@ def test_mistakes_are_one_line(args, message):
     assert result.returncode != 0, result
     assert "Traceback" not in result.stderr
     assert message in result.stderr, result.stderr
+
+
+def test_the_ax_series_flags_reach_the_ax_servos_on_a_servo_wire(tmp_path):
+    """--params, --goal-torque, --eeprom-busy-ms and the other AX bus flags shape the AX servos of a --servo wire:
+    a twin fitted to an AX-18A's recording serves AX-18As; an X-series servo beside them is untouched."""
+    from ax12emu.bus.clock import VirtualClock
+    from ax12emu.cli.main import build_serve_wire
+    from firmware_model.params import ServoParams
+
+    twin = ServoParams(static_friction_nm=0.21, supply_voltage_v=11.1)
+    twin.to_toml(tmp_path / "twin.toml")
+    bus = build_serve_wire(parse_args(["serve", "--servo", "ax-18a", "--ids", "1-2", "--params", str(tmp_path / "twin.toml"),
+                                       "--goal-torque", "unchanged", "--eeprom-busy-ms", "0"]), VirtualClock())
+    assert bus.model.params == twin
+    assert [(s.options.goal_position_enables_torque, s.options.eeprom_busy_s_per_byte) for s in bus.servos] == [(False, 0.0)] * 2
+    mixed = build_serve_wire(parse_args(["serve", "--servo", "1:ax-18a,2:xl430-w250", "--baud", "1000000",
+                                         "--reset-reply-id", "new", "--broadcast-ping", "silent"]), VirtualClock())
+    (ax,) = mixed.bus1.servos
+    assert ax.options.reset_reply_from_new_id and not ax.options.reply_to_broadcast_ping
+    mx = build_serve_wire(parse_args(["serve", "--servo", "mx-28", "--goal-torque", "unchanged"]), VirtualClock())
+    assert not mx.servos[0].options.goal_position_enables_torque

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import pytest
 
-from ax12emu.servo.model_factory import ModelChoice, build_model
+from ax12emu.protocol.servo_models import model
+from ax12emu.servo.model_factory import ModelChoice, build_model, build_protocol1_model, datasheet_params
 from firmware_model.params import ServoEffects, ServoParams
 
 TWIN = ServoParams(static_friction_nm=0.2, effects=ServoEffects(backlash_rad=0.04, arm_weight_moment_nm=0.3,
@@ -34,3 +37,15 @@ def test_bad_choices_raise_one_line_errors(choice, message):
 def test_arm_option_alone_still_hangs_an_arm():
     model = build_model(ModelChoice(arm=(0.2, 0.1)), 1)
     assert model._array("weight_nm")[0] == pytest.approx(0.2 * 9.80665 * 0.1)
+
+
+def test_a_wire_of_another_model_alone_runs_the_given_parameters_and_a_mixed_wire_refuses_them():
+    """A twin fitted to an AX-18A's recording serves AX-18As; on a wire of AX-12As and AX-18As it would be one
+    servo's parameters put on the other too."""
+    twin = replace(datasheet_params(model("ax-18a")), static_friction_nm=0.21)
+    assert build_protocol1_model(["ax-18a", "ax-18a"], ModelChoice(params=twin)).params == twin
+    assert build_protocol1_model(["ax-18a"]).params == datasheet_params(model("ax-18a"))
+    with pytest.raises(ValueError, match=r"several models \(ax-12a, ax-18a\)"):
+        build_protocol1_model(["ax-12a", "ax-18a"], ModelChoice(params=twin))
+    with pytest.raises(ValueError, match="kinematic applies to the AX-12A only"):
+        build_protocol1_model(["ax-18a"], ModelChoice(name="kinematic"))
