@@ -53,9 +53,13 @@ from ax12emu.protocol.servo_models import model as servo_model  # noqa: E402
 from ax12emu.protocol.servo_models import model_names  # noqa: E402
 from ax12emu.servo.model_factory import datasheet_params  # noqa: E402
 from firmware_model.diagnose.synthetic import step_response  # noqa: E402
-from firmware_model.diagnose.wizard import read_wizard  # noqa: E402
+from firmware_model.diagnose.wizard import (
+    SPEED_LIMITED_SHARE,  # noqa: E402
+    read_wizard,  # noqa: E402
+)
+from firmware_model.diagnose.wizard import cruise_units_s as wizard_cruise_units_s  # noqa: E402
 from firmware_model.params import ServoParams  # noqa: E402
-from firmware_model.units import RAD_PER_POSITION_UNIT, RAD_S_PER_SPEED_UNIT  # noqa: E402
+from firmware_model.units import RAD_PER_POSITION_UNIT, speed_rad_s_to_raw  # noqa: E402
 
 #: Where the recordings live, relative to the repository (never copied into it).
 DEFAULT_DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "reference" / "real-ax12a"
@@ -240,21 +244,9 @@ def real_features(rec: Measured) -> dict:
     return {"overshoot": over, "dip": dip, "final": final}
 
 
-#: The cruise is read while the step crosses this share of its way (from the first reading to the settled value).
-CRUISE_SHARE = (0.2, 0.8)
-#: A cruise slower than this share of the model's top speed was not run at Moving Speed 0.
-SPEED_LIMITED_SHARE = 0.9
-
-
 def cruise_units_s(rec: Measured) -> float:
-    """The step's cruise speed (units/s, magnitude): the slope of a line through the rows crossing the middle of
-    the step (:data:`CRUISE_SHARE`); ValueError where fewer than three rows do."""
-    start, final = rec.pos[0], real_features(rec)["final"]
-    lo, hi = sorted(start + share * (final - start) for share in CRUISE_SHARE)
-    inside = (rec.pos >= lo) & (rec.pos <= hi) & (rec.t_ms >= rec.first_move_ms)
-    if inside.sum() < 3:
-        raise ValueError(f"only {int(inside.sum())} rows cross the middle of the step: no cruise to read")
-    return float(abs(np.polyfit(rec.t_ms[inside] / 1000.0, rec.pos[inside], 1)[0]))
+    """The step's cruise speed (units/s; :func:`firmware_model.diagnose.wizard.cruise_units_s` to the settled value)."""
+    return wizard_cruise_units_s(rec.t_ms / 1000.0, rec.pos, real_features(rec)["final"])
 
 
 def datasheet_servo(name: str) -> ServoParams | None:
@@ -276,7 +268,7 @@ def other_servo_rows(r: Recording, rec: Measured, goal: int) -> dict[str, tuple[
     rows = {"served, Moving Speed 0": (params, 0)}
     cruise = cruise_units_s(rec) * RAD_PER_POSITION_UNIT
     if cruise < SPEED_LIMITED_SHARE * params.top_speed_rad_s(params.supply_voltage_v):
-        speed = int(round(cruise / RAD_S_PER_SPEED_UNIT))
+        speed = int(speed_rad_s_to_raw(cruise))
         rows[f"served, Moving Speed {speed} (cruise)"] = (params, speed)
     return rows
 

@@ -11,6 +11,8 @@ line on stdout is the port to open (the pty's slave path, or the
 from __future__ import annotations
 
 import argparse
+import contextlib
+import io
 import logging
 import signal
 import sys
@@ -22,7 +24,7 @@ from ax12emu.bus import Bus
 from ax12emu.bus.clock import WallClock
 from ax12emu.bus.state_store import StateFileError, StateStore
 from ax12emu.cli import hil as cli_hil
-from ax12emu.protocol.control_table import AX12_MODEL, DEFAULT_PROFILE, PROFILES
+from ax12emu.protocol.control_table import AX12_MODEL, DEFAULT_PROFILE, PROFILES, PROTOCOL1_MODELS
 from ax12emu.protocol.ids import parse_ids
 from ax12emu.servo.model_factory import MODELS, ModelChoice, build_model, parse_arm
 from ax12emu.servo.virtual_servo import ServoOptions
@@ -167,7 +169,8 @@ def build_parser() -> argparse.ArgumentParser:
     diagnose = sub.add_parser(
         "diagnose",
         add_help=False,
-        help="find where a measured trace and the model disagree (same as python -m firmware_model.diagnose)",
+        help="find where a measured trace and the model disagree (python -m firmware_model.diagnose; another AX "
+             "model's Wizard export starts from that servo's served model)",
     )
     diagnose.add_argument("arguments", nargs=argparse.REMAINDER)
     return parser
@@ -212,7 +215,6 @@ def _check_servo_spec(parser: argparse.ArgumentParser, args: argparse.Namespace,
 
 def _family(key: str) -> str:
     """A Protocol 1.0 model's series ("AX" or "MX"), as the flags above name them; "X" for the rest."""
-    from ax12emu.bus.wire import PROTOCOL1_MODELS
     from ax12emu.protocol.servo_models import model
 
     if key in PROTOCOL1_MODELS:
@@ -451,7 +453,53 @@ def _diagnose(arguments: list[str]) -> int:
     except ImportError as exc:
         print(f"ax12emu: diagnose needs scipy and matplotlib: pip install 'ax12emu[diagnose]' ({exc})", file=sys.stderr)
         return 2
-    return diagnose_main(arguments)
+    return diagnose_main(_from_the_served_servo(arguments))
+
+
+#: Where ``ax12emu diagnose`` writes the served servo's parameters it starts another AX model's export from.
+BASE_PARAMS_FILE = "base_params.toml"
+
+
+def _from_the_served_servo(arguments: list[str]) -> list[str]:
+    """The diagnosis's arguments, with ``--params`` added for a Wizard export of another AX model (the AX-18A).
+
+    Why: the workflow's model is the AX-12A's unless given parameters, and an AX-18A's recording diagnosed against
+    an AX-12A's motor names the motor.  ``ax12emu`` knows each model's served parameters
+    (:func:`~ax12emu.servo.model_factory.datasheet_params`), which the workflow, a layer below, does not read; so
+    they are written to ``--out``/:data:`BASE_PARAMS_FILE` and given as ``--params``, and the fitted twin it
+    writes then serves as ``serve --servo ax-18a --params``.  Anything this cannot read is left as it is, for the
+    workflow to report.
+    """
+    from ax12emu.protocol.servo_models import model
+    from ax12emu.servo.model_factory import datasheet_params
+    from firmware_model.diagnose.cli import parse_args as diagnose_args
+    from firmware_model.diagnose.wizard import is_wizard_export, read_wizard
+
+    try:
+        with contextlib.redirect_stderr(io.StringIO()):  # said once, by the workflow itself
+            args = diagnose_args(arguments)
+    except SystemExit:  # a bad command line
+        return arguments
+    if args.params is not None or not is_wizard_export(args.trace):
+        return arguments
+    try:
+        name = read_wizard(args.trace).model_name
+    except (ValueError, OSError):
+        return arguments
+    spec = next((model(key) for key in PROTOCOL1_MODELS if model(key).name == name), None)
+    if spec is None or spec.key == AX12_MODEL:
+        return arguments
+    path = Path(args.out) / BASE_PARAMS_FILE
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        datasheet_params(spec).to_toml(path, comments=(f"the served {spec.name}'s parameters (ax12emu/protocol/models/"
+                                                       f"{spec.key}.toml), where ax12emu diagnose started from",))
+    except OSError:
+        return arguments
+    if not args.quiet:
+        print(f"ax12emu diagnose: the export is from an {spec.name}: starting from the served {spec.name}'s parameters "
+              f"({path})", file=sys.stderr)
+    return [*arguments, "--params", str(path)]
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..params import ServoParams
+from ..units import RAD_PER_POSITION_UNIT, speed_rad_s_to_raw
 from .batch import null_knobs
 from .effects import LIBRARY, X_LIBRARY
 from .families import family_of
@@ -36,7 +37,7 @@ from .nuisance import first_movement_onset, first_movement_row, locate_onset
 from .output import verdict_json, verdict_text, write_outputs
 from .search import Diagnosis, diagnose
 from .trace import Trace, TraceFormatError, read_trace
-from .wizard import WizardExport, is_wizard_export, read_wizard, to_trace
+from .wizard import SPEED_LIMITED_SHARE, WizardExport, cruise_units_s, is_wizard_export, read_wizard, to_trace
 
 __all__ = ["parse_args", "main", "load_input", "Input", "DEFAULT_GOAL", "DEFAULT_VOLTAGE_V"]
 
@@ -134,7 +135,7 @@ def _wizard_input(ex: WizardExport, args: argparse.Namespace, params: ServoParam
              "skipped": dict(ex.skipped), "items_ignored": list(ex.ignored_items), "recorded": recorded,
              "reading_period_s": ex.read_period_s, "rows_on_reading_clock": ex.read_share if ex.read_s is not None else None}
     notes = [ex.summary()]
-    if ex.model_name.replace("-", "").upper() != "AX12A":
+    if ex.model_name.replace("-", "").upper() != "AX12A" and args.params is None:
         notes.append(f"the export is from an {ex.model_name}; the model is an AX-12A's (its parameters are not "
                      "that servo's unless --params says otherwise)")
     assumed = []
@@ -165,6 +166,8 @@ def _wizard_input(ex: WizardExport, args: argparse.Namespace, params: ServoParam
     if "moving_speed" not in ex.values:
         assumed.append(f"Moving Speed {speed}" + (" (full speed)" if speed == 0 else ""))
         facts["moving_speed"] = speed
+        if args.moving_speed is None:
+            notes += _cruise_notes(ex, params, volts, facts)
     if "voltage" not in ex.values:
         assumed.append(f"{volts:.1f} V")
         facts["voltage_v"] = volts
@@ -173,6 +176,32 @@ def _wizard_input(ex: WizardExport, args: argparse.Namespace, params: ServoParam
                      + " — override with --goal, --initial-goal, --onset, --moving-speed, --voltage")
     facts["assumed"] = assumed
     return Input(trace, "wizard", notes, facts)
+
+
+def _cruise_notes(ex: WizardExport, params: ServoParams, volts: float, facts: dict) -> list[str]:
+    """Where a step assumed at full speed cruised well below the model's top speed: the Moving Speed it shows.
+
+    Why a note and not a fitted nuisance: Moving Speed is a command the user set, which the export does not record,
+    so the user is asked for it (``--moving-speed``), as for the goal and the supply."""
+    try:
+        cruise = cruise_units_s(ex.times_s, ex.values["present_position"])
+    except ValueError:
+        return []
+    facts["cruise_units_s"] = cruise
+    top = params.top_speed_rad_s(volts) / float(RAD_PER_POSITION_UNIT)
+    if cruise >= SPEED_LIMITED_SHARE * top:
+        return []
+    cruise_rad_s = cruise * float(RAD_PER_POSITION_UNIT)
+    suggested = int(speed_rad_s_to_raw(cruise_rad_s))
+    # The supply at which the model's top speed is this cruise (top_speed_rad_s solved for the volts).
+    c = params.holding_slope_nm_v
+    supply_v = (cruise_rad_s * (c * params.torque_constant_nm_a + params.viscous_friction_nm_s_rad)
+                + params.coulomb_friction_nm) / c
+    why = f"a Moving Speed of about {suggested} (--moving-speed)"
+    if supply_v >= params.min_supply_voltage_v:
+        why = f"a lower supply, about {supply_v:.1f} V (--voltage), or " + why
+    return [f"the step cruises at {cruise:.0f} units/s, {100 * cruise / top:.0f} % of the model's top speed at "
+            f"{volts:.1f} V: {why} would explain it"]
 
 
 def _recording_notes(d: Diagnosis, trace: Trace) -> list[str]:

@@ -152,16 +152,17 @@ def step_response(params: ServoParams, start: int, goal: int, duration_ms: int, 
 
 
 def wizard_step_export(params: ServoParams, head_ms: float, tail_ms: float, phase_ms: float = 7.3, seed: int = 0,
-                       noise_units: float = 0.25, read_every_ms: float = 20.0, start: int = 1, goal: int = 500) -> str:
+                       noise_units: float = 0.25, read_every_ms: float = 20.0, start: int = 1, goal: int = 500,
+                       moving_speed: int = 0) -> str:
     """One step of Goal Position as DYNAMIXEL Wizard 2 exports it (:mod:`.wizard`), the answer known.
 
     The served model (:class:`~firmware_model.physical.PhysicalModel`, not the diagnosis's own simulator) steps
-    from ``start`` to ``goal`` written ``head_ms`` after the first reading and is read every ``read_every_ms``
+    from ``start`` to ``goal`` at ``moving_speed`` (0: full speed) written ``head_ms`` after the first reading and is read every ``read_every_ms``
     from ``phase_ms`` on until ``tail_ms`` after the write, the pot's noise (``noise_units`` SD) added before the
     reading is rounded; each row is stamped on the first :data:`WIZARD_TICK_MS` tick after its reading, the
     newest winning a tick, as the Wizard stamps them.  Returns the export's text.
     """
-    sim = step_response(params, start, goal, int(tail_ms) + 900)
+    sim = step_response(params, start, goal, int(tail_ms) + 900, moving_speed)
     rng = np.random.default_rng(seed)
     rows = {}
     for read_ms in np.arange(phase_ms, head_ms + len(sim) - 1, read_every_ms):

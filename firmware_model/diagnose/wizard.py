@@ -73,7 +73,8 @@ import numpy as np
 from ..units import DIRECTION_BIT
 from .trace import Trace, TraceFormatError
 
-__all__ = ["WizardExport", "WizardFormatError", "ITEM_COLUMNS", "SIGNED_ITEMS", "MAGIC", "is_wizard_export",
+__all__ = ["WizardExport", "WizardFormatError", "ITEM_COLUMNS", "SIGNED_ITEMS", "MAGIC", "is_wizard_export", "cruise_units_s",
+           "CRUISE_SHARE", "SPEED_LIMITED_SHARE",
            "read_wizard", "parse_wizard", "to_trace", "reading_times", "TICK_S"]
 
 #: The Wizard graph timer's tick (s): every stamp is a whole number of ticks (+-1 ms) from the first.
@@ -351,6 +352,28 @@ def reading_times(t_s: np.ndarray) -> tuple[np.ndarray, float, float] | None:
         return None
     read = np.maximum.accumulate(read)
     return read - read[0], float(np.median(periods)), float(on_clock.mean())
+
+
+#: A step's cruise is read while it crosses this share of its way (from its first reading to its last).
+CRUISE_SHARE = (0.2, 0.8)
+#: A cruise slower than this share of the model's top speed was not run at Moving Speed 0 (full speed).
+SPEED_LIMITED_SHARE = 0.9
+
+
+def cruise_units_s(t_s: np.ndarray, positions: np.ndarray, final: float | None = None) -> float:
+    """A step's cruise speed (units/s, magnitude): the slope of a line through the readings that cross the middle
+    of its way (:data:`CRUISE_SHARE`, from the first reading to ``final``, default the last reading).
+
+    Why: an export does not record Moving Speed, and a step that cruised well below the servo's top speed was
+    taken with one, which its cruise tells.  ValueError where fewer than three readings cross the middle.
+    """
+    t, pos = np.asarray(t_s, dtype=float), np.asarray(positions, dtype=float)
+    start, end = pos[0], pos[-1] if final is None else float(final)
+    lo, hi = sorted(start + share * (end - start) for share in CRUISE_SHARE)
+    inside = (pos >= lo) & (pos <= hi)
+    if hi - lo < 1.0 or inside.sum() < 3:
+        raise ValueError(f"only {int(inside.sum())} readings cross the middle of the step: no cruise to read")
+    return float(abs(np.polyfit(t[inside], pos[inside], 1)[0]))
 
 
 def _number(text: str) -> float | None:

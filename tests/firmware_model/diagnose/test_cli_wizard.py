@@ -1,6 +1,7 @@
 """The command line on Wizard 2 graph exports: detected, assumptions printed and overridable, bad options refused."""
 
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -123,3 +124,34 @@ def test_real_export_runs(tmp_path):
     assert v["input"]["first_movement_s"] == pytest.approx(1.942, abs=0.002)
     assert 1.85 < v["input"]["onset_s"] < v["input"]["first_movement_s"]  # before the first reading that moved
     assert np.isfinite(v["gap_rms_after"]["present_position"])
+
+
+@pytest.mark.parametrize(("moving_speed", "supply_v", "words"), [
+    (300, 9.6, r"a Moving Speed of about (29\d|30\d) "),  # speed-limited: 300 x 0.111 rpm, slower than at any supply
+    (0, 9.6, r"a lower supply, about 9\.[5-7] V \(--voltage\)"),  # full speed at 9.6 V, assumed 12 V
+])
+def test_a_step_slower_than_the_model_says_which_command_would_explain_it(tmp_path, moving_speed, supply_v, words):
+    """An export does not record Moving Speed or the supply: a step that cruised well below the model's top speed
+    at the assumed 12 V gets a note saying what would explain it, and the assumption stays the user's to change."""
+    from firmware_model.diagnose.cli import load_input, parse_args
+    from firmware_model.diagnose.synthetic import wizard_step_export
+    from firmware_model.params import ServoParams
+
+    params = ServoParams(supply_voltage_v=supply_v)
+    path = tmp_path / "w.csv"
+    path.write_text(wizard_step_export(params, 300.0, 5000.0, moving_speed=moving_speed), encoding="utf-8")
+    notes = load_input(parse_args([str(path), "--out", str(tmp_path / "o")]), ServoParams()).notes
+    assert any(re.search(words, note) for note in notes), notes
+    given = load_input(parse_args([str(path), "--out", str(tmp_path / "o"), "--moving-speed", str(moving_speed),
+                                   "--voltage", str(supply_v)]), ServoParams()).notes
+    assert not any("cruises" in note for note in given), given
+
+
+def test_a_full_speed_step_at_the_assumed_supply_gets_no_cruise_note(tmp_path):
+    from firmware_model.diagnose.cli import load_input, parse_args
+    from firmware_model.diagnose.synthetic import wizard_step_export
+    from firmware_model.params import ServoParams
+
+    path = tmp_path / "w.csv"
+    path.write_text(wizard_step_export(ServoParams(supply_voltage_v=12.0), 300.0, 5000.0), encoding="utf-8")
+    assert not any("cruises" in n for n in load_input(parse_args([str(path), "--out", str(tmp_path)]), ServoParams()).notes)
