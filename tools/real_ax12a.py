@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -99,7 +100,10 @@ def _readme_load(cell: str, load: str | None) -> float:
     """The J cell (kg m^2): its number, or 0 where it is blank and the load is none; ValueError otherwise."""
     if cell.lower() in README_BLANKS and (load or "none").lower() in README_BLANKS | {"none", "no load"}:
         return 0.0
-    return float(cell)
+    value = float(cell)
+    if not 0.0 <= value < math.inf:
+        raise ValueError(f"J must be a finite inertia of 0 or more, got {cell}")
+    return value
 
 
 def _columns(cells: list[str], starts: dict[str, str]) -> dict[str, int | None]:

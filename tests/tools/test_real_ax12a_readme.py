@@ -53,8 +53,9 @@ def test_dashed_or_missing_figures_are_none_and_a_dashed_j_with_no_load_is_no_lo
         ("AX12A_NOLOAD_2.csv", 0.0, None, None), ("AX12A_LOAD1_1.csv", 4.57e-3, None, None)]
 
 
-def test_a_dashed_j_under_a_bar_is_named_not_taken_for_no_load(tmp_path):
-    (tmp_path / "README.md").write_text(TABLE.replace("2.673e-3", "–"), encoding="utf-8")
+@pytest.mark.parametrize("j", ["–", "-2.673e-3", "inf", "nan"])
+def test_a_j_that_is_no_bar_s_inertia_is_named_not_taken_for_no_load(tmp_path, j):
+    (tmp_path / "README.md").write_text(TABLE.replace("2.673e-3", j), encoding="utf-8")
     with pytest.raises(ValueError, match=r"README.md:8: .*AX12A_LOAD9_2.csv"):
         tool.read_recordings(tmp_path)
 
