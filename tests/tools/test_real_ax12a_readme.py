@@ -54,7 +54,7 @@ def test_dashed_or_missing_figures_are_none_and_a_dashed_j_with_no_load_is_no_lo
 
 
 @pytest.mark.parametrize("j", ["–", "-2.673e-3", "inf", "nan"])
-def test_a_j_that_is_no_bar_s_inertia_is_named_not_taken_for_no_load(tmp_path, j):
+def test_a_j_that_is_not_an_inertia_is_named_not_taken_for_no_load(tmp_path, j):
     (tmp_path / "README.md").write_text(TABLE.replace("2.673e-3", j), encoding="utf-8")
     with pytest.raises(ValueError, match=r"README.md:8: .*AX12A_LOAD9_2.csv"):
         tool.read_recordings(tmp_path)
