@@ -179,10 +179,11 @@ def _wizard_input(ex: WizardExport, args: argparse.Namespace, params: ServoParam
 
 
 def _cruise_notes(ex: WizardExport, params: ServoParams, volts: float, facts: dict) -> list[str]:
-    """Where a step assumed at full speed cruised well below the model's top speed: the Moving Speed it shows.
+    """Where a step assumed at full speed cruised well below the model's top speed at the assumed supply: the
+    supply or the Moving Speed that would make the model cruise so (the supply only where the servo runs at it).
 
-    Why a note and not a fitted nuisance: Moving Speed is a command the user set, which the export does not record,
-    so the user is asked for it (``--moving-speed``), as for the goal and the supply."""
+    Why a note and not a fitted nuisance: both are settings of the user's, which the export does not record, so
+    the user is asked for them (``--voltage``, ``--moving-speed``), as for the goal."""
     try:
         cruise = cruise_units_s(ex.times_s, ex.values["present_position"])
     except ValueError:
