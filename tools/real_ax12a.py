@@ -50,14 +50,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ax12emu.protocol.control_table import AX12_MODEL, PROTOCOL1_MODELS  # noqa: E402
 from ax12emu.protocol.servo_models import model as servo_model  # noqa: E402
-from ax12emu.protocol.servo_models import model_names  # noqa: E402
 from ax12emu.servo.model_factory import datasheet_params  # noqa: E402
 from firmware_model.diagnose.synthetic import step_response  # noqa: E402
-from firmware_model.diagnose.wizard import (
-    SPEED_LIMITED_SHARE,  # noqa: E402
-    read_wizard,  # noqa: E402
-)
+from firmware_model.diagnose.wizard import SPEED_LIMITED_SHARE, read_wizard  # noqa: E402
 from firmware_model.diagnose.wizard import cruise_units_s as wizard_cruise_units_s  # noqa: E402
 from firmware_model.params import ServoParams  # noqa: E402
 from firmware_model.units import RAD_PER_POSITION_UNIT, speed_rad_s_to_raw  # noqa: E402
@@ -254,10 +251,11 @@ def cruise_units_s(rec: Measured) -> float:
 
 
 def datasheet_servo(name: str) -> ServoParams | None:
-    """The served model's parameters for another Protocol 1.0 servo named as the README names it (e.g. "AX-18A"):
-    its data sheet's motor, as ``ax12emu serve --servo`` runs it; None where no model file has that name."""
-    spec = next((s for s in map(servo_model, model_names()) if s.name == name and "1.0" in s.protocols), None)
-    return None if spec is None or spec.name == "AX-12A" else datasheet_params(spec)
+    """The served model's parameters for another servo of the AX bus named as the README names it (e.g. "AX-18A"):
+    its model file's motor, as ``ax12emu serve --servo`` runs it; None for the AX-12A (its rows are the default and
+    the twin) and where no such model has that name (the MX series runs another firmware model)."""
+    spec = next((servo_model(key) for key in PROTOCOL1_MODELS if servo_model(key).name == name), None)
+    return None if spec is None or spec.key == AX12_MODEL else datasheet_params(spec)
 
 
 def other_servo_rows(r: Recording, rec: Measured, goal: int) -> dict[str, tuple[ServoParams, int]] | None:
@@ -270,7 +268,10 @@ def other_servo_rows(r: Recording, rec: Measured, goal: int) -> dict[str, tuple[
         return None
     params = dataclasses.replace(params, load_inertia_kg_m2=params.load_inertia_kg_m2 + r.load_kg_m2)  # the bar, if any
     rows = {"served, Moving Speed 0": (params, 0)}
-    cruise = cruise_units_s(rec) * RAD_PER_POSITION_UNIT
+    try:
+        cruise = cruise_units_s(rec) * RAD_PER_POSITION_UNIT
+    except ValueError:  # a step too short to cruise: nothing tells a Moving Speed
+        return rows
     if cruise < SPEED_LIMITED_SHARE * params.top_speed_rad_s(params.supply_voltage_v):
         speed = int(speed_rad_s_to_raw(cruise))
         rows[f"served, Moving Speed {speed} (cruise)"] = (params, speed)
@@ -369,10 +370,9 @@ def run(data: Path, goal: int, plot: Path | None, fit_on: str = FIT_ON) -> int:
         if r.servo != "AX-12A":
             others = other_servo_rows(r, rec, goal)
             if others is None:
-                print(f"  (no servo model file is named {r.servo}: not replayed)")
+                print(f"  (no servo of the AX bus is named {r.servo}: not replayed)")
                 continue
-            print(f"  (the served {r.servo}: its model file's motor, friction scaled from the AX-12A's; "
-                  f"cruise {cruise_units_s(rec):.0f} units/s)")
+            print(f"  (the served {r.servo}: its model file's motor, friction scaled from the AX-12A's)")
             curves[r.file] = (rec, {})
             for name, (params, speed) in others.items():
                 result = evaluate(params, rec, goal, speed)

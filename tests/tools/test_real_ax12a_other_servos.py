@@ -70,3 +70,14 @@ def test_a_bar_on_another_servo_is_replayed_with_the_bar():
     params = tool.datasheet_servo("AX-18A")
     rows = tool.other_servo_rows(tool.Recording("x.csv", "AX-18A", 2.0e-3, None, None), _rows(params, 0), 500)
     assert [p.load_inertia_kg_m2 for p, _ in rows.values()] == [params.load_inertia_kg_m2 + 2.0e-3]
+
+
+def test_a_step_too_short_to_cruise_is_replayed_at_full_speed_only():
+    short = tool.Measured(np.arange(0.0, 1500.0, 20.0), np.where(np.arange(0.0, 1500.0, 20.0) < 100.0, 0.0, 3.0))
+    rows = tool.other_servo_rows(tool.Recording("x.csv", "AX-18A", 0.0, None, None), short, 3)
+    assert [speed for _, speed in rows.values()] == [0]
+
+
+def test_the_mx_series_is_not_replayed_with_the_ax_physics():
+    """An MX serves on the X-series firmware model: the AX bus's data-sheet physics would not be what it serves."""
+    assert tool.datasheet_servo("MX-28") is None
