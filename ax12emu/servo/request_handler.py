@@ -41,7 +41,7 @@ from ax12emu.protocol.packets import BROADCAST_ID, Instruction, InstructionPacke
 
 from .virtual_servo import VirtualServo
 
-__all__ = ["MAX_READ_BYTES", "Outcome", "handle", "HANDLERS", "ping", "silent_read_length", "write_handlers"]
+__all__ = ["MAX_READ_BYTES", "Outcome", "answers", "handle", "HANDLERS", "ping", "silent_read_length", "write_handlers"]
 
 #: The largest READ reply that fits in one status packet (LENGTH is one byte).
 MAX_READ_BYTES = 253
@@ -187,15 +187,17 @@ HANDLERS: dict[int, Handler] = {
 }
 
 
-def _answers(servo: VirtualServo, packet: InstructionPacket) -> bool:
-    """Whether this servo sends a status packet for this packet (before errors)."""
+def answers(servo, packet: InstructionPacket, reads: tuple[int, ...] = (Instruction.READ,)) -> bool:
+    """Whether a Protocol 1.0 servo sends a status packet for this packet (before errors): PING always (to the
+    broadcast ID only as its options say), else as Status Return Level says, level 1 answering ``reads`` (the
+    instructions that read: an MX's Bulk Read too)."""
     instruction = packet.instruction
     if packet.id == BROADCAST_ID:
         return instruction == Instruction.PING and servo.options.reply_to_broadcast_ping
     if instruction == Instruction.PING:
         return True
     level = servo.status_return_level
-    return level >= 2 or (level == 1 and instruction == Instruction.READ)
+    return level >= 2 or (level == 1 and instruction in reads)
 
 
 def silent_read_length(packet: InstructionPacket) -> int:
@@ -209,11 +211,11 @@ def handle(servo: VirtualServo, packet: InstructionPacket) -> Outcome:
     """Execute ``packet`` on ``servo`` (already known to be addressed to it) and build its answer."""
     reply_id = servo.id
     delay_s = servo.return_delay_s
-    answers = _answers(servo, packet)
+    talks = answers(servo, packet)
     if not packet.checksum_ok:
         error = StatusError.CHECKSUM
         data = bytes(silent_read_length(packet))
-        answers = answers and servo.options.reply_on_checksum_error
+        talks = talks and servo.options.reply_on_checksum_error
     else:
         handler = HANDLERS.get(packet.instruction)
         if handler is None:
@@ -224,7 +226,7 @@ def handle(servo: VirtualServo, packet: InstructionPacket) -> Outcome:
                 reply_id = servo.id
         if error and packet.instruction == Instruction.READ:
             data = data.ljust(silent_read_length(packet), b"\x00")
-    if not answers:
+    if not talks:
         return Outcome(None, reply_id, delay_s, error)
     status = (int(error) | servo.alarms) & 0x7F
     return Outcome(encode_status(reply_id, status, data), reply_id, delay_s, error)

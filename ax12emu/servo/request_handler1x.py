@@ -26,9 +26,9 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import NamedTuple
 
-from ax12emu.protocol.packets import BROADCAST_ID, Instruction, InstructionPacket, StatusError, encode_status
+from ax12emu.protocol.packets import Instruction, InstructionPacket, StatusError, encode_status
 
-from .request_handler import MAX_READ_BYTES, Outcome, ping, silent_read_length, write_handlers
+from .request_handler import MAX_READ_BYTES, Outcome, answers, ping, silent_read_length, write_handlers
 from .servo1x import Servo1X
 
 __all__ = ["BulkReadRequest", "HANDLERS", "Outcome1X", "handle1x", "listed_read", "parse_bulk_read", "status_byte"]
@@ -103,22 +103,15 @@ def parse_bulk_read(params: bytes) -> list[BulkReadRequest] | None:
     return out
 
 
-def answers(servo: Servo1X, packet: InstructionPacket) -> bool:
-    """Whether ``servo`` sends a status packet for ``packet`` (before errors)."""
-    instruction = packet.instruction
-    if packet.id == BROADCAST_ID:
-        return instruction == Instruction.PING and servo.options.reply_to_broadcast_ping
-    if instruction == Instruction.PING:
-        return True
-    level = servo.status_return_level
-    return level >= 2 or (level == 1 and instruction in (Instruction.READ, Instruction.BULK_READ))
+#: The instructions Status Return Level 1 answers besides PING: an MX's Bulk Read reads too.
+READS = (Instruction.READ, Instruction.BULK_READ)
 
 
 def handle1x(servo: Servo1X, packet: InstructionPacket) -> Outcome1X:
     """Execute ``packet`` on ``servo`` (addressed to it, or broadcast) and build its answer (Bulk Read is the bus's)."""
     reply_id = servo.id
     delay_s = servo.return_delay_s
-    talks = answers(servo, packet)
+    talks = answers(servo, packet, READS)
     if not packet.checksum_ok:
         error, data = StatusError.CHECKSUM, bytes(silent_read_length(packet))
         talks = talks and servo.options.reply_on_checksum_error
