@@ -50,9 +50,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from ax12emu.protocol.control_table import AX12_MODEL, PROTOCOL1_MODELS  # noqa: E402
-from ax12emu.protocol.servo_models import model as servo_model  # noqa: E402
-from ax12emu.servo.model_factory import datasheet_params  # noqa: E402
+from ax12emu.protocol.control_table import AX12_MODEL  # noqa: E402
+from ax12emu.servo.model_factory import ax_bus_model, datasheet_params  # noqa: E402
 from firmware_model.diagnose.synthetic import step_response  # noqa: E402
 from firmware_model.diagnose.wizard import SPEED_LIMITED_SHARE, read_wizard  # noqa: E402
 from firmware_model.diagnose.wizard import cruise_units_s as wizard_cruise_units_s  # noqa: E402
@@ -254,7 +253,7 @@ def datasheet_servo(name: str) -> ServoParams | None:
     """The served model's parameters for another servo of the AX bus named as the README names it (e.g. "AX-18A"):
     its model file's motor, as ``ax12emu serve --servo`` runs it; None for the AX-12A (its rows are the default and
     the twin) and where no such model has that name (the MX series runs another firmware model)."""
-    spec = next((servo_model(key) for key in PROTOCOL1_MODELS if servo_model(key).name == name), None)
+    spec = ax_bus_model(name)
     return None if spec is None or spec.key == AX12_MODEL else datasheet_params(spec)
 
 

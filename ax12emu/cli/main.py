@@ -470,8 +470,7 @@ def _from_the_served_servo(arguments: list[str]) -> list[str]:
     writes then serves as ``serve --servo ax-18a --params``.  Anything this cannot read is left as it is, for the
     workflow to report.
     """
-    from ax12emu.protocol.servo_models import model
-    from ax12emu.servo.model_factory import datasheet_params
+    from ax12emu.servo.model_factory import ax_bus_model, datasheet_params
     from firmware_model.diagnose.cli import parse_args as diagnose_args
     from firmware_model.diagnose.wizard import is_wizard_export, read_wizard
 
@@ -486,7 +485,7 @@ def _from_the_served_servo(arguments: list[str]) -> list[str]:
         name = read_wizard(args.trace).model_name
     except (ValueError, OSError):
         return arguments
-    spec = next((model(key) for key in PROTOCOL1_MODELS if model(key).name == name), None)
+    spec = ax_bus_model(name)
     if spec is None or spec.key == AX12_MODEL:
         return arguments
     path = Path(args.out) / BASE_PARAMS_FILE

@@ -12,14 +12,15 @@ from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from os import PathLike
 
-from ax12emu.protocol.control_table import AX12_MODEL
+from ax12emu.protocol.control_table import AX12_MODEL, PROTOCOL1_MODELS
 from ax12emu.protocol.servo_models import ServoModel as ServoModelFile
 from ax12emu.protocol.servo_models import model as model_file
 from firmware_model import KinematicModel, PhysicalModel, ServoParams
 from firmware_model.grouped import GroupedModel
 from firmware_model.interface import ServoModel
 
-__all__ = ["ModelChoice", "MODELS", "build_model", "build_protocol1_model", "datasheet_params", "parse_arm"]
+__all__ = ["ModelChoice", "MODELS", "ax_bus_model", "build_model", "build_protocol1_model", "datasheet_params",
+           "parse_arm"]
 
 #: Model names accepted by ``--model``.
 MODELS = ("physical", "kinematic")
@@ -87,6 +88,12 @@ def build_model(choice: ModelChoice, n: int) -> ServoModel:
     if choice.arm is not None:
         model.set_arm(*choice.arm)
     return model
+
+
+def ax_bus_model(name: str) -> ServoModelFile | None:
+    """The model file of a servo the AX bus serves (:data:`PROTOCOL1_MODELS`), by its name as ROBOTIS writes it (a
+    Wizard export's model line, a README: "AX-18A"); None for any other name."""
+    return next((model_file(key) for key in PROTOCOL1_MODELS if model_file(key).name == name), None)
 
 
 def datasheet_params(spec: ServoModelFile) -> ServoParams:
