@@ -51,13 +51,20 @@ def servo_models(spec: str, ids: list[int] | None, *, mixed: bool = False) -> li
 
 def build_wire(spec: str, ids: list[int] | None = None, *, clock: WallClock | VirtualClock,
                baud_bps: float | None = None, choice: XModelChoice = XModelChoice(),
-               options: Servo2Options = Servo2Options()) -> Bus | Bus1X | Bus2 | MixedBus:
+               options: Servo2Options = Servo2Options(), choice1: ModelChoice | None = None,
+               options1: ServoOptions | None = None) -> Bus | Bus1X | Bus2 | MixedBus:
     """The bus ``spec``'s servos need: each protocol's servos on its own bus, and both on one wire (a MixedBus)
-    when the text names both (:func:`build_wire_of` builds it)."""
+    when the text names both (:func:`build_wire_of` builds it).  ``choice1`` and ``options1`` shape the AX
+    bus's servos (the AX-12As and AX-18As) and are refused where ``spec`` names none."""
     models = servo_models(spec, ids, mixed=True)
     if {key for _, key in models} == {AX12_MODEL}:
         raise ValueError(f"{spec!r} names no servo but AX-12As; AX-12As alone are the default bus (leave out servo=)")
-    return build_wire_of(models, clock=clock, baud_bps=baud_bps, choice=choice, options=options)
+    if (choice1 is not None or options1 is not None) and not any(key in PROTOCOL1_MODELS for _, key in models):
+        raise ValueError(f"the AX bus's model and options shape AX-12As and AX-18As; {spec!r} names none")
+    if options1 is not None and options1.profile != ServoOptions().profile:
+        raise ValueError("profile: the AX-12A bus alone takes another edition of the AX-12A's table (leave out servo=)")
+    return build_wire_of(models, clock=clock, baud_bps=baud_bps, choice=choice, options=options, choice1=choice1,
+                         options1=ServoOptions() if options1 is None else options1)
 
 
 def build_wire_of(models: Sequence[tuple[int, str]], *, clock: WallClock | VirtualClock,

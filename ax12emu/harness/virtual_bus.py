@@ -21,8 +21,9 @@ Servos are addressed by their present ID in the state methods, and by their
 the X series on Protocol 2.0 (``VirtualBus([1, 2], servo="xl430-w250")`` or
 ``VirtualBus(servo="1-5:xm430-w350,6:xl330-m077")``, ``options=Servo2Options(...)`` for the
 behaviours the e-manual leaves open), the MX series on Protocol 1.0 (``servo="mx-28"``), and
-AX-12As, AX-18As and MX servos beside them on one wire (``servo="1-2:ax-12a,3:mx-64,4-6:xl430-w250"``).
-Which bus serves them is decided once (:func:`~.servos2.build_wire`); every method here then
+AX-12As, AX-18As and MX servos beside them on one wire (``servo="1-2:ax-12a,3:mx-64,4-6:xl430-w250"``);
+``params=``, ``model="kinematic"`` and ``options=ServoOptions(...)`` shape its AX-12As and AX-18As, as
+``--params`` and the AX bus's flags do on the command line.  Which bus serves them is decided once (:func:`~.servos2.build_wire`); every method here then
 finds the servo and the bus holding it through the buses' own interface (``servo``, ``holder``),
 and tells a servo with a firmware model of its own (X, MX) from an AX-12 by that model, never by
 its kind.  IDs are per protocol, so an ID both protocols have needs ``protocol=1.0`` or ``2.0`` in
@@ -172,14 +173,18 @@ class VirtualBus:
         clock = VirtualClock() if virtual_time else WallClock(time_scale)
         self.bus: AnyBus
         if servo is not None:
-            refused = [name for name, given in (
-                ("options", not isinstance(options, Servo2Options) and options != ServoOptions()),
-                ("model", model is not None), ("params", params is not None),
-            ) if given]
-            if refused:
-                raise ValueError(f"{', '.join(refused)}: not available with servo= (the buses of its models have no such option yet)")
+            if model is not None and not isinstance(model, str):
+                raise ValueError("model: a model object cannot serve a servo= wire (its buses build their own); "
+                                 "give model='kinematic' or params= for its AX servos")
+            # ServoOptions, model= and params= shape the wire's AX servos (AX-12A, AX-18A), as on the command line.
+            choice1 = None
+            if model is not None or params is not None:
+                given = {} if params is None else ({"params": params} if isinstance(params, ServoParams) else {"params_path": params})
+                choice1 = ModelChoice(name=model or "physical", **given)
+            options1 = options if isinstance(options, ServoOptions) and options != ServoOptions() else None
             options2 = options if isinstance(options, Servo2Options) else Servo2Options()
-            self.bus = build_wire(servo, None if ids is None else list(ids), clock=clock, baud_bps=baud_bps, options=options2)
+            self.bus = build_wire(servo, None if ids is None else list(ids), clock=clock, baud_bps=baud_bps, options=options2,
+                                  choice1=choice1, options1=options1)
         else:
             if isinstance(options, Servo2Options):
                 raise ValueError("Servo2Options apply with servo= (Protocol 2.0 servos); the AX-12A bus takes ServoOptions")

@@ -132,8 +132,8 @@ def build_protocol1_model(keys: Sequence[str], choice: ModelChoice = ModelChoice
 
     given = choice.params is not None or choice.params_path is not None
     if given and len(groups) > 1:
-        raise ValueError(f"--params on a wire of several models ({', '.join(groups)}): the file does not say whose "
-                         "parameters it holds; serve one model with it")
+        raise ValueError(f"servo parameters (--params, params=) on a wire of several models ({', '.join(groups)}): "
+                         "they do not say whose they are; serve one model with them")
 
     def one(key: str, n: int) -> ServoModel:
         if key == AX12_MODEL:

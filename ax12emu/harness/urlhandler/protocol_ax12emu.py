@@ -67,9 +67,25 @@ EXPECTED = (
 LOGGER_LEVELS = {"debug": logging.DEBUG, "info": logging.INFO, "warning": logging.WARNING, "error": logging.ERROR}
 #: Options of a private bus besides the fault ones.
 BUS_OPTIONS = ("ids", "profile", "virtual_time", "goal_torque", "eeprom_busy_ms", "trace", "params", "servo", "baud")
-#: Options a bus of other models (servo=) takes; the others shape AX-12As only.
-SERVO_OPTIONS = ("ids", "virtual_time", "trace", "servo", "baud",
+#: Options a bus of other models (servo=) takes; goal_torque, eeprom_busy_ms and params shape its AX servos (AX-12A,
+#: AX-18A), and profile the AX-12A bus alone.
+SERVO_OPTIONS = ("ids", "virtual_time", "trace", "servo", "baud", "goal_torque", "eeprom_busy_ms", "params",
                  "drop", "corrupt", "delay", "delay_s", "fault_ids", "seed", "vanish", "duplicate", "alarm", "stall")
+
+
+def _ax_options(options: dict[str, list[str]], virtual: str, profile: str = "ax12a") -> ServoOptions:
+    """The AX bus's options from the URL's goal_torque and eeprom_busy_ms (taken out of ``options``); ValueError
+    for a bad value.  Without eeprom_busy_ms a virtual-time bus answers at once (its clock does not run alone)."""
+    goal_torque = options.pop("goal_torque", ["on"])[-1]
+    if goal_torque not in ("on", "unchanged"):
+        raise ValueError(f"goal_torque must be on or unchanged, got {goal_torque!r}")
+    busy_text = options.pop("eeprom_busy_ms", ["0" if virtual == "1" else "6"])[-1]
+    try:
+        busy_ms = float(busy_text)
+    except ValueError:
+        raise ValueError(f"eeprom_busy_ms must be a number of milliseconds, got {busy_text!r}") from None
+    return ServoOptions(profile=profile, goal_position_enables_torque=goal_torque == "on",
+                        eeprom_busy_s_per_byte=busy_ms * 1e-3)
 
 
 class UrlError(SerialException, ValueError):
@@ -154,16 +170,7 @@ class Serial(SerialBase):
             virtual = options.pop("virtual_time", ["0"])[-1]
             if virtual not in ("0", "1"):
                 raise ValueError(f"virtual_time must be 0 or 1, got {virtual!r}")
-            goal_torque = options.pop("goal_torque", ["on"])[-1]
-            if goal_torque not in ("on", "unchanged"):
-                raise ValueError(f"goal_torque must be on or unchanged, got {goal_torque!r}")
-            busy_text = options.pop("eeprom_busy_ms", ["0" if virtual == "1" else "6"])[-1]
-            try:
-                busy_ms = float(busy_text)
-            except ValueError:
-                raise ValueError(f"eeprom_busy_ms must be a number of milliseconds, got {busy_text!r}") from None
-            servo_options = ServoOptions(profile=profile, goal_position_enables_torque=goal_torque == "on",
-                                         eeprom_busy_s_per_byte=busy_ms * 1e-3)
+            servo_options = _ax_options(options, virtual, profile)
             trace_path = options.pop("trace", [None])[-1]
             params_path = options.pop("params", [None])[-1]
             model = build_model(ModelChoice(params_path=params_path), len(ids)) if params_path else None
@@ -183,7 +190,7 @@ class Serial(SerialBase):
         """A private bus of the models ``servo=`` names; options of the AX-12A bus are refused by name."""
         refused = sorted(set(options) - set(SERVO_OPTIONS))
         if refused:
-            raise UrlError(f"{EXPECTED}: {', '.join(refused)} not available with servo= (the buses of its models have no such option yet)")
+            raise UrlError(f"{EXPECTED}: {', '.join(refused)} not available with servo= (the AX-12A bus alone takes it)")
         try:
             spec = options["servo"][-1]
             ids = parse_ids(options["ids"][-1]) if "ids" in options else None
@@ -196,7 +203,10 @@ class Serial(SerialBase):
             except ValueError:
                 raise ValueError(f"baud must be a bit rate, got {baud_text!r}") from None
             faults = FaultConfig.from_options({name: texts for name, texts in options.items() if name in FAULT_OPTIONS})
-            bus = build_wire(spec, ids, clock=VirtualClock() if virtual == "1" else WallClock(), baud_bps=baud_bps)
+            options1 = _ax_options(dict(options), virtual) if {"goal_torque", "eeprom_busy_ms"} & set(options) else None
+            params_path = options.get("params", [None])[-1]
+            bus = build_wire(spec, ids, clock=VirtualClock() if virtual == "1" else WallClock(), baud_bps=baud_bps,
+                             choice1=None if params_path is None else ModelChoice(params_path=params_path), options1=options1)
             if faults.active:
                 faults.install(bus)
         except ValueError as exc:

@@ -39,7 +39,7 @@ def test_a_model_for_every_id_and_per_id_models():
         (["--servo", "1:ax-12a,1:ax-12a,2:xl430-w250"], "ID 1 is given two models"),
         (["--servo", "xl430-w250", "--goal-torque", "unchanged"], "--goal-torque applies to AX series and MX series"),
         (["--servo", "mx-28", "--eeprom-busy-ms", "0"], "--eeprom-busy-ms applies to AX series servos"),
-        (["--servo", "1:ax-12a,2:ax-18a", "--params", "twin.toml"], "--params on a wire of several models (ax-12a, ax-18a)"),
+        (["--servo", "1:ax-12a,2:ax-18a", "--params", "twin.toml"], "on a wire of several models (ax-12a, ax-18a)"),
         (["--servo", "ax-18a", "--arm", "0.1,0.1"], "--arm is not available with --servo yet"),
     ],
 )

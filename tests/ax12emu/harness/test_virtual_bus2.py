@@ -125,10 +125,12 @@ def test_served_over_tcp_with_options_of_the_2_0_servos():
         ({"servo": "ax-12a"}, "names no servo but AX-12As; AX-12As alone are the default bus"),
         ({"servo": "1:xl430-w250", "ids": [1]}, "give one of them"),
         ({"servo": "xl430-w250", "baud_bps": 12345}, "not 12345"),
-        ({"servo": "xl430-w250", "model": "kinematic"}, "model: not available with servo="),
+        ({"servo": "xl430-w250", "model": "kinematic"}, "shape AX-12As and AX-18As; 'xl430-w250' names none"),
+        ({"servo": "ax-18a", "model": object()}, "a model object cannot serve a servo= wire"),
         ({"baud_bps": 57600}, "baud_bps applies with servo="),
         ({"options": Servo2Options()}, "Servo2Options apply with servo="),
-        ({"servo": "xl430-w250", "options": ServoOptions(profile="ax12-2006")}, "options: not available with servo="),
+        ({"servo": "xl430-w250", "options": ServoOptions(goal_position_enables_torque=False)}, "'xl430-w250' names none"),
+        ({"servo": "ax-18a", "options": ServoOptions(profile="ax12-2006")}, "profile: the AX-12A bus alone"),
     ],
 )
 def test_bad_servo_arguments_are_named(kwargs, message):
@@ -179,6 +181,9 @@ def test_url_through_dynamixel_sdk():
         ("ax12emu://?servo=xl430-w250&alarm=1:hot", "unknown alarm 'hot'"),
         ("ax12emu://?servo=xl430-w250&vanish=9", "no servo launched as ID 9"),
         ("ax12emu://?servo=xl430-w250&profile=ax12a", "profile not available with servo="),
+        ("ax12emu://?servo=xl430-w250&goal_torque=unchanged", "'xl430-w250' names none"),
+        ("ax12emu://?servo=ax-18a&goal_torque=maybe", "goal_torque must be on or unchanged"),
+        ("ax12emu://?servo=1:ax-12a,2:ax-18a&params=twin.toml", r"several models \(ax-12a, ax-18a\)"),
         ("ax12emu://?ids=1&baud=57600", "baud= applies with servo="),
     ],
 )

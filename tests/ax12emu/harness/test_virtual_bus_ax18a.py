@@ -35,3 +35,27 @@ def test_dynamixel_sdk_pings_each_model(servo, expected, kind):
 def test_ax12as_alone_are_still_the_default_bus():
     with pytest.raises(ValueError, match="AX-12As alone are the default bus"):
         VirtualBus(servo="1-2:ax-12a", transport="inprocess")
+
+
+def test_params_options_and_the_url_shape_the_ax_servos_of_a_servo_wire(tmp_path):
+    """As on the command line: params= (a twin of an AX-18A's recording) and the AX bus's options reach the AX
+    servos of a servo= wire, from VirtualBus and from an ax12emu:// URL alike."""
+    from ax12emu.servo.virtual_servo import ServoOptions
+    from firmware_model.params import ServoParams
+
+    twin = ServoParams(static_friction_nm=0.21, supply_voltage_v=9.5)
+    with VirtualBus(servo="ax-18a", ids=[1, 2], transport="inprocess", virtual_time=True, params=twin,
+                    options=ServoOptions(goal_position_enables_torque=False)) as bus:
+        assert bus.bus.model.params == twin
+        assert [s.options.goal_position_enables_torque for s in bus.bus.servos] == [False, False]
+    twin.to_toml(tmp_path / "twin.toml")
+    port = UrlPortHandler(f"ax12emu://?servo=1:ax-18a,2:xl430-w250&baud=1000000&virtual_time=1&goal_torque=unchanged"
+                          f"&params={tmp_path / 'twin.toml'}")
+    assert port.openPort() and port.setBaudRate(1_000_000)
+    try:
+        ph = PacketHandler(1.0)
+        assert ph.read1ByteTxRx(port, 1, 42) == (95, COMM_SUCCESS, 0)  # Present Voltage: the twin's 9.5 V supply
+        assert ph.write2ByteTxRx(port, 1, 30, 600) == (COMM_SUCCESS, 0)  # a goal with the torque off ...
+        assert ph.read1ByteTxRx(port, 1, 24) == (0, COMM_SUCCESS, 0)  # ... leaves it off (goal_torque=unchanged)
+    finally:
+        port.closePort()
