@@ -73,19 +73,20 @@ SERVO_OPTIONS = ("ids", "virtual_time", "trace", "servo", "baud", "goal_torque",
                  "drop", "corrupt", "delay", "delay_s", "fault_ids", "seed", "vanish", "duplicate", "alarm", "stall")
 
 
-def _ax_options(options: dict[str, list[str]], busy_default_ms: str, profile: str = "ax12a") -> ServoOptions:
-    """The AX bus's options from the URL's goal_torque and eeprom_busy_ms (taken out of ``options``; the latter
-    ``busy_default_ms`` where not given); ValueError for a bad value."""
+def _ax_options(options: dict[str, list[str]], busy_default_s: float, profile: str = "ax12a") -> ServoOptions:
+    """The AX bus's options from the URL's goal_torque and eeprom_busy_ms (taken out of ``options``; the pause
+    ``busy_default_s`` per byte where eeprom_busy_ms is not given); ValueError for a bad value."""
     goal_torque = options.pop("goal_torque", ["on"])[-1]
     if goal_torque not in ("on", "unchanged"):
         raise ValueError(f"goal_torque must be on or unchanged, got {goal_torque!r}")
-    busy_text = options.pop("eeprom_busy_ms", [busy_default_ms])[-1]
-    try:
-        busy_ms = float(busy_text)
-    except ValueError:
-        raise ValueError(f"eeprom_busy_ms must be a number of milliseconds, got {busy_text!r}") from None
-    return ServoOptions(profile=profile, goal_position_enables_torque=goal_torque == "on",
-                        eeprom_busy_s_per_byte=busy_ms * 1e-3)
+    busy_s = busy_default_s
+    if "eeprom_busy_ms" in options:
+        busy_text = options.pop("eeprom_busy_ms")[-1]
+        try:
+            busy_s = float(busy_text) * 1e-3
+        except ValueError:
+            raise ValueError(f"eeprom_busy_ms must be a number of milliseconds, got {busy_text!r}") from None
+    return ServoOptions(profile=profile, goal_position_enables_torque=goal_torque == "on", eeprom_busy_s_per_byte=busy_s)
 
 
 class UrlError(SerialException, ValueError):
@@ -171,7 +172,7 @@ class Serial(SerialBase):
             if virtual not in ("0", "1"):
                 raise ValueError(f"virtual_time must be 0 or 1, got {virtual!r}")
             # Without eeprom_busy_ms a virtual-time bus answers at once (its clock does not run alone).
-            servo_options = _ax_options(options, "0" if virtual == "1" else "6", profile)
+            servo_options = _ax_options(options, 0.0 if virtual == "1" else ServoOptions().eeprom_busy_s_per_byte, profile)
             trace_path = options.pop("trace", [None])[-1]
             params_path = options.pop("params", [None])[-1]
             model = build_model(ModelChoice(params_path=params_path), len(ids)) if params_path else None
@@ -204,8 +205,8 @@ class Serial(SerialBase):
             except ValueError:
                 raise ValueError(f"baud must be a bit rate, got {baud_text!r}") from None
             faults = FaultConfig.from_options({name: texts for name, texts in options.items() if name in FAULT_OPTIONS})
-            default_ms = str(ServoOptions().eeprom_busy_s_per_byte * 1e3)  # as the wire's AX servos have without options
-            options1 = _ax_options(dict(options), default_ms) if {"goal_torque", "eeprom_busy_ms"} & set(options) else None
+            options1 = (_ax_options(dict(options), ServoOptions().eeprom_busy_s_per_byte)  # the pause they have without
+                        if {"goal_torque", "eeprom_busy_ms"} & set(options) else None)
             params_path = options.get("params", [None])[-1]
             bus = build_wire(spec, ids, clock=VirtualClock() if virtual == "1" else WallClock(), baud_bps=baud_bps,
                              choice1=None if params_path is None else ModelChoice(params_path=params_path), options1=options1)
