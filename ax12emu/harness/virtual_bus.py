@@ -23,8 +23,8 @@ the X series on Protocol 2.0 (``VirtualBus([1, 2], servo="xl430-w250")`` or
 behaviours the e-manual leaves open), the MX series on Protocol 1.0 (``servo="mx-28"``), and
 AX-12As, AX-18As and MX servos beside them on one wire (``servo="1-2:ax-12a,3:mx-64,4-6:xl430-w250"``);
 ``params=``, ``model="kinematic"`` and ``options=ServoOptions(...)`` shape its AX-12As and AX-18As, as
-``--params`` and the AX bus's flags do on the command line.  Which bus serves them is decided once (:func:`~.servos2.build_wire`); every method here then
-finds the servo and the bus holding it through the buses' own interface (``servo``, ``holder``),
+``--params`` and the AX bus's flags do on the command line.  Which bus serves them is decided once
+(:func:`~.servos2.build_wire`); every method here then finds the servo and the bus holding it through the buses' own interface (``servo``, ``holder``),
 and tells a servo with a firmware model of its own (X, MX) from an AX-12 by that model, never by
 its kind.  IDs are per protocol, so an ID both protocols have needs ``protocol=1.0`` or ``2.0`` in
 the state methods and in ``bus.faults`` (:class:`~ax12emu.faults.injection.MixedFaults`; a
