@@ -24,9 +24,9 @@ behaviours the e-manual leaves open), the MX series on Protocol 1.0 (``servo="mx
 AX-12As, AX-18As and MX servos beside them on one wire (``servo="1-2:ax-12a,3:mx-64,4-6:xl430-w250"``);
 ``params=``, ``model="kinematic"`` and ``options=ServoOptions(...)`` shape its AX-12As and AX-18As, as
 ``--params`` and the AX bus's flags do on the command line.  Which bus serves them is decided once
-(:func:`~.servos2.build_wire`); every method here then finds the servo and the bus holding it through the buses' own interface (``servo``, ``holder``),
-and tells a servo with a firmware model of its own (X, MX) from an AX-12 by that model, never by
-its kind.  IDs are per protocol, so an ID both protocols have needs ``protocol=1.0`` or ``2.0`` in
+(:func:`~.servos2.build_wire`); every method here then finds the servo and the bus holding it
+through the buses' own interface (``servo``, ``holder``), and tells a servo with a firmware model of
+its own (X, MX) from an AX-12 by that model, never by its kind.  IDs are per protocol, so an ID both protocols have needs ``protocol=1.0`` or ``2.0`` in
 the state methods and in ``bus.faults`` (:class:`~ax12emu.faults.injection.MixedFaults`; a
 ValueError says so).  Each servo has its model's table, and the register methods take that
 table's names (``bus.read(1, "present_position")``).  What is not offered here with ``servo=``
