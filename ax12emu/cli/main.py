@@ -260,6 +260,24 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
 STATE_SUBDIR_2 = "protocol2"
 
 
+def _ax_options(args: argparse.Namespace) -> ServoOptions:
+    """The AX bus's behaviours as the serve flags set them (the AX-12A bus's, and a --servo wire's AX servos')."""
+    return ServoOptions(
+        profile=args.profile,
+        reply_on_checksum_error=args.checksum_error == "reply",
+        reply_to_broadcast_ping=args.broadcast_ping == "reply",
+        reset_reply_from_new_id=args.reset_reply_id == "new",
+        goal_position_enables_torque=args.goal_torque == "on",
+        eeprom_busy_s_per_byte=args.eeprom_busy_ms * 1e-3,
+    )
+
+
+def _ax_choice(args: argparse.Namespace) -> ModelChoice:
+    """The AX bus's physics as the serve flags choose it."""
+    return ModelChoice(name=args.model, params_path=args.params, voltage_v=args.voltage, controller=args.controller,
+                       external_torque_nm=args.external_torque, arm=args.arm)
+
+
 def build_serve_wire(args: argparse.Namespace, clock):
     """The wire ``serve --servo`` serves, built by the one builder the harness uses (:func:`ax12emu.bus.wire.build_wire_of`).
 
@@ -272,19 +290,14 @@ def build_serve_wire(args: argparse.Namespace, clock):
     from ax12emu.servo.servo2 import Servo2Options
 
     reply = args.checksum_error == "reply"
-    broadcast_ping, goal_torque = args.broadcast_ping == "reply", args.goal_torque == "on"
+    options1 = _ax_options(args)  # --profile and --arm are refused with --servo: at their defaults here
     return build_wire_of(
         args.servo_models, clock=clock, baud_bps=args.baud,
         choice=XModelChoice(voltage_v=args.voltage, external_torque_nm=args.external_torque),
-        choice1=ModelChoice(name=args.model, params_path=args.params, voltage_v=args.voltage,
-                            controller=args.controller, external_torque_nm=args.external_torque),
-        options=Servo2Options(reply_on_crc_error=reply),
-        options1=ServoOptions(reply_on_checksum_error=reply, reply_to_broadcast_ping=broadcast_ping,
-                              reset_reply_from_new_id=args.reset_reply_id == "new",
-                              goal_position_enables_torque=goal_torque,
-                              eeprom_busy_s_per_byte=args.eeprom_busy_ms * 1e-3),
-        options1x=Servo1XOptions(reply_on_checksum_error=reply, reply_to_broadcast_ping=broadcast_ping,
-                                 goal_position_enables_torque=goal_torque),
+        choice1=_ax_choice(args),
+        options=Servo2Options(reply_on_crc_error=reply), options1=options1,
+        options1x=Servo1XOptions(reply_on_checksum_error=reply, reply_to_broadcast_ping=options1.reply_to_broadcast_ping,
+                                 goal_position_enables_torque=options1.goal_position_enables_torque),
         # Protocol 2.0 servos keep their EEPROM in a directory of their own: IDs are per protocol.
         state_store1=StateStore(args.state_dir) if args.state_dir else None,
         state_store2=StateStore(Path(args.state_dir) / STATE_SUBDIR_2) if args.state_dir else None,
@@ -373,29 +386,11 @@ def _serve(args: argparse.Namespace) -> int:
     from ax12emu.serve import BusServer, open_transport
     from ax12emu.serve.transports.tcp import is_loopback
 
-    options = ServoOptions(
-        profile=args.profile,
-        reply_on_checksum_error=args.checksum_error == "reply",
-        reply_to_broadcast_ping=args.broadcast_ping == "reply",
-        reset_reply_from_new_id=args.reset_reply_id == "new",
-        goal_position_enables_torque=args.goal_torque == "on",
-        eeprom_busy_s_per_byte=args.eeprom_busy_ms * 1e-3,
-    )
     store = StateStore(args.state_dir) if args.state_dir else None
-    model = build_model(
-        ModelChoice(
-            name=args.model,
-            params_path=args.params,
-            voltage_v=args.voltage,
-            controller=args.controller,
-            external_torque_nm=args.external_torque,
-            arm=args.arm,
-        ),
-        len(args.ids),
-    )
+    model = build_model(_ax_choice(args), len(args.ids))
     bus = Bus(
         args.ids,
-        options=options,
+        options=_ax_options(args),
         model=model,
         clock=WallClock(args.time_scale),
         state_store=None if args.factory_reset else store,
