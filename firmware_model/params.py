@@ -356,6 +356,11 @@ class ServoParams:
             c * self.torque_constant_nm_a + self.viscous_friction_nm_s_rad
         )
 
+    def supply_for_top_speed_v(self, speed_rad_s: float) -> float:
+        """The supply at which :meth:`top_speed_rad_s` is ``speed_rad_s`` (its inverse)."""
+        c = self.holding_slope_nm_v
+        return (speed_rad_s * (c * self.torque_constant_nm_a + self.viscous_friction_nm_s_rad) + self.coulomb_friction_nm) / c
+
     def no_load_speed_rad_s(self, supply_v: float) -> float:
         """Speed at which the back-EMF equals the supply (no friction at all)."""
         return supply_v / self.torque_constant_nm_a

@@ -194,10 +194,7 @@ def _cruise_notes(ex: WizardExport, params: ServoParams, volts: float, facts: di
         return []
     cruise_rad_s = cruise * float(RAD_PER_POSITION_UNIT)
     suggested = int(speed_rad_s_to_raw(cruise_rad_s))
-    # The supply at which the model's top speed is this cruise (top_speed_rad_s solved for the volts).
-    c = params.holding_slope_nm_v
-    supply_v = (cruise_rad_s * (c * params.torque_constant_nm_a + params.viscous_friction_nm_s_rad)
-                + params.coulomb_friction_nm) / c
+    supply_v = params.supply_for_top_speed_v(cruise_rad_s)
     why = f"a Moving Speed of about {suggested} (--moving-speed)"
     if supply_v >= params.min_supply_voltage_v:
         why = f"a lower supply, about {supply_v:.1f} V (--voltage), or " + why

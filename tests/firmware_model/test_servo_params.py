@@ -161,3 +161,9 @@ def test_effects_validate_in_python_too():
         ServoEffects(arm_weight_moment_nm=float("nan"))
     with pytest.raises(ValueError, match="ServoParams.effects"):
         ServoParams(effects={"backlash_rad": 0.1})
+
+
+@pytest.mark.parametrize("volts", [7.0, 9.6, 12.0])
+def test_the_supply_for_a_top_speed_is_the_top_speed_s_own_supply(volts):
+    params = ServoParams(viscous_friction_nm_s_rad=0.01)
+    assert params.supply_for_top_speed_v(params.top_speed_rad_s(volts)) == pytest.approx(volts)
