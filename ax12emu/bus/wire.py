@@ -31,7 +31,7 @@ from .clock import VirtualClock, WallClock
 from .mixed import MixedBus, model_name, model_of
 from .state_store import StateStore
 
-__all__ = ["build_bus2", "build_wire", "build_wire_of", "protocol1_keys", "servo_list", "servo_models"]
+__all__ = ["build_bus2", "build_wire", "build_wire_of", "protocol1_keys", "servo_family", "servo_list", "servo_models"]
 
 
 def protocol1_keys() -> tuple[str, ...]:
@@ -49,6 +49,14 @@ def servo_models(spec: str, ids: list[int] | None, *, mixed: bool = False) -> li
     return parse_servo_spec(spec, ids, also=protocol1_keys() if mixed else ())
 
 
+def servo_family(key: str) -> str:
+    """Which bus of a wire serves a model: "AX" (the AX-12 bus: AX-12A, AX-18A), "MX" (Protocol 1.0 on its own
+    firmware model) or "X" (Protocol 2.0)."""
+    if key in PROTOCOL1_MODELS:
+        return "AX"
+    return "X" if "2.0" in model(key).protocols else "MX"
+
+
 def build_wire(spec: str, ids: list[int] | None = None, *, clock: WallClock | VirtualClock,
                baud_bps: float | None = None, choice: XModelChoice = XModelChoice(),
                options: Servo2Options = Servo2Options(), choice1: ModelChoice | None = None,
@@ -59,7 +67,7 @@ def build_wire(spec: str, ids: list[int] | None = None, *, clock: WallClock | Vi
     models = servo_models(spec, ids, mixed=True)
     if {key for _, key in models} == {AX12_MODEL}:
         raise ValueError(f"{spec!r} names no servo but AX-12As; AX-12As alone are the default bus (leave out servo=)")
-    if (choice1 is not None or options1 is not None) and not any(key in PROTOCOL1_MODELS for _, key in models):
+    if (choice1 is not None or options1 is not None) and not any(servo_family(key) == "AX" for _, key in models):
         raise ValueError(f"the AX bus's model and options shape AX-12As and AX-18As; {spec!r} names none")
     if options1 is not None and options1.profile != ServoOptions().profile:
         raise ValueError("profile: the AX-12A bus alone takes another edition of the AX-12A's table (leave out servo=)")
@@ -83,9 +91,9 @@ def build_wire_of(models: Sequence[tuple[int, str]], *, clock: WallClock | Virtu
     each protocol's servos keep their EEPROM area (IDs are per protocol, so apart); ``load_state`` False starts
     from factory defaults and still saves there.
     """
-    ax = [(servo_id, key) for servo_id, key in models if key in PROTOCOL1_MODELS]
-    mx = [(servo_id, model(key)) for servo_id, key in models if key not in PROTOCOL1_MODELS and "2.0" not in model(key).protocols]
-    x_models = [(servo_id, model(key)) for servo_id, key in models if "2.0" in model(key).protocols]
+    ax = [(servo_id, key) for servo_id, key in models if servo_family(key) == "AX"]
+    mx = [(servo_id, model(key)) for servo_id, key in models if servo_family(key) == "MX"]
+    x_models = [(servo_id, model(key)) for servo_id, key in models if servo_family(key) == "X"]
     bus1: Bus | Bus1X | None = None
     if ax:
         keys1 = [key for _, key in ax]

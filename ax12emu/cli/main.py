@@ -24,7 +24,7 @@ from ax12emu.bus import Bus
 from ax12emu.bus.clock import WallClock
 from ax12emu.bus.state_store import StateFileError, StateStore
 from ax12emu.cli import hil as cli_hil
-from ax12emu.protocol.control_table import AX12_MODEL, DEFAULT_PROFILE, PROFILES, PROTOCOL1_MODELS
+from ax12emu.protocol.control_table import AX12_MODEL, DEFAULT_PROFILE, PROFILES
 from ax12emu.protocol.ids import parse_ids
 from ax12emu.servo.model_factory import MODELS, ModelChoice, build_model, parse_arm
 from ax12emu.servo.virtual_servo import ServoOptions
@@ -189,7 +189,7 @@ _PROTOCOL1_ONLY = ("arm", "profile")
 
 def _check_servo_spec(parser: argparse.ArgumentParser, args: argparse.Namespace, argv: list[str]) -> None:
     """Resolve ``--servo`` into ``args.servo_models`` [(ID, model key)], or exit with the reason."""
-    from ax12emu.bus.wire import protocol1_keys
+    from ax12emu.bus.wire import protocol1_keys, servo_family
     from ax12emu.protocol.servo_spec import parse_servo_spec
 
     ids_given = any(a == "--ids" or a.startswith("--ids=") for a in argv)
@@ -201,7 +201,7 @@ def _check_servo_spec(parser: argparse.ArgumentParser, args: argparse.Namespace,
     if all(key == AX12_MODEL for _, key in args.servo_models):
         parser.error("--servo: no Protocol 2.0 servo; serve AX-12As without --servo")
     defaults = parser.parse_args(["serve"])
-    families = {_family(key) for _, key in args.servo_models}
+    families = {servo_family(key) for _, key in args.servo_models}
     for dest in (*_PROTOCOL1_ONLY, *_APPLIES_TO):
         if getattr(args, dest) == getattr(defaults, dest):
             continue
@@ -212,14 +212,6 @@ def _check_servo_spec(parser: argparse.ArgumentParser, args: argparse.Namespace,
             parser.error(f"{flag} applies to {' and '.join(f'{f} series' for f in _APPLIES_TO[dest])} servos; "
                          "this --servo names none")
 
-
-def _family(key: str) -> str:
-    """A Protocol 1.0 model's series ("AX" or "MX"), as the flags above name them; "X" for the rest."""
-    from ax12emu.protocol.servo_models import model
-
-    if key in PROTOCOL1_MODELS:
-        return "AX"
-    return "MX" if "2.0" not in model(key).protocols else "X"
 
 
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
