@@ -808,7 +808,8 @@ class Bus2(ServosById[Servo2], DecodedBus):
                 consulted.append((tuple(found), address, length))
             servo = found[0] if found else None
             if (servo is None or not (line_bps is None or self._hears(servo, line_bps))
-                    or not answers(servo, packet.instruction) or (faults is not None and not faults.admit(servo))):
+                    or not answers(servo, packet.instruction) or packet.instruction in servo.spec.unsupported_instructions
+                    or (faults is not None and not faults.admit(servo))):
                 break
             data, error = servo.table.read(address, length)  # listed_read's, without the call
             if len(found) > 1:

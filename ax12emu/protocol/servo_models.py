@@ -14,6 +14,8 @@ The format (``models/ax-12a.toml`` is the worked example)::
     baud_rates_bps = [9600, 57600, 115200, 1000000]  # optional: bit rate per Baud Rate register value
     protocols = ["2.0"]          # "1.0" and/or "2.0": the protocol this table is for
     source = "..."               # e-manual page and the emanual repository commit
+    unsupported_instructions = ["clear"]  # optional: Protocol 2.0 instructions the model's firmware does not
+                                 # know (Instruction2 names), where the e-manual's "Supported DYNAMIXEL" lists leave it out
 
     [table]
     size = 662                   # bytes: addresses 0 .. size-1
@@ -95,6 +97,7 @@ from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
+from .packets2 import Instruction2
 from .registers import MAX_ENTRY_SIZE, Access, Area, Entry, Layout, ModeRange, Profile, compile_layout
 
 if sys.version_info >= (3, 11):
@@ -108,8 +111,11 @@ __all__ = ["Rating", "Physical", "Controller", "Classic", "CLASSIC_ERRORS", "Ser
 MODELS_PACKAGE_DIR = "models"
 PROTOCOLS = ("1.0", "2.0")
 SHUTDOWN_CLEARS = ("torque_limit", "torque_enable")
+#: Instructions every Protocol 2.0 firmware knows (and the status packet's code): a model file cannot leave them out.
+_ALWAYS_KNOWN = frozenset({Instruction2.PING, Instruction2.READ, Instruction2.WRITE, Instruction2.STATUS})
 
-_MODEL_KEYS = {"name", "model_number", "firmware_version", "protocols", "source", "baud_rates_bps"}
+_MODEL_KEYS = {"name", "model_number", "firmware_version", "protocols", "source", "baud_rates_bps",
+               "unsupported_instructions"}
 _TABLE_KEYS = {"size", "entries"}
 _ENTRY_KEYS = {"address", "size", "name", "access", "area", "default", "min", "max", "signed", "min_from", "max_from",
                "count", "first", "default_step", "note", "ranges_when", "values"}
@@ -258,6 +264,9 @@ class ServoModel:
     mode_change: ModeChange = ModeChange()
     #: A classic table's units (``[classic]``); None for X-series tables and the AX-12's own model.
     classic: Classic | None = None
+    #: Protocol 2.0 instruction codes the firmware does not know: answered with Instruction Error, never listed
+    #: among a Sync/Bulk Read's answers (``model.unsupported_instructions``).
+    unsupported_instructions: frozenset[int] = frozenset()
     _layouts: dict[str, Layout] = field(default_factory=dict, compare=False, repr=False)
 
     @property
@@ -661,7 +670,24 @@ def parse_model(text: str, key: str, path: str) -> ServoModel:
         controller=_controller(where, data.get("controller")),
         mode_change=_mode_change(where, data.get("mode_change"), seen),
         classic=_classic(where, data.get("classic"), seen),
+        unsupported_instructions=_unsupported(where, info.get("unsupported_instructions", []), protocols),
     )
+
+
+def _unsupported(where: _Where, raw: Any, protocols: list[str]) -> frozenset[int]:
+    """``model.unsupported_instructions``: Protocol 2.0 instruction names (``Instruction2``'s, in lower case)."""
+    if not isinstance(raw, list):
+        raise where.error("model.unsupported_instructions", f"must be a list of instruction names, got {raw!r}")
+    if raw and "2.0" not in protocols:
+        raise where.error("model.unsupported_instructions", "names Protocol 2.0 instructions of a model without it")
+    known = {i.name.lower(): int(i) for i in Instruction2 if i not in _ALWAYS_KNOWN}
+    codes = []
+    for name in raw:
+        if name not in known:
+            raise where.error("model.unsupported_instructions", f"unknown instruction {name!r}; choose from: "
+                              f"{', '.join(known)}")
+        codes.append(known[name])
+    return frozenset(codes)
 
 
 def load_model_file(path: str | Path) -> ServoModel:

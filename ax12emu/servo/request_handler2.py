@@ -158,10 +158,13 @@ def _clear(servo: Servo2, params: Clear) -> tuple[int, bytes]:
 
 
 def _backup(servo: Servo2, params: ControlTableBackup) -> tuple[int, bytes]:
+    """Store the table, or check a restore can run (it runs after the reply).  Either way only with the torque
+    off: "If the Torque Enable is set as '1' (Torque On), Status Packet with Result Fail will be returned"
+    (e-manual, Protocol 2.0, Control Table Backup)."""
     table = servo.table
+    if table.torque_on:
+        return ErrorNumber.RESULT_FAIL, b""
     if params.option is BackupOption.STORE:
-        if table.torque_on:
-            return ErrorNumber.RESULT_FAIL, b""
         servo.backup = bytes(table.row)
         if table.has("backup_ready"):
             table.set("backup_ready", 1)
@@ -297,7 +300,7 @@ def handle2(servo: Servo2, packet: InstructionPacket2, *, secondary: bool = Fals
         talks = talks and servo.options.reply_on_crc_error
     else:
         params = parsed_params(instruction, params_bytes(packet))
-        handler = HANDLERS.get(instruction)
+        handler = None if instruction in servo.spec.unsupported_instructions else HANDLERS.get(instruction)
         if handler is None:
             error, data = ErrorNumber.INSTRUCTION, bytes(_read_length(servo, packet))
         elif isinstance(params, Malformed):

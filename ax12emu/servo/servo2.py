@@ -20,7 +20,7 @@ from .plant2 import Plant2
 from .table2 import Table2
 from .table_servo import TableServo
 
-__all__ = ["GOAL_REGISTERS", "SECONDARY_ID_MAX", "Servo2", "Servo2Options", "WATCHDOG_ERROR", "WATCHDOG_UNIT_S"]
+__all__ = ["BACKUP_RAM_PREFIX", "BACKUP_RAM_REGISTERS", "STARTUP_RAM_RESTORE", "STARTUP_TORQUE_ON", "GOAL_REGISTERS", "SECONDARY_ID_MAX", "Servo2", "Servo2Options", "WATCHDOG_ERROR", "WATCHDOG_UNIT_S"]
 
 #: The Goal registers ("Goal Value": e-manual, X series, "Bus Watchdog(98)"); writing one starts a new profile.
 GOAL_REGISTERS = frozenset({"goal_pwm", "goal_current", "goal_velocity", "goal_position"})
@@ -33,6 +33,18 @@ WATCHDOG_UNIT_S = 0.020
 #: default Goal PWM of 0 would allow no output at all); on the XL-320's classic table "When the power is turned
 #: on, Torque Limit(35) is reset to the value of Max Torque(15)" (e-manual, _includes/en/dxl/control_table_torque_limit.md).
 BOOT_GOALS = {"goal_pwm": "pwm_limit", "goal_current": "current_limit", "torque_limit": "max_torque"}
+#: The RAM registers a Control Table Backup carries besides the EEPROM area ("Available items in Control Table for
+#: data backup: All Data in EEPROM, Velocity P.I Gains, Position P.I.D Gains, Feedforward 1st & 2nd Gains, Profile
+#: Acceleration, Profile Velocity, Indirect Addresses": e-manual, Protocol 2.0, Control Table Backup (0x20)); the
+#: Indirect Addresses by their prefix.
+BACKUP_RAM_REGISTERS = frozenset({"velocity_i_gain", "velocity_p_gain", "position_d_gain", "position_i_gain",
+                                  "position_p_gain", "feedforward_2nd_gain", "feedforward_1st_gain",
+                                  "profile_acceleration", "profile_velocity"})
+BACKUP_RAM_PREFIX = "indirect_address_"
+#: Startup Configuration(60)'s bits: "Bit 0 Startup Torque On ... [1] Torque On on startup (Torque Enable(64) is set
+#: to 1)"; "Bit 1 RAM Restore ... [1] On startup, use the backup data to restore the RAM area" (e-manual, X series,
+#: e.g. https://emanual.robotis.com/docs/en/dxl/x/xl430-w250/#startup-configuration60; firmware v45 on, v46 on X330).
+STARTUP_TORQUE_ON, STARTUP_RAM_RESTORE = 0x01, 0x02
 #: The highest active Secondary ID(12); 253..255 switch the function off.
 SECONDARY_ID_MAX = 252
 #: RAM registers whose write is not one :meth:`Servo2.writes_goals_only` lets through: what the bus reads per
@@ -154,7 +166,20 @@ class Servo2(TableServo):
             table.set("registered_instruction", 0)
         if table.has("backup_ready"):  # the backup area outlives a reboot, so the firmware finds it again at boot
             table.set("backup_ready", int(self.backup is not None))
+        startup = table.get("startup_configuration") if table.has("startup_configuration") else 0
+        if startup & STARTUP_RAM_RESTORE and self.backup is not None:
+            self.restore_ram(self.backup)
+        if startup & STARTUP_TORQUE_ON:
+            table.set("torque_enable", 1)  # the goal is Present Position (above): it holds where it booted
         self.plant.command()
+
+    def restore_ram(self, backup: bytes) -> None:
+        """The RAM registers a backup carries (:data:`BACKUP_RAM_REGISTERS` and the Indirect Addresses), from
+        ``backup`` (the table's bytes when it was stored)."""
+        table = self.table
+        for entry in table.layout.entries:
+            if entry.name in BACKUP_RAM_REGISTERS or entry.name.startswith(BACKUP_RAM_PREFIX):
+                table.set(entry.name, entry.value_in(backup))
 
     @property
     def heard_span(self) -> tuple[int, int] | None:

@@ -476,6 +476,67 @@ def test_control_table_backup_stores_with_torque_off_and_restores_the_eeprom():
     assert status(bus, 2, Instruction2.CONTROL_TABLE_BACKUP, b"\x02CTRL").error == ErrorNumber.RESULT_FAIL  # nothing stored
 
 
+def test_control_table_backup_restore_with_torque_on_fails_and_keeps_the_table():
+    """"If the Torque Enable is set as '1' (Torque On), Status Packet with Result Fail will be returned": the
+    restore too, which then neither restores nor reboots."""
+    bus, firmware = recording_bus(ids=(1,), key="xl430-w250")
+    table = bus.servo(1).table
+    assert status(bus, 1, Instruction2.CONTROL_TABLE_BACKUP, b"\x01CTRL").error == ErrorNumber.NONE
+    send(bus, 1, Instruction2.WRITE, bytes((31, 0, 50)))  # Temperature Limit, after the backup
+    send(bus, 1, Instruction2.WRITE, bytes((64, 0, 1)))
+    assert status(bus, 1, Instruction2.CONTROL_TABLE_BACKUP, b"\x02CTRL").error == ErrorNumber.RESULT_FAIL
+    assert table.get("temperature_limit") == 50 and table.get("torque_enable") == 1 and firmware[0].reboots == 0
+
+
+@pytest.mark.parametrize("startup", [0, 1, 2, 3])
+def test_startup_configuration_turns_the_torque_on_and_restores_the_backed_up_ram_at_boot(startup):
+    """Startup Configuration(60): bit 0 Torque On at startup, bit 1 the backup's RAM registers (gains, profile,
+    Indirect Addresses) restored at startup; neither without its bit, and nothing a backup does not carry."""
+    bus, _ = recording_bus(ids=(1,), key="xl430-w250")
+    table = bus.servo(1).table
+    send(bus, 1, Instruction2.WRITE, bytes((84, 0)) + (1234).to_bytes(2, "little"))  # Position P Gain
+    send(bus, 1, Instruction2.WRITE, bytes((112, 0)) + u32(77))  # Profile Velocity
+    send(bus, 1, Instruction2.WRITE, bytes((168, 0)) + (132).to_bytes(2, "little"))  # Indirect Address 1
+    send(bus, 1, Instruction2.WRITE, bytes((65, 0, 1)))  # LED: RAM, not in a backup
+    assert status(bus, 1, Instruction2.CONTROL_TABLE_BACKUP, b"\x01CTRL").error == ErrorNumber.NONE
+    send(bus, 1, Instruction2.WRITE, bytes((84, 0)) + (999).to_bytes(2, "little"))  # after the backup
+    assert status(bus, 1, Instruction2.WRITE, bytes((60, 0, startup))).error == ErrorNumber.NONE
+    send(bus, 1, Instruction2.REBOOT)
+    restored = bool(startup & 2)
+    assert table.get("position_p_gain") == (1234 if restored else 640)
+    assert table.get("profile_velocity") == (77 if restored else 0)
+    assert table.get("indirect_address_1") == (132 if restored else 224)
+    assert table.get("led") == 0
+    assert table.get("torque_enable") == startup & 1
+    assert table.get("goal_position") == table.get("present_position")  # torque on at boot holds where it is
+
+
+def test_startup_ram_restore_without_a_backup_boots_with_the_defaults():
+    bus, _ = recording_bus(ids=(1,), key="xl430-w250")
+    send(bus, 1, Instruction2.WRITE, bytes((84, 0)) + (1234).to_bytes(2, "little"))
+    send(bus, 1, Instruction2.WRITE, bytes((60, 0, 2)))
+    send(bus, 1, Instruction2.REBOOT)
+    assert bus.servo(1).table.get("position_p_gain") == 640
+
+
+def test_the_xl320_knows_no_clear_backup_or_fast_read():
+    """The Protocol 2.0 page's "Supported DYNAMIXEL" lists leave the XL-320 out of Clear, Control Table Backup
+    and the fast reads: Instruction Error to the first two, silence in a fast read's chain (which stops there),
+    while the X series beside it answers all of them."""
+    bus, _ = recording_bus(ids=(1,), key="xl-320")
+    assert status(bus, 1, Instruction2.CLEAR, b"\x01DXL\x22").error == ErrorNumber.INSTRUCTION
+    assert status(bus, 1, Instruction2.CONTROL_TABLE_BACKUP, b"\x01CTRL").error == ErrorNumber.INSTRUCTION
+    assert bus.servo(1).backup is None
+    for fast, plain in ((Instruction2.FAST_SYNC_READ, Instruction2.SYNC_READ),
+                        (Instruction2.FAST_BULK_READ, Instruction2.BULK_READ)):
+        params = bytes((37, 0, 2, 0, 1)) if plain == Instruction2.SYNC_READ else bytes((1, 37, 0, 2, 0))
+        assert send(bus, 0xFE, fast, params) == []
+        assert len(send(bus, 0xFE, plain, params)) == 1  # the plain forms it answers
+    x_bus, _ = recording_bus(ids=(1,), key="xl430-w250")
+    assert status(x_bus, 1, Instruction2.CLEAR, b"\x01DXL\x22").error == ErrorNumber.NONE
+    assert len(send(x_bus, 0xFE, Instruction2.FAST_SYNC_READ, bytes((132, 0, 4, 0, 1)))) == 1
+
+
 def test_reg_write_is_checked_when_registered_and_bulk_write_errors_are_silent(xm):
     bus, _ = xm
     assert status(bus, 1, Instruction2.REG_WRITE, b"\x74\x00" + u32(5000)).error == ErrorNumber.DATA_RANGE

@@ -216,3 +216,26 @@ def test_plugin_option_serves_every_bus(pytester):
     )
     result = pytester.runpytest_inprocess("--ax12-servo", "1,4:xl330-m077", "--strict-markers", "-p", "no:cacheprovider")
     result.assert_outcomes(passed=2)
+
+
+def test_startup_torque_on_holds_the_rebooted_servo_and_a_goal_moves_it_through_dynamixel_sdk():
+    """Startup Configuration(60) bit 0 set and the servo rebooted: Torque Enable reads 1 without a write, the
+    shaft holds against a load that turns a limp one, and the next Goal Position moves it (virtual time)."""
+    with VirtualBus([1], servo="xl430-w250", transport="inprocess", virtual_time=True) as bus:
+        port, ph = sdk2(bus.port)
+        try:
+            assert ph.write1ByteTxRx(port, 1, 60, 1) == (COMM_SUCCESS, 0)
+            assert ph.reboot(port, 1) == (COMM_SUCCESS, 0)
+            assert ok(ph.read1ByteTxRx(port, 1, TORQUE_ENABLE)) == 1
+            start = bus.read(1, "present_position")
+            bus.set_external_torque(1, 0.3)  # a limp shaft turns on (measured: 168, 355, 541 pulses after 0.5, 1, 1.5 s)
+            bus.step(0.5)
+            held = bus.read(1, "present_position") - start
+            bus.step(1.0)
+            assert held < 60 and bus.read(1, "present_position") - start == held  # the position loop's offset, held
+            bus.set_external_torque(1, 0.0)
+            assert ph.write4ByteTxRx(port, 1, GOAL_POSITION, start + 1024) == (COMM_SUCCESS, 0)
+            bus.step(2.0)
+            assert abs(bus.read(1, "present_position") - (start + 1024)) <= 20
+        finally:
+            port.closePort()

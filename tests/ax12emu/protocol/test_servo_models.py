@@ -174,6 +174,24 @@ def test_bad_model_or_physical_sections_are_refused(header, physical, message):
         parse_model(_minimal(header=header, physical=physical), "t", "bad.toml")
 
 
+@pytest.mark.parametrize(
+    ("header", "message"),
+    [
+        ('unsupported_instructions = "clear"', r"model.unsupported_instructions: must be a list"),
+        ('unsupported_instructions = ["teleport"]', r"unknown instruction 'teleport'; choose from: .*fast_sync_read"),
+        ('unsupported_instructions = ["ping"]', r"unknown instruction 'ping'"),  # every firmware knows PING
+    ],
+)
+def test_unsupported_instructions_are_named_protocol_2_instructions(header, message):
+    with pytest.raises(ValueError, match=message):
+        parse_model(_minimal(header=header), "t", "bad.toml")
+    one = _minimal(header='unsupported_instructions = ["clear"]').replace('protocols = ["2.0"]', 'protocols = ["1.0"]')
+    with pytest.raises(ValueError, match=r"names Protocol 2.0 instructions of a model without it"):
+        parse_model(one, "t", "bad.toml")
+    assert parse_model(_minimal(header='unsupported_instructions = ["clear"]'), "t", "t.toml").unsupported_instructions == {0x10}
+    assert model("xl430-w250").unsupported_instructions == frozenset()
+
+
 def test_model_number_must_match_the_table_and_profiles_are_checked(tmp_path):
     """[model].model_number equals the table's default; a profile overriding a missing entry is refused."""
     text = _minimal().replace("model_number = 7\n", "model_number = 8\n", 1)
