@@ -91,6 +91,14 @@ class GroupedModel:
         for model, part in zip(self._models, self._per_servo(torque_nm, float)):
             model.set_external_torque(part)
 
+    @property
+    def external_torque_nm(self) -> np.ndarray:
+        """Each servo's external torque, gathered from its group's model."""
+        torques = np.zeros(self.n)
+        for model, group in zip(self._models, self._indices):
+            torques[group] = model.external_torque_nm
+        return torques
+
     def set_supply_voltage(self, volts: float) -> None:
         """One supply for the wire; each group checks it against its own valid range."""
         for model in self._models:

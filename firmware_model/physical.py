@@ -229,6 +229,11 @@ class PhysicalModel:
         self._s.ext_nm = self._to_backend(np.broadcast_to(np.asarray(torque_nm, dtype=float), (self.n,)))
         self._plan_cache = None
 
+    @property
+    def external_torque_nm(self) -> np.ndarray:
+        """The torque :meth:`set_external_torque` put on each shaft (a copy), so a caller can change one servo's."""
+        return np.asarray(self._array("ext_nm"), dtype=float)
+
     def set_arm(self, mass_kg, length_m) -> None:
         """Hang an arm (point mass at ``length_m``) on each shaft; convention in :mod:`firmware_model.motor`.
 

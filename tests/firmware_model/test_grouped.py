@@ -27,4 +27,6 @@ def test_per_servo_inputs_reach_the_servo_they_name():
     np.testing.assert_allclose(grouped.angle_rad[1:], [2.0, 1.0])
     grouped.set_blocked([False, True, False])
     grouped.set_external_torque([0.1, 0.2, 0.3])
+    np.testing.assert_allclose(slow.external_torque_nm, [0.1, 0.3])
+    np.testing.assert_allclose(grouped.external_torque_nm, [0.1, 0.2, 0.3])  # read back in the wire's order
     assert grouped.sense().present_position.shape == (3,)

@@ -125,3 +125,15 @@ def test_faults_name_the_buses_that_take_them():
     says = str(refused.value)
     assert "not available on a SomeOtherBus" in says
     assert all(name in says for name in ("AX-12", "MX", "Protocol 2.0")), says
+
+
+def test_a_push_on_one_ax12_keeps_the_torque_serve_put_on_the_others():
+    """The AX-12 bus's one model takes every servo's torque at once: changing servo 1's from the page leaves the
+    torque ``serve --external-torque`` put on servo 2 (and the model's own record of both is what moves them)."""
+    with VirtualBus(ids=[1, 2], transport="inprocess", virtual_time=True) as bus:
+        bus.call(lambda b: b.model.set_external_torque(1.0))  # what serve --external-torque 1.0 does
+        controls = ServedControls(bus.call)
+        apply(controls, {"action": "external_torque", "id": 1, "nm": 0.5})
+        assert list(bus.call(lambda b: b.model.external_torque_nm)) == [0.5, 1.0]
+        apply(controls, {"action": "external_torque", "id": 2, "nm": 0.0})
+        assert list(bus.call(lambda b: b.model.external_torque_nm)) == [0.5, 0.0]
