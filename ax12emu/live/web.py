@@ -23,7 +23,8 @@ Robustness: the bus never waits on this thread (frames come from the
 :class:`~ax12emu.live.sampler.Sampler`, which reads the bus at a bounded
 rate).  Request bodies over ``MAX_BODY_BYTES`` get 413, WebSocket messages
 over ``MAX_MESSAGE_BYTES`` close the socket with 1009 (message too big),
-malformed JSON or a bad control gets 400 with the reason; each WebSocket
+malformed JSON or a bad control gets 400 with the reason, a body that stalls
+after its headers 408 after ``BODY_TIMEOUT_S``; each WebSocket
 client has a queue of ``QUEUE_FRAMES`` frames, and a client that falls that
 far behind (one that never reads) is dropped; past ``max_connections`` open
 connections a new one gets 503 and is closed; idle keep-alive connections
@@ -42,6 +43,8 @@ from pathlib import Path
 from typing import Any
 
 from aiohttp import WSMsgType, web
+from aiohttp.http_exceptions import HttpProcessingError
+from aiohttp.web_protocol import RequestPayloadError
 
 from ax12emu.serve.transports.tcp import is_loopback
 
@@ -68,10 +71,41 @@ KEEPALIVE_S = 15.0
 FIRST_FRAME_WAIT_S = 2.0
 #: Newest log lines ``/api/log`` returns by default and at most.
 LOG_LINES = 200
+#: How long a control's body may take to arrive once its headers have: a client that stalls mid-body would
+#: otherwise hold its connection (and, many of them, every slot) for good; the keep-alive limit covers only
+#: idle connections.
+BODY_TIMEOUT_S = 5.0
 
 
 def _error(status: int, text: str) -> web.Response:
     return web.json_response({"error": text}, status=status)
+
+
+def _parse_json(data: bytes | str) -> Any:
+    """A control message (JSON is UTF-8, RFC 8259, whatever charset a request names); ValueError with the reason,
+    nesting too deep to parse included."""
+    try:
+        return json.loads(data)
+    except RecursionError:
+        raise ValueError("nested too deeply") from None
+
+
+class _ClientFaults(logging.Filter):
+    """aiohttp logs a client's own faults (a connection dropped mid-request, a malformed request it has already
+    answered with 400) as errors with a traceback, tens of lines each: one INFO line instead, so a careless or
+    hostile client cannot fill the log or the terminal a ``--monitor`` draws on."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        exc = record.exc_info[1] if record.exc_info else None
+        if isinstance(exc, (ConnectionError, HttpProcessingError, RequestPayloadError)):
+            said = " ".join(str(exc).split())  # aiohttp's messages quote the request over several lines
+            record.msg, record.args = "live view: a client's request ended: %s: %s", (type(exc).__name__, said)
+            record.exc_info = record.exc_text = None
+            record.levelno, record.levelname = logging.INFO, "INFO"
+        return True
+
+
+_CLIENT_FAULTS = _ClientFaults()
 
 
 class _Refuse(asyncio.Protocol):
@@ -166,6 +200,9 @@ class WebServer:
             loop.close()
 
     async def _setup(self) -> None:
+        server_log = logging.getLogger("aiohttp.server")
+        if _CLIENT_FAULTS not in server_log.filters:
+            server_log.addFilter(_CLIENT_FAULTS)
         app = web.Application(client_max_size=MAX_BODY_BYTES)
         app.router.add_get("/", self._index)
         app.router.add_static("/assets/", ASSETS, show_index=False)
@@ -174,7 +211,10 @@ class WebServer:
         app.router.add_get("/api/actions", self._actions)
         app.router.add_post("/api/control", self._control)
         app.router.add_get("/ws", self._ws)
-        self._runner = web.AppRunner(app, access_log=None, keepalive_timeout=KEEPALIVE_S, shutdown_timeout=1.0)
+        # lingering_time 0: a request answered before its body arrived (408, 413) is closed at once, not after
+        # reading up to 10 s more of a body nobody will use.
+        self._runner = web.AppRunner(app, access_log=None, keepalive_timeout=KEEPALIVE_S, shutdown_timeout=1.0,
+                                     lingering_time=0.0)
         await self._runner.setup()
         family = socket.AF_INET6 if ":" in self.host else socket.AF_INET
         sock = socket.socket(family, socket.SOCK_STREAM)
@@ -291,10 +331,18 @@ class WebServer:
         if request.content_length is not None and request.content_length > MAX_BODY_BYTES:
             return _error(413, f"request body over {MAX_BODY_BYTES} bytes")
         try:
-            message = await request.json()
+            data = await asyncio.wait_for(request.read(), BODY_TIMEOUT_S)
         except web.HTTPRequestEntityTooLarge:
             return _error(413, f"request body over {MAX_BODY_BYTES} bytes")
-        except (ValueError, UnicodeDecodeError) as exc:
+        except TimeoutError:
+            late = _error(408, f"the body did not arrive within {BODY_TIMEOUT_S:g} s of its headers")
+            late.force_close()  # the rest of the body may still come: the connection cannot carry another request
+            return late
+        except RequestPayloadError as exc:  # e.g. a body its Content-Encoding cannot decode
+            return _error(400, f"the body could not be read: {exc}")
+        try:
+            message = _parse_json(data)
+        except ValueError as exc:
             return _error(400, f"the body is not JSON: {exc}")
         status, body = await self._apply(message)
         return web.json_response(body, status=status)
@@ -330,7 +378,7 @@ class WebServer:
                 await ws.send_str(json.dumps({"type": "error", "error": "send control messages as JSON text"}))
                 continue
             try:
-                parsed = json.loads(message.data)
+                parsed = _parse_json(message.data)
             except ValueError as exc:
                 await ws.send_str(json.dumps({"type": "error", "error": f"not JSON: {exc}"}))
                 continue

@@ -8,6 +8,7 @@ from __future__ import annotations
 import asyncio
 import base64
 import json
+import logging
 import os
 import socket
 import time
@@ -23,6 +24,7 @@ from emu_testkit import sdk_port  # noqa: E402
 
 from ax12emu import VirtualBus  # noqa: E402
 from ax12emu.live import Sampler  # noqa: E402
+from ax12emu.live import web as web_module  # noqa: E402
 from ax12emu.live.web import MAX_MESSAGE_BYTES, QUEUE_FRAMES, WebServer  # noqa: E402
 
 
@@ -178,3 +180,84 @@ def test_malformed_and_oversized_websocket_messages_get_clear_errors(bus):
         _, comm, error = ph.ping(sdk, 2)
         assert comm == COMM_SUCCESS and error & 0x04  # the alarm sent over the socket took
         assert ph.ping(sdk, 3)[1] == COMM_SUCCESS
+
+
+def _raw_request(host: str, port: int, request: bytes, wait_s: float = 5.0) -> bytes:
+    """Send ``request`` as is and return everything the server says until it closes (or ``wait_s`` passes)."""
+    with socket.create_connection((host, port), timeout=wait_s) as sock:
+        sock.sendall(request)
+        answer = b""
+        try:
+            while chunk := sock.recv(4096):
+                answer += chunk
+        except TimeoutError:
+            pass
+        return answer
+
+
+def test_a_control_body_that_stalls_gets_408_and_its_connection_is_closed(bus, monkeypatch):
+    """Headers, then one byte of a 100-byte body, then nothing: answered 408 and closed once BODY_TIMEOUT_S is
+    over, where the connection used to stay open (256 such held every slot for good)."""
+    monkeypatch.setattr(web_module, "BODY_TIMEOUT_S", 0.5)
+    host, port = host_port(bus.web_url)
+    start = time.monotonic()
+    answer = _raw_request(host, port, b"POST /api/control HTTP/1.1\r\nHost: x\r\nContent-Length: 100\r\n\r\n{")
+    assert answer.startswith(b"HTTP/1.1 408") and b"did not arrive" in answer, answer[:200]
+    assert time.monotonic() - start < 4.0  # closed by the server, not by the client's own 5 s timeout
+
+
+BAD_BODIES = [
+    ({"Content-Type": "application/json"}, b"[" * 5000 + b"]" * 5000, "nested too deeply"),
+    ({"Content-Type": "application/json; charset=bogus"}, b'{"action": 1}', "action"),  # read as UTF-8 JSON
+    ({"Content-Type": "application/json", "Content-Encoding": "gzip"}, b"abcde", "could not be read"),
+    ({"Content-Type": "application/json"}, b"\xff\xfe{", "not JSON"),
+]
+
+
+@pytest.mark.parametrize(("headers", "body", "says"), BAD_BODIES, ids=["deep", "charset", "gzip", "bytes"])
+def test_malformed_control_bodies_get_400_with_the_reason(bus, headers, body, says):
+    request = urllib.request.Request(bus.web_url + "api/control", data=body, method="POST", headers=headers)
+    status, answer = None, None
+    try:
+        with urllib.request.urlopen(request, timeout=5) as reply:
+            status, answer = reply.status, json.loads(reply.read())
+    except urllib.error.HTTPError as error:
+        with error:
+            status, answer = error.code, json.loads(error.read())
+    assert status == 400 and says in answer["error"], (status, answer)
+
+
+def test_a_deeply_nested_websocket_message_gets_an_error_and_the_socket_stays(bus):
+    async def run() -> tuple[dict, dict]:
+        async with aiohttp.ClientSession() as session, session.ws_connect(bus.web_url.replace("http", "ws") + "ws") as ws:
+            await ws.send_str("[" * 2000 + "]" * 2000)
+            answers = []
+            while len(answers) < 2:
+                data = json.loads((await ws.receive(timeout=5)).data)
+                if data["type"] == "error":
+                    answers.append(data)
+                    await ws.send_str(json.dumps({"action": "clear_faults"}))
+                elif data["type"] == "reply":
+                    answers.append(data)
+            return answers[0], answers[1]
+
+    error, reply = asyncio.run(run())
+    assert "nested too deeply" in error["error"] and reply["status"] == 200
+
+
+def test_a_clients_own_faults_are_one_info_line_not_an_error_with_a_traceback(bus, caplog):
+    """A malformed request aiohttp answers with 400 and a request dropped mid-body: logged, but not as errors."""
+    host, port = host_port(bus.web_url)
+    with caplog.at_level(logging.INFO, logger="aiohttp.server"):
+        refused = _raw_request(host, port, b"POST /api/control HTTP/1.1\r\nHost: x\r\nContent-Length: -1\r\n\r\n")
+        assert refused.split(b"\r\n")[0].endswith(b" 400 Bad Request"), refused[:100]
+        with socket.create_connection((host, port), timeout=5) as sock:
+            sock.sendall(b"POST /api/control HTTP/1.1\r\nHost: x\r\nContent-Length: 100\r\n\r\n{")
+            time.sleep(0.2)
+        deadline = time.monotonic() + 3
+        while time.monotonic() < deadline and len([r for r in caplog.records if r.name == "aiohttp.server"]) < 2:
+            time.sleep(0.05)
+    server = [r for r in caplog.records if r.name == "aiohttp.server"]
+    assert len(server) >= 2, [r.getMessage() for r in caplog.records]
+    assert all(r.levelno == logging.INFO and r.exc_info is None and "a client's request ended" in r.getMessage()
+               and "\n" not in r.getMessage() for r in server), [(r.levelname, r.getMessage()) for r in server]
