@@ -165,6 +165,10 @@ SENSED = frozenset({"present_position", "present_velocity", "present_current", "
                     "present_input_voltage", "present_temperature", "hardware_error_status",
                     "present_speed", "present_voltage"})  # the last two: a classic table's (XL-320)
 KEEPS = {0xFF: (), 0x01: ("id",), 0x02: ("id", "baud_rate")}
+#: The RAM registers a Control Table Backup holds (e-manual, Protocol 2.0, "Available items in Control Table for
+#: data backup"), and the Indirect Addresses: what Startup Configuration's RAM Restore brings back at boot.
+BACKUP_RAM = frozenset({"velocity_i_gain", "velocity_p_gain", "position_d_gain", "position_i_gain", "position_p_gain",
+                        "feedforward_2nd_gain", "feedforward_1st_gain", "profile_acceleration", "profile_velocity"})
 #: What Factory Reset never resets: what the servo is (the X series keeps them in bytes 0..6).
 IDENTITY = ("model_number", "model_information", "firmware_version")
 
@@ -429,6 +433,13 @@ class Oracle2:
         if "backup_ready" in rules.by_name:
             at = rules.address["backup_ready"]
             out[at] = image[at] if shadow.backup is None else 1  # the backup outlives a power-up
+        startup = out[rules.address["startup_configuration"]] if "startup_configuration" in rules.by_name else 0
+        if startup & 0x02 and shadow.backup is not None:  # RAM Restore: the RAM items a backup carries
+            for entry in rules.layout.entries:
+                if entry.name in BACKUP_RAM or entry.name.startswith("indirect_address_"):
+                    out[entry.address:entry.end] = shadow.backup[entry.address:entry.end]
+        if startup & 0x01:  # Startup Torque On
+            out[rules.address["torque_enable"]] = 1
         shadow.registered = None
         return bytes(out)
 
@@ -441,6 +452,8 @@ class Oracle2:
         """(error number, reply data, table after, what else may differ: None, 'boot' or 'sensed')."""
         rules = shadow.rules
         wd = self._watchdog_error(rules, row)
+        if instruction in rules.spec.unsupported_instructions:  # the model file's list (the e-manual's "Supported")
+            return INSTRUCTION_ERROR, b"", row, None
         if instruction == PING:
             if params:
                 return RESULT_FAIL, b"", row, None
@@ -506,9 +519,9 @@ class Oracle2:
         if instruction == BACKUP:
             if len(params) != 5 or params[0] not in (1, 2) or params[1:] != BACKUP_KEY:
                 return RESULT_FAIL, b"", row, None
+            if row[rules.address["torque_enable"]]:  # "works properly only if Torque Enable ... is set as '0'"
+                return RESULT_FAIL, b"", row, None
             if params[0] == 1:
-                if row[rules.address["torque_enable"]]:
-                    return RESULT_FAIL, b"", row, None
                 shadow.backup = row
                 out = bytearray(row)
                 if "backup_ready" in rules.by_name:
@@ -636,7 +649,7 @@ class Oracle2:
                 break
             k = holders[0]
             rules = self.shadows[k].rules
-            if not self._answers(rules, rows[k], instruction):
+            if not self._answers(rules, rows[k], instruction) or instruction in rules.spec.unsupported_instructions:
                 break
             error, data = rules.read(rows[k], address, length)
             shares.append((k, servo_id, error | self._alert(rules, rows[k]), data))

@@ -8,12 +8,15 @@ resident memory, first undisturbed, then while the page's port holds
   limit each one is answered 503 and closed),
 * ``--stuck`` WebSocket clients that never read (their frames pile up until
   the server drops them),
-* ``--oversized`` requests with bodies over the limit, and malformed ones.
+* ``--oversized`` requests with bodies over the limit, and malformed ones;
 
-Prints both phases side by side; the tests (tests/ax12emu/live/test_hostile.py)
+then, with ``--requests N``, while N clients (in a process of their own) send
+``GET /api/servos`` back to back, as fast as the server answers them.
+
+Prints the phases side by side; the tests (tests/ax12emu/live/test_hostile.py)
 do the same with a couple of hundred connections.
 
-Usage: ``python tools/live_flood.py [--connections 1000] [--stuck 50] [--seconds 3]``
+Usage: ``python tools/live_flood.py [--connections 1000] [--stuck 50] [--seconds 3] [--requests 100]``
 """
 
 from __future__ import annotations
@@ -32,6 +35,7 @@ import urllib.request
 from dynamixel_sdk import COMM_SUCCESS, PacketHandler
 
 import ax12emu  # noqa: E402, F401 - first: once tests/ is on the path its ax12emu folder would shadow the package
+import firmware_model  # noqa: E402, F401 - and its firmware_model folder this one
 
 sys.path.append(os.path.join(os.path.dirname(__file__), "..", "tests"))
 from emu_testkit import UrlPortHandler  # noqa: E402
@@ -76,12 +80,57 @@ def status_of(url: str, data: bytes | None = None) -> int:
         return 0
 
 
+#: The request flood's clients, run by ``python -c`` in a process of their own (so they do not share this one's
+#: interpreter with the dynamixel-sdk reads being measured): argv url, clients, seconds; prints "status:count ...".
+REQUEST_FLOOD = """
+import asyncio, sys, time, aiohttp
+url, clients, seconds = sys.argv[1], int(sys.argv[2]), float(sys.argv[3])
+counts = {}
+async def client(session):
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        try:
+            async with session.get(url) as answer:
+                await answer.read()
+                counts[answer.status] = counts.get(answer.status, 0) + 1
+        except (aiohttp.ClientError, OSError) as error:
+            counts[type(error).__name__] = counts.get(type(error).__name__, 0) + 1
+async def main():
+    async with aiohttp.ClientSession(connector=aiohttp.TCPConnector(limit=0)) as session:
+        await asyncio.gather(*[client(session) for _ in range(clients)])
+asyncio.run(main())
+print(" ".join(f"{status}:{count}" for status, count in sorted(counts.items(), key=str)))
+"""
+
+
+def request_flood(page_url: str, clients: int, seconds: float, port, ph) -> None:
+    """Reads measured while ``clients`` GET /api/servos as fast as they are answered; prints the rates."""
+    quiet_rate, _ = reads(port, ph, seconds)
+    flood = subprocess.Popen([sys.executable, "-c", REQUEST_FLOOD, page_url + "api/servos", str(clients),
+                              str(seconds + 1.0)], stdout=subprocess.PIPE, text=True)
+    try:
+        time.sleep(0.5)  # the clients connect
+        rate, failures = reads(port, ph, seconds)
+        said = flood.communicate(timeout=seconds + 30)[0].strip()
+    finally:
+        if flood.poll() is None:
+            flood.kill()
+            flood.wait()
+    answered = sum(int(part.split(":")[1]) for part in said.split() if part.split(":")[0].isdigit())
+    print(f"GET flood:   {rate:7.0f} reads/s, {failures} failures, against {quiet_rate:.0f} just before: "
+          f"{rate / quiet_rate:.1%} ({clients} clients, {answered / (seconds + 1.0):.0f} requests/s answered: {said})")
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--connections", type=int, default=1000)
     parser.add_argument("--stuck", type=int, default=50, help="WebSocket clients that never read")
     parser.add_argument("--seconds", type=float, default=3.0)
+    parser.add_argument("--requests", type=int, default=0, metavar="N",
+                        help="also measure while N clients send GET /api/servos back to back")
     args = parser.parse_args(argv)
+    if args.connections < 0 or args.stuck < 0 or args.requests < 0 or not args.seconds > 0:
+        parser.error("--connections, --stuck and --requests must be >= 0 and --seconds > 0")
     soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
     resource.setrlimit(resource.RLIMIT_NOFILE, (min(hard, max(soft, args.connections + args.stuck + 256)), hard))
     process = subprocess.Popen([sys.executable, "-m", "ax12emu", "serve", "--tcp", "127.0.0.1:0", "--web", "127.0.0.1:0"],
@@ -135,6 +184,8 @@ def main(argv: list[str] | None = None) -> int:
         time.sleep(1.0)
         after = status_of(page_url + "api/servos")
         print(f"after the flood: GET /api/servos {after}, server RSS {rss_kb(process.pid) / 1024:.1f} MB")
+        if args.requests:
+            request_flood(page_url, args.requests, args.seconds, port, ph)
         port.closePort()
     finally:
         for sock in held:

@@ -26,7 +26,9 @@ over ``MAX_MESSAGE_BYTES`` close the socket with 1009 (message too big),
 malformed JSON or a bad control gets 400 with the reason, a body that stalls
 after its headers 408 after ``BODY_TIMEOUT_S``; each WebSocket
 client has a queue of ``QUEUE_FRAMES`` frames, and a client that falls that
-far behind (one that never reads) is dropped; past ``max_connections`` open
+far behind (one that never reads) is dropped; requests (and a socket's
+controls) are answered at most ``REQUESTS_PER_S`` a second, the rest wait
+their turn or, past ``MAX_REQUEST_WAIT_S``, get 503; past ``max_connections`` open
 connections a new one gets 503 and is closed; idle keep-alive connections
 close after ``KEEPALIVE_S``.
 """
@@ -71,6 +73,12 @@ KEEPALIVE_S = 15.0
 FIRST_FRAME_WAIT_S = 2.0
 #: Newest log lines ``/api/log`` returns by default and at most.
 LOG_LINES = 200
+#: Requests the live view answers per second, all routes but the WebSocket's frames together: a page needs a
+#: handful to load and one per control, a script polling the snapshot 25 (the sampler's rate).  Past it requests
+#: wait their turn, so a flood of them costs the bus (which shares this process) little more than the page does.
+REQUESTS_PER_S = 100.0
+#: A request whose turn is further away than this gets 503 at once instead of waiting.
+MAX_REQUEST_WAIT_S = 2.0
 #: How long a control's body may take to arrive once its headers have: a client that stalls mid-body would
 #: otherwise hold its connection (and, many of them, every slot) for good; the keep-alive limit covers only
 #: idle connections.
@@ -154,6 +162,8 @@ class WebServer:
         self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="ax12emu-live-control")
         self._runner: web.AppRunner | None = None
         self._server: asyncio.base_events.Server | None = None
+        #: When the next request may be answered (event-loop time): see :meth:`_turn`.
+        self._next_slot_s = 0.0
 
     @property
     def url(self) -> str:
@@ -203,7 +213,7 @@ class WebServer:
         server_log = logging.getLogger("aiohttp.server")
         if _CLIENT_FAULTS not in server_log.filters:
             server_log.addFilter(_CLIENT_FAULTS)
-        app = web.Application(client_max_size=MAX_BODY_BYTES)
+        app = web.Application(client_max_size=MAX_BODY_BYTES, middlewares=[self._paced])
         app.router.add_get("/", self._index)
         app.router.add_static("/assets/", ASSETS, show_index=False)
         app.router.add_get("/api/servos", self._servos)
@@ -276,6 +286,27 @@ class WebServer:
         if transport is not None:
             transport.abort()  # a client that does not read would hold a polite close up
         log.info("live view: dropped a WebSocket client (%s)", why)
+
+    # -- pacing ------------------------------------------------------------------------------
+    def _turn(self) -> float | None:
+        """Seconds until the next request may be answered (0: now), or None when that is too far away."""
+        now = asyncio.get_running_loop().time()
+        slot = max(now, self._next_slot_s)
+        if slot - now > MAX_REQUEST_WAIT_S:
+            return None
+        self._next_slot_s = slot + 1.0 / REQUESTS_PER_S
+        return slot - now
+
+    @web.middleware
+    async def _paced(self, request: web.Request, handler: Any) -> web.StreamResponse:
+        if request.path != "/ws":  # the frames are paced by the sampler; a socket's controls by _serve_messages
+            wait = self._turn()
+            if wait is None:
+                return _error(503, f"the live view answers {REQUESTS_PER_S:g} requests a second and more are "
+                                   "waiting; frames stream on /ws")
+            if wait:
+                await asyncio.sleep(wait)
+        return await handler(request)
 
     # -- routes -----------------------------------------------------------------------------
     async def _index(self, request: web.Request) -> web.StreamResponse:
@@ -382,6 +413,13 @@ class WebServer:
             except ValueError as exc:
                 await ws.send_str(json.dumps({"type": "error", "error": f"not JSON: {exc}"}))
                 continue
+            wait = self._turn()
+            if wait is None:
+                await ws.send_str(json.dumps({"type": "error", "error": f"more than {REQUESTS_PER_S:g} requests a "
+                                              "second are waiting: control not taken"}))
+                continue
+            if wait:
+                await asyncio.sleep(wait)
             status, body = await self._apply(parsed)
             await ws.send_str(json.dumps({"type": "reply", "status": status, **body}))
 

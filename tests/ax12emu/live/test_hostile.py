@@ -261,3 +261,27 @@ def test_a_clients_own_faults_are_one_info_line_not_an_error_with_a_traceback(bu
     assert len(server) >= 2, [r.getMessage() for r in caplog.records]
     assert all(r.levelno == logging.INFO and r.exc_info is None and "a client's request ended" in r.getMessage()
                and "\n" not in r.getMessage() for r in server), [(r.levelname, r.getMessage()) for r in server]
+
+
+def test_requests_past_the_rate_wait_their_turn_or_get_503(bus, monkeypatch):
+    """REQUESTS_PER_S paces every route but the socket's frames: of 20 requests at once at 10 a second with at
+    most 0.5 s to wait, about 6 are answered (spread over half a second) and the rest get 503 at once; that is
+    what keeps a flood of requests from starving the bus this process also serves."""
+    monkeypatch.setattr(web_module, "REQUESTS_PER_S", 10.0)
+    monkeypatch.setattr(web_module, "MAX_REQUEST_WAIT_S", 0.5)
+    time.sleep(0.3)  # the fixture's own requests' turns are over
+
+    async def burst() -> list[tuple[int, float, str]]:
+        start = time.monotonic()
+        async with aiohttp.ClientSession() as session:
+            async def one() -> tuple[int, float, str]:
+                async with session.get(bus.web_url + "api/log?n=1") as answer:
+                    return answer.status, time.monotonic() - start, await answer.text()
+            return await asyncio.gather(*[one() for _ in range(20)])
+
+    answers = asyncio.run(burst())
+    served = sorted(elapsed for status, elapsed, _ in answers if status == 200)
+    refused = [text for status, _, text in answers if status == 503]
+    assert 4 <= len(served) <= 10 and len(served) + len(refused) == 20, answers
+    assert served[-1] >= 0.3  # the last ones waited their turn
+    assert all("requests a second" in text for text in refused)
