@@ -48,6 +48,11 @@ class ModelChoice:
     arm: tuple[float, float] | None = None
 
 
+#: The largest arm ``--arm`` takes: far beyond what any of these servos holds (an AX-12A's stall torque is about
+#: 1.5 N m; 100 kg at 10 m is 9.8 kN m), yet small enough that the physics stays finite (1e308 overflowed it).
+ARM_MASS_MAX_KG, ARM_LENGTH_MAX_M = 100.0, 10.0
+
+
 def parse_arm(text: str) -> tuple[float, float]:
     """"MASS_KG,LENGTH_M" to a pair of non-negative floats."""
     parts = text.split(",")
@@ -57,8 +62,8 @@ def parse_arm(text: str) -> tuple[float, float]:
         mass_kg, length_m = float(parts[0]), float(parts[1])
     except ValueError:
         raise ValueError(f"expected two numbers MASS_KG,LENGTH_M, got {text!r}") from None
-    if not (0 <= mass_kg < float("inf") and 0 <= length_m < float("inf")):
-        raise ValueError(f"arm mass and length must be finite and >= 0, got {text!r}")
+    if not (0 <= mass_kg <= ARM_MASS_MAX_KG and 0 <= length_m <= ARM_LENGTH_MAX_M):
+        raise ValueError(f"arm mass must be 0..{ARM_MASS_MAX_KG:g} kg and length 0..{ARM_LENGTH_MAX_M:g} m, got {text!r}")
     return mass_kg, length_m
 
 

@@ -28,6 +28,8 @@ import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from ..params import ServoParams
 from ..units import RAD_PER_POSITION_UNIT, speed_rad_s_to_raw
 from .batch import null_knobs
@@ -98,6 +100,22 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     return args
 
 
+#: The longest recording the workflow simulates (s): every fit steps the model through all of it at 1 kHz for
+#: dozens of parameter sets at once, and the arrays grow with it (a 3,000 s trace took 4.6 GB).  Recordings the
+#: workflow is meant for last seconds to a minute or two; a longer span is usually a time column in ms, not s.
+MAX_SPAN_S = 300.0
+
+
+def check_span(t_s: np.ndarray, source: str, unit_s: float = 1.0) -> None:
+    """ValueError naming the widest gap when the rows span more than :data:`MAX_SPAN_S` (times in ``unit_s``)."""
+    span_s = float(t_s[-1] - t_s[0]) * unit_s if len(t_s) else 0.0
+    if span_s > MAX_SPAN_S:
+        widest = int(np.argmax(np.diff(t_s))) + 1
+        raise ValueError(f"{source}: the rows span {span_s:.6g} s, more than the {MAX_SPAN_S:g} s the workflow "
+                         f"simulates (the widest gap: row {widest + 1} of the data, from {t_s[widest - 1]:.6g} to "
+                         f"{t_s[widest]:.6g}); cut the recording, or check the time column's unit")
+
+
 def load_input(args: argparse.Namespace, params: ServoParams, say=lambda msg: None) -> Input:
     """The trace named on the command line, in either format; raises ValueError / OSError on bad input."""
     given = [f"--{n.replace('_', '-')}" for n in _WIZARD_OPTIONS if getattr(args, n, None) is not None]
@@ -109,13 +127,16 @@ def load_input(args: argparse.Namespace, params: ServoParams, say=lambda msg: No
             raise ValueError(f"{', '.join(given)} {'applies' if len(given) == 1 else 'apply'} only to Wizard 2 graph "
                              f"exports; {args.trace} is a trace CSV, which records its own commands")
         trace = read_trace(args.trace)
+        check_span(trace.t, args.trace)
         notes = [f"{args.trace}: trace CSV, {len(trace)} rows"]
         if not trace.records_command_times:
             notes.append("the trace does not say when commands were sent (no command_t): each change's onset is "
                          "fitted within its sample as part of the base model")
         return Input(trace, "trace", notes, {"format": "trace", "rows": len(trace),
                                              "records_command_times": trace.records_command_times})
-    return _wizard_input(read_wizard(args.trace), args, params, say)
+    export = read_wizard(args.trace)
+    check_span(export.t_s, args.trace)
+    return _wizard_input(export, args, params, say)
 
 
 def _wizard_input(ex: WizardExport, args: argparse.Namespace, params: ServoParams, say) -> Input:

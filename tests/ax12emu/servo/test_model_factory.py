@@ -7,7 +7,7 @@ from dataclasses import replace
 import pytest
 
 from ax12emu.protocol.servo_models import model
-from ax12emu.servo.model_factory import ModelChoice, build_model, build_protocol1_model, datasheet_params
+from ax12emu.servo.model_factory import ModelChoice, build_model, build_protocol1_model, datasheet_params, parse_arm
 from firmware_model.params import ServoEffects, ServoParams
 
 TWIN = ServoParams(static_friction_nm=0.2, effects=ServoEffects(backlash_rad=0.04, arm_weight_moment_nm=0.3,
@@ -49,3 +49,11 @@ def test_a_wire_of_another_model_alone_runs_the_given_parameters_and_a_mixed_wir
         build_protocol1_model(["ax-12a", "ax-18a"], ModelChoice(params=twin))
     with pytest.raises(ValueError, match="kinematic applies to the AX-12A only"):
         build_protocol1_model(["ax-18a"], ModelChoice(name="kinematic"))
+
+
+@pytest.mark.parametrize("text", ["1e308,1e308", "101,0.1", "0.1,11", "-1,0.1", "nan,0.1", "0.1,inf"])
+def test_an_arm_beyond_any_servo_is_refused_in_one_line(text):
+    """A mass or length so large the physics overflowed (1e308 gave infinite positions) is a flag error."""
+    with pytest.raises(ValueError, match=r"arm mass must be 0..100 kg and length 0..10 m"):
+        parse_arm(text)
+    assert parse_arm("100,10") == (100.0, 10.0)

@@ -18,6 +18,12 @@ CASES = {
     "Wizard export cut in its header": (_WIZARD_HEADER[:40], "ItemCount"),
     "Wizard export with no data row whole": (_WIZARD_HEADER + "0,1\n16,", "need at least two readable data rows"),
     "directory": (None, "Is a directory"),
+    # a span no fit can simulate (it used to allocate petabytes): a gap, or a time column in ms
+    "trace with a gap of years": (_AX_HEADER + "0,500,0,100\n0.01,500,0,105\n1e12,500,0,110\n",
+                                  "widest gap: row 3 of the data, from 0.01 to 1e+12"),
+    "trace timed in ms": (_AX_HEADER + "".join(f"{i * 10},500,0,{100 + i}\n" for i in range(40)), "time column's unit"),
+    "Wizard export with a row stamped far off": (_WIZARD_HEADER + "0,1\n16,2\n32,3\n99999999999,5\n",
+                                                 "the rows span 1e+08 s"),
     # read whole, but its model cannot be built: the data sheet is missing from the metadata
     "X-series trace without its data sheet": ('#@ servo = "x"\nt,goal_position,present_position\n0,1,2\n0.1,1,2\n',
                                               "needs #@ gear_ratio"),
