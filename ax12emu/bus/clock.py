@@ -9,9 +9,20 @@ monotonic clock; only the simulated world is scaled.
 
 from __future__ import annotations
 
+import logging
 import time
 
-__all__ = ["WallClock", "VirtualClock"]
+__all__ = ["WallClock", "VirtualClock", "MAX_STRIDE_S"]
+
+log = logging.getLogger(__name__)
+
+#: The most simulated time a wall clock moves between two readings (s).  Each reading is where a bus brings its
+#: physics to, so this bounds the stepping one reading can ask for: at a time scale the model cannot keep up with
+#: (thousands, or many servos moving at hundreds), each catch-up took longer than the one before, the serving
+#: loop never got back to a packet or a signal, and the server could not be stopped.  Past it the clock slips:
+#: simulated time runs as fast as the model can step it.  At a time scale of 1 it takes a process stalled for a
+#: second to slip.
+MAX_STRIDE_S = 1.0
 
 
 class WallClock:
@@ -23,16 +34,30 @@ class WallClock:
     """
 
     def __init__(self, time_scale: float = 1.0) -> None:
-        if not time_scale > 0:
-            raise ValueError(f"time scale must be positive, got {time_scale}")
+        if not 0 < time_scale < float("inf"):
+            raise ValueError(f"time scale must be positive and finite, got {time_scale}")
         self.time_scale = time_scale
         self._start = time.monotonic()
         self._paused_at: float | None = None
+        #: The last reading (simulated s): the next moves at most :data:`MAX_STRIDE_S` past it.
+        self._last_s = 0.0
+        #: Simulated time let go because the readings were further apart than :data:`MAX_STRIDE_S`.
+        self.slipped_s = 0.0
 
     def now_s(self) -> float:
-        """Simulated time now."""
+        """Simulated time now: at most :data:`MAX_STRIDE_S` past the last reading (the rest slips)."""
         wall_s = time.monotonic() if self._paused_at is None else self._paused_at
-        return (wall_s - self._start) * self.time_scale
+        now = (wall_s - self._start) * self.time_scale
+        if now - self._last_s > MAX_STRIDE_S:
+            slip = now - self._last_s - MAX_STRIDE_S
+            self._start += slip / self.time_scale
+            now -= slip
+            if not self.slipped_s:
+                log.warning("simulated time slipped %.3g s: the model could not step as fast as --time-scale %g asks "
+                            "(or the process was stopped); it now runs as fast as the model steps", slip, self.time_scale)
+            self.slipped_s += slip
+        self._last_s = now
+        return now
 
     @property
     def paused(self) -> bool:
@@ -57,6 +82,7 @@ class WallClock:
         if dt_s < 0:
             raise ValueError(f"simulated time cannot go backwards (dt={dt_s})")
         self._start -= dt_s / self.time_scale
+        self._last_s += dt_s  # a step by hand is taken whole, whatever its length
         return self.now_s()
 
 

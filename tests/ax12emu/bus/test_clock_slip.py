@@ -1,0 +1,60 @@
+"""A wall clock slips rather than asking the physics for more than MAX_STRIDE_S between two readings.
+
+At a time scale the model cannot step as fast as (thousands; hundreds with many servos moving), each catch-up
+took longer than the last and the serving loop never came back to a packet or a signal.
+"""
+
+from __future__ import annotations
+
+import signal
+import time
+
+import pytest
+from dynamixel_sdk import COMM_SUCCESS
+from emu_testkit import sdk_port
+
+from ax12emu.bus.clock import MAX_STRIDE_S, WallClock
+
+
+def test_readings_far_apart_move_at_most_one_stride_and_the_rest_slips():
+    clock = WallClock(time_scale=1e6)
+    first = clock.now_s()
+    time.sleep(0.01)  # 10,000 simulated seconds of wall
+    second = clock.now_s()
+    assert first < second <= first + MAX_STRIDE_S
+    assert clock.slipped_s > 1000
+    time.sleep(0.001)
+    assert second < clock.now_s() <= second + MAX_STRIDE_S  # still moving, as fast as it is read
+
+
+def test_at_the_usual_scales_nothing_slips_and_a_step_by_hand_is_taken_whole():
+    clock = WallClock(time_scale=2.0)
+    start = clock.now_s()
+    time.sleep(0.05)
+    assert clock.now_s() == pytest.approx(start + 0.1, abs=0.05) and clock.slipped_s == 0
+    clock.pause()
+    before = clock.now_s()
+    assert clock.advance(5 * MAX_STRIDE_S) == pytest.approx(before + 5 * MAX_STRIDE_S)
+    clock.resume()
+    assert clock.now_s() == pytest.approx(before + 5 * MAX_STRIDE_S, abs=0.05) and clock.slipped_s == 0
+
+
+def test_an_infinite_time_scale_is_refused():
+    with pytest.raises(ValueError, match="positive and finite"):
+        WallClock(float("inf"))
+
+
+@pytest.mark.wallclock
+def test_a_server_far_beyond_the_models_speed_keeps_answering_and_stops_on_sigint(emulator):
+    """``serve --time-scale 1e6`` with six servos moving: every write answered, and SIGINT stops it at once
+    (it used to spin in one catch-up for good, deaf to both)."""
+    served = emulator("--ids", "1-6", "--tcp", "127.0.0.1:0", "--time-scale", "1e6")
+    with sdk_port(served.port, 1_000_000) as (port, ph):
+        for servo_id in range(1, 7):
+            assert ph.write1ByteTxRx(port, servo_id, 24, 1) == (COMM_SUCCESS, 0)
+        for k in range(40):
+            for servo_id in range(1, 7):
+                assert ph.write2ByteTxRx(port, servo_id, 30, 200 if k % 2 else 800) == (COMM_SUCCESS, 0)
+    started = time.monotonic()
+    assert served.stop(signal.SIGINT, timeout_s=10.0) == 0
+    assert time.monotonic() - started < 5.0
