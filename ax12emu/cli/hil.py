@@ -13,6 +13,7 @@ import sys
 from collections.abc import Callable
 
 from ax12emu.cli import models as cli_models
+from ax12emu.cli.arg_types import positive_float
 from ax12emu.faults.config import FAULT_OPTIONS, FaultConfig
 from ax12emu.protocol.control_table import DEFAULT_PROFILE, PROFILES
 from ax12emu.protocol.ids import parse_ids
@@ -90,8 +91,8 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     check.add_argument("--ids", type=_typed(_ids), default=[1], metavar="LIST", help="IDs on the bus to check (default 1)")
     check.add_argument("--baud", type=int, default=None,
                        help="host bit rate (default 1000000; with --protocol 2.0, 57600: the X series' factory Baud Rate 1)")
-    check.add_argument("--timeout-ms", type=float, default=50.0, metavar="MS", help="reply timeout (default 50)")
-    check.add_argument("--silence-ms", type=float, default=None, metavar="MS",
+    check.add_argument("--timeout-ms", type=positive_float, default=50.0, metavar="MS", help="reply timeout (default 50)")
+    check.add_argument("--silence-ms", type=positive_float, default=None, metavar="MS",
                        help="how long a packet that must get no reply is listened to (default: the reply timeout, safe "
                        "behind a USB adapter's 16 ms latency timer; a bus that answers at once, as the emulator does, "
                        "can take less; a reply that comes later, before the next packet, still fails the check)")
@@ -120,6 +121,10 @@ def _decode(args: argparse.Namespace) -> int:
 
     chunks = read_raw(args.file) if args.raw else read_capture(args.file)
     servos = args.servo if args.servo is not None else (None if args.raw else trace_header(args.file).get("servos"))
+    if servos is not None and not isinstance(servos, str):
+        raise ValueError(f"{args.file}: the header's servos must be a text such as \"1-5:xm430-w350\", got {servos!r}")
+    if args.servo is not None and ":" not in args.servo:  # serve's bare MODEL takes its IDs from --ids; decode has none
+        raise ValueError(f"--servo {args.servo}: decode needs IDS:MODEL[,IDS:MODEL...] (e.g. 1-5:xm430-w350)")
     protocol = None if args.protocol == "auto" else args.protocol
     for item in decode(chunks, profile=args.profile, protocol=protocol, servos=servos):
         print(format_decoded(item))

@@ -24,6 +24,8 @@ from ax12emu.bus import Bus
 from ax12emu.bus.clock import WallClock
 from ax12emu.bus.state_store import StateFileError, StateStore
 from ax12emu.cli import hil as cli_hil
+from ax12emu.cli.arg_types import finite_float as _finite_float
+from ax12emu.cli.arg_types import positive_float as _positive_float
 from ax12emu.protocol.control_table import AX12_MODEL, DEFAULT_PROFILE, PROFILES
 from ax12emu.protocol.ids import parse_ids
 from ax12emu.servo.model_factory import MODELS, ModelChoice, build_model, parse_arm
@@ -47,23 +49,6 @@ def _arm(text: str) -> tuple[float, float]:
         return parse_arm(text)
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
-
-
-def _finite_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
-    if value != value or value in (float("inf"), float("-inf")):
-        raise argparse.ArgumentTypeError(f"must be a finite number, got {text}")
-    return value
-
-
-def _positive_float(text: str) -> float:
-    value = _finite_float(text)
-    if not value > 0:
-        raise argparse.ArgumentTypeError(f"must be a positive finite number, got {text}")
-    return value
 
 
 def _eeprom_busy_ms(text: str) -> float:

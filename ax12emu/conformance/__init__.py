@@ -107,6 +107,10 @@ def run_on_link(
         ctx, checks, unchanged = Context2(link, list(ids), destructive=destructive), CHECKS2, _unchanged2
     else:
         ctx, checks, unchanged = Context(link, list(ids), profile=profile, destructive=destructive), CHECKS, _unchanged
+    unknown = sorted(set(only or ()) - {check.name for check in checks})
+    if unknown:  # a misspelt name would run nothing and report a pass
+        raise ValueError(f"no such check: {', '.join(unknown)}; the Protocol {'2.0' if isinstance(link, Link2) else '1.0'} "
+                         f"checks are: {', '.join(check.name for check in checks)}")
     results: list[Result] = []
     try:
         if isinstance(ctx, Context2):

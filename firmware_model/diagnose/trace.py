@@ -267,8 +267,8 @@ def _parse(text: str, name: str, line: int, source: str, fmt: TraceColumns = FOR
 def read_trace(path: str | Path) -> Trace:
     """Read and validate a trace file; raise :class:`TraceFormatError` with line and column on any problem."""
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
+    try:  # utf-8-sig: a spreadsheet's "CSV UTF-8" starts with a byte-order mark, which would join the first column's name
+        text = path.read_text(encoding="utf-8-sig")
     except UnicodeDecodeError as exc:
         raise TraceFormatError(f"not UTF-8 text ({exc.reason})", source=str(path)) from None
     return parse_trace(text, source=str(path))

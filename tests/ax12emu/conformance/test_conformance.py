@@ -112,3 +112,18 @@ def test_cli_conformance_against_served_tcp(emulator):
         capture_output=True, text=True, timeout=60,
     )
     assert bad.returncode == 1 and "FAIL" in bad.stdout
+
+
+@pytest.mark.parametrize(("argv", "says"), [
+    (["--only", "nosuch"], "no such check: nosuch; the Protocol 1.0 checks are: ping,"),
+    (["--only", "read tables"], "no such check: read tables"),  # a row the report prints, not a check
+    (["--protocol", "2.0", "--only", "ping", "--only", "moving"], "no such check: moving; the Protocol 2.0 checks"),
+    (["--timeout-ms", "nan"], "--timeout-ms: must be a finite number"),  # it waited for good
+    (["--timeout-ms", "0"], "--timeout-ms: must be a positive finite number"),  # it blamed the servo
+    (["--silence-ms", "-5"], "--silence-ms: must be a positive finite number"),
+])
+def test_a_misspelt_check_or_a_bad_timeout_is_an_error_not_a_pass_or_a_hang(argv, says):
+    """A check name no suite has ran nothing and reported a pass (rc 0); a NaN timeout hung."""
+    result = subprocess.run([sys.executable, "-m", "ax12emu", "conformance", "ax12emu://?ids=1", *argv],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2 and says in result.stderr, (result.returncode, result.stdout, result.stderr)

@@ -142,4 +142,10 @@ def test_cli_decode_of_a_2_0_trace_and_a_raw_capture(tmp_path):
     result = subprocess.run([*run, str(raw), "--servo", "7:xm430-w350"], capture_output=True, text=True, timeout=60)
     assert result.returncode == 0 and "READ id=7 present_position length=4" in result.stdout, result.stderr
     result = subprocess.run([*run, str(raw), "--servo", "xm430-w350"], capture_output=True, text=True, timeout=60)
-    assert result.returncode == 2 and "names no IDs" in result.stderr
+    assert result.returncode == 2 and "decode needs IDS:MODEL" in result.stderr  # not serve's "give --ids"
+    assert "--ids" not in result.stderr
+    header["servos"] = 123  # a header written by hand: an error naming it, not a traceback
+    path.write_text("\n".join([json.dumps(header), *lines[1:]]) + "\n")
+    result = subprocess.run([*run, str(path)], capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2 and "the header's servos must be a text" in result.stderr, result.stderr
+    assert "Traceback" not in result.stderr

@@ -63,3 +63,10 @@ def test_rest_level_is_the_median_of_the_first_or_last_readings():
 def test_a_departure_is_a_reading_away_from_rest_whose_next_reading_is_too():
     pos = np.array([3, 1, 1, 1, 1, 1, 4, 1, 1, 2, 9, 40])
     np.testing.assert_array_equal(departures(pos, 2), [10, 11])
+
+
+def test_a_byte_order_mark_is_read_past(tmp_path):
+    """A spreadsheet's "CSV UTF-8" starts with a byte-order mark; it was read into the first column's name."""
+    path = tmp_path / "from_a_spreadsheet.csv"
+    path.write_bytes("\ufeff".encode() + b"t,goal_position,moving_speed,present_position\n0,512,0,512\n0.01,512,0,513\n")
+    assert read_trace(path)["present_position"].tolist() == [512, 513]
