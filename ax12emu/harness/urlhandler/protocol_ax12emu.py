@@ -89,6 +89,16 @@ def _ax_options(options: dict[str, list[str]], busy_default_s: float, profile: s
     return ServoOptions(profile=profile, goal_position_enables_torque=goal_torque == "on", eeprom_busy_s_per_byte=busy_s)
 
 
+def _trace_writer(path: str | None, **header: str) -> TraceWriter | None:
+    """The ``trace=`` file's writer (None without one); a path that cannot be written is a :class:`UrlError`."""
+    if not path:
+        return None
+    try:
+        return TraceWriter(path, **header)
+    except OSError as exc:
+        raise UrlError(f"{EXPECTED}: trace={path}: {exc.strerror or exc}") from None
+
+
 class UrlError(SerialException, ValueError):
     """A malformed ax12emu:// URL: both a SerialException (pyserial's habit) and a ValueError."""
 
@@ -144,6 +154,9 @@ class Serial(SerialBase):
             options = urllib.parse.parse_qs(parts.query, keep_blank_values=True, strict_parsing=bool(parts.query))
         except ValueError as exc:
             raise UrlError(f"{EXPECTED}: {exc}") from None
+        repeated = sorted(key for key, values in options.items() if len(values) > 1)
+        if repeated:  # which one counts would be a guess (ids=1&ids=2 served ID 2 alone)
+            raise UrlError(f"{EXPECTED}: {', '.join(repeated)} given more than once")
         level = options.pop("logging", None)
         if level is not None:
             if level[-1] not in LOGGER_LEVELS:
@@ -178,11 +191,11 @@ class Serial(SerialBase):
             model = build_model(ModelChoice(params_path=params_path), len(ids)) if params_path else None
             faults = FaultConfig.from_options(options)
             bus = Bus(ids, model=model, options=servo_options, clock=VirtualClock() if virtual == "1" else WallClock())
+            if faults.active:
+                faults.install(bus)
         except ValueError as exc:
             raise UrlError(f"{EXPECTED}: {exc}") from None
-        if faults.active:
-            faults.install(bus)
-        trace = TraceWriter(trace_path, profile=profile) if trace_path else None
+        trace = _trace_writer(trace_path, profile=profile)
         self._private = (bus, trace)
         if self.logger:
             self.logger.info("private bus with IDs %s", ids)
@@ -216,7 +229,7 @@ class Serial(SerialBase):
             raise UrlError(f"{EXPECTED}: {exc}") from None
         trace_path = options.get("trace", [None])[-1]
         servos = servo_list(bus)
-        trace = TraceWriter(trace_path, servos=servos) if trace_path else None
+        trace = _trace_writer(trace_path, servos=servos)
         self._private = (bus, trace)
         if self.logger:
             self.logger.info("private bus of %s (%s)", servos, type(bus).__name__)

@@ -54,6 +54,10 @@ def test_host_baud_must_match():
         ("ax12emu://?eeprom_busy_ms=soon", "eeprom_busy_ms"),
         ("ax12emu://?eeprom_busy_ms=-1", "eeprom_busy_s_per_byte"),
         ("ax12emu://?logging=loud", "logging"),
+        ("ax12emu://?ids=1&ids=2", "ids given more than once"),  # served ID 2 alone, silently
+        ("ax12emu://?trace=/no/such/folder/bus.jsonl", "trace=/no/such/folder/bus.jsonl: No such file"),
+        ("ax12emu://?servo=xl430-w250&ids=1&trace=/no/such/folder/bus.jsonl", "trace=.*No such file"),
+        ("ax12emu://?delay=1&delay_s=nan", "delay_s must be >= 0"),  # a bare ValueError from the faults
     ],
 )
 def test_bad_urls_quote_the_expected_form(url, message):
