@@ -165,6 +165,9 @@ def _wizard_input(ex: WizardExport, args: argparse.Namespace, params: ServoParam
                        + (")" if args.initial_goal is not None else ", the first reading)"))
         facts["goal"], facts["initial_goal"] = goal, initial
         if args.onset is not None:
+            if not 0.0 <= args.onset < float(ex.t_s[-1]):  # a write outside the recording leaves nothing to fit
+                raise ValueError(f"--onset {args.onset:g}: the goal must be written within the recording, "
+                                 f"0..{float(ex.t_s[-1]):.3f} s from its first row")
             trace = build(args.onset, known=True)
             assumed.append(f"written at {args.onset:.3f} s (given, so known)")
             facts["onset_s"], facts["onset_source"] = args.onset, "given"

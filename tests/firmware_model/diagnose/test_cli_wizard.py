@@ -92,6 +92,9 @@ def test_wizard_options_refused_for_a_trace_and_bad_voltage(tmp_path, capsys):
     f = _wizard_file(tmp_path / "w.csv")
     assert main([str(f), "--out", str(tmp_path / "o"), "--voltage", "30"]) == 2
     assert "--voltage 30.0 V is outside" in capsys.readouterr().err
+    for onset in ("1e9", "-1e4"):  # a write outside the recording: it was fitted, meaninglessly
+        assert main([str(f), "--out", str(tmp_path / "o"), f"--onset={onset}"]) == 2
+        assert "the goal must be written within the recording" in capsys.readouterr().err
 
 
 def test_params_with_an_effect_the_fit_cannot_simulate_exit_2(tmp_path, capsys):
