@@ -66,14 +66,14 @@ class DecodedBus:
             if servo.eeprom_dirty:
                 servo.eeprom_dirty = False
                 if self.state_store is not None:
-                    self.state_store.save(slot, servo.table)
+                    self.state_store.save(slot, servo.table, servo.backup)
 
     # -- life cycle --------------------------------------------------------------------
     def save_state(self) -> None:
         """Write every servo's EEPROM area to the state store (if any)."""
         if self.state_store is not None:
             for slot, servo in self._persisted():
-                self.state_store.save(slot, servo.table)
+                self.state_store.save(slot, servo.table, servo.backup)
 
     def close(self) -> None:
         """Save state; safe to call more than once."""

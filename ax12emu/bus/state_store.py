@@ -12,7 +12,10 @@ no input can make the store touch a file outside its directory, and a state
 file that is a symlink is refused rather than followed.  A file also keeps
 its servo's model number: another model launched on the same slot (Protocol 2.0
 buses mix models, each with its own EEPROM layout) is refused with a message
-rather than given an image that is not its own.
+rather than given an image that is not its own.  A Protocol 2.0 servo's Control
+Table Backup is kept beside its EEPROM (the table's bytes as stored, in hex): the
+servo keeps it in its own non-volatile memory, and Startup Configuration's RAM
+Restore reads it at power-up.
 """
 
 from __future__ import annotations
@@ -103,8 +106,28 @@ class StateStore:
             raise StateFileError(f"{path}: unusable state file ({exc}); remove it or start with --factory-reset") from exc
         return True
 
-    def save(self, slot: int, table: PersistentTable) -> None:
-        """Write the slot's EEPROM atomically."""
+    def load_backup(self, slot: int, size: int) -> bytes | None:
+        """The slot's Control Table Backup (``size`` bytes: the table's), or None where none was stored."""
+        path = self.path_for(slot)
+        if not path.exists():
+            return None
+        try:
+            fd = os.open(path, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0))
+            with os.fdopen(fd, encoding="utf-8") as handle:
+                text = json.loads(handle.read()).get("backup")
+            if text is None:
+                return None
+            if not isinstance(text, str):
+                raise TypeError(f"'backup' must be a hex string, got {type(text).__name__}")
+            backup = bytes.fromhex(text)
+            if len(backup) != size:
+                raise ValueError(f"the backup holds {len(backup)} bytes, the table {size}")
+        except (OSError, ValueError, TypeError, AttributeError) as exc:
+            raise StateFileError(f"{path}: unusable state file ({exc}); remove it or start with --factory-reset") from exc
+        return backup
+
+    def save(self, slot: int, table: PersistentTable, backup: bytes | None = None) -> None:
+        """Write the slot's EEPROM (and its Control Table Backup, if any) atomically."""
         registers = {
             entry.name: table.get(entry.name)
             for entry in table.layout.entries
@@ -114,6 +137,8 @@ class StateStore:
         # Protocol 2.0 bus mixes models, each with its own EEPROM layout) must not take it for its own.
         document = {"format": "ax12emu-eeprom/1", "profile": table.profile.name, "model_number": table.get("model_number"),
                     "eeprom": registers}
+        if backup is not None:
+            document["backup"] = backup.hex()
         path = self.path_for(slot)
         fd, tmp = tempfile.mkstemp(prefix=path.name, suffix=".tmp", dir=self.directory)
         try:

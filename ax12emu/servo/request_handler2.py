@@ -166,6 +166,7 @@ def _backup(servo: Servo2, params: ControlTableBackup) -> tuple[int, bytes]:
         return ErrorNumber.RESULT_FAIL, b""
     if params.option is BackupOption.STORE:
         servo.backup = bytes(table.row)
+        servo.eeprom_dirty = True  # the backup area is non-volatile too: a state store keeps it
         if table.has("backup_ready"):
             table.set("backup_ready", 1)
         return ErrorNumber.NONE, b""

@@ -104,8 +104,6 @@ class Servo2(TableServo):
             self.table.set("firmware_version", spec.firmware_version)
         #: Bus-clock time of the last instruction packet this servo heard (Bus Watchdog).
         self.last_instruction_s: float | None = None
-        #: The backup area of Control Table Backup (0x20): the table's bytes, or None.
-        self.backup: bytes | None = None
         #: True while a packet addressed to the Secondary ID is handled: the EEPROM area is out of reach.
         self.ram_only = False
         #: id(entries) -> (entries, what they write): see :meth:`_what_is_written`.

@@ -44,6 +44,9 @@ class TableServo:
         self.registered_write: tuple[int, bytes] | None = None
         #: Set when a write changed the EEPROM area; the bus persists and clears it.
         self.eeprom_dirty = False
+        #: The backup area of Control Table Backup (Protocol 2.0's 0x20): the table's bytes, or None; kept with
+        #: the EEPROM, as the servo keeps it in its non-volatile memory.
+        self.backup: bytes | None = None
 
     @property
     def id(self) -> int:

@@ -16,7 +16,7 @@ from x2_testkit import RecordingFirmware, recording_bus
 from ax12emu.bus.bus2 import Bus2
 from ax12emu.bus.clock import VirtualClock
 from ax12emu.bus.reply import BITS_PER_BYTE, merge_replies
-from ax12emu.bus.state_store import StateStore
+from ax12emu.bus.state_store import StateFileError, StateStore
 from ax12emu.protocol.packets2 import (
     ErrorNumber,
     Instruction2,
@@ -457,6 +457,27 @@ def test_eeprom_persists_by_launch_id_signed_values_too(tmp_path):
     again, _ = recording_bus(ids=(1, 2), key="xm430-w350", state_store=store)
     assert again.ids == [1, 9]
     assert again.servo(1).table.get("homing_offset") == -300 and again.servo(1).table.get("led") == 0
+
+
+def test_the_backup_outlives_the_process_and_startup_restores_from_it(tmp_path):
+    """A state store keeps the Control Table Backup with the EEPROM (the servo's own non-volatile memory): a servo
+    launched again finds it (Backup Ready 1), and Startup Configuration's RAM Restore brings its gains back."""
+    store = StateStore(tmp_path)
+    bus, _ = recording_bus(ids=(1,), key="xl430-w250", state_store=store)
+    send(bus, 1, Instruction2.WRITE, bytes((84, 0)) + (1234).to_bytes(2, "little"))  # Position P Gain
+    assert status(bus, 1, Instruction2.CONTROL_TABLE_BACKUP, b"\x01CTRL").error == ErrorNumber.NONE
+    send(bus, 1, Instruction2.WRITE, bytes((60, 0, 2)))  # RAM Restore at startup
+    bus.close()
+    again, _ = recording_bus(ids=(1,), key="xl430-w250", state_store=store)
+    table = again.servo(1).table
+    assert table.get("backup_ready") == 1 and table.get("position_p_gain") == 1234
+    restore = encode_instruction2(1, Instruction2.CONTROL_TABLE_BACKUP, b"\x02CTRL")
+    assert [r.data for r in again.receive(restore)] == [EMPTY_OK]  # the stored backup can be restored too
+    again.close()
+    path = store.path_for(1)
+    path.write_text(path.read_text().replace('"backup": "', '"backup": "zz'))
+    with pytest.raises(StateFileError, match="unusable state file"):
+        recording_bus(ids=(1,), key="xl430-w250", state_store=store)
 
 
 def test_control_table_backup_stores_with_torque_off_and_restores_the_eeprom():
