@@ -92,6 +92,9 @@ ALARM_NAMES: Mapping[str, int] = {
     "input_voltage": int(StatusError.INPUT_VOLTAGE),
     "voltage": int(StatusError.INPUT_VOLTAGE),
 }
+#: The alarms' bits together, and each alarm's first name (not the aliases), for messages.
+_ALARM_BITS = sum(set(ALARM_NAMES.values()))
+_ALARM_FIRST = {name: bit for name, bit in ALARM_NAMES.items() if name == next(n for n, b in ALARM_NAMES.items() if b == bit)}
 #: Present Load full scale with the direction bit clear (e-manual, Present Load).
 _FULL_LOAD = 1023
 
@@ -186,8 +189,11 @@ class Faults:
     def force_alarm(self, slot: int, bits: int | str) -> None:
         """Raise alarm bits (int or names such as "overload,overheating") until :meth:`clear_alarm`."""
         value = parse_alarm_bits(bits) if isinstance(bits, str) else int(bits)
-        if not 0 < value < 0x80:
-            raise ValueError(f"alarm bits must be 1..127, got {value}")
+        # The status bits an AX-12's firmware raises on its own (Input Voltage, Overheating, Overload); the others
+        # (Angle Limit, Range, Checksum, Instruction) answer one packet, they are not a state to force.
+        if not value or value & ~_ALARM_BITS:
+            raise ValueError(f"the AX-12's alarm bits are {', '.join(f'{k} {v:#04x}' for k, v in _ALARM_FIRST.items())}; "
+                             f"got {value:#04x}")
         self._alarms[self._index(slot)] = value
 
     def clear_alarm(self, slot: int) -> None:

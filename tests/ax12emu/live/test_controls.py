@@ -137,3 +137,14 @@ def test_a_push_on_one_ax12_keeps_the_torque_serve_put_on_the_others():
         assert list(bus.call(lambda b: b.model.external_torque_nm)) == [0.5, 1.0]
         apply(controls, {"action": "external_torque", "id": 2, "nm": 0.0})
         assert list(bus.call(lambda b: b.model.external_torque_nm)) == [0.5, 0.0]
+
+
+def test_an_ax12_takes_only_its_alarms_by_number_too():
+    """Angle Limit, Range, Checksum and Instruction answer one packet, they are no state: refused by name, and by
+    number as well (bit 0x02 was forced while "angle_limit" was refused)."""
+    with VirtualBus(ids=[1], transport="inprocess", virtual_time=True) as bus:
+        controls = ServedControls(bus.call)
+        for bits in (0x02, 0x08, 0x10, 0x40, 0x22):
+            with pytest.raises(ControlError, match="the AX-12's alarm bits are overload 0x20, overheating 0x04, input_voltage 0x01"):
+                apply(controls, {"action": "alarm", "slot": 1, "bits": bits})
+        assert apply(controls, {"action": "alarm", "slot": 1, "bits": 0x20}) == "servo 1: alarm 32 forced"
