@@ -43,6 +43,8 @@ class WallClock:
         self._last_s = 0.0
         #: Simulated time let go because the readings were further apart than :data:`MAX_STRIDE_S`.
         self.slipped_s = 0.0
+        #: Whether the clock has been read (a slow start before the first reading is no news) and has said so.
+        self._read = self._warned = False
 
     def now_s(self) -> float:
         """Simulated time now: at most :data:`MAX_STRIDE_S` past the last reading (the rest slips)."""
@@ -52,11 +54,13 @@ class WallClock:
             slip = now - self._last_s - MAX_STRIDE_S
             self._start += slip / self.time_scale
             now -= slip
-            if not self.slipped_s:
+            if self._read and not self._warned:
+                self._warned = True
                 log.warning("simulated time slipped %.3g s: the model could not step as fast as --time-scale %g asks "
                             "(or the process was stopped); it now runs as fast as the model steps", slip, self.time_scale)
             self.slipped_s += slip
         self._last_s = now
+        self._read = True
         return now
 
     @property

@@ -20,7 +20,8 @@ from .plant2 import Plant2
 from .table2 import Table2
 from .table_servo import TableServo
 
-__all__ = ["BACKUP_RAM_PREFIX", "BACKUP_RAM_REGISTERS", "STARTUP_RAM_RESTORE", "STARTUP_TORQUE_ON", "GOAL_REGISTERS", "SECONDARY_ID_MAX", "Servo2", "Servo2Options", "WATCHDOG_ERROR", "WATCHDOG_UNIT_S"]
+__all__ = ["BACKUP_RAM_PREFIX", "BACKUP_RAM_REGISTERS", "STARTUP_RAM_RESTORE", "STARTUP_TORQUE_ON", "GOAL_REGISTERS",
+           "SECONDARY_ID_MAX", "Servo2", "Servo2Options", "WATCHDOG_ERROR", "WATCHDOG_UNIT_S"]
 
 #: The Goal registers ("Goal Value": e-manual, X series, "Bus Watchdog(98)"); writing one starts a new profile.
 GOAL_REGISTERS = frozenset({"goal_pwm", "goal_current", "goal_velocity", "goal_position"})

@@ -6,6 +6,7 @@ took longer than the last and the serving loop never came back to a packet or a 
 
 from __future__ import annotations
 
+import logging
 import signal
 import time
 
@@ -25,6 +26,21 @@ def test_readings_far_apart_move_at_most_one_stride_and_the_rest_slips():
     assert clock.slipped_s > 1000
     time.sleep(0.001)
     assert second < clock.now_s() <= second + MAX_STRIDE_S  # still moving, as fast as it is read
+
+
+def test_a_slow_start_before_the_first_reading_is_capped_without_a_warning(caplog):
+    """A server may take a while between making its clock and first reading it: that stride is bounded too (at a
+    huge scale it would be the first endless catch-up), but it is no news; a later slip is logged once."""
+    clock = WallClock(time_scale=1e6)
+    time.sleep(0.01)
+    with caplog.at_level(logging.WARNING, logger="ax12emu.bus.clock"):
+        assert clock.now_s() <= MAX_STRIDE_S
+        assert not caplog.records
+        time.sleep(0.01)
+        clock.now_s()
+        time.sleep(0.01)
+        clock.now_s()
+    assert len(caplog.records) == 1 and "slipped" in caplog.records[0].getMessage()
 
 
 def test_at_the_usual_scales_nothing_slips_and_a_step_by_hand_is_taken_whole():
