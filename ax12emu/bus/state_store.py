@@ -56,6 +56,8 @@ class StateStore:
 
     def __init__(self, directory: str | os.PathLike[str]) -> None:
         self.directory = Path(directory)
+        if self.directory.exists() and not self.directory.is_dir():
+            raise StateFileError(f"{self.directory}: exists and is not a folder (a state directory holds one file per servo)")
         self.directory.mkdir(parents=True, exist_ok=True)
         # A crash between creating a temporary file and renaming it leaves the temporary
         # file behind (the state file itself is intact); remove such leftovers so they

@@ -337,6 +337,11 @@ def _open_live(args: argparse.Namespace, server, transport, bus):
         return LiveView.for_server(
             server, seed=args.fault_seed, web=getattr(args, "web_address", None), allow_remote=args.allow_remote, monitor=args.monitor
         ).start()
+    except OSError as exc:
+        transport.close()
+        bus.close()
+        host, port = getattr(args, "web_address", None) or ("", "")
+        raise OSError(exc.errno, f"--web {host}:{port}: {exc.strerror or exc}") from None
     except BaseException:
         transport.close()
         bus.close()
@@ -350,7 +355,10 @@ def _open_transport(args: argparse.Namespace):
 
     if args.tcp:
         host, port = args.tcp_address
-        transport = open_transport("tcp", host=host, port=port)
+        try:
+            transport = open_transport("tcp", host=host, port=port)
+        except OSError as exc:  # which flag's address (--web binds another), not the bare errno
+            raise OSError(exc.errno, f"--tcp {host}:{port}: {exc.strerror or exc}") from None
         if not is_loopback(host):
             log.warning("serving on %s, reachable from other machines", transport.url)
         return transport
@@ -360,8 +368,7 @@ def _open_transport(args: argparse.Namespace):
 def _serve(args: argparse.Namespace) -> int:
     if getattr(args, "servo_models", None):
         return _serve2(args)
-    from ax12emu.serve import BusServer, open_transport
-    from ax12emu.serve.transports.tcp import is_loopback
+    from ax12emu.serve import BusServer
 
     store = StateStore(args.state_dir) if args.state_dir else None
     model = build_model(_ax_choice(args), len(args.ids))
@@ -378,13 +385,7 @@ def _serve(args: argparse.Namespace) -> int:
     if faults.active:
         faults.install(bus)
     trace = TraceWriter(args.trace, profile=args.profile) if args.trace else None
-    if args.tcp:
-        host, port = args.tcp_address
-        transport = open_transport("tcp", host=host, port=port)
-        if not is_loopback(host):
-            log.warning("serving on %s, reachable from other machines", transport.url)
-    else:
-        transport = open_transport("pty", link=args.link)
+    transport = _open_transport(args)
     where = transport.url
     server = BusServer(bus, transport, pace=args.pace, echo=args.echo, trace=trace)
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import socket
 import subprocess
 import sys
 
@@ -53,6 +54,25 @@ def test_link_over_a_regular_file_is_refused(tmp_path):
     result = run("serve", "--link", str(target))
     assert result.returncode == 2 and "not a symlink" in result.stderr
     assert target.read_text() == "keep me"
+
+
+def test_a_state_dir_that_is_a_file_and_a_taken_port_name_their_flag(tmp_path):
+    """One line each, naming what is wrong: "[Errno 17] File exists" and a bare "Address already in use" (which of
+    --tcp and --web?) did not."""
+    afile = tmp_path / "afile"
+    afile.write_text("")
+    result = run("serve", "--tcp", "127.0.0.1:0", "--state-dir", str(afile))
+    assert result.returncode == 2 and f"{afile}: exists and is not a folder" in result.stderr, result.stderr
+    with socket.socket() as held:
+        held.bind(("127.0.0.1", 0))
+        held.listen()
+        port = held.getsockname()[1]
+        for flags, says in ((["--tcp", f"127.0.0.1:{port}"], f"--tcp 127.0.0.1:{port}: "),
+                            (["--servo", "xl430-w250", "--ids", "1", "--tcp", f"127.0.0.1:{port}"], f"--tcp 127.0.0.1:{port}: "),
+                            (["--tcp", "127.0.0.1:0", "--web", f"127.0.0.1:{port}"], f"--web 127.0.0.1:{port}: ")):
+            result = run("serve", *flags)
+            assert result.returncode == 1 and says in result.stderr and "in use" in result.stderr, result.stderr
+            assert len(result.stderr.strip().splitlines()) == 1
 
 
 def test_parse_args_defaults():
