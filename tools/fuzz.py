@@ -167,7 +167,7 @@ class Oracle:
 
     # -- write rules ---------------------------------------------------------------------
     def _check(self, row: np.ndarray, address: int, data: bytes) -> tuple[np.ndarray | None, int]:
-        """Validate a write as REG_WRITE does (range, access, Lock window)."""
+        """Validate a write's bytes: range, access, the Lock window."""
         end = address + len(data)
         if not data or end > TABLE_SIZE:
             return None, R
@@ -189,19 +189,29 @@ class Oracle:
                 return None, R
         return candidate, 0
 
-    def _write(self, shadow: ShadowServo, address: int, data: bytes) -> int:
-        """Validate a WRITE fully (also Lock release and the Angle Limit rule); apply if valid."""
-        candidate, error = self._check(shadow.row, address, data)
+    def _judge(self, row: np.ndarray, address: int, data: bytes) -> tuple[np.ndarray | None, int]:
+        """Validate a WRITE or a REG_WRITE fully (range, access, Lock window, Lock release, the Angle Limit rule)."""
+        candidate, error = self._check(row, address, data)
         if candidate is None:
-            return error
-        if shadow.row[47] and not candidate[47]:
-            return R
+            return None, error
+        if row[47] and not candidate[47]:
+            return None, R
         if address <= 31 and address + len(data) > 30:
             cw = int(candidate[6]) | int(candidate[7]) << 8
             ccw = int(candidate[8]) | int(candidate[9]) << 8
             goal = int(candidate[30]) | int(candidate[31]) << 8
             if (cw or ccw) and not cw <= goal <= ccw:
-                return StatusError.ANGLE_LIMIT
+                return None, StatusError.ANGLE_LIMIT
+        return candidate, 0
+
+    def _write(self, shadow: ShadowServo, address: int, data: bytes) -> int:
+        """A WRITE (or an ACTION's): validated as :meth:`_judge`, applied if valid; a goal past the Angle Limits
+        with Alarm Shutdown's Angle Limit bit set takes the output to 0 (Torque Limit 0)."""
+        candidate, error = self._judge(shadow.row, address, data)
+        if candidate is None:
+            if error & StatusError.ANGLE_LIMIT and shadow.row[18] & StatusError.ANGLE_LIMIT:
+                shadow.row[34:36] = 0
+            return error
         if address < 24:  # the EEPROM area: the servo writes it after answering, deaf meanwhile
             shadow.eeprom_bytes += min(len(data), 24 - address)
         if self.options.goal_position_enables_torque and address <= 31 and address + len(data) > 30:
@@ -226,7 +236,7 @@ class Oracle:
                 return R, b"", None
             if instruction == Instruction.WRITE:
                 return self._write(shadow, params[0], params[1:]), b"", None
-            candidate, error = self._check(row, params[0], params[1:])
+            candidate, error = self._judge(row, params[0], params[1:])
             if candidate is None:
                 return error, b"", None
             shadow.registered = (params[0], params[1:])

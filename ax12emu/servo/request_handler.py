@@ -89,19 +89,35 @@ def _angle_error(servo: VirtualServo, candidate: np.ndarray) -> StatusError:
     return StatusError.NONE
 
 
-def _apply_write(servo: VirtualServo, address: int, data: bytes) -> StatusError:
-    """Validate and commit one write, all-or-nothing, with the firmware's side effects."""
+def _judge_write(servo: VirtualServo, address: int, data: bytes) -> tuple[np.ndarray | None, StatusError]:
+    """The table after one write, or None and the error bits: what a WRITE and a REG_WRITE alike are checked by
+    (a Reg Write is "similar to Write Instruction", e-manual Protocol 1.0, so a goal past the Angle Limits is
+    refused when it is registered, as on the MX, not left to fail silently at a broadcast Action)."""
     table = servo.table
     candidate, error = table.check_write(address, data)
     if candidate is None:
-        return error
+        return None, error
     lock = table.layout.by_name["lock"]
     if lock.value_in(table.row) and not lock.value_in(candidate):
-        return StatusError.RANGE  # Lock is released only by power-off (e-manual, Lock)
+        return None, StatusError.RANGE  # Lock is released only by power-off (e-manual, Lock)
     if address <= 31 and address + len(data) > 30:
         error |= _angle_error(servo, candidate)
         if error:
-            return error
+            return None, error
+    return candidate, StatusError.NONE
+
+
+def _apply_write(servo: VirtualServo, address: int, data: bytes) -> StatusError:
+    """Validate and commit one write, all-or-nothing, with the firmware's side effects."""
+    table = servo.table
+    candidate, error = _judge_write(servo, address, data)
+    if candidate is None:
+        if error & StatusError.ANGLE_LIMIT and table.get("shutdown") & StatusError.ANGLE_LIMIT:
+            # "providing that Angle Limit Error Bit(0x01) in the Alarm LED/Shutdown is set, the Alarm LED will start
+            # blinking and the motor's output will be 0 [%]" (e-manual, AX-12A, Goal Position; the bit is the
+            # status packet's, 0x02); output 0 as every Alarm Shutdown makes it, through Torque Limit
+            table.set("torque_limit", 0)
+        return error
     if address < EEPROM_END:
         servo.eeprom_dirty = True
         servo.eeprom_bytes_written += min(len(data), EEPROM_END - address)
@@ -176,7 +192,7 @@ def write_handlers(apply_write: Callable[[Any, int, bytes], StatusError],
 
 
 def _check_write(servo: VirtualServo, address: int, data: bytes) -> tuple[np.ndarray | None, StatusError]:
-    return servo.table.check_write(address, data)
+    return _judge_write(servo, address, data)
 
 
 HANDLERS: dict[int, Handler] = {

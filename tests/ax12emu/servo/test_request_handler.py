@@ -89,3 +89,25 @@ def test_reg_write_validated_at_registration():
     s = servo()
     assert send(s, 0x04, [24, 9]).error == StatusError.RANGE
     assert s.table.get("registered") == 0 and s.registered_write is None
+
+
+def test_a_registered_goal_past_the_angle_limits_is_refused_when_registered():
+    """A Reg Write is "similar to Write Instruction": a goal past CW/CCW Angle Limit gets Angle Limit Error at
+    once (as on the MX), not Instruction-free acceptance and a silent failure at a broadcast Action."""
+    s = servo()
+    assert send(s, 0x03, [6, 100, 0, 200, 0]).error == StatusError.NONE  # limits 100..200
+    assert send(s, 0x04, [30, 0xF4, 1]).error == StatusError.ANGLE_LIMIT  # goal 500
+    assert s.table.get("registered") == 0 and s.registered_write is None
+    assert send(s, 0x04, [30, 150, 0]).error == StatusError.NONE and s.table.get("registered") == 1
+
+
+def test_a_goal_past_the_angle_limits_takes_the_output_to_zero_where_shutdown_selects_it():
+    """"providing that Angle Limit Error Bit in the Alarm LED/Shutdown is set, ... the motor's output will be 0
+    [%]" (e-manual, AX-12A, Goal Position): Torque Limit 0, as every Alarm Shutdown; not without the bit."""
+    s = servo()
+    send(s, 0x03, [6, 100, 0, 200, 0])
+    assert send(s, 0x03, [30, 0xF4, 1]).error == StatusError.ANGLE_LIMIT
+    assert s.table.get("torque_limit") == 1023  # the factory Shutdown (36) does not select Angle Limit
+    assert send(s, 0x03, [18, 36 | StatusError.ANGLE_LIMIT]).error == StatusError.NONE
+    assert send(s, 0x03, [30, 0xF4, 1]).error == StatusError.ANGLE_LIMIT
+    assert s.table.get("torque_limit") == 0 and s.table.get("goal_position") != 500
