@@ -83,8 +83,8 @@ class WallClock:
         """While paused, move simulated time forward by ``dt_s``; returns the new time."""
         if self._paused_at is None:
             raise RuntimeError("a wall clock can be stepped only while paused")
-        if dt_s < 0:
-            raise ValueError(f"simulated time cannot go backwards (dt={dt_s})")
+        if not 0 <= dt_s < float("inf"):
+            raise ValueError(f"simulated time moves by a finite step, not backwards (dt={dt_s})")
         self._start -= dt_s / self.time_scale
         self._last_s += dt_s  # a step by hand is taken whole, whatever its length
         return self.now_s()
@@ -102,7 +102,7 @@ class VirtualClock:
 
     def advance(self, dt_s: float) -> float:
         """Move time forward by ``dt_s`` and return the new time."""
-        if dt_s < 0:
-            raise ValueError(f"virtual time cannot go backwards (dt={dt_s})")
+        if not 0 <= dt_s < float("inf"):  # NaN or infinity would stick to the clock for good
+            raise ValueError(f"virtual time moves by a finite step, not backwards (dt={dt_s})")
         self._now += dt_s
         return self._now

@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import logging
 import math
+import operator
 import os
 import threading
 from collections.abc import Callable, Iterable
@@ -183,14 +184,14 @@ class VirtualBus:
                 choice1 = ModelChoice(name=model or "physical", **given)
             options1 = options if isinstance(options, ServoOptions) and options != ServoOptions() else None
             options2 = options if isinstance(options, Servo2Options) else Servo2Options()
-            self.bus = build_wire(servo, None if ids is None else list(ids), clock=clock, baud_bps=baud_bps, options=options2,
+            self.bus = build_wire(servo, None if ids is None else _id_list(ids), clock=clock, baud_bps=baud_bps, options=options2,
                                   choice1=choice1, options1=options1)
         else:
             if isinstance(options, Servo2Options):
                 raise ValueError("Servo2Options apply with servo= (Protocol 2.0 servos); the AX-12A bus takes ServoOptions")
             if baud_bps is not None:
                 raise ValueError("baud_bps applies with servo= (the AX-12A bus starts at its factory 1,000,000 bps)")
-            slots = [1] if ids is None else list(ids)
+            slots = [1] if ids is None else _id_list(ids)
             if params is not None:  # a parameter file (e.g. a fitted twin's params.toml, effects included) or object
                 if model is not None and not isinstance(model, str):
                     raise ValueError("params= builds the physical model; it cannot go with a model object")
@@ -377,7 +378,7 @@ class VirtualBus:
 
         def _write(bus: Bus) -> None:
             _, servo = _servo_with(bus, servo_id, name, protocol)
-            servo.table.set(name, value)  # the AX-12 bus's plant hears of it (ControlTable.on_set)
+            servo.table.set(name, _fitting(servo.table.layout.by_name[name], value))  # the AX-12 bus's plant hears of it
             if _firmware(servo) is not None:  # a firmware of its own takes its commands when told
                 servo.plant.command(goal_written=name in _GOAL_REGISTERS)
             if name == "id":
@@ -416,6 +417,7 @@ class VirtualBus:
 
     def set_angle_deg(self, servo_id: int, degrees: float, *, protocol: float | None = None) -> None:
         """Move the shaft by hand (torque off, or the controller pulls it back): an AX-12's, whose bus's model sets angles."""
+        _finite("degrees", degrees)
 
         def _set(bus: AnyBus) -> None:
             holder, servo = _find(bus, servo_id, protocol)
@@ -442,6 +444,8 @@ class VirtualBus:
             name = next((n for n in names if n in servo.table.layout.by_name), None)
             if name is None:
                 raise KeyError(f"{model_name(servo)} has no register {' or '.join(map(repr, names))} (ID {servo_id})")
+            if value is not None:
+                _fitting(servo.table.layout.by_name[name], value)
             self._controls.faults_of(bus)  # the whole wire's faults first: one seed for all its servos
             self._controls.faults_of(holder).hold(holder.slots[servo.index], name, value)
 
@@ -453,7 +457,7 @@ class VirtualBus:
         On an X-series servo the firmware judges the pinned reading: Overheating latches if Shutdown
         selects it, and stays until REBOOT after the reading is released.
         """
-        value = None if celsius is None else round(celsius)
+        value = None if celsius is None else round(_finite("celsius", celsius))
         self._hold(servo_id, protocol, ("present_temperature",), value)
 
     def set_voltage(self, servo_id: int, volts: float | None, *, protocol: float | None = None) -> None:
@@ -462,11 +466,13 @@ class VirtualBus:
         On an X-series servo: Present Input Voltage (144), judged by the firmware as
         :meth:`set_temperature` says.
         """
-        value = None if volts is None else round(volts * 10)
+        value = None if volts is None else round(_finite("volts", volts) * 10)
         self._hold(servo_id, protocol, ("present_voltage", "present_input_voltage"), value)
 
     def set_external_torque(self, servo_id: int, torque_nm: float, *, protocol: float | None = None) -> None:
         """A torque on the output shaft (N m, positive CCW), through the model's ``set_external_torque``."""
+
+        _finite("torque_nm", torque_nm)
 
         def _own_firmware(bus: AnyBus) -> bool:
             firmware = _firmware(_find(bus, servo_id, protocol)[1])
@@ -476,3 +482,33 @@ class VirtualBus:
 
         if not self.call(_own_firmware):  # an AX-12: its bus's one model takes every servo's torque (ServedControls)
             self._controls.set_external_torque(servo_id, torque_nm, protocol=1.0)
+
+
+def _finite(name: str, value: float) -> float:
+    """``value`` as a float; ValueError for NaN or infinity, which would stick in the physics for good."""
+    number = float(value)
+    if not math.isfinite(number):
+        raise ValueError(f"{name} must be a finite number, got {value!r}")
+    return number
+
+
+def _fitting(entry: Any, value: Any) -> int:
+    """``value`` as an int that the register ``entry`` holds (numpy integers too); ValueError for one it cannot hold
+    (it wrapped: an ID of 300 became 44), naming the register and what it holds.  No range check beyond its bytes:
+    a test may set what the firmware could."""
+    try:
+        number = operator.index(value)
+    except TypeError:
+        raise TypeError(f"{entry.name} takes an integer, got {type(value).__name__} {value!r}") from None
+    low, high = (-(1 << (8 * entry.size - 1)), (1 << (8 * entry.size - 1)) - 1) if entry.signed else (0, (1 << (8 * entry.size)) - 1)
+    if not low <= number <= high:
+        raise ValueError(f"{entry.name} holds {low}..{high} ({entry.size} byte{'s' if entry.size > 1 else ''}), got {number}")
+    return number
+
+
+def _id_list(ids: Iterable[Any]) -> list[int]:
+    """The IDs as Python ints (numpy's integers too); TypeError naming one that is not an integer."""
+    try:
+        return [operator.index(servo_id) for servo_id in ids]
+    except TypeError:
+        raise TypeError(f"ids must be integers, got {ids!r}") from None
