@@ -264,7 +264,7 @@ class Bus(ServosById[VirtualServo]):
             if servo.eeprom_dirty:
                 servo.eeprom_dirty = False
                 if self.state_store is not None:
-                    self.state_store.save(self.slots[servo.index], servo.table)
+                    self.state_store.save_or_say(self.slots[servo.index], servo.table)
         instruction = packet.instruction
         if instruction in _CHANGES_TABLES and targets and packet.checksum_ok:
             self.plant.wrote()

@@ -66,7 +66,7 @@ class DecodedBus:
             if servo.eeprom_dirty:
                 servo.eeprom_dirty = False
                 if self.state_store is not None:
-                    self.state_store.save(slot, servo.table, servo.backup)
+                    self.state_store.save_or_say(slot, servo.table, servo.backup)
 
     # -- life cycle --------------------------------------------------------------------
     def save_state(self) -> None:

@@ -20,7 +20,9 @@ Restore reads it at power-up.
 
 from __future__ import annotations
 
+import fcntl
 import json
+import logging
 import os
 import tempfile
 from pathlib import Path
@@ -30,6 +32,11 @@ from ax12emu.protocol.control_table import Access, Area
 from ax12emu.protocol.registers import Layout, Profile
 
 __all__ = ["PersistentTable", "StateStore", "StateFileError"]
+
+log = logging.getLogger(__name__)
+
+#: The file a serving process holds locked while it keeps its servos' state in the directory.
+LOCK_NAME = "lock"
 
 
 class PersistentTable(Protocol):
@@ -59,11 +66,56 @@ class StateStore:
         if self.directory.exists() and not self.directory.is_dir():
             raise StateFileError(f"{self.directory}: exists and is not a folder (a state directory holds one file per servo)")
         self.directory.mkdir(parents=True, exist_ok=True)
-        # A crash between creating a temporary file and renaming it leaves the temporary
-        # file behind (the state file itself is intact); remove such leftovers so they
-        # do not pile up.  One server per state directory, as one servo per EEPROM.
+        self._lock_fd: int | None = None
+        #: Slots whose last save failed (said once each, until one succeeds).
+        self._failing: set[int] = set()
+
+    def claim(self) -> None:
+        """Take the directory for this process, one server per state directory as one servo per EEPROM; a
+        :class:`StateFileError` naming the holder's pid if another process has it.
+
+        Why: two servers on one directory overwrote each other's files, and the second one's start removed the
+        first's temporary file mid-save, which killed it.  The lock is the kernel's (``flock``), so a server that
+        crashed holds nothing.  Once claimed, the temporary files a crash left between writing and renaming (the
+        state file itself intact) are removed so they do not pile up.
+        """
+        if self._lock_fd is not None:
+            return
+        path = self.directory / LOCK_NAME
+        fd = os.open(path, os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0), 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.read(fd, 32).decode(errors="replace").strip() or "?"
+            os.close(fd)
+            raise StateFileError(f"{self.directory}: in use by another server (pid {holder}); "
+                                 "one server per state directory") from None
+        os.ftruncate(fd, 0)
+        os.write(fd, f"{os.getpid()}\n".encode())
+        self._lock_fd = fd
         for leftover in self.directory.glob("servo-[0-9][0-9][0-9].json*.tmp"):
             leftover.unlink(missing_ok=True)
+
+    def release(self) -> None:
+        """Give the directory up (a process's exit does too)."""
+        if self._lock_fd is not None:
+            os.close(self._lock_fd)
+            self._lock_fd = None
+
+    def save_or_say(self, slot: int, table: PersistentTable, backup: bytes | None = None) -> bool:
+        """:meth:`save`, for a server mid-session: a failure (the directory removed, made read-only, a full disk)
+        is logged, once until a save of that slot succeeds again, and the server goes on serving; the servo's
+        EEPROM stays as written, only not kept.  False if it failed."""
+        try:
+            self.save(slot, table, backup)
+        except OSError as exc:
+            if slot not in self._failing:
+                self._failing.add(slot)
+                log.error("could not keep the EEPROM of the servo launched as ID %d in %s (%s); serving on, "
+                          "but that change will not survive a restart", slot, self.directory, exc)
+            return False
+        self._failing.discard(slot)
+        return True
 
     def path_for(self, slot: int) -> Path:
         """The file of the servo launched with ID ``slot``."""

@@ -276,8 +276,8 @@ def build_serve_wire(args: argparse.Namespace, clock):
         options1x=Servo1XOptions(reply_on_checksum_error=reply, reply_to_broadcast_ping=options1.reply_to_broadcast_ping,
                                  goal_position_enables_torque=options1.goal_position_enables_torque),
         # Protocol 2.0 servos keep their EEPROM in a directory of their own: IDs are per protocol.
-        state_store1=StateStore(args.state_dir) if args.state_dir else None,
-        state_store2=StateStore(Path(args.state_dir) / STATE_SUBDIR_2) if args.state_dir else None,
+        state_store1=_claimed(args.state_dir) if args.state_dir else None,
+        state_store2=_claimed(Path(args.state_dir) / STATE_SUBDIR_2) if args.state_dir else None,
         load_state=not args.factory_reset,
     )
 
@@ -348,6 +348,13 @@ def _open_live(args: argparse.Namespace, server, transport, bus):
         raise
 
 
+def _claimed(directory: str | Path) -> StateStore:
+    """The state directory of a serving process, taken for it alone (``StateStore.claim``)."""
+    store = StateStore(directory)
+    store.claim()
+    return store
+
+
 def _open_transport(args: argparse.Namespace):
     """The pty (default) or TCP transport the serve flags ask for."""
     from ax12emu.serve import open_transport
@@ -370,7 +377,7 @@ def _serve(args: argparse.Namespace) -> int:
         return _serve2(args)
     from ax12emu.serve import BusServer
 
-    store = StateStore(args.state_dir) if args.state_dir else None
+    store = _claimed(args.state_dir) if args.state_dir else None
     model = build_model(_ax_choice(args), len(args.ids))
     bus = Bus(
         args.ids,

@@ -20,7 +20,8 @@ def test_sigkill_during_write_bursts_leaves_old_or_new_state(tmp_path):
 
 
 def test_leftover_temporary_files_are_removed_at_start(tmp_path):
-    """A temporary file left by a kill between create and rename is removed when the store opens; the state stays."""
+    """A temporary file left by a kill between create and rename is removed when a server claims the store (the one
+    process that owns the directory); the state stays."""
     store = StateStore(tmp_path)
     table = ControlTable(np.zeros(50, dtype=np.uint8))
     table.set("id", 7)
@@ -28,7 +29,9 @@ def test_leftover_temporary_files_are_removed_at_start(tmp_path):
     (tmp_path / "servo-001.jsonab12cd.tmp").write_text('{"eeprom": {"id"')
     unrelated = tmp_path / "notes.tmp"
     unrelated.write_text("keep")
-    StateStore(tmp_path)
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.tmp", "servo-001.json"]
+    claimed = StateStore(tmp_path)
+    claimed.claim()
+    claimed.release()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["lock", "notes.tmp", "servo-001.json"]
     fresh = ControlTable(np.zeros(50, dtype=np.uint8))
     assert StateStore(tmp_path).load(1, fresh) and fresh.get("id") == 7

@@ -114,7 +114,7 @@ def test_no_client_input_writes_outside_the_state_directory(emulator, tmp_path):
         time.sleep(0.05)
     assert served.stop() == 0
     assert sorted(p.relative_to(tmp_path).as_posix() for p in tmp_path.rglob("*")) == [
-        "state", "state/servo-001.json", "state/servo-002.json"]
+        "state", "state/lock", "state/servo-001.json", "state/servo-002.json"]  # lock: the serving process's claim
 
 
 # -- one-line errors ----------------------------------------------------------------------
