@@ -220,12 +220,14 @@ class VirtualBus:
         self._controls = ServedControls(self.call, servos=len(self.bus.slots), seed=seed)
         #: The servo text the bus was built from (None: AX-12As of ``ids``), which a trace's header keeps.
         self._servo_spec = servo
-        self._closed = False
+        self._closed = self._closing = False
         self._started = False
 
     # -- life cycle -----------------------------------------------------------------------
     def start(self) -> "VirtualBus":
         """Open the transport and start serving; on failure everything opened is closed."""
+        if self._closed:
+            raise RuntimeError(f"VirtualBus {self.name} is closed; make a new one")
         if self._started:
             return self
         self._started = True
@@ -233,8 +235,9 @@ class VirtualBus:
             if self._trace_path:
                 self._trace = self._open_trace(self._trace_path)
             if self.transport_name == "inprocess":
-                self._link = InProcessLink(self.bus, trace=self._trace)
-                register(self.name, self._link)
+                link = InProcessLink(self.bus, trace=self._trace)
+                register(self.name, link)  # a name another bus holds is refused here, and that bus keeps it
+                self._link = link
                 self.port = f"ax12emu://{self.name}"
                 self._start_live()
                 return self
@@ -293,9 +296,9 @@ class VirtualBus:
 
     def close(self) -> None:
         """Stop serving, join the thread, close the port and the trace; safe to call more than once."""
-        if self._closed:
+        if self._closing:
             return
-        self._closed = True
+        self._closing = True  # (the live view, closing first, may still read the bus through call)
         if self._live is not None:  # first: it reads the bus through the serving thread
             self._live.close()
         if self._server is not None:
@@ -312,6 +315,7 @@ class VirtualBus:
         self.bus.close()
         if self._trace is not None:
             self._trace.close()
+        self._closed = True
 
     @property
     def running(self) -> bool:
@@ -333,6 +337,8 @@ class VirtualBus:
     # -- running code where the bus lives ---------------------------------------------------
     def call(self, fn: Callable[[Bus], Any]) -> Any:
         """Run ``fn(bus)`` between packets (on the serving thread, or under the link's lock)."""
+        if self._closed:  # its port is gone (a pty's name may be another's by now) and its state was saved
+            raise RuntimeError(f"VirtualBus {self.name} is closed")
         if self._link is not None:
             return self._link.call(fn)
         if self._thread is not None and self._thread.is_alive():
