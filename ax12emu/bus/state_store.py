@@ -37,6 +37,8 @@ log = logging.getLogger(__name__)
 
 #: The file a serving process holds locked while it keeps its servos' state in the directory.
 LOCK_NAME = "lock"
+#: Every state file's "format": a JSON file of another kind is refused, not read for the keys it happens to share.
+FORMAT = "ax12emu-eeprom/1"
 
 
 class PersistentTable(Protocol):
@@ -134,10 +136,14 @@ class StateStore:
             fd = os.open(path, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0))
             with os.fdopen(fd, encoding="utf-8") as handle:
                 document = json.loads(handle.read())
+            if not isinstance(document, dict) or document.get("format") != FORMAT:
+                raise ValueError(f"not an {FORMAT} file")
             registers = document["eeprom"]
             if not isinstance(registers, dict):
                 raise TypeError("'eeprom' must be an object")
             saved_model = document.get("model_number")
+            if saved_model is not None and (not isinstance(saved_model, int) or isinstance(saved_model, bool)):
+                raise TypeError(f"model_number must be an integer, got {saved_model!r}")
             if saved_model is not None and saved_model != table.get("model_number"):
                 raise StateFileError(
                     f"{path}: holds the EEPROM of another model ({document.get('profile', '?')}, model number {saved_model}), "
@@ -156,7 +162,7 @@ class StateStore:
             table.load_eeprom(bytes(image))
         except StateFileError:
             raise
-        except (OSError, ValueError, TypeError, KeyError) as exc:
+        except (OSError, ValueError, TypeError, KeyError, RecursionError) as exc:
             raise StateFileError(f"{path}: unusable state file ({exc}); remove it or start with --factory-reset") from exc
         return True
 
@@ -168,7 +174,10 @@ class StateStore:
         try:
             fd = os.open(path, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0))
             with os.fdopen(fd, encoding="utf-8") as handle:
-                text = json.loads(handle.read()).get("backup")
+                document = json.loads(handle.read())
+            if not isinstance(document, dict):
+                raise TypeError("not a JSON object")
+            text = document.get("backup")
             if text is None:
                 return None
             if not isinstance(text, str):
@@ -176,7 +185,7 @@ class StateStore:
             backup = bytes.fromhex(text)
             if len(backup) != size:
                 raise ValueError(f"the backup holds {len(backup)} bytes, the table {size}")
-        except (OSError, ValueError, TypeError, AttributeError) as exc:
+        except (OSError, ValueError, TypeError, RecursionError) as exc:
             raise StateFileError(f"{path}: unusable state file ({exc}); remove it or start with --factory-reset") from exc
         return backup
 
@@ -189,7 +198,7 @@ class StateStore:
         }
         # The model number keys the image to its model: a different model started on the same ID (a
         # Protocol 2.0 bus mixes models, each with its own EEPROM layout) must not take it for its own.
-        document = {"format": "ax12emu-eeprom/1", "profile": table.profile.name, "model_number": table.get("model_number"),
+        document = {"format": FORMAT, "profile": table.profile.name, "model_number": table.get("model_number"),
                     "eeprom": registers}
         if backup is not None:
             document["backup"] = backup.hex()

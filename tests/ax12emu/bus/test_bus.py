@@ -95,6 +95,15 @@ def test_state_store_survives_and_rejects_corruption(tmp_path):
     store.path_for(3).write_text("{not json")
     with pytest.raises(StateFileError, match="servo-003.json"):
         Bus([3], state_store=store)
-    store.path_for(3).write_text('{"eeprom": {"status_return_level": 9}}')
+    store.path_for(3).write_text('{"format": "ax12emu-eeprom/1", "eeprom": {"status_return_level": 9}}')
     with pytest.raises(StateFileError, match="status_return_level"):
+        Bus([3], state_store=store)
+    store.path_for(3).write_text('{"eeprom": {"id": 3}}')  # another program's JSON with a key this one reads
+    with pytest.raises(StateFileError, match="not an ax12emu-eeprom/1 file"):
+        Bus([3], state_store=store)
+    store.path_for(3).write_text('{"format": "ax12emu-eeprom/1", "model_number": "12", "eeprom": {}}')
+    with pytest.raises(StateFileError, match="model_number must be an integer, got '12'"):
+        Bus([3], state_store=store)
+    store.path_for(3).write_text("[" * 100_000 + "]" * 100_000)  # nested too deep to parse: no traceback
+    with pytest.raises(StateFileError, match="unusable state file"):
         Bus([3], state_store=store)
