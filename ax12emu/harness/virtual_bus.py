@@ -69,6 +69,9 @@ __all__ = ["VirtualBus", "TRANSPORTS"]
 
 log = logging.getLogger(__name__)
 
+#: How long a call waits for the serving thread (s): it runs calls between packets, within about a millisecond.
+_CALL_TIMEOUT_S = 5.0
+
 #: Where a VirtualBus can put its servos.
 TRANSPORTS = ("pty", "tcp", "inprocess")
 #: Degrees of travel per radian, and the AX-12's 300-degree range over positions 0..1023.
@@ -335,14 +338,15 @@ class VirtualBus:
             log.warning("VirtualBus %s was never closed", self.name)
 
     # -- running code where the bus lives ---------------------------------------------------
-    def call(self, fn: Callable[[Bus], Any]) -> Any:
-        """Run ``fn(bus)`` between packets (on the serving thread, or under the link's lock)."""
+    def call(self, fn: Callable[[Bus], Any], timeout_s: float | None = None) -> Any:
+        """Run ``fn(bus)`` between packets (on the serving thread, or under the link's lock); served on a pty or
+        TCP, wait at most ``timeout_s`` for it (default :data:`_CALL_TIMEOUT_S`)."""
         if self._closed:  # its port is gone (a pty's name may be another's by now) and its state was saved
             raise RuntimeError(f"VirtualBus {self.name} is closed")
         if self._link is not None:
             return self._link.call(fn)
         if self._thread is not None and self._thread.is_alive():
-            return self._server.call(fn)
+            return self._server.call(fn, _CALL_TIMEOUT_S if timeout_s is None else timeout_s)
         return fn(self.bus)
 
     def _faults(self, bus: Bus) -> Faults:
@@ -364,7 +368,9 @@ class VirtualBus:
             bus.advance()
             return now
 
-        return self.call(_step)
+        # Served on a pty or TCP the step runs on the serving thread: it may take a while for a long one (the
+        # physics runs many times faster than real time, so a wall second per simulated second is ample).
+        return self.call(_step, timeout_s=_CALL_TIMEOUT_S + max(0.0, float(seconds)))
 
     @property
     def now_s(self) -> float:

@@ -47,6 +47,7 @@ import sys
 import time
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Future
+from concurrent.futures import TimeoutError as FuturesTimeout
 from typing import Any
 
 from ax12emu.bus import BITS_PER_BYTE, Bus, Reply, merge_replies
@@ -425,7 +426,11 @@ class BusServer:
         """
         future: Future = Future()
         self._calls.append((fn, future))
-        return future.result(timeout_s)
+        try:
+            return future.result(timeout_s)
+        except FuturesTimeout:
+            raise TimeoutError(f"the serving loop did not finish the call within {timeout_s:g} s (a long step, "
+                               "or the loop has stopped); it may still run") from None
 
     def _run_calls(self) -> None:
         self._read_pending()
