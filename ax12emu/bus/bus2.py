@@ -173,8 +173,8 @@ class Bus2(ServosById[Servo2], DecodedBus):
         self.state_store = state_store
         if state_store is not None:
             for slot, servo in zip(ids, self.servos):
-                servo.backup = state_store.load_backup(slot, len(servo.table.row))  # before power-up reads it
-                if state_store.load(slot, servo.table) or servo.backup is not None:
+                if state_store.load(slot, servo.table):  # first: another model's file is refused as that
+                    servo.backup = state_store.load_backup(slot, len(servo.table.row))  # before power-up reads it
                     servo.power_on()
         self._by_id: dict[int, list[Servo2]] = {}
         self.reindex()

@@ -10,18 +10,19 @@ monotonic clock; only the simulated world is scaled.
 from __future__ import annotations
 
 import logging
+import threading
 import time
 
 __all__ = ["WallClock", "VirtualClock", "MAX_STRIDE_S"]
 
 log = logging.getLogger(__name__)
 
-#: The most simulated time a wall clock moves between two readings (s).  Each reading is where a bus brings its
-#: physics to, so this bounds the stepping one reading can ask for: at a time scale the model cannot keep up with
-#: (thousands, or many servos moving at hundreds), each catch-up took longer than the one before, the serving
-#: loop never got back to a packet or a signal, and the server could not be stopped.  Past it the clock slips:
-#: simulated time runs as fast as the model can step it.  At a time scale of 1 it takes a process stalled for a
-#: second to slip.
+#: The most simulated time a serving loop's wall clock moves between two readings (s; :meth:`WallClock.bound_strides`).
+#: Each reading is where the bus brings its physics to, so this bounds the stepping one reading can ask for: at a
+#: time scale the model cannot keep up with (thousands, or many servos moving at hundreds), each catch-up took
+#: longer than the one before, the serving loop never got back to a packet or a signal, and the server could not be
+#: stopped.  Past it the clock slips: simulated time runs as fast as the model can step it.  A serving loop reads
+#: its clock at every tick (1 ms), so at a time scale of 1 it takes a process stalled for a second to slip.
 MAX_STRIDE_S = 1.0
 
 
@@ -39,26 +40,51 @@ class WallClock:
         self.time_scale = time_scale
         self._start = time.monotonic()
         self._paused_at: float | None = None
-        #: The last reading (simulated s): the next moves at most :data:`MAX_STRIDE_S` past it.
+        #: The most simulated time between two readings, or infinity (unbounded, the default: :meth:`bound_strides`).
+        self._stride_s = float("inf")
+        #: The last reading (simulated s): the next moves at most ``_stride_s`` past it.
         self._last_s = 0.0
-        #: Simulated time let go because the readings were further apart than :data:`MAX_STRIDE_S`.
+        #: Simulated time let go because the readings were further apart than the bound.
         self.slipped_s = 0.0
         #: Whether the clock has been read (a slow start before the first reading is no news) and has said so.
         self._read = self._warned = False
+        #: Readings come from the serving thread and from callers' (VirtualBus.now_s): a slip is taken once.
+        self._slipping = threading.Lock()
+
+    def bound_strides(self, stride_s: float = MAX_STRIDE_S) -> None:
+        """Move at most ``stride_s`` of simulated time between two readings from now on, letting the rest slip.
+
+        For a clock a serving loop reads at every tick (:class:`~ax12emu.serve.server.BusServer`), so only a
+        catch-up the model cannot finish in time, or a stalled process, makes it slip.  Left unbounded for a bus
+        read only when a request comes (in process, ``ax12emu://``): there a second between requests is a second
+        of the servo's time, not a slip.
+        """
+        if not stride_s > 0:
+            raise ValueError(f"a stride must be positive, got {stride_s}")
+        self._stride_s = stride_s
+
+    @property
+    def stride_s(self) -> float:
+        """The most simulated time between two readings (infinity: unbounded)."""
+        return self._stride_s
 
     def now_s(self) -> float:
-        """Simulated time now: at most :data:`MAX_STRIDE_S` past the last reading (the rest slips)."""
+        """Simulated time now (with :meth:`bound_strides`, at most the bound past the last reading)."""
         wall_s = time.monotonic() if self._paused_at is None else self._paused_at
         now = (wall_s - self._start) * self.time_scale
-        if now - self._last_s > MAX_STRIDE_S:
-            slip = now - self._last_s - MAX_STRIDE_S
-            self._start += slip / self.time_scale
-            now -= slip
-            if self._read and not self._warned:
-                self._warned = True
-                log.warning("simulated time slipped %.3g s: the model could not step as fast as --time-scale %g asks "
-                            "(or the process was stopped); it now runs as fast as the model steps", slip, self.time_scale)
-            self.slipped_s += slip
+        if now - self._last_s > self._stride_s:
+            with self._slipping:
+                now = ((time.monotonic() if self._paused_at is None else self._paused_at) - self._start) * self.time_scale
+                slip = now - self._last_s - self._stride_s
+                if slip > 0:  # (not taken already by another thread's reading meanwhile)
+                    self._start += slip / self.time_scale
+                    now -= slip
+                    if self._read and not self._warned:
+                        self._warned = True
+                        log.warning("simulated time slipped %.3g s: the model could not step as fast as --time-scale %g "
+                                    "asks (or the process was stopped); it now runs as fast as the model steps", slip,
+                                    self.time_scale)
+                    self.slipped_s += slip
         self._last_s = now
         self._read = True
         return now

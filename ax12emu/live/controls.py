@@ -86,6 +86,8 @@ class ServedControls:
     def __init__(self, call: Callable[[Callable[[AnyBus], Any]], Any], *, servos: int = 0, seed: int = 0) -> None:
         self.call = call
         self.seed = seed
+        #: External torque set from here on each Protocol 1.0 servo, by index: for a model that does not show its own.
+        self._torque_nm: dict[int, float] = {}
 
     def faults_of(self, bus: AnyBus) -> Faults | MixedFaults:
         # ax12emu.faults knows the buses of FAULT_BUSES (and wires of both protocols); another
@@ -137,9 +139,16 @@ class ServedControls:
                 what = f"its model ({type(holder).__name__}) takes" if holder is not None else f"its bus ({type(sub).__name__}) has"
                 raise ControlError(f"external_torque: ID {servo_id}: {what} no external torque")
             # The model's own torques, so one servo's change keeps what serve's --external-torque or an earlier
-            # control put on the others.
-            torques = np.array(getattr(model, "external_torque_nm", np.zeros(len(sub.servos))), dtype=float)
-            torques[servo.index] = torque_nm
+            # control put on the others; a model that does not show them (one a caller wrote) keeps this object's.
+            shown = getattr(model, "external_torque_nm", None)
+            if shown is None:
+                torques = np.zeros(len(sub.servos))
+                self._torque_nm[servo.index] = torque_nm
+                for index, nm in self._torque_nm.items():
+                    torques[index] = nm
+            else:
+                torques = np.array(shown, dtype=float)
+                torques[servo.index] = torque_nm
             model.set_external_torque(torques)  # type: ignore[union-attr]
             sub.plant.tables_changed()  # type: ignore[union-attr]
 

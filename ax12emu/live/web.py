@@ -365,7 +365,7 @@ class WebServer:
             data = await asyncio.wait_for(request.read(), BODY_TIMEOUT_S)
         except web.HTTPRequestEntityTooLarge:
             return _error(413, f"request body over {MAX_BODY_BYTES} bytes")
-        except TimeoutError:
+        except asyncio.TimeoutError:  # (TimeoutError itself from Python 3.11 on; a class of its own on 3.10)
             late = _error(408, f"the body did not arrive within {BODY_TIMEOUT_S:g} s of its headers")
             late.force_close()  # the rest of the body may still come: the connection cannot carry another request
             return late

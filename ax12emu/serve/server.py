@@ -51,6 +51,7 @@ from concurrent.futures import TimeoutError as FuturesTimeout
 from typing import Any
 
 from ax12emu.bus import BITS_PER_BYTE, Bus, Reply, merge_replies
+from ax12emu.bus.clock import WallClock
 from ax12emu.tracing.trace import IN, OUT, TraceWriter
 
 from .transports.base import Transport
@@ -93,6 +94,8 @@ class BusServer:
         trace: TraceWriter | None = None,
     ) -> None:
         self.bus = bus
+        if isinstance(bus.clock, WallClock):  # read at every tick from here on: a catch-up past the model's speed slips
+            bus.clock.bound_strides()
         #: Records every byte in and out; None (the default) costs one test per chunk.
         self.trace = trace
         #: Functions to run on the serving thread (see :meth:`call`).

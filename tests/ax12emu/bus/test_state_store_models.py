@@ -57,3 +57,14 @@ def test_the_ax12_profiles_share_their_model_number(tmp_path):
         bus.save_state()
     with Bus([1], options=ServoOptions(profile="ax12-2006"), state_store=store) as bus:
         assert bus.servo(1).table.get("return_delay_time") == 50
+
+
+def test_another_models_file_with_a_backup_is_refused_as_another_model(tmp_path):
+    """The backup's size (the XL430's table) must not speak first: the file is another model's."""
+    store = StateStore(tmp_path)
+    bus, _ = recording_bus(ids=(1,), key="xl430-w250", state_store=store)
+    bus.receive(encode_instruction2(1, Instruction2.CONTROL_TABLE_BACKUP, b"\x01CTRL"))
+    bus.close()
+    assert "backup" in json.loads(store.path_for(1).read_text())
+    with pytest.raises(StateFileError, match="holds the EEPROM of another model"):
+        recording_bus(ids=(1,), key="xl-320", state_store=store)

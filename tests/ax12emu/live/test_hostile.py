@@ -282,6 +282,6 @@ def test_requests_past_the_rate_wait_their_turn_or_get_503(bus, monkeypatch):
     answers = asyncio.run(burst())
     served = sorted(elapsed for status, elapsed, _ in answers if status == 200)
     refused = [text for status, _, text in answers if status == 503]
-    assert 4 <= len(served) <= 10 and len(served) + len(refused) == 20, answers
+    assert 4 <= len(served) <= 14 and len(served) + len(refused) == 20, answers
     assert served[-1] >= 0.3  # the last ones waited their turn
     assert all("requests a second" in text for text in refused)
