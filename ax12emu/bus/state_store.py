@@ -60,6 +60,20 @@ class StateFileError(ValueError):
     """A state file exists but cannot be used; the message names the file."""
 
 
+def _document(path: Path) -> dict:
+    """A state file's JSON object; ValueError (or OSError, RecursionError) where it is not one of this format.
+
+    O_NOFOLLOW: a symlink planted in the directory cannot make the store read a file elsewhere (ELOOP, reported
+    as an unusable state file).
+    """
+    fd = os.open(path, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0))
+    with os.fdopen(fd, encoding="utf-8") as handle:
+        document = json.loads(handle.read())
+    if not isinstance(document, dict) or document.get("format") != FORMAT:
+        raise ValueError(f"not an {FORMAT} file")
+    return document
+
+
 class StateStore:
     """Reads and writes the EEPROM image of each servo slot under ``directory``."""
 
@@ -131,13 +145,7 @@ class StateStore:
         if not path.exists():
             return False
         try:
-            # O_NOFOLLOW: a symlink planted in the directory cannot make the store read
-            # a file elsewhere (ELOOP, reported below as an unusable state file).
-            fd = os.open(path, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0))
-            with os.fdopen(fd, encoding="utf-8") as handle:
-                document = json.loads(handle.read())
-            if not isinstance(document, dict) or document.get("format") != FORMAT:
-                raise ValueError(f"not an {FORMAT} file")
+            document = _document(path)
             registers = document["eeprom"]
             if not isinstance(registers, dict):
                 raise TypeError("'eeprom' must be an object")
@@ -172,12 +180,7 @@ class StateStore:
         if not path.exists():
             return None
         try:
-            fd = os.open(path, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0))
-            with os.fdopen(fd, encoding="utf-8") as handle:
-                document = json.loads(handle.read())
-            if not isinstance(document, dict):
-                raise TypeError("not a JSON object")
-            text = document.get("backup")
+            text = _document(path).get("backup")
             if text is None:
                 return None
             if not isinstance(text, str):
