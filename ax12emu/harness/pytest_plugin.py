@@ -30,6 +30,7 @@ test can be watched and its last state inspected.
 from __future__ import annotations
 
 import importlib.util
+import numbers
 import time
 from collections.abc import Iterator
 from typing import Any
@@ -90,6 +91,20 @@ def pytest_configure(config: pytest.Config) -> None:
     config.addinivalue_line("markers", "ax12_servo(spec): the ax12_bus fixture's servo models (X series, MX, ...), as serve --servo takes them")
 
 
+def _marker_takes(marker: pytest.Mark, example: str, *, args: bool) -> None:
+    """A UsageError for a marker written the other way round (its keywords or its positional arguments were
+    ignored: ``ax12_servo(servo=...)`` served an AX-12A), naming how it is written."""
+    if (marker.kwargs if args else marker.args):
+        raise pytest.UsageError(f"@pytest.mark.{marker.name} takes {'positional arguments' if args else 'keywords'}: {example}")
+
+
+def _marker_id(value: Any) -> int:
+    """One ID of ``ax12_ids``: an integer (numpy's too); a text such as "1,2" is a UsageError, not a deep one."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise pytest.UsageError(f"@pytest.mark.ax12_ids takes integer IDs, got {value!r}: ax12_ids(1, 2, 3)")
+    return int(value)
+
+
 def _default_transport() -> str:
     return "pty" if importlib.util.find_spec("pty") is not None and importlib.util.find_spec("termios") is not None else "inprocess"
 
@@ -102,16 +117,22 @@ def ax12_bus(request: pytest.FixtureRequest) -> Iterator[Any]:
     ids: list[int] | None = None  # VirtualBus's default: ID 1, or the IDs a per-ID servo text names
     marker = request.node.get_closest_marker("ax12_ids")
     if marker is not None:
-        ids = [int(i) for arg in marker.args for i in (arg if isinstance(arg, (list, tuple)) else [arg])]
+        _marker_takes(marker, "ax12_ids(1, 2, 3) or ax12_ids([1, 2, 3])", args=True)
+        ids = [_marker_id(i) for arg in marker.args for i in (arg if isinstance(arg, (list, tuple, range)) else [arg])]
     if hasattr(request, "param"):
         ids = list(request.param) if isinstance(request.param, (list, tuple)) else [int(request.param)]
     options: dict[str, Any] = {"transport": _default_transport()}
     servo_marker = request.node.get_closest_marker("ax12_servo")
-    servo = servo_marker.args[0] if servo_marker is not None and servo_marker.args else request.config.getoption("--ax12-servo", None)
+    if servo_marker is not None:
+        _marker_takes(servo_marker, 'ax12_servo("1-2:xl430-w250")', args=True)
+        if len(servo_marker.args) != 1:
+            raise pytest.UsageError('ax12_servo takes one servo text, e.g. ax12_servo("1-2:xl430-w250")')
+    servo = servo_marker.args[0] if servo_marker is not None else request.config.getoption("--ax12-servo", None)
     if servo is not None:
         options["servo"] = servo
     options_marker = request.node.get_closest_marker("ax12_bus_options")
     if options_marker is not None:
+        _marker_takes(options_marker, "ax12_bus_options(virtual_time=True)", args=False)
         options.update(options_marker.kwargs)
     web = request.config.getoption("--ax12-web", False)
     if web:

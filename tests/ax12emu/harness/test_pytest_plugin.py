@@ -33,6 +33,32 @@ def test_options_marker(ax12_bus):
     assert ax12_bus.port.startswith("ax12emu://") and ax12_bus.virtual_time
 
 
+@pytest.mark.parametrize(("marker", "says"), [
+    ('ax12_servo(servo="xl430-w250")', "ax12_servo takes positional arguments"),  # served an AX-12A
+    ("ax12_servo()", "ax12_servo takes one servo text"),
+    ('ax12_bus_options({"virtual_time": True})', "ax12_bus_options takes keywords"),  # dropped
+    ('ax12_ids("1,2")', "ax12_ids takes integer IDs, got '1,2'"),  # an error deep inside
+])
+def test_a_marker_written_the_other_way_round_is_a_usage_error_naming_how(pytester, marker, says):
+    pytester.makepyfile(
+        f"""
+        import pytest
+
+        @pytest.mark.{marker}
+        def test_it(ax12_bus):
+            pass
+        """
+    )
+    result = pytester.runpytest_inprocess("-p", "no:cacheprovider")
+    result.assert_outcomes(errors=1)
+    result.stdout.fnmatch_lines([f"*{says}*"])
+
+
+@pytest.mark.ax12_ids(range(1, 4))
+def test_a_range_of_ids(ax12_bus):
+    assert ax12_bus.bus.ids == [1, 2, 3]
+
+
 def test_failing_test_still_tears_down(pytester):
     """A test that fails inside the fixture leaves no serving thread behind, and the marker is registered."""
     pytester.makepyfile(
