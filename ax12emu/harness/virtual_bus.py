@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import logging
 import math
+import numbers
 import operator
 import os
 import threading
@@ -91,6 +92,21 @@ def _next_name() -> str:
     with _instances_lock:
         _instances += 1
         return f"bus{_instances}"
+
+
+def _check_types(*, options: Any, model: Any, faults: Any, servo: Any, baud_bps: Any) -> None:
+    """A TypeError naming the argument whose type is wrong (they failed deep inside: ``model=5`` as "'int' object has
+    no attribute 'n'")."""
+    if not isinstance(options, (ServoOptions, Servo2Options)):
+        raise TypeError(f"options must be a ServoOptions (AX-12A bus) or Servo2Options (servo=), got {type(options).__name__}")
+    if model is not None and not isinstance(model, str) and not callable(getattr(model, "advance", None)):
+        raise TypeError(f"model must be 'physical', 'kinematic' or a firmware_model.ServoModel, got {type(model).__name__}")
+    if faults is not None and not isinstance(faults, FaultConfig):
+        raise TypeError(f"faults must be an ax12emu.faults.FaultConfig, got {type(faults).__name__}")
+    if servo is not None and not isinstance(servo, str):
+        raise TypeError(f"servo must be a text such as '1-2:xl430-w250', got {type(servo).__name__}")
+    if baud_bps is not None and (isinstance(baud_bps, bool) or not isinstance(baud_bps, numbers.Real)):
+        raise TypeError(f"baud_bps must be a bit rate, got {type(baud_bps).__name__}")
 
 
 def _web_address(web: str | tuple[str, int] | bool | None) -> tuple[str, int] | None:
@@ -172,6 +188,11 @@ class VirtualBus:
     ) -> None:
         if transport not in TRANSPORTS:
             raise ValueError(f"unknown transport {transport!r}; choose one of: {', '.join(TRANSPORTS)}")
+        _check_types(options=options, model=model, faults=faults, servo=servo, baud_bps=baud_bps)
+        if isinstance(tcp_address, str):  # "HOST:PORT", as web= and serve --tcp take it
+            from ax12emu.serve.transports.tcp import parse_host_port
+
+            tcp_address = parse_host_port(tcp_address)
         self.transport_name = transport
         self.virtual_time = virtual_time
         clock = VirtualClock() if virtual_time else WallClock(time_scale)

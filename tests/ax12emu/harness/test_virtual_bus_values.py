@@ -3,6 +3,8 @@ physics cannot hold: they were wrapped (an ID of 300 became 44) or stuck in the 
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -49,3 +51,21 @@ def test_a_value_no_register_or_physics_can_hold_is_refused_by_name_and_changes_
 def test_ids_that_are_not_integers_are_refused():
     with pytest.raises(TypeError, match="ids must be integers, got '12'"):
         VirtualBus("12", transport="inprocess")
+
+
+@pytest.mark.parametrize(("given", "says"), [
+    ({"model": 5}, "model must be 'physical', 'kinematic' or a firmware_model.ServoModel, got int"),
+    ({"faults": {"drop": 0.5}}, "faults must be an ax12emu.faults.FaultConfig, got dict"),
+    ({"options": {"profile": "ax12a"}}, "options must be a ServoOptions"),
+    ({"servo": 5}, "servo must be a text such as '1-2:xl430-w250', got int"),
+    ({"servo": "xl430-w250", "baud_bps": "fast"}, "baud_bps must be a bit rate, got str"),
+])
+def test_an_argument_of_the_wrong_type_is_named(given, says):
+    """They failed deep inside ("'int' object has no attribute 'n'", "Unknown format code 'f'")."""
+    with pytest.raises(TypeError, match=re.escape(says)):
+        VirtualBus([1], transport="inprocess", **given)
+
+
+def test_tcp_address_takes_host_colon_port_as_web_does():
+    with VirtualBus([1], transport="tcp", tcp_address="127.0.0.1:0") as bus:
+        assert bus.port.startswith("socket://127.0.0.1:")
