@@ -99,7 +99,8 @@ def _check_types(*, options: Any, model: Any, faults: Any, servo: Any, baud_bps:
     no attribute 'n'")."""
     if not isinstance(options, (ServoOptions, Servo2Options)):
         raise TypeError(f"options must be a ServoOptions (AX-12A bus) or Servo2Options (servo=), got {type(options).__name__}")
-    if model is not None and not isinstance(model, str) and not callable(getattr(model, "advance", None)):
+    if (servo is None and model is not None and not isinstance(model, str)  # (servo= refuses any model object)
+            and not callable(getattr(model, "advance", None))):
         raise TypeError(f"model must be 'physical', 'kinematic' or a firmware_model.ServoModel, got {type(model).__name__}")
     if faults is not None and not isinstance(faults, FaultConfig):
         raise TypeError(f"faults must be an ax12emu.faults.FaultConfig, got {type(faults).__name__}")
