@@ -163,8 +163,8 @@ class StateStore:
                     value = registers[entry.name]
                     if not isinstance(value, int) or isinstance(value, bool):
                         raise TypeError(f"{entry.name} must be an integer, got {value!r}")
-                    low = -(1 << (8 * entry.size - 1)) if entry.signed else 0
-                    if not low <= value < low + 256**entry.size:
+                    low, high = entry.byte_range
+                    if not low <= value <= high:
                         raise ValueError(f"{entry.name} = {value} does not fit in {entry.size} byte(s)")
                     image[entry.address : entry.end] = entry.to_bytes(value)
             table.load_eeprom(bytes(image))

@@ -340,12 +340,17 @@ def _open_live(args: argparse.Namespace, server, transport, bus):
     except OSError as exc:
         transport.close()
         bus.close()
-        host, port = getattr(args, "web_address", None) or ("", "")
-        raise OSError(exc.errno, f"--web {host}:{port}: {exc.strerror or exc}") from None
+        raise _naming("--web", getattr(args, "web_address", None) or ("", ""), exc) from None
     except BaseException:
         transport.close()
         bus.close()
         raise
+
+
+def _naming(flag: str, address: tuple, exc: OSError) -> OSError:
+    """``exc`` saying which flag's address it is about (``--tcp`` and ``--web`` each bind one), not the bare errno."""
+    host, port = address
+    return OSError(exc.errno, f"{flag} {host}:{port}: {exc.strerror or exc}")
 
 
 def _claimed(directory: str | Path) -> StateStore:
@@ -364,8 +369,8 @@ def _open_transport(args: argparse.Namespace):
         host, port = args.tcp_address
         try:
             transport = open_transport("tcp", host=host, port=port)
-        except OSError as exc:  # which flag's address (--web binds another), not the bare errno
-            raise OSError(exc.errno, f"--tcp {host}:{port}: {exc.strerror or exc}") from None
+        except OSError as exc:
+            raise _naming("--tcp", (host, port), exc) from None
         if not is_loopback(host):
             log.warning("serving on %s, reachable from other machines", transport.url)
         return transport

@@ -534,7 +534,7 @@ def _fitting(entry: Any, value: Any) -> int:
         number = operator.index(value)
     except TypeError:
         raise TypeError(f"{entry.name} takes an integer, got {type(value).__name__} {value!r}") from None
-    low, high = (-(1 << (8 * entry.size - 1)), (1 << (8 * entry.size - 1)) - 1) if entry.signed else (0, (1 << (8 * entry.size)) - 1)
+    low, high = entry.byte_range
     if not low <= number <= high:
         raise ValueError(f"{entry.name} holds {low}..{high} ({entry.size} byte{'s' if entry.size > 1 else ''}), got {number}")
     return number

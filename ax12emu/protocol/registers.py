@@ -90,6 +90,13 @@ class Entry:
         # One C call (a NumPy row slice is a buffer too): the Protocol 2.0 write path reads dozens of registers a packet.
         return int.from_bytes(image[self.address : self.address + self.size], "little", signed=self.signed)
 
+    @property
+    def byte_range(self) -> tuple[int, int]:
+        """The values this entry's bytes can hold at all (two's complement when signed), inclusive; the e-manual's
+        range (``minimum``/``maximum``) is a separate, narrower matter."""
+        bits = 8 * self.size
+        return (-(1 << (bits - 1)), (1 << (bits - 1)) - 1) if self.signed else (0, (1 << bits) - 1)
+
     def to_bytes(self, value: int) -> bytes:
         """``value`` as this entry's bytes (two's complement when signed, any int masked to the size)."""
         return (value & ((1 << (8 * self.size)) - 1)).to_bytes(self.size, "little")
