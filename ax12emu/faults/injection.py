@@ -586,16 +586,16 @@ class Faults1X(Faults2):
 
     An MX on Protocol 1.0 runs the X-series firmware model behind its classic table (``ax12emu.servo.plant1x``),
     so its own faults act inside that firmware as :class:`Faults2`'s do, and show as the Protocol 1.0 firmware
-    shows them (ROBOTIS e-manual, MX-28 (Protocol 1.0), "Torque Limit(34)": "If the function of Alarm
+    shows them: the status packets carry the conditions present, and those Alarm Shutdown(18) selects set
+    Torque Limit to 0 (ROBOTIS e-manual, MX-28 (Protocol 1.0), "Torque Limit(34)": "If the function of Alarm
     LED(17)/Shutdown(18) is triggered, the motor loses its torque because Torque Limit(34) becomes 0. Once
     error conditions are resolved and Torque Limit(34) is changed to the value other than 0, the motor can be
     operated again."):
 
     * ``alarm``: status-packet alarm bits by the model file's ``[classic] errors`` names (overload,
-      overheating, input_voltage) or as bits; the firmware detects them now if Shutdown(18) selects them
-      (else a ValueError, as on the X series), every status packet carries them and Torque Limit drops to 0.
-      :meth:`clear_alarm` lifts them as the firmware does when Torque Limit is written non-zero; Torque
-      Limit itself stays 0 until the client writes it, as on the AX-12 bus.
+      overheating, input_voltage) or as bits, raised until :meth:`clear_alarm` as on the AX-12 bus: every
+      status packet carries them and, where Shutdown(18) selects them, Torque Limit drops to 0 and stays
+      there until the client writes it once they are lifted.
     * ``stall``: the shaft is held while the firmware drives; its overload protection trips after the
       firmware's own overload time (Overload, Torque Limit 0, if Shutdown selects it).
     * ``hold``: Present Temperature or Present Voltage pinned, judged by the firmware's limits.
@@ -626,32 +626,34 @@ class Faults1X(Faults2):
             raise ValueError(f"no servo launched as ID {slot} (slots: {self.bus.slots})") from None
 
     def force_alarm(self, slot: int, bits: int | str) -> None:
-        """The MX's firmware detects the alarms ``bits`` (status-packet bits, or names such as "overload") now."""
+        """Raise the alarms ``bits`` (status-packet bits, or names such as "overload") until :meth:`clear_alarm`.
+
+        As on the AX-12A: every status packet carries them, whatever Shutdown(18) selects, and those it
+        selects set Torque Limit to 0 (``ax12emu.servo.plant1x``).
+        """
         servo = self._servo2(slot)
-        classic = servo.plant.classic
-        names = dict(classic.units.errors)  # the family's Shutdown/status bits by name, from its model file
+        names = dict(servo.plant.classic.units.errors)  # the family's Shutdown/status bits by name, from its model file
         value = parse_alarm_bits(bits, names) if isinstance(bits, str) else int(bits)
         if not value or value & ~sum(names.values()):
             raise ValueError(f"{servo.spec.name}'s alarm bits are {', '.join(f'{k} {v:#04x}' for k, v in names.items())}; "
                              f"got {value:#04x}")
-        shutdown = servo.table.get("shutdown")
-        if value & ~shutdown:
-            unselected = [name for name, bit in names.items() if bit & value & ~shutdown]
-            raise ValueError(f"alarm: ID {slot}'s Shutdown({servo.table.layout.by_name['shutdown'].address}) is {shutdown:#04x}, "
-                             f"which does not select {', '.join(unselected)}: the firmware detects only the errors Shutdown "
-                             "selects (write Shutdown first)")
-        from ax12emu.servo.classic import X_ERROR_BITS  # loaded with the MX bus, not before
-
-        self._firmware(slot, "alarm").raise_error(sum(X_ERROR_BITS[name] for name, bit in names.items() if bit & value))
-        servo.plant.write_back()  # a newly latched error: Torque Limit 0
         index = self._index(slot)
         self._alarms[index] = self._alarms.get(index, 0) | value
+        self._hold_alarms(slot, self._alarms[index])
 
     def clear_alarm(self, slot: int) -> None:
-        """The errors go as when a client writes Torque Limit non-zero (the firmware restarts its protections)."""
-        index = self._index(slot)
-        self._alarms.pop(index, None)
-        self._servo2(slot).plant.clear_alarms()
+        """Lift forced alarms; the firmware's own conditions, if any, stay (Torque Limit stays as it is)."""
+        self._alarms.pop(self._index(slot), None)
+        self._hold_alarms(slot, 0)
+
+    def _hold_alarms(self, slot: int, bits: int) -> None:
+        """The MX's firmware holds the conditions of the status-packet ``bits`` (0: none) present, then the copy."""
+        from ax12emu.servo.classic import X_ERROR_BITS  # loaded with the MX bus, not before
+
+        servo = self._servo2(slot)
+        names = dict(servo.plant.classic.units.errors)
+        self._firmware(slot, "alarm").hold_errors(sum(X_ERROR_BITS[name] for name, bit in names.items() if bit & bits))
+        servo.plant.write_back()
 
     def duplicate(self, slot: int, as_id: int) -> None:
         """Give the servo launched as ``slot`` the ID ``as_id`` (0..253 on Protocol 1.0, normally another servo's)."""
@@ -670,9 +672,6 @@ class Faults1X(Faults2):
         """As :meth:`Faults.active`; a forced alarm the client has cleared (Torque Limit written) is no longer listed."""
         if self.ax is not None and slot in self.ax.bus.slots:  # the AX-12A's own, and the wire's reply faults
             return [*self.ax.active(slot), *self._on_replies_of(self.ax.bus.servos[self.ax._index(slot)].id)]
-        index = self._index(slot)
-        if index in self._alarms:  # the status packets' bits
-            self._forget_cleared_alarms(index, self._servo2(slot).alarms)
         return Faults.active(self, slot)
 
     def clear(self) -> None:

@@ -8,13 +8,26 @@ go through the model file's ``[classic]`` numbers (:class:`~.classic.ClassicMap`
 multi-turn and torque control modes, goal acceleration), and this is the one place that knows both
 the table and the model's seam, as :mod:`.plant2` is for the X series.
 
-What the Protocol 1.0 firmware adds here (ROBOTIS e-manual, MX-28 page, shared text
-_includes/en/dxl/control_table_torque_limit.md): "If the function of Alarm LED(17)/Shutdown(18) is
-triggered, the motor loses its torque because Torque Limit(34) becomes 0. Once error conditions are
-resolved and Torque Limit(34) is changed to the value other than 0, the motor can be operated again."
-So Torque Enable stays the client's (the firmware's torque-off on a shutdown is not copied back), a
-newly latched error sets Torque Limit to 0, and :meth:`clear_alarms` restarts the firmware's
-protections when a client writes it non-zero.  The latched errors are the status packets' alarm bits.
+What the Protocol 1.0 firmware adds here (ROBOTIS e-manual, MX-28 page and its shared texts in
+github ROBOTIS-GIT/emanual _includes/en/dxl/):
+
+* The status packet's alarm bits are conditions, not latched errors: "Input Voltage Error: When the
+  applied voltage is out of the range of operating voltage set in the Control table", "OverHeating
+  Error: When the internal temperature is out of the range of operating temperature", "Overload Error:
+  When the current load cannot be controlled with the set maximum torque" (control_table_alarm_shutdown.md,
+  the same text as the AX-12A's). So every status packet carries the conditions present now, whatever
+  Alarm Shutdown(18) selects, as on the AX-12A beside it on the wire (``ax12emu.servo.plant``): the
+  X-series firmware model's ``present_errors``.
+* Alarm Shutdown acts through Torque Limit: "If the function of Alarm LED(17)/Shutdown(18) is triggered,
+  the motor loses its torque because Torque Limit(34) becomes 0. Once error conditions are resolved and
+  Torque Limit(34) is changed to the value other than 0, the motor can be operated again"
+  (control_table_torque_limit.md). The firmware model runs with ``shutdown_cuts_output``: an error
+  Shutdown selects cuts its output at the step it is detected (not latched, torque not turned off), the
+  copy shows Torque Limit 0, and a Torque Limit written non-zero restores the output; a condition still
+  present cuts it again at the next step. Torque Enable stays the client's.
+* With the output cut the firmware cannot judge the load, so an Overload that cut it stays in the status
+  packets until Torque Limit is written non-zero, as the AX-12A's does while its shaft is held off its
+  goal with no torque to reach it.
 """
 
 from __future__ import annotations
@@ -43,8 +56,8 @@ class Plant1X(SteppedPlant):
         self._values: dict[str, int] = {}
         self._commands = XCommands()
         self._write_unseen = False
-        #: Hardware error bits seen at the last copy: a new one is an Alarm Shutdown (Torque Limit to 0).
-        self._errors_seen = 0
+        #: The status packets' alarm bits at the last copy (Protocol 1.0 bits).
+        self._alarms = 0
         self.command()
         self.write_back()
 
@@ -65,34 +78,33 @@ class Plant1X(SteppedPlant):
 
     # -- time: due, catch_up, tick (SteppedPlant); firmware -> table ------------------------
     def write_back(self) -> None:
-        """Copy what the firmware senses into the table; a newly latched error is an Alarm Shutdown."""
-        sensed = self.firmware.sense()
+        """Copy what the firmware senses into the table; an output cut by Alarm Shutdown shows as Torque Limit 0."""
+        firmware = self.firmware
+        sensed = firmware.sense()
         registers = self.classic.sensed_to_registers(sensed, self._commands, self._values)
         row = self.table.row
         for name, entry in self._sensed_entries:
             row[entry.address : entry.end] = entry.to_bytes(registers[name])
-        new_errors = sensed.hardware_error_status & ~self._errors_seen
-        self._errors_seen = sensed.hardware_error_status
-        if new_errors:
+        self._alarms = self.classic.errors_to_classic(firmware.present_errors)
+        if firmware.cut_errors and self.table.get("torque_limit"):
             self.table.set("torque_limit", 0)
+            self.command()  # the table and the firmware agree: no output until the client writes it
 
     @property
     def alarms(self) -> int:
-        """The status packets' alarm bits now: the errors the firmware latched, as Protocol 1.0 bits."""
-        return self.classic.errors_to_classic(self._errors_seen)
+        """The status packets' alarm bits now: the conditions present, as Protocol 1.0 bits."""
+        return self._alarms
 
-    def clear_alarms(self) -> None:
-        """Torque Limit written non-zero after a shutdown: the firmware restarts its protections (the shaft stays)."""
-        if not self._errors_seen:
-            return
-        self.firmware.reboot()
-        self._errors_seen = 0
-        self.command(goal_written=True)
+    def torque_limit_written(self) -> None:
+        """Torque Limit written non-zero: the output cut by an Alarm Shutdown comes back (module docstring)."""
+        if self.firmware.cut_errors:
+            self.firmware.restore_output()
+            self.write_back()
 
     def reboot(self) -> None:
         """Power-up (RESET): the firmware restarts; the servo has put the table back."""
         self.firmware.reboot()
-        self._errors_seen = 0
+        self.firmware.restore_output()
         self._values = {}
         self.write_back()
         self.command()
@@ -104,4 +116,5 @@ def build_plant1x(spec: ServoModel, table: Table2, choice=None) -> Plant1X:
     from .model_factory2 import XModelChoice, build_x_firmware
 
     firmware = build_x_firmware(spec, choice if choice is not None else XModelChoice())
+    firmware.shutdown_cuts_output = True  # Protocol 1.0's Alarm Shutdown (module docstring)
     return Plant1X(firmware, table, ClassicMap.from_model(spec, step_s=firmware.step_s))

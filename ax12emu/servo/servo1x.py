@@ -168,7 +168,7 @@ class Servo1X(TableServo):
         if any(entry.area is Area.EEPROM for entry in check.entries):
             self.eeprom_dirty = True
         if "torque_limit" in names and table.get("torque_limit") and not torque_limit_before:
-            self.plant.clear_alarms()
+            self.plant.torque_limit_written()
         self.plant.command(goal_written=bool(names & self.plant.classic.goal_registers))
         return StatusError.NONE
 

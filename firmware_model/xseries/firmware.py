@@ -153,8 +153,13 @@ class XFirmware:
         thermal: ThermalParams | None = None,
         overload_time_s: float = 1.0,
         position_output_scale: float = 1.0,
+        shutdown_cuts_output: bool = False,
     ) -> None:
         self.physics = physics
+        #: What an error Shutdown selects does: False, the X series' (latched in Hardware Error Status, torque off
+        #: until REBOOT); True, the Protocol 1.0 MX firmware's (the output cut to 0 % until :meth:`restore_output`,
+        #: nothing latched: its status packets report the conditions present, :attr:`present_errors`).
+        self.shutdown_cuts_output = shutdown_cuts_output
         self.position_output_scale = position_output_scale
         self.step_s = step_s
         self.time_s = 0.0
@@ -168,6 +173,8 @@ class XFirmware:
         self._cmd = XCommands()
         #: Sensed registers pinned by a stuck sensor (:meth:`hold_reading`): the world's fault, so a reboot keeps them.
         self._held_readings: dict[str, int] = {}
+        #: Error conditions a fault injection holds present (:meth:`hold_errors`): detected at every step until lifted.
+        self._held_errors = 0
         #: Counts every change that may alter a sensed value other than :data:`.interface.TRAJECTORY_SENSED` (a step, a
         #: reboot, the world, a command that moves the frame or the torque): while it stands still, ``sense()``
         #: gives the same values for every other field.  A serving bus uses it to leave the copy of a
@@ -182,6 +189,10 @@ class XFirmware:
         self._torque_on = False
         self._last_torque_cmd = 0
         self._hw_error = 0
+        #: Errors that cut the output (``shutdown_cuts_output``), kept until :meth:`restore_output`.
+        self._cut_errors = 0
+        #: The firmware's own Overload detection cut the output (reported until :meth:`restore_output`).
+        self._overload_cut = False
         self._fixed = False
         self.sensing_epoch += 1
         self._overload_elapsed_s = 0.0
@@ -432,7 +443,7 @@ class XFirmware:
         if self._torque_on:
             sign = self._sign()
             mode = cmd.operating_mode
-            pwm_limit = min(cmd.pwm_limit, PWM_FULL_SCALE)
+            pwm_limit = min(cmd.pwm_limit, PWM_FULL_SCALE) if not self._cut_errors else 0
             if mode != OperatingMode.PWM:
                 pwm_limit = min(abs(cmd.goal_pwm), pwm_limit)  # "Goal PWM ... is used to limit PWM value"
             if mode in _POSITION_MODES:
@@ -564,8 +575,33 @@ class XFirmware:
             self._latch(detected)
         self._check_readings()
 
+    @property
+    def present_errors(self) -> int:
+        """The Hardware Error Status bits whose condition holds now, whether or not Shutdown(63) selects them.
+
+        What a firmware that reports conditions rather than latched errors shows (the MX series' Protocol 1.0
+        status packets, ``ax12emu.servo.plant1x``): the temperature reading above Temperature Limit, the
+        supply outside the voltage limits, the overload held for ``overload_time_s``, the conditions a fault
+        injection holds.  An Overload that cut the output stays until :meth:`restore_output`: with no output
+        the firmware cannot judge the load again.
+        """
+        cmd = self._cmd
+        held = self._held_readings
+        bits = self._held_errors | (HW_ERROR_OVERLOAD if self._overload_cut else 0)
+        if held.get("present_temperature", self.temperature_c) > cmd.temperature_limit:
+            bits |= HW_ERROR_OVERHEATING
+        tenths_v = held.get("present_input_voltage", round(self.physics.supply_v * 10.0))
+        if tenths_v < cmd.min_voltage_limit or tenths_v > cmd.max_voltage_limit:
+            bits |= HW_ERROR_INPUT_VOLTAGE
+        if self._overload_elapsed_s >= self.overload_time_s:
+            bits |= HW_ERROR_OVERLOAD
+        return bits
+
     def _check_readings(self) -> None:
-        """Input voltage against its limits every step; a pinned temperature too (a real one is checked as it changes)."""
+        """Input voltage against its limits every step; a pinned temperature too (a real one is checked as it changes);
+        the conditions a fault injection holds."""
+        if self._held_errors:
+            self._latch(self._held_errors, own=False)
         cmd = self._cmd
         held = self._held_readings
         if held and held.get("present_temperature", -1e9) > cmd.temperature_limit:
@@ -574,11 +610,46 @@ class XFirmware:
         if tenths_v < cmd.min_voltage_limit or tenths_v > cmd.max_voltage_limit:
             self._latch(HW_ERROR_INPUT_VOLTAGE)
 
-    def _latch(self, detected: int) -> None:
+    def _latch(self, detected: int, *, own: bool = True) -> None:
+        """Act on errors detected now as Shutdown(63) selects; ``own``: the firmware's protections found them
+        (not conditions a fault injection holds, which are reported for as long as they are held)."""
         detected &= self._cmd.shutdown
-        if detected:
+        if not detected:
+            return
+        if self.shutdown_cuts_output:
+            self._cut_errors |= detected
+            self._overload_cut = self._overload_cut or (own and bool(detected & HW_ERROR_OVERLOAD))
+        else:
             self._hw_error |= detected
             self._torque_on = False
+
+    @property
+    def cut_errors(self) -> int:
+        """The errors that have cut the output (``shutdown_cuts_output``) since the last :meth:`restore_output`."""
+        return self._cut_errors
+
+    def restore_output(self) -> None:
+        """The host lets the motor run again after a cut (Protocol 1.0: Torque Limit written non-zero).
+
+        An error still present is detected again at the next step and cuts the output again.
+        """
+        if self._cut_errors:
+            self._cut_errors = 0
+            self._overload_cut = False
+            self._fixed = False
+            self.sensing_epoch += 1
+
+    def hold_errors(self, bits: int) -> None:
+        """Hold the Hardware Error Status ``bits``' conditions present (fault injection) until called with 0.
+
+        Detected now and at every step, as a real condition would be: latched or cutting the output as
+        Shutdown(63) selects, and in :attr:`present_errors` while held.
+        """
+        self._fixed = False
+        self.sensing_epoch += 1
+        self._held_errors = int(bits)
+        if bits:
+            self._latch(bits, own=False)
 
     # ------------------------------------------------------------------ sensing
 

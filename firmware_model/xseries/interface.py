@@ -159,6 +159,20 @@ class XServoModel(Protocol):
         """A torque acting on the output shaft (N·m, positive = counter-clockwise)."""
         ...
 
+    @property
+    def present_errors(self) -> int:
+        """The Hardware Error Status bits whose condition holds now, whether or not Shutdown(63) selects them."""
+        ...
+
+    @property
+    def cut_errors(self) -> int:
+        """The errors that cut the output, on a firmware whose Shutdown cuts it rather than latching (Protocol 1.0 MX)."""
+        ...
+
+    def restore_output(self) -> None:
+        """The host lets the motor run again after a cut; an error still present cuts it again at the next step."""
+        ...
+
 
 @runtime_checkable
 class XFaultable(Protocol):
@@ -168,6 +182,10 @@ class XFaultable(Protocol):
     latches in Hardware Error Status and turns the torque off only as Shutdown(63) selects, and
     REBOOT clears it; a blocked shaft draws stall current until the overload protection trips.
     """
+
+    def hold_errors(self, bits: int) -> None:
+        """Hold the Hardware Error Status ``bits``' conditions present until called with 0, detected at every step."""
+        ...
 
     def raise_error(self, bits: int) -> int:
         """The firmware detects the Hardware Error Status ``bits`` now; returns those it latched (Shutdown's)."""

@@ -287,21 +287,37 @@ def test_the_eeprom_area_persists_in_a_state_store_and_another_model_is_refused(
         make("mx-64")
 
 
-def test_input_voltage_and_overheating_are_the_status_packets_bits_as_shutdown_selects_them():
-    """Max Voltage Limit 11.0 V under a 12 V supply, Temperature Limit under the servo's 25 C: each error reaches the
-    status packets once Shutdown(18) selects it (the X-series firmware detects what Shutdown selects), and shuts down."""
+def test_input_voltage_and_overheating_are_in_every_status_packet_and_shut_down_as_shutdown_selects_them():
+    """Max Voltage Limit 11.0 V under a 12 V supply, Temperature Limit under the servo's 25 C: each condition is the
+    status packets' bit while it holds, whatever Shutdown(18) selects (the AX-12A's e-manual text); those Shutdown
+    selects set Torque Limit to 0, which stays until written once the condition is gone."""
     bus = mx_bus(["mx-64"])
     assert write(bus, 1, 13, 110) == 0  # Max Voltage Limit 11.0 V
     run_s(bus, 0.01)
-    assert bus.receive(encode_instruction(1, Instruction.PING, b""))[0].data[4] == 0  # the default 36 does not select it
-    assert write(bus, 1, 18, 36 | 0x01) == 0
-    run_s(bus, 0.01)
     assert bus.receive(encode_instruction(1, Instruction.PING, b""))[0].data[4] == StatusError.INPUT_VOLTAGE
+    assert read2(bus, 1, TORQUE_LIMIT) == 1023  # the default 36 does not select it: the motor still runs
+    assert write2(bus, 1, GOAL_POSITION, 2500) == StatusError.INPUT_VOLTAGE
+    run_s(bus, 0.5)
+    assert abs(read2(bus, 1, PRESENT_POSITION) - 2500) < 20
+    assert write(bus, 1, 18, 36 | 0x01) == StatusError.INPUT_VOLTAGE
+    run_s(bus, 0.01)
     assert read2(bus, 1, TORQUE_LIMIT) == 0
+    assert write2(bus, 1, TORQUE_LIMIT, 1023) == StatusError.INPUT_VOLTAGE
+    run_s(bus, 0.01)
+    assert read2(bus, 1, TORQUE_LIMIT) == 0  # the condition holds: the shutdown holds
+    assert write(bus, 1, 13, 160) == StatusError.INPUT_VOLTAGE  # the supply within the limits again, from the next step
+    run_s(bus, 0.01)
+    assert bus.receive(encode_instruction(1, Instruction.PING, b""))[0].data[4] == 0
+    assert read2(bus, 1, TORQUE_LIMIT) == 0  # until the client writes it
+    assert write2(bus, 1, TORQUE_LIMIT, 1023) == 0
+    assert write2(bus, 1, GOAL_POSITION, 1500) == 0
+    run_s(bus, 1.0)
+    assert abs(read2(bus, 1, PRESENT_POSITION) - 1500) < 20 and read2(bus, 1, TORQUE_LIMIT) == 1023
     hot = mx_bus(["mx-28"])
-    assert write(hot, 1, 11, 20) == 0  # Temperature Limit 20 C
+    assert write(hot, 1, 11, 20) == 0  # Temperature Limit 20 C; the default Shutdown 36 selects Overheating
     run_s(hot, 0.01)
     assert hot.receive(encode_instruction(1, Instruction.PING, b""))[0].data[4] == StatusError.OVERHEATING
+    assert read2(hot, 1, TORQUE_LIMIT) == 0
 
 
 def test_an_angle_limit_error_with_shutdowns_angle_bit_drops_the_output_to_zero():

@@ -27,8 +27,8 @@ def test_the_spec_takes_the_mx_series_alone_and_beside_other_models():
     [
         (["--servo", "1:ax-12a,1:mx-28"], "ID 1"),
         (["--servo", "mx-64", "--voltage", "7"], "MX-64 runs on 10..14.8 V, not 7 V"),
-        # faults reach MX servos through their firmware, which detects only the errors Shutdown selects (0x24 by default)
-        (["--servo", "mx-28", "--alarm", "1:voltage"], "which does not select input_voltage"),
+        # an X-series Hardware Error Status name the Protocol 1.0 status packet has no bit for
+        (["--servo", "mx-28", "--alarm", "1:electrical_shock"], "unknown alarm 'electrical_shock'"),
     ],
 )
 def test_mistakes_are_one_line(args, message):

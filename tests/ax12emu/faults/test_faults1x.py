@@ -2,9 +2,9 @@
 
 The wire's faults act on every status packet of the wire and on each servo as on the AX-12 bus.
 An MX's own faults act inside its X-series firmware model and show as the Protocol 1.0 firmware
-shows them: an error is detected only if Shutdown(18) selects it, every status packet carries its
-alarm bit, Torque Limit drops to 0, and writing Torque Limit non-zero clears it (e-manual, MX-28
-"Torque Limit(34)").  An AX-12A on the same wire keeps the AX-12 bus's faults.  All in virtual time.
+shows them: every status packet carries the alarm conditions present, those Shutdown(18) selects drop
+Torque Limit to 0, and once they are gone a Torque Limit written non-zero lets the motor run (e-manual,
+MX-28 "Torque Limit(34)").  An AX-12A on the same wire keeps the AX-12 bus's faults.  All in virtual time.
 """
 
 from __future__ import annotations
@@ -107,7 +107,7 @@ def test_two_mx_servos_on_one_id_both_answer_and_collide(wire):
         bus.faults.duplicate(2, 254)
 
 
-def test_a_forced_alarm_is_a_shutdown_until_torque_limit_is_written(wire):
+def test_a_forced_alarm_is_a_shutdown_until_lifted_and_torque_limit_is_written(wire):
     bus, port, ph = wire
     assert ph.write2ByteTxRx(port, 1, GOAL_POSITION, 3000) == (COMM_SUCCESS, 0)
     bus.faults.force_alarm(1, "overload")
@@ -116,27 +116,34 @@ def test_a_forced_alarm_is_a_shutdown_until_torque_limit_is_written(wire):
     bus.step(1.0)
     assert abs(bus.read(1, "present_position") - 2048) < 50  # no output: it did not go to 3000
     assert bus.faults.active(1) == ["alarm 0x20"]
-    assert ph.write2ByteTxRx(port, 1, TORQUE_LIMIT, 1023) == (COMM_SUCCESS, 0)  # the client's way out
+    assert ph.write2ByteTxRx(port, 1, TORQUE_LIMIT, 1023) == (COMM_SUCCESS, OVERLOAD)  # the alarm still holds
+    bus.step(0.01)
+    assert bus.read(1, "torque_limit") == 0
+    bus.faults.clear_alarm(1)
     assert ph.ping(port, 1)[2] == 0 and bus.faults.active(1) == []
+    assert bus.read(1, "torque_limit") == 0  # as on the AX-12 bus: the client restores it
+    assert ph.write2ByteTxRx(port, 1, TORQUE_LIMIT, 1023) == (COMM_SUCCESS, 0)  # the client's way out
     bus.step(1.0)
     assert abs(bus.read(1, "present_position") - 3000) <= 3
 
 
-def test_an_alarm_shutdown_does_not_select_is_refused_until_selected(wire):
+def test_a_forced_alarm_is_reported_whatever_shutdown_selects_and_shuts_down_only_where_it_does(wire):
+    """As on the AX-12A (e-manual, Alarm Shutdown: the bits are the status packet's conditions, Shutdown decides the output)."""
     bus, port, ph = wire
-    with pytest.raises(ValueError, match=r"Shutdown\(18\) is 0x24, which does not select input_voltage"):
-        bus.faults.force_alarm(1, "input_voltage")
-    assert ph.ping(port, 1)[2] == 0
-    assert ph.write1ByteTxRx(port, 1, SHUTDOWN, 0x25) == (COMM_SUCCESS, 0)
-    bus.faults.force_alarm(1, INPUT_VOLTAGE)
+    bus.faults.force_alarm(1, "input_voltage")  # the factory Shutdown 0x24 does not select it
     assert ph.ping(port, 1)[2] == INPUT_VOLTAGE
+    bus.step(0.1)
+    assert bus.read(1, "torque_limit") == 1023
+    assert ph.write1ByteTxRx(port, 1, SHUTDOWN, 0x25) == (COMM_SUCCESS, INPUT_VOLTAGE)
+    bus.step(0.01)
+    assert bus.read(1, "torque_limit") == 0
     with pytest.raises(ValueError, match="unknown alarm 'electrical_shock'"):
         bus.faults.force_alarm(2, "electrical_shock")  # an X-series error the Protocol 1.0 status has no bit for
     with pytest.raises(ValueError, match="MX-28's alarm bits are"):
         bus.faults.force_alarm(2, 0x10)  # the status packet's Checksum Error bit: no alarm
     bus.faults.clear_alarm(1)
     assert ph.ping(port, 1)[2] == 0 and bus.faults.active(1) == []
-    assert bus.read(1, "torque_limit") == 0  # as on the AX-12 bus: the client restores it
+    assert bus.read(1, "torque_limit") == 0
 
 
 def test_a_blocked_mx_trips_overload_after_the_firmware_overload_time(wire):
@@ -172,9 +179,11 @@ def test_hold_pins_the_readings_the_firmware_senses(wire):
     bus.faults.hold(1, "present_temperature", None)
     bus.step(0.01)
     assert bus.read(1, "present_temperature") < 40 and bus.faults.active(1) == []
-    assert ph.ping(port, 1)[2] == OVERHEATING  # latched until the client writes Torque Limit
-    assert ph.write2ByteTxRx(port, 1, TORQUE_LIMIT, 1023) == (COMM_SUCCESS, 0)
-    assert ph.ping(port, 1)[2] == 0
+    assert ph.ping(port, 1)[2] == 0  # a condition, not a latched error (as on the AX-12A)
+    assert bus.read(1, "torque_limit") == 0  # the Shutdown (factory 0x24 selects Overheating) holds ...
+    assert ph.write2ByteTxRx(port, 1, TORQUE_LIMIT, 1023) == (COMM_SUCCESS, 0)  # ... until the client writes it
+    bus.step(0.01)
+    assert ph.ping(port, 1)[2] == 0 and bus.read(1, "torque_limit") == 1023
     with pytest.raises(ValueError, match="not a register the firmware senses"):
         bus.faults.hold(2, "goal_position", 5)
     with pytest.raises(KeyError, match="MX-28 has no register 'present_input_voltage'"):

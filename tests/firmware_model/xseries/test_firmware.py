@@ -408,6 +408,53 @@ def test_input_voltage_outside_limits():
     assert quiet.sense().hardware_error_status == 0
 
 
+def test_a_shutdown_that_cuts_the_output_latches_nothing_and_reports_the_conditions_present():
+    """The Protocol 1.0 MX firmware's Alarm Shutdown (``shutdown_cuts_output``): the output goes to 0 % at the step
+    the overload is found, torque stays on, nothing is latched, and the overload is reported until the host
+    restores the output; a condition Shutdown does not select is reported and cuts nothing."""
+    servo, cmd = make(torque_enable=1, overload_time_s=1.0)
+    servo.shutdown_cuts_output = True
+    write(servo, cmd, goal_position=servo.sense().present_position + 1000)
+    servo.set_external_torque(-6.0)  # beyond the XM430-W350's 4.1 N m stall torque at 12 V
+    servo.step_to(servo.time_s + 0.9)
+    assert servo.cut_errors == 0 and servo.present_errors == 0
+    servo.step_to(servo.time_s + 2.0)  # one stretch, as a bus brings a servo nobody asked about to its time: cut within it
+    s = servo.sense()
+    assert servo.cut_errors == HW_ERROR_OVERLOAD and servo.present_errors == HW_ERROR_OVERLOAD
+    assert s.present_pwm == 0 and s.torque_enable == 1 and s.hardware_error_status == 0
+    driving, dcmd = make(torque_enable=1, overload_time_s=1.0, shutdown=0)  # the same stall, nothing selected
+    driving.shutdown_cuts_output = True
+    write(driving, dcmd, goal_position=driving.sense().present_position + 1000)
+    driving.set_external_torque(-6.0)
+    driving.step_to(servo.time_s)
+    assert driving.sense().present_pwm != 0 and driving.present_errors == HW_ERROR_OVERLOAD  # reported, still driving
+    servo.set_external_torque(0.0)
+    servo.restore_output()
+    assert servo.present_errors == 0
+    trace = run(servo, 1.5)
+    assert trace[-1].present_pwm != 0 or abs(trace[-1].present_position - cmd.goal_position) <= 2  # it drives again
+    servo.set_supply_v(16.5)  # outside 9.5..16.0 V; the default Shutdown (52) does not select it
+    run(servo, 0.01)
+    assert servo.present_errors == HW_ERROR_INPUT_VOLTAGE and servo.cut_errors == 0
+
+
+def test_held_errors_are_detected_at_every_step_until_lifted():
+    servo, cmd = make(torque_enable=1)
+    servo.shutdown_cuts_output = True
+    servo.hold_errors(HW_ERROR_OVERHEATING)  # selected by the default Shutdown (52)
+    assert servo.cut_errors == HW_ERROR_OVERHEATING and servo.present_errors == HW_ERROR_OVERHEATING
+    servo.restore_output()
+    servo.step_to(servo.time_s + 5.0)  # at rest: the skipped stretch detects it too
+    assert servo.cut_errors == HW_ERROR_OVERHEATING
+    servo.hold_errors(0)
+    servo.restore_output()
+    run(servo, 0.01)
+    assert servo.cut_errors == 0 and servo.present_errors == 0
+    latching, _ = make(torque_enable=1)  # the X series' Shutdown: latched, torque off
+    latching.hold_errors(HW_ERROR_OVERHEATING)
+    assert latching.sense().hardware_error_status == HW_ERROR_OVERHEATING and latching.sense().torque_enable == 0
+
+
 # ---------------------------------------------------------------------------- cost
 
 
