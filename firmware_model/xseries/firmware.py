@@ -294,7 +294,11 @@ class XFirmware:
             if self._torque_on:
                 self._start_profile()
             elif commands.drive_mode & 0x08:
-                self._torque_on_now()  # Drive Mode bit 3: torque on by goal update
+                # Drive Mode bit 3, torque on by goal update: "Torque Enable(64) will be updated to '1'", so it
+                # is as if Torque Enable were written 1: a later 0 turns the torque off, a later 1 is no change.
+                self._torque_on_now()
+                if self._torque_on:
+                    self._last_torque_cmd = 1
 
     def keeps_sensing(self, commands: XCommands, *, goal_written: bool = False) -> bool:
         """Whether :meth:`command` with these now would leave every sensed value but the trajectory ones

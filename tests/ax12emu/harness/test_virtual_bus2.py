@@ -239,3 +239,24 @@ def test_startup_torque_on_holds_the_rebooted_servo_and_a_goal_moves_it_through_
             assert abs(bus.read(1, "present_position") - (start + 1024)) <= 20
         finally:
             port.closePort()
+
+
+def test_torque_turned_on_by_a_goal_update_is_turned_off_by_torque_enable_0_through_dynamixel_sdk():
+    """Drive Mode bit 3 ("Torque Enable(64) will be updated to '1'" by a goal): the torque it turned on answers a
+    later Torque Enable 0 as one written would (it was lost: the servo ran on and refused EEPROM writes)."""
+    with VirtualBus([1], servo="xl430-w250", transport="inprocess", virtual_time=True) as bus:
+        port, ph = sdk2(bus.port)
+        try:
+            assert ph.write1ByteTxRx(port, 1, 10, 0x08) == (COMM_SUCCESS, 0)  # Drive Mode: torque on by goal update
+            start = bus.read(1, "present_position")
+            assert ph.write4ByteTxRx(port, 1, GOAL_POSITION, start + 2000) == (COMM_SUCCESS, 0)
+            assert ok(ph.read1ByteTxRx(port, 1, TORQUE_ENABLE)) == 1
+            bus.step(0.05)
+            assert ph.write1ByteTxRx(port, 1, TORQUE_ENABLE, 0) == (COMM_SUCCESS, 0)
+            bus.step(3.0)
+            assert ok(ph.read1ByteTxRx(port, 1, TORQUE_ENABLE)) == 0
+            assert bus.read(1, "present_velocity") == 0 and bus.read(1, "present_pwm") == 0
+            assert bus.read(1, "present_position") - start < 1500  # it coasted to rest short of the goal
+            assert ph.write1ByteTxRx(port, 1, 9, 100) == (COMM_SUCCESS, 0)  # Return Delay Time: the EEPROM is open
+        finally:
+            port.closePort()

@@ -339,6 +339,14 @@ def test_torque_on_by_goal_update():
     assert servo.sense().torque_enable == 0
     write(servo, cmd, goal_position=servo.sense().present_position + 500)
     assert servo.sense().torque_enable == 1
+    # The table now reads Torque Enable 1: handed back with another write, it is no new torque-on (the
+    # profile runs on), and a 0 written after it turns the torque off.
+    run(servo, 0.1)
+    moving = servo.sense()
+    write(servo, cmd, torque_enable=1)
+    assert servo.sense().position_trajectory == moving.position_trajectory  # a torque-on would hold where it is
+    write(servo, cmd, torque_enable=0)
+    assert servo.sense().torque_enable == 0 and run(servo, 0.01)[-1].present_pwm == 0
     plain, pcmd = make()
     write(plain, pcmd, goal_position=plain.sense().present_position + 500)
     assert plain.sense().torque_enable == 0
