@@ -123,9 +123,12 @@ def _write(servo: Servo2, params: Write) -> tuple[int, bytes]:
 
 
 def _reg_write(servo: Servo2, params: Write) -> tuple[int, bytes]:
-    check = servo.table.check_write(params.address, params.data)
-    if check.error:
-        return check.error, b""
+    # Judged as a Write when registered: through the Secondary ID the EEPROM area is refused ("The EEPROM area of
+    # the Control Table cannot be modified with control packets addressed to a Secondary ID(12)", e-manual,
+    # Secondary(Shadow) ID), or a broadcast Action would carry an ID or baud change to every servo sharing it.
+    error = servo.judge_write(params.address, params.data)
+    if error:
+        return error, b""
     servo.registered_write = (params.address, params.data)
     if servo.table.has("registered_instruction"):
         servo.table.set("registered_instruction", 1)

@@ -17,7 +17,7 @@ from ax12emu.protocol.registers import Area, Entry
 from ax12emu.protocol.servo_models import ServoModel
 
 from .plant2 import Plant2
-from .table2 import Table2
+from .table2 import Table2, WriteCheck
 from .table_servo import TableServo
 
 __all__ = ["BACKUP_RAM_PREFIX", "BACKUP_RAM_REGISTERS", "STARTUP_RAM_RESTORE", "STARTUP_TORQUE_ON", "GOAL_REGISTERS",
@@ -227,15 +227,27 @@ class Servo2(TableServo):
     def watchdog_error(self) -> bool:
         return self._watchdog is not None and self._watchdog_value() == WATCHDOG_ERROR
 
+    def judge_write(self, address: int, data: bytes) -> int:
+        """The error number a write of ``data`` at ``address`` would get now, nothing written (a Reg Write is
+        judged so when it is registered, as a Write would be)."""
+        return self._checked(address, data)[1]
+
+    def _checked(self, address: int, data: bytes) -> tuple[WriteCheck, int]:
+        """The table's check of a client's write and its error number (this servo's refusals included)."""
+        check = self.table.check_write(address, data, refused=GOAL_REGISTERS if self.watchdog_error else _NOTHING_REFUSED)
+        if check.error:
+            return check, check.error
+        if self.ram_only and self._what_is_written(check.entries)[2]:
+            return check, ErrorNumber.ACCESS  # "The EEPROM area ... cannot be modified with Secondary ID(12)"
+        return check, ErrorNumber.NONE
+
     def write(self, address: int, data: bytes) -> int:
         """A client's write, all or nothing, with the firmware's side effects; returns the error number."""
         table = self.table
-        check = table.check_write(address, data, refused=GOAL_REGISTERS if self.watchdog_error else _NOTHING_REFUSED)
-        if check.error:
-            return check.error
+        check, error = self._checked(address, data)
+        if error:
+            return error
         mode_written, goal_written, eeprom = self._what_is_written(check.entries)
-        if self.ram_only and eeprom:
-            return ErrorNumber.ACCESS  # "The EEPROM area ... cannot be modified with Secondary ID(12)"
         mode_before = table.get("operating_mode") if mode_written else None
         table.apply(check)
         if mode_before is not None and table.get("operating_mode") != mode_before:

@@ -442,9 +442,15 @@ def test_secondary_id_groups_servos_silently_and_on_the_ram_area_only(xm):
     assert [bus.servo(i).table.get("led") for i in range(1, 8)] == [1, 1, 1, 0, 1, 0, 0]  # ID 5 itself too
     send(bus, 5, Instruction2.WRITE, bytes((31, 0, 60)))  # Temperature Limit: EEPROM
     assert [bus.servo(i).table.get("temperature_limit") for i in (1, 2, 3, 5)] == [80, 80, 80, 60]
+    # A Reg Write through it is judged when registered: an EEPROM one is refused then, so a broadcast Action
+    # cannot carry an ID change to the whole group (they would all take ID 9 and collide).
+    assert status(bus, 5, Instruction2.REG_WRITE, bytes((7, 0, 9))).error == ErrorNumber.NONE  # ID 5's own: registered
+    assert [bus.servo(i).table.get("registered_instruction") for i in (1, 2, 3, 5)] == [0, 0, 0, 1]
+    send(bus, 0xFE, Instruction2.ACTION, b"")  # broadcast
+    assert sorted(bus.ids) == [1, 2, 3, 4, 6, 7, 9]
     send(bus, 3, Instruction2.WRITE, bytes((12, 0, 255)))  # off again
     send(bus, 5, Instruction2.WRITE, bytes((65, 0, 0)))
-    assert [bus.servo(i).table.get("led") for i in (1, 2, 3, 5)] == [0, 0, 1, 0]
+    assert [bus.servo(i).table.get("led") for i in (1, 2, 3, 9)] == [0, 0, 1, 1]
 
 
 def test_eeprom_persists_by_launch_id_signed_values_too(tmp_path):
