@@ -253,6 +253,13 @@ class Bus2(ServosById[Servo2], DecodedBus):
         self._changes += 1
         for servo in self.servos:
             plant = servo.plant
+            deadline_s = servo.watchdog_deadline_s()
+            if deadline_s is not None and deadline_s < sim_time_s:
+                # The Bus Watchdog stops the servo when the silence runs out, not at the packet that ends it (a
+                # bus brought to its time in one stretch: virtual time, an in-process port).
+                if plant.due(deadline_s):
+                    plant.catch_up(deadline_s)
+                servo.check_watchdog(sim_time_s)
             if plant.due(sim_time_s, clock_s):
                 spans = reads.get(servo) if reads is not None else None
                 if spans is None or clock_s is None or not plant.defer_catch_up(sim_time_s, clock_s, spans):

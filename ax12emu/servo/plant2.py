@@ -279,7 +279,9 @@ class Plant2(SteppedPlant):
         if self._deferred is not None:
             self.catch_up_deferred()
         present = self.table.get("present_position") if self.table.has("present_position") else 0
-        held = {"goal_velocity": 0, "goal_position": present}
+        # "When it stops, the Profile Acceleration(108) and Profile Velocity(112) are applied as '0'" (e-manual, Bus
+        # Watchdog example): the stop is a step, not a ramp; the registers keep their values for the next goal.
+        held = {"goal_velocity": 0, "goal_position": present, "profile_acceleration": 0, "profile_velocity": 0}
         mode = self.table.get("operating_mode") if self.table.has("operating_mode") else OperatingMode.POSITION
         if mode == OperatingMode.PWM:
             held["goal_pwm"] = 0

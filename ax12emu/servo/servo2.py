@@ -206,17 +206,21 @@ class Servo2(TableServo):
         is larger than the set value of Bus Watchdog(98), the DYNAMIXEL will stop. Bus Watchdog(98)
         will be changed to '-1'", and the Goal registers become read-only until it is written 0.
         """
+        deadline_s = self.watchdog_deadline_s()
+        if deadline_s is not None and now_s > deadline_s:
+            self.table.set("bus_watchdog", WATCHDOG_ERROR)
+            self.plant.hold()
+
+    def watchdog_deadline_s(self) -> float | None:
+        """The time past which silence trips Bus Watchdog(98), while it is armed with the torque on; else None."""
         if self.last_instruction_s is None:
-            return
+            return None
         value = self._watchdog_value()
         if not value:
-            return  # off, or no such register (the usual case: checked for every servo on every packet)
-        table = self.table
-        if not 1 <= value < WATCHDOG_ERROR or not table.torque_on:
-            return
-        if now_s - self.last_instruction_s > value * WATCHDOG_UNIT_S:
-            table.set("bus_watchdog", WATCHDOG_ERROR)
-            self.plant.hold()
+            return None  # off, or no such register (the usual case: asked for every servo on every packet)
+        if not 1 <= value < WATCHDOG_ERROR or not self.table.torque_on:
+            return None
+        return self.last_instruction_s + value * WATCHDOG_UNIT_S
 
     @property
     def watchdog_off(self) -> bool:

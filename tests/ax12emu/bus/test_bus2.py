@@ -325,6 +325,7 @@ def test_bus_watchdog_stops_the_servo_and_refuses_goals_until_cleared(xm):
     send(bus, 1, Instruction2.WRITE, bytes((11, 0, 1)))  # velocity mode
     send(bus, 1, Instruction2.WRITE, bytes((64, 0, 1)))
     send(bus, 1, Instruction2.WRITE, bytes((104, 0)) + u32(50))
+    send(bus, 1, Instruction2.WRITE, bytes((108, 0)) + u32(20) + u32(100))  # Profile Acceleration and Velocity
     send(bus, 1, Instruction2.WRITE, bytes((98, 0, 5)))  # 100 ms
     bus.clock.advance(0.09)
     assert status(bus, 1, Instruction2.READ, bytes((98, 0, 1, 0))).params == b"\x05"  # in time: still armed
@@ -332,6 +333,8 @@ def test_bus_watchdog_stops_the_servo_and_refuses_goals_until_cleared(xm):
     bus.advance()
     assert bus.servo(1).table.get("bus_watchdog") == 0xFF
     assert firmware[0].last.goal_velocity == 0 and firmware[0].commands[-1][1]
+    # "When it stops, the Profile Acceleration(108) and Profile Velocity(112) are applied as '0'": a step, no ramp
+    assert firmware[0].last.profile_acceleration == 0 and firmware[0].last.profile_velocity == 0
     assert status(bus, 1, Instruction2.WRITE, bytes((104, 0)) + u32(150)).error == ErrorNumber.DATA_RANGE
     assert status(bus, 1, Instruction2.WRITE, bytes((98, 0, 0))).error == ErrorNumber.NONE
     assert firmware[0].last.goal_velocity == 0  # still stopped: nothing new was asked

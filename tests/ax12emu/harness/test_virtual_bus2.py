@@ -260,3 +260,29 @@ def test_torque_turned_on_by_a_goal_update_is_turned_off_by_torque_enable_0_thro
             assert ph.write1ByteTxRx(port, 1, 9, 100) == (COMM_SUCCESS, 0)  # Return Delay Time: the EEPROM is open
         finally:
             port.closePort()
+
+
+def test_the_bus_watchdog_stops_the_servo_when_the_silence_runs_out_in_one_virtual_stretch():
+    """Bus Watchdog(98) 5 (100 ms) on a wheel turning at Goal Velocity 200: however long the silence, the servo
+    is stopped about 100 ms after the last packet, its velocity goal a step to 0 ("When it stops, the Profile Acceleration(108) and
+    Profile Velocity(112) are applied as '0'", e-manual); it ran on for the whole stretch before."""
+    with VirtualBus([1, 2], servo="xl430-w250", transport="inprocess", virtual_time=True) as bus:
+        port, ph = sdk2(bus.port)
+        try:
+            for servo_id in (1, 2):
+                assert ph.write1ByteTxRx(port, servo_id, 11, 1) == (COMM_SUCCESS, 0)  # Velocity Control Mode
+                assert ph.write4ByteTxRx(port, servo_id, 108, 50) == (COMM_SUCCESS, 0)  # Profile Acceleration
+                assert ph.write1ByteTxRx(port, servo_id, TORQUE_ENABLE, 1) == (COMM_SUCCESS, 0)
+                assert ph.write4ByteTxRx(port, servo_id, 104, 200) == (COMM_SUCCESS, 0)
+            bus.step(1.0)  # both at speed (200 x 0.229 rpm: 3,126 pulses/s)
+            start = [bus.read(i, "present_position") for i in (1, 2)]
+            assert ph.write1ByteTxRx(port, 1, 98, 5) == (COMM_SUCCESS, 0)  # ID 1 only: 100 ms
+            bus.step(2.0)
+            moved = [bus.read(i, "present_position") - s for i, s in zip((1, 2), start)]
+            assert bus.read(1, "bus_watchdog") == 0xFF and bus.read(1, "present_velocity") == 0
+            # ~100 ms at speed (313 pulses), then the velocity loop brings it to rest; the other ran on for 2 s
+            assert 300 < moved[0] < 1500 and moved[1] > 6000
+            assert bus.read(1, "velocity_trajectory") == 0
+            assert bus.read(1, "profile_acceleration") == 50  # the register keeps its value for the next goal
+        finally:
+            port.closePort()
