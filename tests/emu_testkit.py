@@ -59,10 +59,11 @@ class UrlPortHandler(PatientPortHandler):
     def setupPort(self, cflag_baud):  # noqa: N802 (the SDK's name)
         import serial
 
-        if self.is_open:
-            self.closePort()
-        self.ser = serial.serial_for_url(self.port_name, baudrate=self.baudrate, timeout=0)
-        self.is_open = True
+        if self.is_open:  # setBaudRate: change the line speed; reopening would end a private ax12emu:// bus
+            self.ser.baudrate = self.baudrate
+        else:
+            self.ser = serial.serial_for_url(self.port_name, baudrate=self.baudrate, timeout=0)
+            self.is_open = True
         self.ser.reset_input_buffer()
         self.tx_time_per_byte = (1000.0 / self.baudrate) * 10.0
         return True

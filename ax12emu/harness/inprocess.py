@@ -33,7 +33,7 @@ from ax12emu.bus.bus2 import Bus2
 from ax12emu.bus.reply import merge_replies
 from ax12emu.tracing.trace import IN, OUT, TraceWriter
 
-__all__ = ["InProcessLink", "register", "lookup", "LinkBusy"]
+__all__ = ["InProcessLink", "register", "lookup", "LinkBusy", "LinkClosed"]
 
 _REGISTRY: "weakref.WeakValueDictionary[str, InProcessLink]" = weakref.WeakValueDictionary()
 _REGISTRY_LOCK = threading.Lock()
@@ -41,6 +41,10 @@ _REGISTRY_LOCK = threading.Lock()
 
 class LinkBusy(RuntimeError):
     """A second host tried to attach: one host at a time, as on a bus with one master."""
+
+
+class LinkClosed(RuntimeError):
+    """The bus behind the link was closed: its port is gone, as an unplugged adapter's."""
 
 
 class InProcessLink:
@@ -57,6 +61,10 @@ class InProcessLink:
         self._seq = 0
         self._rx = bytearray()
         self._attached = False
+        #: The bus was closed (:meth:`close`): a host's reads and writes fail from then on.
+        self.closed = False
+        #: A host's read is to return at once with what has arrived (:meth:`cancel_read`), once.
+        self._cancel_read = False
         #: Packets handled, for diagnostics.
         self.packets_in = 0
 
@@ -73,13 +81,32 @@ class InProcessLink:
         """Release the link (the port closed); bytes in flight are lost."""
         with self._cond:
             self._attached = False
+            self._cancel_read = False
             self._rx.clear()
             self._pending.clear()
             self._cond.notify_all()
 
+    def close(self) -> None:
+        """The bus is closed: a host still attached finds its port gone at its next read or write."""
+        with self._cond:
+            self.closed = True
+            self._pending.clear()
+            self._cond.notify_all()
+
+    def cancel_read(self) -> None:
+        """Make a read blocked in another thread (or the next read) return at once with what has arrived."""
+        with self._cond:
+            self._cancel_read = True
+            self._cond.notify_all()
+
+    def _check_open(self) -> None:
+        if self.closed:
+            raise LinkClosed("the in-process bus was closed")
+
     def write(self, data: bytes, line_bps: float | None = None) -> int:
         """The host sends ``data``; servos act at once and their replies are queued."""
         with self._cond:
+            self._check_open()
             now = time.monotonic()
             if self.trace is not None:
                 self.trace.record(IN, data, now)
@@ -111,8 +138,12 @@ class InProcessLink:
         deadline = None if timeout_s is None else time.monotonic() + timeout_s
         with self._cond:
             while True:
+                self._check_open()
                 now = time.monotonic()
                 self._release(now)
+                if self._cancel_read:
+                    self._cancel_read = False
+                    break
                 if len(self._rx) >= size or not self._attached or (deadline is not None and now >= deadline):
                     break
                 wait = None if deadline is None else deadline - now

@@ -334,7 +334,7 @@ class VirtualBus:
                 log.error("serving thread of %s did not stop", self.name)
         if self._link is not None:
             unregister(self.name)
-            self._link.detach()
+            self._link.close()  # a port still open on it fails from now on, as an unplugged adapter's
         if self._transport is not None:
             self._transport.close()
         self.bus.close()

@@ -122,6 +122,8 @@ class BusServer:
         self._taken_early_for: float | None = None
         self._connections = getattr(transport, "connections", None)
         self._yield_after_reply = getattr(transport, "yield_after_reply", False) and hasattr(os, "sched_yield")
+        #: Tells the transport nothing more is owed to its host (a TCP client that half-closed can go); None: not asked.
+        self._replies_sent: Callable[[], None] | None = getattr(transport, "replies_sent", None)
         #: The bus times several replies to one packet one after another (see ``merge_replies``).
         self._in_sequence = bus.replies_in_sequence
         #: Whether the clock is fine enough to wait on for a few microseconds (not Windows before 3.13).
@@ -169,6 +171,9 @@ class BusServer:
             count += 1
         if not count:
             return False
+        if getattr(self.transport, "connections", None) != self._connections:
+            self._new_host()  # what was owed to the host before is not this one's
+            return False
         data = queue[0][2] if count == 1 else b"".join(item[2] for item in queue[:count])
         self._replied = self._replied or any(item[3] for item in queue[:count])
         del queue[:count]
@@ -201,13 +206,18 @@ class BusServer:
     def _byte_s(self) -> float:
         return BITS_PER_BYTE / self.bus.servos[0].baud_bps
 
+    def _new_host(self) -> None:
+        """A new TCP client is a new host: the last one's half packet, the replies it was owed and the wire time
+        its bytes took (``pace``) are not its business."""
+        self._connections = getattr(self.transport, "connections", None)
+        self.bus.framer.reset()
+        self._queue.clear()
+        self._rx_busy_until = 0.0
+
     # -- input -------------------------------------------------------------------------
     def _on_bytes(self, data: bytes, now: float) -> None:
-        connections = getattr(self.transport, "connections", None)
-        if connections != self._connections:
-            # A new TCP client is a new host: the last one's half packet is not its business.
-            self._connections = connections
-            self.bus.framer.reset()
+        if getattr(self.transport, "connections", None) != self._connections:
+            self._new_host()
         if self.trace is not None:
             self.trace.record(IN, data, now)
         line_bps = self.transport.line_bps()
@@ -318,6 +328,8 @@ class BusServer:
         now = time.monotonic()  # handling input may have taken a while (a yield, a timeslice)
         if queue and self._flush(now):
             answered = True
+        if not queue and self._replies_sent is not None:
+            self._replies_sent()
         # Step physics on the loop's tick, not in the request path: a request then rarely pays
         # for a step (see Bus.request_lag_s).  The step comes in pieces, one per pass; while a
         # host is mid-conversation, a piece runs just after a packet was answered or a delayed

@@ -12,6 +12,7 @@ import importlib.util
 import re
 import subprocess
 import sys
+import time
 from pathlib import Path
 from types import ModuleType
 
@@ -199,3 +200,29 @@ def test_servo_models_table_lists_every_model_file():
         rating = servo.physical.ratings[0]
         assert f"{rating.stall_torque_nm:g} N m @ {rating.voltage_v:g} V" in row
         assert (ROOT / "ax12emu" / "protocol" / "models" / f"{key}.toml").exists()
+
+
+# -- the URL port handler users are shown --------------------------------------------------------
+def test_the_url_port_handler_of_getting_started_keeps_a_private_bus_through_a_baud_change():
+    """The page's UrlPortHandler, run as written: dynamixel-sdk's setBaudRate after a Baud Rate write reaches the
+    same servo (reopening the URL built a new private bus: the servo was back at ID 1 and 1 Mbps)."""
+    text = (DOCS / "getting-started.md").read_text(encoding="utf-8")
+    block = next(code for code in re.findall(r"```python\n(.*?)```", text, re.S) if "class UrlPortHandler" in code)
+    namespace: dict = {}
+    exec(compile(block.split("port = UrlPortHandler(")[0], "getting-started.md", "exec"), namespace)  # noqa: S102
+    from dynamixel_sdk import PacketHandler
+
+    import ax12emu  # noqa: F401  (registers the ax12emu:// handler)
+
+    port = namespace["UrlPortHandler"]("ax12emu://?ids=1")
+    packet = PacketHandler(1.0)
+    assert port.openPort() and port.setBaudRate(1_000_000)
+    try:
+        assert packet.write1ByteTxRx(port, 1, 3, 5) == (0, 0)  # ID 5
+        time.sleep(0.05)  # the servo writes its EEPROM (deaf meanwhile, as a real AX-12A)
+        assert packet.write1ByteTxRx(port, 5, 4, 34) == (0, 0)  # Baud Rate 34: 57,142 bps
+        time.sleep(0.05)
+        assert port.setBaudRate(57600)
+        assert packet.ping(port, 5) == (12, 0, 0)
+    finally:
+        port.closePort()

@@ -49,7 +49,7 @@ from ax12emu.bus.bus2 import Bus2
 from ax12emu.bus.clock import VirtualClock, WallClock
 from ax12emu.bus.mixed import MixedBus
 from ax12emu.faults.config import FAULT_OPTIONS, FaultConfig
-from ax12emu.harness.inprocess import InProcessLink, LinkBusy, lookup
+from ax12emu.harness.inprocess import InProcessLink, LinkBusy, LinkClosed, lookup
 from ax12emu.harness.servos2 import build_wire, servo_list
 from ax12emu.protocol.ids import parse_ids
 from ax12emu.servo.model_factory import ModelChoice, build_model
@@ -121,12 +121,17 @@ class Serial(SerialBase):
             raise SerialException("Port must be configured before it can be used.")
         link = self.from_url(self.portstr)
         try:
+            self._reconfigure_port()  # before claiming the bus: a refused setting leaves it free, as pyserial's ports do
+            if link.closed:
+                raise LinkClosed("the in-process bus was closed")
             link.attach()
-        except LinkBusy as exc:
+        except (LinkBusy, LinkClosed) as exc:
             self._close_private()
             raise SerialException(f"{self.portstr}: {exc}") from None
+        except BaseException:
+            self._close_private()
+            raise
         self._link = link
-        self._reconfigure_port()
         self.is_open = True
 
     def close(self) -> None:
@@ -248,10 +253,13 @@ class Serial(SerialBase):
         return self._link.in_waiting()
 
     def read(self, size: int = 1) -> bytes:
-        """Up to ``size`` bytes, waiting up to the timeout (None: until all arrive)."""
+        """Up to ``size`` bytes, waiting up to the timeout (None: until all arrive, or :meth:`cancel_read`)."""
         if not self.is_open or self._link is None:
             raise PortNotOpenError()
-        data = self._link.read(size, self._timeout)
+        try:
+            data = self._link.read(size, self._timeout)
+        except LinkClosed as exc:
+            raise SerialException(f"{self.portstr}: {exc}") from None
         if self.logger:
             self.logger.debug("read %s", data.hex(" "))
         return data
@@ -267,7 +275,23 @@ class Serial(SerialBase):
         payload = bytes(to_bytes(data))
         if self.logger:
             self.logger.debug("write %s", payload.hex(" "))
-        return self._link.write(payload, float(self._baudrate))
+        try:
+            return self._link.write(payload, float(self._baudrate))
+        except LinkClosed as exc:
+            raise SerialException(f"{self.portstr}: {exc}") from None
+
+    def cancel_read(self) -> None:
+        """Make a read blocked in another thread return at once with what has arrived (pyserial's ``cancel_read``)."""
+        if self._link is not None:
+            self._link.cancel_read()
+
+    def cancel_write(self) -> None:
+        """Writes complete at once: nothing to cancel."""
+
+    def flush(self) -> None:
+        """Writes complete at once: nothing to wait for."""
+        if not self.is_open:
+            raise PortNotOpenError()
 
     def reset_input_buffer(self) -> None:
         """Drop received bytes."""
@@ -283,6 +307,8 @@ class Serial(SerialBase):
     @property
     def out_waiting(self) -> int:
         """Writes complete at once."""
+        if not self.is_open:
+            raise PortNotOpenError()
         return 0
 
     # -- modem lines: there are none; answer like a plain 3-wire adapter ----------------

@@ -8,7 +8,10 @@ accepted and closed at once (it sees EOF), so bytes of two hosts never
 interleave, unless the first one turns out to have just hung up (its EOF
 may land up to HANGUP_GRACE_S after the new connection).  A client that
 disconnects, even mid-packet, leaves the bus serving; its partial packet is
-dropped by the framer's silence timeout.
+dropped by the framer's silence timeout.  A client that half-closes (``shutdown(SHUT_WR)``,
+``nc -N``: "nothing more to send", RFC 9293 section 3.6) still gets the replies to what it sent:
+its end is kept for writing until the server has sent what it owes (:meth:`TcpTransport.replies_sent`),
+a new client comes or a write fails, HALF_CLOSE_LINGER_S at most.
 TCP carries no line speed, so every servo hears whatever its baud setting.
 """
 
@@ -18,6 +21,7 @@ import ipaddress
 import logging
 import select
 import socket
+import time
 
 from .base import Transport
 
@@ -29,6 +33,9 @@ log = logging.getLogger(__name__)
 #: client that hangs up and reconnects at once can have its FIN trail the new handshake (on
 #: loopback the two may be queued on different CPUs); seen once in 200 reconnections on CI.
 HANGUP_GRACE_S = 0.002
+#: How long a client that has half-closed is kept for the replies it is owed: a servo answers within
+#: its Return Delay Time (at most 508 us), an injected ``--delay`` within its own bound.
+HALF_CLOSE_LINGER_S = 1.0
 
 
 def is_loopback(host: str) -> bool:
@@ -71,6 +78,8 @@ class TcpTransport(Transport):
             raise
         self._listener.setblocking(False)
         self._client: socket.socket | None = None
+        #: When the connected client half-closed (its EOF came), None while it may still send.
+        self._eof_at: float | None = None
         self.host, self.port = self._listener.getsockname()[:2]
         self.name = f"tcp://{self.host}:{self.port}"
         #: Clients turned away because one was already connected.
@@ -92,7 +101,9 @@ class TcpTransport(Transport):
     def fds(self) -> list[int]:
         # The client first: when it hangs up and reconnects at once, select reports both,
         # and its EOF must be seen before the new connection, or that one is refused.
-        if self._client is not None:
+        if self._client is not None and self._eof_at is not None and time.monotonic() - self._eof_at > HALF_CLOSE_LINGER_S:
+            self._drop_client()
+        if self._client is not None and self._eof_at is None:
             return [self._client.fileno(), self._listener.fileno()]
         return [self._listener.fileno()]
 
@@ -114,7 +125,8 @@ class TcpTransport(Transport):
                 log.info("client connection failed: %s", exc)
                 data = b""
             if not data:
-                self._drop_client()
+                # The client sends no more; it may still read the replies to what it sent (module docstring).
+                self._eof_at = time.monotonic()
                 break
             chunks.append(data)
         return b"".join(chunks)
@@ -124,7 +136,7 @@ class TcpTransport(Transport):
             conn, peer = self._listener.accept()
         except (BlockingIOError, InterruptedError):
             return
-        if self._client is not None and self._hung_up():
+        if self._client is not None and (self._eof_at is not None or self._hung_up()):
             self._drop_client()
         if self._client is not None:
             self.refused += 1
@@ -150,11 +162,17 @@ class TcpTransport(Transport):
         except OSError:  # reset: gone too
             return True
 
+    def replies_sent(self) -> None:
+        """The server owes the host nothing more: a client that half-closed is closed now."""
+        if self._eof_at is not None:
+            self._drop_client()
+
     def _drop_client(self) -> None:
         if self._client is not None:
             log.info("client disconnected")
             self._client.close()
             self._client = None
+        self._eof_at = None
 
     def write(self, data: bytes) -> int:
         if self._client is None:

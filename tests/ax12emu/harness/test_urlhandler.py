@@ -81,6 +81,53 @@ def test_named_bus_and_one_host_at_a_time():
         serial.serial_for_url("ax12emu://arm")
 
 
+def test_a_refused_setting_at_open_leaves_a_named_bus_free():
+    """pyserial's own ports release what they took when configuring fails; a bad baud rate claimed the bus for good."""
+    with VirtualBus([3], transport="inprocess", name="arm2") as bus:
+        with pytest.raises(ValueError, match="invalid baudrate"):
+            serial.serial_for_url(bus.port, baudrate=0)
+        with serial.serial_for_url(bus.port, baudrate=1_000_000, timeout=0.5) as link:
+            link.write(encode_instruction(3, 0x01))
+            assert link.read(6) == encode_status(3, 0)
+
+
+def test_cancel_read_wakes_a_blocked_read_and_a_closed_port_refuses_flush():
+    """As pyserial's ports: cancel_read() ends a read blocked in another thread (serial.threaded.ReaderThread
+    relies on it to stop at once), and a closed port raises on flush and out_waiting."""
+    import threading
+
+    link = serial.serial_for_url("ax12emu://?ids=1", baudrate=1_000_000, timeout=None)
+    got: list[bytes] = []
+    reader = threading.Thread(target=lambda: got.append(link.read(10)))
+    reader.start()
+    time.sleep(0.05)
+    link.cancel_read()
+    reader.join(5.0)
+    assert not reader.is_alive() and got == [b""]
+    link.cancel_write()
+    link.flush()
+    assert link.out_waiting == 0
+    link.close()
+    with pytest.raises(serial.PortNotOpenError):
+        link.flush()
+    with pytest.raises(serial.PortNotOpenError):
+        link.out_waiting
+
+
+def test_a_port_on_a_closed_bus_fails_as_an_unplugged_adapter():
+    """Reads and writes after VirtualBus.close() raise SerialException (they worked on, and a read spun at once)."""
+    bus = VirtualBus([3], transport="inprocess", name="arm3").start()
+    link = serial.serial_for_url(bus.port, baudrate=1_000_000, timeout=0.5)
+    link.write(encode_instruction(3, 0x01))
+    assert link.read(6) == encode_status(3, 0)
+    bus.close()
+    with pytest.raises(serial.SerialException, match="closed"):
+        link.write(encode_instruction(3, 0x01))
+    with pytest.raises(serial.SerialException, match="closed"):
+        link.read(6)
+    link.close()
+
+
 def test_faults_in_the_url():
     """Fault options work in the URL: drop=1 silences every reply."""
     with serial.serial_for_url("ax12emu://?ids=1&drop=1&seed=3", baudrate=1_000_000, timeout=0.05) as link:

@@ -58,3 +58,40 @@ def test_dynamixel_sdk_over_tcp_with_url_port_handler(emulator):
         assert ph.read2ByteTxRx(port, 3, 32) == (123, COMM_SUCCESS, 0)
     finally:
         port.closePort()
+
+
+def _address(served) -> tuple[str, int]:
+    host, port = served.port.removeprefix("socket://").rsplit(":", 1)
+    return host, int(port)
+
+
+def test_a_client_that_half_closes_still_gets_its_replies(emulator):
+    """shutdown(SHUT_WR) (``printf ... | nc -N``) says "nothing more to send", not "gone" (RFC 9293, 3.6): the
+    replies to what it sent reach it, then the server closes its end (it used to close at once: 0 of 100)."""
+    served = emulator("--tcp", "127.0.0.1:0", "--ids", "1,2")
+    for _ in range(10):
+        with socket.create_connection(_address(served), timeout=2) as client:
+            client.sendall(PING + encode_instruction(2, 0x01))
+            client.shutdown(socket.SHUT_WR)
+            received = b""
+            while True:
+                chunk = client.recv(64)
+                if not chunk:
+                    break
+                received += chunk
+        assert received == encode_status(1, 0) + encode_status(2, 0)
+
+
+def test_a_reply_owed_to_a_client_that_left_is_not_sent_to_the_next(emulator):
+    """A new TCP client is a new host: a status packet for the one before it never reaches it."""
+    served = emulator("--tcp", "127.0.0.1:0", "--ids", "1", "--delay", "1", "--delay-s", "0.3")  # every reply 0.3 s late
+    with socket.create_connection(_address(served), timeout=2) as first:
+        first.sendall(PING)  # answered 0.3 s late (an injected delay): the host is gone by then
+    time.sleep(0.05)
+    with socket.create_connection(_address(served), timeout=2) as second:
+        second.settimeout(0.6)
+        with pytest.raises(socket.timeout):
+            second.recv(16)  # nothing it asked for
+        second.sendall(PING)
+        second.settimeout(2.0)
+        assert second.recv(16) == encode_status(1, 0)  # its own ping: answered
