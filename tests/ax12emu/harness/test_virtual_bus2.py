@@ -286,3 +286,23 @@ def test_the_bus_watchdog_stops_the_servo_when_the_silence_runs_out_in_one_virtu
             assert bus.read(1, "profile_acceleration") == 50  # the register keeps its value for the next goal
         finally:
             port.closePort()
+
+
+@pytest.mark.parametrize("servo", ["xl430-w250", "xm430-w350", "xl330-m288", "xl330-m077", "xc330-m288"])
+def test_every_x_model_takes_the_drive_mode_bits_its_firmware_has(servo):
+    """Time-based profile (firmware V42 on) and torque on by goal update (X430 V45, X330 V46 on: control_table_drivemode.md)
+    on the firmware each model file gives; the XL330's and XM430's files refused them."""
+    with VirtualBus([1], servo=servo, transport="inprocess", virtual_time=True) as bus:
+        port, ph = sdk2(bus.port)
+        try:
+            assert ph.write1ByteTxRx(port, 1, 10, 0x04 | 0x08) == (COMM_SUCCESS, 0)
+            start = bus.read(1, "present_position")
+            assert ph.write4ByteTxRx(port, 1, 112, 1000) == (COMM_SUCCESS, 0)  # time-based: reach the goal in 1 s
+            assert ph.write4ByteTxRx(port, 1, GOAL_POSITION, start + 400) == (COMM_SUCCESS, 0)
+            assert ok(ph.read1ByteTxRx(port, 1, TORQUE_ENABLE)) == 1
+            bus.step(0.5)
+            assert 100 < bus.read(1, "position_trajectory") - start < 300  # halfway through a 1 s profile
+            bus.step(1.0)
+            assert abs(bus.read(1, "present_position") - (start + 400)) <= 20  # there, within the loop's offset
+        finally:
+            port.closePort()
