@@ -70,8 +70,12 @@ def fitted_effects(named: list[str], knobs: dict[str, float],
     return ServoEffects(**{k: v for k, v in values.items() if v != EFFECT_NULLS[k]}), notes
 
 
-def fitted_params(d: Diagnosis, params: ServoParams = ServoParams()) -> ServoParams:
-    """ServoParams with the base re-fit and every named effect: base fields folded in, the rest as ``effects``."""
+def fitted_params(d: Diagnosis, params: ServoParams = ServoParams(), supply_v: float | None = None) -> ServoParams:
+    """ServoParams with the base re-fit and every named effect: base fields folded in, the rest as ``effects``.
+
+    ``supply_v``: the supply the fit simulated (the trace's voltage), which a served servo must run at to read
+    and move as the fit did; None keeps ``params``'.
+    """
     k = d.knobs
     changes = {"gearbox_efficiency": k["gearbox_efficiency"], "coulomb_friction_nm": max(k["coulomb_friction_nm"], 0.0),
                "static_friction_nm": max(k["static_friction_nm"], k["coulomb_friction_nm"], 0.0),
@@ -80,7 +84,29 @@ def fitted_params(d: Diagnosis, params: ServoParams = ServoParams()) -> ServoPar
     if "sample_hold" in d.named:
         changes["sample_hold_s"] = round(k["hold_s"], 2)
     changes["effects"] = fitted_effects(d.named, k, params.effects)[0]
+    if supply_v is not None:
+        changes["supply_voltage_v"] = supply_v
     return replace(params, **changes)
+
+
+def fitted_supply_v(trace: Trace, params: ServoParams) -> tuple[float, list[str]]:
+    """The supply a served twin of ``trace`` runs at, V, and a note when it is not the one the fit simulated.
+
+    The fit simulated the trace's voltage column row by row (``params.supply_voltage_v`` without one); the
+    served servo has one supply: the recording's median, within the model's valid range.
+    """
+    if not trace.has("voltage"):
+        return params.supply_voltage_v, []
+    volts = float(np.median(trace["voltage"])) / 10.0
+    notes = []
+    if float(np.ptp(trace["voltage"])) > 0:
+        notes.append(f"the recording's supply varies ({trace['voltage'].min() / 10:.1f}-{trace['voltage'].max() / 10:.1f} V); "
+                     f"served at its median, {volts:.1f} V")
+    served = min(max(volts, params.min_supply_voltage_v), params.max_supply_voltage_v)
+    if served != volts:
+        notes.append(f"the recording's supply {volts:.1f} V is outside the model's "
+                     f"{params.min_supply_voltage_v:g}-{params.max_supply_voltage_v:g} V; served at {served:g} V")
+    return served, notes
 
 
 def verdict_json(d: Diagnosis) -> dict:
@@ -193,22 +219,23 @@ def write_outputs(trace: Trace, d: Diagnosis, out: str | Path, source: str = "tr
     out.mkdir(parents=True, exist_ok=True)
     files = _plots(trace, d, out)
     (out / "report.md").write_text(_report(trace, d, files, source), encoding="utf-8")
-    _PARAM_FILES[d.servo][1](d, out, source, params)
+    _PARAM_FILES[d.servo][1](d, out, source, params, trace)
     (out / "verdict.json").write_text(json.dumps(verdict_json(d), indent=2), encoding="utf-8")
 
 
-def _write_servo_params(d: Diagnosis, out: Path, source: str, params: ServoParams) -> None:
+def _write_servo_params(d: Diagnosis, out: Path, source: str, params: ServoParams, trace: Trace) -> None:
     notes = fitted_effects(d.named, d.knobs, params.effects)[1]
+    supply_v, supply_notes = fitted_supply_v(trace, params)
     header = (f"fitted by firmware_model.diagnose from {source}; named effects: {', '.join(d.named) or 'none'}",
-              *notes)
-    fitted_params(d, params).to_toml(out / "params.toml", comments=header)
+              f"supply_voltage_v: the recording's supply, {supply_v:g} V", *supply_notes, *notes)
+    fitted_params(d, params, supply_v).to_toml(out / "params.toml", comments=header)
 
 
 #: Knobs of the X-series replay that are its set-up, not physics parameters (written beside the physics).
 _X_SETUP_KNOBS = ("arm_weight_nm", "drive_ceiling", "delay_s", "position_offset_units", "position_gain")
 
 
-def _write_x_physics(d: Diagnosis, out: Path, source: str, params: object) -> None:
+def _write_x_physics(d: Diagnosis, out: Path, source: str, params: object, trace: Trace) -> None:
     from dataclasses import asdict
 
     from .xreplay import physics_with

@@ -59,6 +59,19 @@ def test_wizard_export_end_to_end(tmp_path):
     assert "pinned" not in report  # the model's own response: the write needs no pinning before the movement
 
 
+def test_the_params_file_serves_the_twin_at_the_supply_it_was_fitted_at(tmp_path):
+    """--voltage 9 (or the trace's voltage column) is what the fit simulated: params.toml carries it, so the served
+    twin reads and moves as fitted (it was written at the default 9.6 V whatever the fit ran at)."""
+    from firmware_model.params import ServoParams
+
+    f = _wizard_file(tmp_path / "w.csv")
+    r = _cli(f, "--out", tmp_path / "o", "-q", "--voltage", "9")
+    assert r.returncode == 0, r.stderr
+    params = ServoParams.from_toml(tmp_path / "o" / "params.toml")
+    assert params.supply_voltage_v == 9.0
+    assert "the recording's supply, 9 V" in (tmp_path / "o" / "params.toml").read_text()
+
+
 def test_overrides_are_used_and_reported(tmp_path):
     """--goal, --onset, --moving-speed and --voltage replace the defaults; a given onset is known, so delay is offered."""
     f = _wizard_file(tmp_path / "w.csv")

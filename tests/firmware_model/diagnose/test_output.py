@@ -102,3 +102,21 @@ def test_the_report_gives_every_candidates_fit_accepted_or_not(written):
             row = next(r for r in rows if r.startswith(f"| {no} | {c.effect} | "))
             for k, v in c.values.items():
                 assert f"{k} {v:.4g} ± {c.uncertainty[k]:.2g}" in row, row
+
+
+def test_the_served_supply_is_the_recordings_with_a_note_where_it_cannot_be():
+    """One supply for the served servo: the recording's median, said when it varied or lies outside the model's range."""
+    from firmware_model.diagnose.output import fitted_supply_v
+    from firmware_model.diagnose.trace import Trace
+
+    def trace(volts):
+        n = len(volts)
+        return Trace({"t": np.arange(n) * 0.01, "present_position": np.full(n, 512), "goal_position": np.full(n, 512),
+                      "moving_speed": np.zeros(n), "voltage": np.asarray(volts)})
+
+    params = ServoParams()
+    assert fitted_supply_v(trace([110] * 5), params) == (11.0, [])
+    volts, notes = fitted_supply_v(trace([100, 110, 110, 120, 120]), params)
+    assert volts == 11.0 and "varies (10.0-12.0 V)" in notes[0]
+    volts, notes = fitted_supply_v(trace([130] * 5), params)
+    assert volts == params.max_supply_voltage_v and "outside the model's" in notes[0]
