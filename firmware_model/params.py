@@ -227,8 +227,20 @@ class ServoEffects:
                 raise ValueError(f"{where}: effect {key!r} must be a number, got {type(value).__name__}")
         try:
             return cls(**{k: float(v) for k, v in table.items()})
+        except OverflowError:  # an integer too large for a float
+            raise ValueError(f"{where}: an effect's value is too large to be a number: "
+                             f"{', '.join(k for k, v in table.items() if not _fits_float(v))}") from None
         except ValueError as exc:
             raise ValueError(f"{where}: {exc}") from exc
+
+
+def _fits_float(value: int | float) -> bool:
+    """Whether a TOML number converts to a float (an integer of hundreds of digits does not)."""
+    try:
+        float(value)
+    except OverflowError:
+        return False
+    return True
 
 
 #: Keys older parameter files carry that no longer mean anything, read and ignored (key -> why).
@@ -321,6 +333,13 @@ class ServoParams:
             raise ValueError(f"ServoParams.bridge_braking_fraction must lie in [0, 1], got {self.bridge_braking_fraction!r}")
         if self.max_supply_voltage_v < self.min_supply_voltage_v:
             raise ValueError("ServoParams.max_supply_voltage_v must be >= min_supply_voltage_v")
+        # What the registers can show: Present Voltage is one byte of 0.1 V, Present Temperature one byte of
+        # degrees C (a reading past them would wrap round); the speed/load hold is the firmware's ~10 Hz update,
+        # a fraction of a second (the diagnosis tries every phase of it, millisecond by millisecond).
+        bounds = {"max_supply_voltage_v": (0.0, 25.5), "ambient_temperature_c": (0.0, 150.0), "sample_hold_s": (0.0, 1.0)}
+        for name, (low, high) in bounds.items():
+            if not low <= getattr(self, name) <= high:
+                raise ValueError(f"ServoParams.{name} must lie in [{low:g}, {high:g}], got {getattr(self, name)!r}")
         self.check_supply(self.supply_voltage_v, "supply_voltage_v")
 
     def check_supply(self, volts: float, name: str = "supply voltage") -> None:
@@ -488,6 +507,9 @@ class ServoParams:
                 raise ValueError(f"{path}: unknown key {key!r}")
             if isinstance(value, bool) or not isinstance(value, (int, float)):
                 raise ValueError(f"{path}: key {key!r} must be a number, got {type(value).__name__}")
+        too_large = [k for k, v in data.items() if not _fits_float(v)]
+        if too_large:
+            raise ValueError(f"{path}: too large to be a number: {', '.join(too_large)}")
         try:
             return cls(**{k: float(v) for k, v in data.items()}, effects=effects)
         except ValueError as exc:

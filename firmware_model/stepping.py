@@ -69,7 +69,7 @@ from .sensors import DelayLine
 from .setpoint import setpoint_velocity
 from .units import RAD_PER_POSITION_UNIT
 
-__all__ = ["StepConstants", "StepPlan", "ModelState", "PerServo", "Kernel", "step_kernel", "generic_steps",
+__all__ = ["check_step", "StepConstants", "StepPlan", "ModelState", "PerServo", "Kernel", "step_kernel", "generic_steps",
            "fused_scalar_steps", "FusedNumpySteps", "fusable"]
 
 #: While no fixed point is found, the numpy kernel looks for one after every this many steps.
@@ -79,6 +79,28 @@ CHECK_EVERY = 8
 PerServo = float | np.ndarray
 #: Per servo, a flag: a bool on the scalar backend, else a bool array of shape (N,).
 PerServoFlag = bool | np.ndarray
+
+
+def check_step(p: ServoParams, step_s: float) -> None:
+    """Raise ``ValueError`` where ``p`` is too stiff for an explicit step of ``step_s`` (its losses taken per step)."""
+    dt_j = step_s / p.total_inertia_kg_m2
+    if p.viscous_friction_nm_s_rad * dt_j >= 1.0:
+        # The viscous loss is taken explicitly, 1 - b dt / J per step: past 1 it would turn the shaft round.
+        raise ValueError(
+            f"viscous friction {p.viscous_friction_nm_s_rad} N m s/rad is too strong for a {step_s * 1e3:g} ms step "
+            f"with inertia {p.total_inertia_kg_m2:.4g} kg m^2: it must stay below inertia / step = "
+            f"{p.total_inertia_kg_m2 / step_s:.4g} N m s/rad (or use a shorter step)"
+        )
+    back_emf_per_step = p.gearbox_efficiency * p.torque_constant_nm_a ** 2 / p.winding_resistance_ohm * dt_j
+    if back_emf_per_step >= 1.0:
+        # The back-EMF's braking is taken explicitly as well (the current from the speed at the step's start):
+        # past 1 a step would reverse the shaft, and the speed grows without bound (an overflow, not a servo).
+        raise ValueError(
+            f"the winding (R {p.winding_resistance_ohm:g} ohm, k {p.torque_constant_nm_a:g} N m/A) brakes the shaft "
+            f"(inertia {p.total_inertia_kg_m2:.4g} kg m^2) too hard for a {step_s * 1e3:g} ms step: "
+            f"eta k^2 / R x step / inertia = {back_emf_per_step:.3g} must stay below 1 "
+            "(a larger resistance or inertia, or a shorter step)"
+        )
 
 
 @dataclass(frozen=True)
@@ -131,14 +153,8 @@ class StepConstants:
     @classmethod
     def from_params(cls, p: ServoParams, step_s: float, controller: str, gains: PidGains) -> StepConstants:
         unit = float(RAD_PER_POSITION_UNIT)
+        check_step(p, step_s)
         dt_j = step_s / p.total_inertia_kg_m2
-        if p.viscous_friction_nm_s_rad * dt_j >= 1.0:
-            # The viscous loss is taken explicitly, 1 - b dt / J per step: past 1 it would turn the shaft round.
-            raise ValueError(
-                f"viscous friction {p.viscous_friction_nm_s_rad} N m s/rad is too strong for a {step_s * 1e3:g} ms step "
-                f"with inertia {p.total_inertia_kg_m2:.4g} kg m^2: it must stay below inertia / step = "
-                f"{p.total_inertia_kg_m2 / step_s:.4g} N m s/rad (or use a shorter step)"
-            )
         return cls(
             step_s=step_s, accel_rad_s2=p.max_acceleration_rad_s2, unit_rad=unit, inv_unit=1.0 / unit,
             k_over_r=p.torque_constant_nm_a / p.winding_resistance_ohm,

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import argparse
 
-__all__ = ["finite_float", "positive_float"]
+__all__ = ["file_name", "finite_float", "positive_float"]
 
 
 def finite_float(text: str) -> float:
@@ -28,3 +28,10 @@ def positive_float(text: str) -> float:
     if not value > 0:
         raise argparse.ArgumentTypeError(f"must be a positive finite number, got {text}")
     return value
+
+
+def file_name(text: str) -> str:
+    """A path that names something (an empty one is the working folder, and was refused as "Is a directory")."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("names no file (an empty path)")
+    return text

@@ -24,6 +24,7 @@ from ax12emu.bus import Bus
 from ax12emu.bus.clock import WallClock
 from ax12emu.bus.state_store import StateFileError, StateStore
 from ax12emu.cli import hil as cli_hil
+from ax12emu.cli.arg_types import file_name
 from ax12emu.cli.arg_types import finite_float as _finite_float
 from ax12emu.cli.arg_types import positive_float as _positive_float
 from ax12emu.protocol.control_table import AX12_MODEL, DEFAULT_PROFILE, PROFILES
@@ -103,7 +104,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     physics = serve.add_argument_group("model behind the servos")
     physics.add_argument("--model", choices=MODELS, default="physical", help="physical (default) or kinematic")
-    physics.add_argument("--params", metavar="FILE", help="servo parameters as TOML (e.g. from firmware_model.diagnose)")
+    physics.add_argument("--params", metavar="FILE", type=file_name,
+                         help="servo parameters as TOML (e.g. from firmware_model.diagnose)")
     physics.add_argument("--voltage", type=_positive_float, metavar="V",
                          help="supply voltage (default: the AX-12A's 9.6 V, the supply its physics is fitted at; "
                               "another model's its e-manual's recommended supply)")
@@ -460,7 +462,8 @@ def _from_the_served_servo(arguments: list[str]) -> list[str]:
     from firmware_model.diagnose.wizard import is_wizard_export, read_wizard
 
     try:
-        with contextlib.redirect_stderr(io.StringIO()):  # said once, by the workflow itself
+        # Said once, by the workflow itself: a usage error (stderr) and --help (stdout) alike.
+        with contextlib.redirect_stderr(io.StringIO()), contextlib.redirect_stdout(io.StringIO()):
             args = diagnose_args(arguments)
     except SystemExit:  # a bad command line
         return arguments

@@ -31,12 +31,14 @@ from pathlib import Path
 import numpy as np
 
 from ..params import ServoParams
+from ..stepping import check_step
 from ..units import RAD_PER_POSITION_UNIT, speed_rad_s_to_raw
 from .batch import null_knobs
 from .effects import LIBRARY, X_LIBRARY
 from .families import family_of
 from .nuisance import first_movement_onset, first_movement_row, locate_onset
 from .output import verdict_json, verdict_text, write_outputs
+from .schedule import CONTROL_STEP_S
 from .search import Diagnosis, diagnose
 from .trace import Trace, TraceFormatError, read_trace
 from .wizard import SPEED_LIMITED_SHARE, WizardExport, cruise_units_s, is_wizard_export, read_wizard, to_trace
@@ -247,6 +249,7 @@ def main(argv: list[str] | None = None) -> int:
     say = progress or (lambda msg: None)
     try:
         params = ServoParams.from_toml(args.params) if args.params else ServoParams()
+        check_step(params, CONTROL_STEP_S)  # the fit steps the physics as the served servo does: too stiff, refused now
         null_knobs(params)  # the fit simulates the file's [effects] too: refuse one it cannot, before any work
         data = load_input(args, params, say)
         if Path(args.out).exists() and not Path(args.out).is_dir():  # refused before any work, not after it

@@ -23,7 +23,7 @@ import numpy as np
 from ..units import RAD_PER_POSITION_UNIT, RAD_S_PER_SPEED_UNIT
 from .trace import Trace
 
-__all__ = ["Segment", "Schedule", "compile_schedule", "FULL_SCALE_SPEED_RAD_S"]
+__all__ = ["Segment", "Schedule", "compile_schedule", "CONTROL_STEP_S", "FULL_SCALE_SPEED_RAD_S"]
 
 #: Moving Speed 0 in joint mode: the register's full scale (as in firmware_model.physical).
 FULL_SCALE_SPEED_RAD_S = float(1023 * RAD_S_PER_SPEED_UNIT)
@@ -82,7 +82,11 @@ class Schedule:
         return np.array([seg.first for seg in self.segments], dtype=np.int64)
 
 
-def compile_schedule(trace: Trace, step_s: float = 1e-3, supply_v: float = 9.6) -> Schedule:
+#: The physics step of the fit: the AX-12's 1 ms control loop, as the served model steps.
+CONTROL_STEP_S = 1e-3
+
+
+def compile_schedule(trace: Trace, step_s: float = CONTROL_STEP_S, supply_v: float = 9.6) -> Schedule:
     """Segments for ``trace`` (time origin: its first row); ``supply_v`` unless the trace has ``voltage``.
 
     A segment starts at each command change: at ``command_t`` where the trace

@@ -189,8 +189,9 @@ class Trace:
     meta: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        if self.meta.get("servo", "ax") not in FORMATS:
-            raise TraceFormatError(f"unknown servo {self.meta['servo']!r} (known: {', '.join(FORMATS)})")
+        servo = self.meta.get("servo", "ax")
+        if not isinstance(servo, str) or servo not in FORMATS:
+            raise TraceFormatError(f"unknown servo {servo!r} (known: {', '.join(FORMATS)})")
         missing = [c for c in self.format.required if c not in self.columns]
         if missing:
             raise TraceFormatError(f"missing required column(s) {', '.join(missing)}")
@@ -294,9 +295,9 @@ def parse_trace(text: str, source: str = "trace") -> Trace:
                 meta[key.strip()] = json.loads(value)
             except ValueError as exc:
                 raise TraceFormatError(f"bad metadata: {exc}", line_no, None, source) from None
-            if meta.get("servo", "ax") not in FORMATS:
-                raise TraceFormatError(f"unknown servo {meta['servo']!r} (known: {', '.join(FORMATS)})", line_no, None,
-                                       source)
+            servo = meta.get("servo", "ax")
+            if not isinstance(servo, str) or servo not in FORMATS:
+                raise TraceFormatError(f"unknown servo {servo!r} (known: {', '.join(FORMATS)})", line_no, None, source)
             fmt = FORMATS[meta.get("servo", "ax")]
             continue
         if stripped.startswith("#"):

@@ -39,6 +39,10 @@ def test_derived_constants_are_physical():
         ({"sample_hold_s": 0.0}, "sample_hold_s"),
         ({"bridge_braking_fraction": 1.5}, "bridge_braking_fraction"),
         ({"bridge_braking_fraction": -0.1}, "bridge_braking_fraction"),
+        # what the registers can show (Present Voltage and Temperature are one byte each) and the ~10 Hz hold
+        ({"supply_voltage_v": 30.0, "max_supply_voltage_v": 30.0}, "max_supply_voltage_v"),
+        ({"ambient_temperature_c": -300.0}, "ambient_temperature_c"),
+        ({"sample_hold_s": 1e300}, "sample_hold_s"),
     ],
 )
 def test_invalid_values_name_the_field(change, field):
@@ -79,6 +83,8 @@ def test_toml_partial_file_keeps_defaults(tmp_path):
         ("[servo]\ngear_ratio = 254\n", "servo"),
         ("gear_ratio = = 1\n", "not valid TOML"),
         ("coulomb_friction_nm = 0.5\n", "static_friction_nm"),
+        (f"gear_ratio = {'9' * 400}\n", "too large to be a number: gear_ratio"),
+        (f"[effects]\nbacklash_rad = {'9' * 400}\n", "too large to be a number: backlash_rad"),
     ],
 )
 def test_toml_errors_name_file_and_key(tmp_path, text, message):

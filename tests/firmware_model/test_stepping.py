@@ -248,3 +248,20 @@ def test_usual_configuration_runs_fused_and_others_the_generic_loop(commands):
         twin = dataclasses.replace(ServoParams(), effects=state_effect)
         assert _kernel(PhysicalModel(1, twin)).func is generic_steps
         assert _kernel(PhysicalModel(3, twin)).func is generic_steps
+
+
+@pytest.mark.parametrize(("change", "words"), [
+    ({"winding_resistance_ohm": 0.1}, "brakes the shaft"),
+    ({"rotor_inertia_reflected_kg_m2": 1e-6}, "brakes the shaft"),
+    ({"viscous_friction_nm_s_rad": 5.0}, "viscous friction"),
+])
+def test_parameters_too_stiff_for_the_step_are_refused_by_name(change, words):
+    """Losses are taken explicitly per 1 ms step: past one step's worth the shaft would reverse and the speed run away
+    (R 0.01 ohm overflowed on the first goal; R 0.1 read a goal of 800 as 1023 then 633)."""
+    from firmware_model.params import ServoParams
+    from firmware_model.stepping import check_step
+
+    check_step(ServoParams(), 1e-3)  # the AX-12's own: a few per cent of a step
+    params = ServoParams(**change)
+    with pytest.raises(ValueError, match=words):
+        check_step(params, 1e-3)

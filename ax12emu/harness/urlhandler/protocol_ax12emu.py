@@ -162,6 +162,9 @@ class Serial(SerialBase):
         repeated = sorted(key for key, values in options.items() if len(values) > 1)
         if repeated:  # which one counts would be a guess (ids=1&ids=2 served ID 2 alone)
             raise UrlError(f"{EXPECTED}: {', '.join(repeated)} given more than once")
+        blank = sorted(key for key, values in options.items() if not values[-1].strip())
+        if blank:  # params= served the default model and trace= recorded nothing, without a word
+            raise UrlError(f"{EXPECTED}: {', '.join(f'{key}=' for key in blank)} given no value")
         level = options.pop("logging", None)
         if level is not None:
             if level[-1] not in LOGGER_LEVELS:

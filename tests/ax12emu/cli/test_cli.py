@@ -28,6 +28,7 @@ def run(*args: str) -> subprocess.CompletedProcess:
         (["serve", "--eeprom-busy-ms", "nan"], "finite"),
         (["serve", "--link", "/tmp/x", "--tcp", "127.0.0.1:0"], "not allowed with|not to --tcp"),
         (["bogus"], "invalid choice"),
+        (["serve", "--params", ""], "names no file"),  # was refused as "Is a directory" (the working folder)
     ],
 )
 def test_bad_flags_exit_2_with_usage(args, message):
@@ -108,3 +109,9 @@ def test_diagnose_alias_reaches_the_workflow(tmp_path):
     assert "MEASURED.csv" in run("diagnose", "--help").stdout
     result = run("diagnose", str(tmp_path / "missing.csv"), "--out", str(tmp_path / "out"))
     assert result.returncode == 2 and "missing.csv" in result.stderr and "Traceback" not in result.stderr
+
+
+def test_diagnose_help_is_printed_once():
+    """``ax12emu diagnose --help`` reads the command line to find the servo before the workflow prints its help."""
+    result = run("diagnose", "--help")
+    assert result.returncode == 0 and result.stdout.count("usage:") == 1

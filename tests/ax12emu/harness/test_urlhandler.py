@@ -58,6 +58,8 @@ def test_host_baud_must_match():
         ("ax12emu://?trace=/no/such/folder/bus.jsonl", "trace=/no/such/folder/bus.jsonl: No such file"),
         ("ax12emu://?servo=xl430-w250&ids=1&trace=/no/such/folder/bus.jsonl", "trace=.*No such file"),
         ("ax12emu://?delay=1&delay_s=nan", "delay_s must be >= 0"),  # a bare ValueError from the faults
+        ("ax12emu://?params=&virtual_time=1", "params= given no value"),  # served the default model, silently
+        ("ax12emu://?servo=xl430-w250&trace=", "trace= given no value"),
     ],
 )
 def test_bad_urls_quote_the_expected_form(url, message):

@@ -34,6 +34,15 @@ def test_errors_name_line_and_column(text, line, column):
     assert f"x.csv:{line}" in str(info.value)
 
 
+@pytest.mark.parametrize("value", ['["x"]', '{"a": 1}', "5", '"mx"'])
+def test_an_unknown_servo_in_the_metadata_is_named(value):
+    """``#@ servo`` holding a list or a table was a TypeError with a traceback; any unknown value is one line."""
+    with pytest.raises(TraceFormatError, match="unknown servo"):
+        parse_trace(f"#@ servo = {value}\n" + GOOD, "m.csv")
+    with pytest.raises(TraceFormatError, match="unknown servo"):
+        Trace({"t": [0.0], "goal_position": [1], "moving_speed": [0], "present_position": [1]}, meta={"servo": ["x"]})
+
+
 def test_row_length_error():
     """A short row names its line."""
     with pytest.raises(TraceFormatError, match=":4"):
