@@ -172,7 +172,7 @@ def test_url_through_dynamixel_sdk():
     "url, message",
     [
         ("ax12emu://?servo=nope", "unknown servo model 'nope'"),
-        ("ax12emu://?servo=", "empty servo list"),
+        ("ax12emu://?servo=", "servo= given no value"),
         ("ax12emu://?servo=1-2:xl430-w250&ids=3", "give one of them"),
         ("ax12emu://?servo=xl430-w250&baud=fast", "baud must be a bit rate"),
         ("ax12emu://?servo=xl430-w250&baud=1234", "not 1234"),
