@@ -41,12 +41,22 @@ from .output import verdict_json, verdict_text, write_outputs
 from .schedule import CONTROL_STEP_S
 from .search import Diagnosis, diagnose
 from .trace import Trace, TraceFormatError, read_trace
-from .wizard import SPEED_LIMITED_SHARE, WizardExport, cruise_units_s, is_wizard_export, read_wizard, to_trace
+from .wizard import (
+    ITEM_COLUMNS,
+    SPEED_LIMITED_SHARE,
+    WizardExport,
+    cruise_units_s,
+    is_wizard_export,
+    read_wizard,
+    to_trace,
+)
 
 __all__ = ["parse_args", "main", "load_input", "Input", "DEFAULT_GOAL", "DEFAULT_VOLTAGE_V"]
 
 #: Goal Position assumed for a Wizard export that did not plot it (the shared real exports step 0 -> about 500).
 DEFAULT_GOAL = 500
+#: The AX-12A's model number: the workflow's model is its (other AX-series exports get a note).
+AX12A_MODEL_NUMBER = 12
 #: Supply assumed for a Wizard export: the AX-12A's recommended 12 V (its 3-cell LiPo / bench supply).
 DEFAULT_VOLTAGE_V = 12.0
 #: A located goal write this close before the first moved reading is reported as pinned there.
@@ -130,6 +140,9 @@ def load_input(args: argparse.Namespace, params: ServoParams, say=lambda msg: No
                              f"exports; {args.trace} is a trace CSV, which records its own commands")
         trace = read_trace(args.trace)
         check_span(trace.t, args.trace)
+        if trace.servo == "ax" and trace.has("voltage"):  # the model is valid over its supply range, as --voltage
+            for volts in (float(trace["voltage"].min()) / 10.0, float(trace["voltage"].max()) / 10.0):
+                params.check_supply(volts, f"{args.trace}: the voltage column's")
         notes = [f"{args.trace}: trace CSV, {len(trace)} rows"]
         if not trace.records_command_times:
             notes.append("the trace does not say when commands were sent (no command_t): each change's onset is "
@@ -141,11 +154,24 @@ def load_input(args: argparse.Namespace, params: ServoParams, say=lambda msg: No
     return _wizard_input(export, args, params, say)
 
 
+#: The Wizard flags that stand in for a plotted item, and the trace column each replaces.
+_FLAG_COLUMNS = {"goal": "goal_position", "initial_goal": "goal_position", "onset": "goal_position",
+                 "moving_speed": "moving_speed", "voltage": "voltage"}
+
+
 def _wizard_input(ex: WizardExport, args: argparse.Namespace, params: ServoParams, say) -> Input:
+    for flag, column in _FLAG_COLUMNS.items():
+        if getattr(args, flag) is not None and column in ex.values:  # it was used silently, the recording won
+            item = next(item for item, col in ITEM_COLUMNS.items() if col == column)
+            raise ValueError(f"--{flag.replace('_', '-')}: the export records {item}; the flag stands in for it only "
+                             "where it does not")
     goal = DEFAULT_GOAL if args.goal is None else args.goal
     speed = 0 if args.moving_speed is None else args.moving_speed
     volts = DEFAULT_VOLTAGE_V if args.voltage is None else args.voltage
     params.check_supply(volts, "--voltage")
+    if "voltage" in ex.values:  # what the servo ran at: within the model's range, as --voltage is
+        volts = float(np.median(ex.values["voltage"])) / 10.0
+        params.check_supply(volts, f"{ex.source}: the recorded Present Voltage (median)")
     if "present_position" not in ex.values:
         raise ValueError(f"{ex.source}: the export has no Present Position column: nothing to compare the model with")
     initial = int(ex.values["present_position"][0]) if args.initial_goal is None else args.initial_goal
@@ -158,7 +184,7 @@ def _wizard_input(ex: WizardExport, args: argparse.Namespace, params: ServoParam
              "skipped": dict(ex.skipped), "items_ignored": list(ex.ignored_items), "recorded": recorded,
              "reading_period_s": ex.read_period_s, "rows_on_reading_clock": ex.read_share if ex.read_s is not None else None}
     notes = [ex.summary()]
-    if ex.model_name.replace("-", "").upper() != "AX12A" and args.params is None:
+    if ex.model_number != AX12A_MODEL_NUMBER and args.params is None:
         notes.append(f"the export is from an {ex.model_name}; the model is an AX-12A's (its parameters are not "
                      "that servo's unless --params says otherwise)")
     assumed = []

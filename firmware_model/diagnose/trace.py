@@ -94,6 +94,9 @@ _INT_RANGES = {
     "present_speed": (-1023, 1023), "present_load": (-1023, 1023), "torque_limit": (0, 1023), "voltage": (0, 255),
 }
 _FLOAT_COLUMNS = ("t", "external_torque_nm", "command_t")
+#: Bounds of the float columns that are not times: a torque on the horn beyond 100 N m (some forty times the
+#: largest stall torque served) is a unit slip, and a simulation of it only overflows.
+_FLOAT_RANGES = {"external_torque_nm": (-100.0, 100.0)}
 #: Columns that are commands (a change in any of them is a command change).
 COMMAND_COLUMNS = ("goal_position", "moving_speed", "torque_limit", "voltage", "external_torque_nm")
 
@@ -254,6 +257,9 @@ def _parse(text: str, name: str, line: int, source: str, fmt: TraceColumns = FOR
             raise TraceFormatError(f"{text!r} is not a number", line, name, source) from None
         if not math.isfinite(value):
             raise TraceFormatError(f"{text!r} is not finite", line, name, source)
+        low, high = _FLOAT_RANGES.get(name, (-math.inf, math.inf))
+        if not low <= value <= high:
+            raise TraceFormatError(f"{value:g} is outside {low:g}..{high:g}", line, name, source)
         return value
     try:
         value = int(text)

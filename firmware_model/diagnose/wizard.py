@@ -106,6 +106,15 @@ ITEM_COLUMNS = {
 }
 #: Columns whose raw register value carries the direction in bit 10 (converted to a signed value).
 SIGNED_ITEMS = ("present_speed", "present_load")
+#: Each mapped item's raw register range (AX series control table, e-manual: positions 0..1023 over 300 degrees,
+#: speeds and loads 0..2047 with bit 10 the direction, Present Voltage one byte of 0.1 V).
+ITEM_RANGES = {
+    "present_position": (0, 1023), "goal_position": (0, 1023), "moving_speed": (0, 2047), "present_speed": (0, 2047),
+    "present_load": (0, 2047), "torque_limit": (0, 1023), "voltage": (0, 255),
+}
+#: Model numbers of the servos whose exports the workflow reads: the AX series' 10-bit, 300-degree table
+#: (AX-12/AX-12A 12, AX-18A 18, AX-12W 300); other servos count positions in other units.
+AX_MODEL_NUMBERS = {12: "AX-12A", 18: "AX-18A", 300: "AX-12W"}
 #: The time column's header.
 TIME_HEADER = "Time[ms]"
 #: Kinds of skipped rows, in report order.
@@ -244,9 +253,17 @@ def parse_wizard(text: str, source: str = "wizard export") -> WizardExport:
         raise fail(f"expected the column header '{TIME_HEADER},{','.join(items)}', got {s[:60]!r}", n)
     if tuple(cols[1:]) != items:
         raise fail(f"column header names {cols[1:]} but the item lines name {list(items)}", n)
+    twice = sorted({i for i in items if i in ITEM_COLUMNS and items.count(i) > 1})
+    if twice:  # which column counts would be a guess
+        raise fail(f"{', '.join(twice)} plotted more than once", n)
+    if _int(model[1]) not in AX_MODEL_NUMBERS:
+        raise fail(f"the export is from a {model[0] or 'servo with no name'} (model number {model[1]}): the workflow reads "
+                   f"the AX series' exports ({', '.join(f'{v} {k}' for k, v in AX_MODEL_NUMBERS.items())}), whose "
+                   "positions are 0..1023 over 300 degrees", header[1][0])
     ex = WizardExport(source, model[0], _int(model[1]), items, np.zeros(0), {},
                       ignored_items=tuple(i for i in items if i not in ITEM_COLUMNS))
     kept: list[list[int | float]] = []
+    kept_lines: list[int] = []
     for n, s in rest[n_items + 1:]:
         ex.rows_seen += 1
         cells = [c.strip() for c in s.split(",")]
@@ -264,6 +281,7 @@ def parse_wizard(text: str, source: str = "wizard export") -> WizardExport:
             ex.skipped_lines.append(n)
             continue
         kept.append([t, *vals])
+        kept_lines.append(n)
     if len(kept) < 2:
         raise fail(f"need at least two readable data rows, found {len(kept)} "
                    f"({ex.rows_skipped} skipped)", rest[-1][0])
@@ -277,6 +295,11 @@ def parse_wizard(text: str, source: str = "wizard export") -> WizardExport:
         col = ITEM_COLUMNS.get(item)
         if col is None:
             continue
+        low, high = ITEM_RANGES[col]
+        outside = np.flatnonzero((data[:, j] < low) | (data[:, j] > high))  # before the cast: 1e300 is no int64
+        if outside.size:
+            raise fail(f"{item} {data[outside[0], j]:g} is outside the register's {low}..{high}"
+                       + (f" (and {outside.size - 1} more rows)" if outside.size > 1 else ""), kept_lines[outside[0]])
         v = data[:, j].astype(np.int64)
         if col in SIGNED_ITEMS:
             v = np.where(v >= DIRECTION_BIT, -(v & (DIRECTION_BIT - 1)), v)

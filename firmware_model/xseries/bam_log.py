@@ -68,10 +68,22 @@ class PendulumLog:
         return (self.mass_kg + self.arm_mass_kg / 2.0) * gravity_m_s2 * self.length_m
 
 
+#: Bounds of a logged pendulum (as ``ax12emu serve --arm``'s) and of the supply (Present Input Voltage, 0.1 V a unit).
+MAX_MASS_KG = 100.0
+MAX_LENGTH_M = 10.0
+MAX_VIN_V = 25.5
+
+
 def _number(value: object, where: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ValueError(f"{where} must be a finite number, got {value!r}")
-    return float(value)
+    try:
+        number = float(value)
+    except OverflowError:  # an integer of hundreds of digits
+        raise ValueError(f"{where} is too large to be a number") from None
+    if not math.isfinite(number):
+        raise ValueError(f"{where} must be a finite number, got {value!r}")
+    return number
 
 
 def read_bam_log(path: str | Path) -> PendulumLog:
@@ -93,6 +105,10 @@ def read_bam_log(path: str | Path) -> PendulumLog:
     vin = _number(data["vin"], f"{path}: 'vin'")
     if mass < 0 or arm_mass < 0 or length <= 0 or vin <= 0 or kp < 0 or kp != int(kp):
         raise ValueError(f"{path}: mass and arm mass must be >= 0, length and vin > 0, kp a register value (>= 0 integer)")
+    # What a pendulum on a servo horn can be, and what the registers hold: a length of 1e200 m overflowed.
+    if mass > MAX_MASS_KG or arm_mass > MAX_MASS_KG or length > MAX_LENGTH_M or vin > MAX_VIN_V or kp > 16383:
+        raise ValueError(f"{path}: mass and arm mass must be at most {MAX_MASS_KG:g} kg, length at most {MAX_LENGTH_M:g} m, "
+                         f"vin at most {MAX_VIN_V:g} V and kp a Position P Gain (0..16383)")
     entries = data["entries"]
     if not isinstance(entries, list) or len(entries) < 2:
         raise ValueError(f"{path}: 'entries' must be a list of at least two samples")

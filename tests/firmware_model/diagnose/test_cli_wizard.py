@@ -102,12 +102,32 @@ def test_wizard_options_refused_for_a_trace_and_bad_voltage(tmp_path, capsys):
     assert main([str(tmp_path / "absent.csv"), "--out", str(tmp_path / "o"), "--goal", "500"]) == 2
     err = capsys.readouterr().err
     assert "No such file" in err and "trace CSV" not in err, err
+    tr.write_text("t,goal_position,moving_speed,present_position,voltage\n0,512,0,512,50\n0.01,512,0,512,50\n")
+    assert main([str(tr), "--out", str(tmp_path / "o")]) == 2  # 5.0 V: simulated, naming a negative friction
+    assert "the voltage column's 5.0 V is outside" in capsys.readouterr().err
     f = _wizard_file(tmp_path / "w.csv")
     assert main([str(f), "--out", str(tmp_path / "o"), "--voltage", "30"]) == 2
     assert "--voltage 30.0 V is outside" in capsys.readouterr().err
     for onset in ("1e9", "-1e4"):  # a write outside the recording: it was fitted, meaninglessly
         assert main([str(f), "--out", str(tmp_path / "o"), f"--onset={onset}"]) == 2
         assert "the goal must be written within the recording" in capsys.readouterr().err
+
+
+def test_a_flag_for_a_plotted_item_is_refused_and_a_recorded_supply_is_checked(tmp_path, capsys):
+    """--goal with Goal Position plotted was ignored while the report still offered it; a plotted Present Voltage
+    outside the model's range was simulated where --voltage is refused."""
+    lines = ["DYNAMIXEL Graph,2", "AX-12A,12", "ItemCount,3", "Present Position,#ffff00,0,1,0",
+             "Goal Position,#00ff00,0,1,0", "Present Voltage,#0000ff,0,1,0",
+             "Time[ms],Present Position,Goal Position,Present Voltage"]
+    lines += [f"{16 * i},{min(1 + 20 * max(i - 5, 0), 500)},{1 if i < 5 else 500},{{volts}}" for i in range(60)]
+    f = tmp_path / "w.csv"
+    f.write_text("\n".join(lines).replace("{volts}", "120") + "\n")
+    for flag in (["--goal", "300"], ["--onset", "0.05"], ["--voltage", "9"]):
+        assert main([str(f), "--out", str(tmp_path / "o"), *flag]) == 2
+        assert "the export records" in capsys.readouterr().err
+    f.write_text("\n".join(lines).replace("{volts}", "135") + "\n")  # 13.5 V: outside the AX-12A's 7..12 V
+    assert main([str(f), "--out", str(tmp_path / "o")]) == 2
+    assert "the recorded Present Voltage (median) 13.5 V is outside" in capsys.readouterr().err
 
 
 def test_params_with_an_effect_the_fit_cannot_simulate_exit_2(tmp_path, capsys):

@@ -25,6 +25,8 @@ def test_round_trip(tmp_path):
     (GOOD.replace(",80", ",2000"), 4, "present_load"),
     (GOOD.replace("present_load", "present_lode"), 2, "present_lode"),
     (GOOD.replace("moving_speed,", ""), 2, "moving_speed"),
+    ("t,goal_position,moving_speed,present_position,external_torque_nm\n0.0,512,0,512,0\n0.01,512,0,512,1e300\n", 3,
+     "external_torque_nm"),  # it overflowed the simulation
 ])
 def test_errors_name_line_and_column(text, line, column):
     """A malformed cell, order, range or header is reported at its line and column."""

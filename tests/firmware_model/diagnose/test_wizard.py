@@ -79,6 +79,15 @@ def test_several_items_signed_speed_and_an_unknown_item():
     (HEAD, 5, "at least two readable data rows, found 0"),
     (HEAD + "0,1\n", 6, "at least two readable data rows"),
     (HEAD + "0,1\nabc\n", 7, "at least two readable data rows"),
+    # a register outside its range (it was used: 1e300 gave an RMS gap of 6e17), named at its line
+    (GOOD.replace("144,60", "144,5000"), 10, "Present Position 5000 is outside the register's 0..1023"),
+    (GOOD.replace("96,1", "96,-7"), 7, "Present Position -7 is outside"),
+    (GOOD.replace("144,60", "144,1e300"), 10, "outside the register's 0..1023"),
+    (HEAD.replace("ItemCount,1", "ItemCount,2").replace("Time[ms],Present Position", "Present Position,#00ff00,0,1,0\n"
+                  "Time[ms],Present Position,Present Position") + "0,1,1\n16,1,1\n", 6, "plotted more than once"),
+    # another series' export: its positions are not the AX series' units
+    (GOOD.replace("AX-12A,12", "MX-28,29"), 2, "from a MX-28 \\(model number 29\\): the workflow reads the AX series"),
+    (GOOD.replace("AX-12A,12", "XL430-W250,1060"), 2, "model number 1060"),
 ])
 def test_malformed_files_name_file_and_line(text, line, words):
     """Header problems, and a file with under two readable rows, are a ValueError naming the file and line."""

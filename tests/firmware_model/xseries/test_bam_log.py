@@ -63,6 +63,11 @@ def test_arm_mass_under_either_key_and_the_later_duty_format(tmp_path):
         (_log(entries=[_entry(0.0), _entry(0.1, load=70000)]), "0..65535"),
         (_log(entries=[_entry(0.0), _entry(0.1, load=900)]), "beyond full scale"),
         (_log(entries=[_entry(0.0), _entry(0.1, load=1.5)]), "duty and must lie in -1..1"),
+        # numbers a float cannot hold, and a pendulum no horn carries (each overflowed with a traceback)
+        (_log(kp=10**400), "'kp' is too large to be a number"),
+        (_log(length=1e200), "length at most 10 m"),
+        (_log(kp=1e9), "kp a Position P Gain"),
+        (_log(vin=100.0), "vin at most 25.5 V"),
     ],
 )
 def test_malformed_logs_are_refused_saying_why(tmp_path, data, message):
