@@ -538,7 +538,7 @@ MX_WRITE_SIDE = frozenset({"torque_enable", "torque_limit"})
 #: Error bits an instruction's handling sets (the others are the servo's alarms: voltage, overheating, overload).
 INSTRUCTION_BITS = int(StatusError.RANGE | StatusError.INSTRUCTION | StatusError.CHECKSUM | StatusError.ANGLE_LIMIT)
 MX_KNOWN = frozenset({Instruction.PING, Instruction.READ, Instruction.WRITE, Instruction.REG_WRITE, Instruction.ACTION,
-                      Instruction.RESET, Instruction.SYNC_WRITE, Instruction.BULK_READ})
+                      Instruction.RESET, Instruction.REBOOT, Instruction.SYNC_WRITE, Instruction.BULK_READ})
 #: Instruction Error not judged: Action (an error without a registered write) and the instructions the e-manual
 #: sends to the broadcast ID only (Sync Write, Bulk Read), whose answer sent to one ID it does not give.
 MX_UNJUDGED = frozenset({Instruction.ACTION, Instruction.SYNC_WRITE, Instruction.BULK_READ})
@@ -551,6 +551,8 @@ class MXRules:
         self.layout = servo_model(key).layout()
         self.size = self.layout.table_size
         self.defaults = bytes(self.layout.defaults)
+        #: Where the RAM area begins: a REBOOT keeps the EEPROM area before it.
+        self.ram_start = self.layout.eeprom_end
         self.by_name = self.layout.by_name
         self.at: list[Any] = [None] * self.size
         for entry in self.layout.entries:
@@ -632,11 +634,15 @@ def _mx_name(rules: MXRules, address: int) -> str:
     return entry.name if entry is not None else "unused"
 
 
-def _mx_writes(packet: Any, servo_id: int, registered: tuple[int, bytes] | None) -> list[tuple[int, bytes]] | None:
-    """The writes ``packet`` asks of the MX holding ``servo_id`` ([] none), or None for RESET (the factory table)."""
+def _mx_writes(packet: Any, servo_id: int, registered: tuple[int, bytes] | None) -> list[tuple[int, bytes]] | str:
+    """The writes ``packet`` asks of the MX holding ``servo_id`` ([] none), or "reset" (the factory table) or "reboot"
+    (the RAM area's defaults).  A broadcast RESET is not carried out (e-manual: "Broadcast ID(0xFE) cannot be used
+    for Reset instruction", MX firmware V40 on)."""
     code, params = packet.instruction, bytes(packet.params)
     if code == Instruction.RESET:
-        return None
+        return [] if packet.id == BROADCAST_ID else "reset"
+    if code == Instruction.REBOOT:
+        return "reboot"
     if code == Instruction.WRITE and len(params) >= 2:
         return [(params[0], params[1:])]
     if code == Instruction.ACTION and registered is not None:
@@ -705,14 +711,16 @@ def _check_mx_record(rules: list[MXRules], record: MXRecord, where: str) -> None
                                                                                       Instruction.ACTION):
             free |= r.span("registered")
         writes = _mx_writes(packet, ids_before[k], record.registered[k]) if packet.checksum_ok and k in reached else []
-        if writes is None:  # RESET: the factory table, but for what the firmware sets at power-up
+        if isinstance(writes, str):  # RESET: the factory table; REBOOT: its RAM area (both but for what power-up sets)
             boot = free | r.span("goal_position", "torque_limit")
-            wrong = [a for a in range(r.size) if a not in boot and new[a] != r.defaults[a]]
+            kept = range(r.ram_start) if writes == "reboot" else range(0)
+            wrong = [a for a in range(r.size) if a not in boot and a not in kept and new[a] != r.defaults[a]]
+            wrong += [a for a in kept if new[a] != old[a]]
             if wrong:
-                raise FuzzFailure(f"{what}: after RESET MX {k} byte {wrong[0]} ({_mx_name(r, wrong[0])}) is "
+                raise FuzzFailure(f"{what}: after {writes.upper()} MX {k} byte {wrong[0]} ({_mx_name(r, wrong[0])}) is "
                                   f"{new[wrong[0]]}, the factory table holds {r.defaults[wrong[0]]}")
             if r.by_name["torque_limit"].value_in(new) != r.by_name["max_torque"].value_in(new):
-                raise FuzzFailure(f"{what}: after RESET MX {k} Torque Limit is not Max Torque")
+                raise FuzzFailure(f"{what}: after {writes.upper()} MX {k} Torque Limit is not Max Torque")
             continue
         # Refused when its reply says so; with no reply (Status Return Level, broadcast) or a shared ID (whose
         # answer is whose?) only the written bytes may change, to what was written.
@@ -846,7 +854,7 @@ class DataChooser:
 HOT_ADDRESSES = (0, 2, 3, 4, 5, 6, 7, 8, 10, 11, 12, 13, 14, 16, 18, 19, 20, 24, 29, 30, 31, 32, 34, 36, 44, 45, 46, 47, 48, 49)
 HOT_VALUES = (0, 1, 2, 3, 4, 0x20, 0x64, 0x7F, 0x80, 0xFD, 0xFE, 0xFF)
 HOT_IDS = (1, 2, 1, 2, BROADCAST_ID, 0, 3)
-KINDS = ("write", "write", "read", "read", "reg", "action", "sync", "ping", "reset", "other")
+KINDS = ("write", "write", "read", "read", "reg", "action", "sync", "ping", "reset", "reboot", "other")
 
 
 def _value(c: Any) -> int:
@@ -887,7 +895,8 @@ def instruction_packet(c: Any) -> bytes:
     elif kind == "other":
         code, params = c.integer(0, 255), _data(c)
     else:
-        code = {"action": Instruction.ACTION, "ping": Instruction.PING, "reset": Instruction.RESET}[kind]
+        code = {"action": Instruction.ACTION, "ping": Instruction.PING, "reset": Instruction.RESET,
+                "reboot": Instruction.REBOOT}[kind]
         params = _data(c) if c.integer(0, 7) == 0 else b""
     return encode_instruction(_id(c), code, params)
 

@@ -23,7 +23,7 @@ of the wire (AX-12As' too) and on each MX servo (unplugged, it hears nothing and
 breaks at it); an MX servo's own (an error, a blocked shaft, pinned readings) act inside its
 firmware model, the AX-12As' through their bus's own :class:`~ax12emu.faults.injection.Faults`.
 Not modelled for MX servos: the busy time after an EEPROM write (the AX-12's measured figure is an
-AX-12's) and the live view; state persists as on the other buses.
+AX-12's); the live view shows them and state persists as on the other buses.
 """
 
 from __future__ import annotations

@@ -46,6 +46,9 @@ class Instruction(enum.IntEnum):
     REG_WRITE = 0x04
     ACTION = 0x05
     RESET = 0x06
+    #: MX series only, from firmware V40 (e-manual, Protocol 1.0, "Reboot": "Applied Products: MX-12W(V41),
+    #: MX-28(V40), MX-64(V40), MX-106(V40)"): the AX-12 answers it with INSTRUCTION error.
+    REBOOT = 0x08
     SYNC_WRITE = 0x83
     #: Not implemented by the AX-12 (MX/RX series only): answered with INSTRUCTION error.
     BULK_READ = 0x92

@@ -97,7 +97,8 @@ X_ERROR_BITS = {"input_voltage": HW_ERROR_INPUT_VOLTAGE, "overheating": HW_ERROR
 #: Classic registers that steer the servo (each read where the table has it).
 COMMAND_REGISTERS = ("torque_enable", "goal_position", "moving_speed", "torque_limit", "cw_angle_limit", "ccw_angle_limit",
                      "p_gain", "i_gain", "d_gain", "temperature_limit", "min_voltage_limit", "max_voltage_limit", "shutdown",
-                     "multi_turn_offset", "resolution_divider", "goal_acceleration", "torque_ctrl_mode_enable", "goal_torque")
+                     "multi_turn_offset", "resolution_divider", "goal_acceleration", "torque_ctrl_mode_enable", "goal_torque",
+                     "drive_mode")
 #: Classic registers the firmware's readings go to (each written where the table has it).
 SENSED_REGISTERS = ("present_position", "present_speed", "present_load", "present_voltage", "present_temperature",
                     "moving", "hardware_error_status", "torque_enable", "current")
@@ -263,6 +264,11 @@ class ClassicMap:
                 cmd.profile_acceleration = self._profile_acceleration(values)
             return cmd
         cmd.operating_mode = OperatingMode.POSITION
+        # Drive Mode(10) bit 0 (the MX-106's): "rotational direction is inverted. Thus, Goal Position, Present Position
+        # will have a inverted direction"; "Normal/Reverse Mode is activated under Joint Mode and Multi-turn Mode"
+        # (control_table_drivemode.md), so not in wheel or torque control mode (returned above).  Bit 1 (dual joint
+        # slave) needs a second servo on a sync cable: not modelled.
+        cmd.drive_mode = values.get("drive_mode", 0) & 0x01
         cmd.goal_pwm = torque_pwm
         cmd.goal_position = int(round(self.position_to_pulses(values["goal_position"])))
         cmd.min_position_limit = int(round(self.position_to_pulses(values.get("cw_angle_limit", 0))))

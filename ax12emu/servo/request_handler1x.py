@@ -18,7 +18,10 @@ Policy, with sources (ROBOTIS e-manual, "Protocol 1.0", https://emanual.robotis.
 * Bulk Read (0x92) is answered by the bus (the listed servos answer in list order, each after the one
   before it: "Bulk Read" > "ID 2 monitors the status packet being sent from ID 1"), from :func:`listed_read`;
 * RESET (0x06, "Factory Reset"): answered from the ID the packet reached (the e-manual's example
-  answers from ID 0), then the factory table.
+  answers from ID 0), then the factory table; a broadcast one is not carried out ("Broadcast ID(0xFE)
+  cannot be used for Reset instruction", for the MX from firmware V40);
+* REBOOT (0x08, "Reboot", MX from firmware V40): answered, then the servo restarts as at power-up
+  (RAM area back to its defaults, the EEPROM kept).
 """
 
 from __future__ import annotations
@@ -26,7 +29,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import NamedTuple
 
-from ax12emu.protocol.packets import Instruction, InstructionPacket, StatusError, encode_status
+from ax12emu.protocol.packets import BROADCAST_ID, Instruction, InstructionPacket, StatusError, encode_status
 
 from .request_handler import MAX_READ_BYTES, Outcome, answers, ping, silent_read_length, write_handlers
 from .servo1x import Servo1X
@@ -64,14 +67,15 @@ def _read(servo: Servo1X, packet: InstructionPacket) -> tuple[StatusError, bytes
     return error, data
 
 
-def _reset(servo: Servo1X, packet: InstructionPacket) -> tuple[StatusError, bytes]:
-    return StatusError.NONE, b""  # done after the reply is built (handle1x)
+def _after_reply(servo: Servo1X, packet: InstructionPacket) -> tuple[StatusError, bytes]:
+    return StatusError.NONE, b""  # RESET and REBOOT: done after the reply is built (handle1x)
 
 
 HANDLERS: dict[int, Handler] = {
     Instruction.PING: ping,
     Instruction.READ: _read,
-    Instruction.RESET: _reset,
+    Instruction.RESET: _after_reply,
+    Instruction.REBOOT: _after_reply,
     **write_handlers(Servo1X.write, Servo1X.check_write),
 }
 
@@ -124,6 +128,10 @@ def handle1x(servo: Servo1X, packet: InstructionPacket) -> Outcome1X:
         if error and packet.instruction == Instruction.READ:
             data = data.ljust(silent_read_length(packet), b"\x00")
     reply = encode_status(reply_id, status_byte(servo, error), data) if talks else None
-    if packet.checksum_ok and packet.instruction == Instruction.RESET:
+    if packet.checksum_ok and packet.instruction == Instruction.RESET and packet.id != BROADCAST_ID:
+        # "Broadcast ID(0xFE) cannot be used for Reset instruction. Applied Products: MX-12W(V41), MX-28(V40),
+        # MX-64(V40), MX-106(V40)" (e-manual, Protocol 1.0, "Factory Reset"): every ID on the wire back to 1 otherwise.
         servo.reset()
+    elif packet.checksum_ok and packet.instruction == Instruction.REBOOT:
+        servo.reboot()
     return Outcome1X(reply, reply_id, delay_s, error)

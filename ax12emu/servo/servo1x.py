@@ -122,6 +122,13 @@ class Servo1X(TableServo):
         self.eeprom_dirty = True
         self.power_on()
 
+    def reboot(self) -> None:
+        """REBOOT (0x08, firmware V40 on): as a power cycle, the RAM area back to its defaults, the EEPROM kept, the
+        firmware restarted with the shaft where it is."""
+        self.table.ram_defaults()
+        self.plant.reboot()
+        self.power_on()
+
     def check_write(self, address: int, data: bytes) -> tuple[object | None, StatusError]:
         """Judge a write without applying it: (Table2's accepted check, NONE) or (None, the error bits)."""
         table = self.table

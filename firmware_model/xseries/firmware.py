@@ -154,8 +154,14 @@ class XFirmware:
         overload_time_s: float = 1.0,
         position_output_scale: float = 1.0,
         shutdown_cuts_output: bool = False,
+        single_turn_position: bool = False,
     ) -> None:
         self.physics = physics
+        #: Position Control Mode on a single-turn count (the MX series' joint mode on Protocol 1.0: Goal and Present
+        #: Position 0..4095, "Multi-turn mode allows joint mode control over multiple rotations", which joint mode
+        #: therefore does not): a shaft pushed across 0/4095 with the torque on is counted within the turn again,
+        #: so it is driven back the direct way within the range, not round the turns it was pushed through.
+        self.single_turn_position = single_turn_position
         #: What an error Shutdown selects does: False, the X series' (latched in Hardware Error Status, torque off
         #: until REBOOT); True, the Protocol 1.0 MX firmware's (the output cut to 0 % until :meth:`restore_output`,
         #: nothing latched: its status packets report the conditions present, :attr:`present_errors`).
@@ -237,6 +243,15 @@ class XFirmware:
         """Present Position reset to within one turn (e-manual "Present Position(132)" note)."""
         shaft = self._sign() * self.physics.angle_rad / PULSE_RAD
         self._turn_base_pulses = math.floor(shaft / PULSES_PER_REV) * PULSES_PER_REV
+
+    def _keep_within_one_turn(self) -> None:
+        """``single_turn_position``: the count back within 0..4095 once the shaft has crossed 0/4095 (the trajectory, a
+        goal within the range, stays: the error is taken the direct way, as an absolute encoder's reading gives it)."""
+        present = self._present_pulses() - self._homing_offset()
+        if -0.5 <= present < PULSES_PER_REV - 0.5:
+            return
+        self._reset_turns()
+        self._prev_error = self._traj_pulses - self._present_pulses()  # no derivative kick from the count's jump
 
     def _hold_here(self) -> None:
         """No profile: the trajectory at the present position, at rest."""
@@ -451,6 +466,8 @@ class XFirmware:
             if mode != OperatingMode.PWM:
                 pwm_limit = min(abs(cmd.goal_pwm), pwm_limit)  # "Goal PWM ... is used to limit PWM value"
             if mode in _POSITION_MODES:
+                if self.single_turn_position and mode == OperatingMode.POSITION:
+                    self._keep_within_one_turn()
                 if self._profile is not None:
                     self._traj_pulses, self._traj_velocity_pulses_s, self._traj_accel_pulses_s2 = self._profile.at(
                         self.time_s - self._profile_start_s

@@ -328,3 +328,23 @@ def test_an_angle_limit_error_with_shutdowns_angle_bit_drops_the_output_to_zero(
     assert write(bus, 1, 18, 36 | StatusError.ANGLE_LIMIT) == 0
     assert write2(bus, 1, GOAL_POSITION, 500) == StatusError.ANGLE_LIMIT
     assert read2(bus, 1, TORQUE_LIMIT) == 0 and read2(bus, 1, GOAL_POSITION) == 2048
+
+
+def test_a_broadcast_factory_reset_is_not_carried_out_and_reboot_restarts_the_servo():
+    """e-manual, Protocol 1.0: "Broadcast ID(0xFE) cannot be used for Reset instruction. Applied Products :
+    MX-12W(V41), MX-28(V40), ..." (every ID on the wire went back to 1), and "Reboot" for the same firmware
+    (answered with Instruction Error); the servos report that firmware, V40."""
+    bus = mx_bus(["mx-28", "mx-28"], ids=[1, 2])
+    assert read2(bus, 1, 2) & 0xFF == 40  # Firmware Version
+    assert write(bus, 2, 3, 7) == 0  # ID 2 -> 7
+    assert bus.receive(encode_instruction(BROADCAST_ID, Instruction.RESET, b"")) == []
+    assert sorted(bus.ids) == [1, 7]
+    assert write(bus, 1, 25, 1) == 0 and write(bus, 1, 14, 500 & 0xFF, 500 >> 8) == 0  # LED (RAM), Max Torque (EEPROM)
+    assert write2(bus, 1, GOAL_POSITION, 3000) == 0  # the torque comes on
+    run_s(bus, 0.5)
+    reply = bus.receive(encode_instruction(1, Instruction.REBOOT, b""))[0].data
+    assert reply[4] == 0  # answered, then restarted
+    run_s(bus, 0.01)
+    assert read2(bus, 1, 24) & 0xFF == 0 and read2(bus, 1, 25) & 0xFF == 0  # Torque Enable, LED: RAM defaults
+    assert read2(bus, 1, 14) == 500 and read2(bus, 1, TORQUE_LIMIT) == 500  # EEPROM kept; Torque Limit loads it
+    assert abs(read2(bus, 1, GOAL_POSITION) - 3000) <= 50  # the goal where it stood (the limp shaft settles)

@@ -113,7 +113,7 @@ def test_cancel_read_wakes_a_blocked_read_and_a_closed_port_refuses_flush():
     with pytest.raises(serial.PortNotOpenError):
         link.flush()
     with pytest.raises(serial.PortNotOpenError):
-        link.out_waiting
+        _ = link.out_waiting
 
 
 def test_a_port_on_a_closed_bus_fails_as_an_unplugged_adapter():

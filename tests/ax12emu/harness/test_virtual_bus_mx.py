@@ -190,3 +190,40 @@ def test_baud_bps_sets_each_servo_by_what_its_own_baud_rate_values_mean():
         assert [bus.read(i, "baud_rate") for i in (1, 2)] == [1, 1]
     with pytest.raises(ValueError, match=r"ID 2 \(AX-12A\) cannot run at 3000000 bps: its Baud Rate values give 7843..2000000 bps"):
         VirtualBus(servo="1:mx-28,2:ax-12a", transport="inprocess", baud_bps=3_000_000)
+
+
+def test_a_joint_pushed_through_a_turn_goes_back_the_direct_way_within_one_turn(mx28):
+    """Joint mode works within one turn (Goal Position 0..4,095; "Multi-turn mode allows joint mode control over
+    multiple rotations"): a compliant joint pushed more than a turn round comes back to its goal the direct way,
+    within the turn it reads; it used to drive back round every turn it was pushed through."""
+    bus, port, ph = mx28
+    assert ph.write1ByteTxRx(port, 1, 18, 0) == (COMM_SUCCESS, 0)  # Shutdown 0: no alarm cuts the push short
+    assert ph.write2ByteTxRx(port, 1, GOAL_POSITION, 2048) == (COMM_SUCCESS, 0)
+    bus.step(0.5)
+    assert ph.write2ByteTxRx(port, 1, 34, 100) == (COMM_SUCCESS, 0)  # Torque Limit 10 %: a compliant joint
+    bus.set_external_torque(1, 1.0)  # a hand turns the horn CCW, past what 10 % holds
+    bus.step(4.0)
+    bus.set_external_torque(1, 0.0)
+    pushed_deg = bus.angle_deg(1)
+    assert pushed_deg > 180.0 + 360.0  # more than a turn round
+    bus.step(6.0)
+    assert abs(bus.read(1, "present_position") - 2048) <= 3 and bus.read(1, "moving") == 0
+    assert abs(bus.angle_deg(1) - (180.0 + 360.0)) < 1.0  # back to its goal in the turn it was in, not 1.5 turns back
+
+
+@pytest.mark.parametrize(("drive_mode", "angle_deg"), [(0, 180.0 + 952 * 360 / 4096), (1, 180.0 - 952 * 360 / 4096)])
+def test_the_mx_106_drive_mode_reverse_bit_turns_the_other_way(drive_mode, angle_deg):
+    """Drive Mode(10) bit 0: "rotational direction is inverted. Thus, Goal Position, Present Position will have a
+    inverted direction" (control_table_drivemode.md); the MX-106 stored it and turned the same way."""
+    with VirtualBus([1], servo="mx-106", transport="inprocess", virtual_time=True) as bus:
+        port = UrlPortHandler(bus.port)
+        assert port.openPort() and port.setBaudRate(MX_FACTORY_BPS)
+        ph = PacketHandler(1.0)
+        try:
+            assert ph.write1ByteTxRx(port, 1, 10, drive_mode) == (COMM_SUCCESS, 0)
+            assert ph.write2ByteTxRx(port, 1, GOAL_POSITION, 3000) == (COMM_SUCCESS, 0)
+            bus.step(2.0)
+            assert abs(bus.read(1, "present_position") - 3000) <= 5
+            assert abs(bus.angle_deg(1) - angle_deg) < 1.0
+        finally:
+            port.closePort()
