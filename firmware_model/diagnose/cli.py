@@ -16,7 +16,8 @@ every assumption is printed with the verdict and in the report:
 * ``--onset`` (default: estimated from the first movement and fitted with the
   base model, :mod:`.nuisance`): when the goal was written, s after the
   first row read; giving it makes it known (the trace then records it);
-* ``--moving-speed`` (default 0, full speed) and ``--voltage`` (default
+* ``--moving-speed`` (default 0, full speed) and ``--voltage`` (default: the
+  ``--params`` file's supply, which a twin's params.toml carries, else
   :data:`DEFAULT_VOLTAGE_V`).
 """
 
@@ -97,7 +98,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                    help="when the goal was written, s after the first row read (default: estimated from the first "
                         "movement and fitted)")
     w.add_argument("--moving-speed", type=int, metavar="N", help="Moving Speed register (default 0: full speed)")
-    w.add_argument("--voltage", type=float, metavar="V", help=f"supply voltage (default {DEFAULT_VOLTAGE_V})")
+    w.add_argument("--voltage", type=float, metavar="V",
+                   help=f"supply voltage (default: --params' supply_voltage_v, else {DEFAULT_VOLTAGE_V})")
     args = p.parse_args(argv)
     if args.effects:
         unknown = [e for e in args.effects.split(",") if e not in LIBRARY]
@@ -167,7 +169,8 @@ def _wizard_input(ex: WizardExport, args: argparse.Namespace, params: ServoParam
                              "where it does not")
     goal = DEFAULT_GOAL if args.goal is None else args.goal
     speed = 0 if args.moving_speed is None else args.moving_speed
-    volts = DEFAULT_VOLTAGE_V if args.voltage is None else args.voltage
+    # Unsaid, the supply is the parameter file's (a twin's params.toml carries the supply it was fitted at), else 12 V.
+    volts = args.voltage if args.voltage is not None else params.supply_voltage_v if args.params else DEFAULT_VOLTAGE_V
     params.check_supply(volts, "--voltage")
     if "voltage" in ex.values:  # what the servo ran at: within the model's range, as --voltage is
         volts = float(np.median(ex.values["voltage"])) / 10.0
