@@ -253,7 +253,7 @@ class Bus2(ServosById[Servo2], DecodedBus):
         self._changes += 1
         for servo in self.servos:
             plant = servo.plant
-            deadline_s = servo.watchdog_deadline_s()
+            deadline_s = servo.watchdog_deadline_s()  # None unless armed with the torque on (the usual case)
             if deadline_s is not None and deadline_s < sim_time_s:
                 # The Bus Watchdog stops the servo when the silence runs out, not at the packet that ends it (a
                 # bus brought to its time in one stretch: virtual time, an in-process port).
@@ -264,7 +264,8 @@ class Bus2(ServosById[Servo2], DecodedBus):
                 spans = reads.get(servo) if reads is not None else None
                 if spans is None or clock_s is None or not plant.defer_catch_up(sim_time_s, clock_s, spans):
                     plant.catch_up(sim_time_s, clock_s)
-            servo.check_watchdog(sim_time_s)
+            if deadline_s is not None:
+                servo.check_watchdog(sim_time_s)
 
     def advance(self) -> bool:
         """Bring the physics up to the clock's present time; True if a servo stepped."""
