@@ -140,11 +140,20 @@ class Table2:
 
     # -- bus side ---------------------------------------------------------------------------
     def _target(self, address: int) -> int:
-        """The address a byte stands for: Indirect Data n's is Indirect Address n's value."""
+        """The address a byte stands for: Indirect Data n's is Indirect Address n's value, followed on where that is
+        Indirect Data too ("inherits features and properties of the Data from the specific Address", e-manual,
+        Indirect Address); a chain that comes back on itself stands for the byte where it closes."""
         holder = self._indirect.get(address)
         if holder is None:
             return address
-        return self.row[holder] | (self.row[holder + 1] << 8)
+        seen = {address}
+        row = self.row
+        target = row[holder] | (row[holder + 1] << 8)
+        while target in self._indirect and target not in seen:
+            seen.add(target)
+            holder = self._indirect[target]
+            target = row[holder] | (row[holder + 1] << 8)
+        return target
 
     def reads_indirect(self, address: int, length: int) -> bool:
         """Whether ``address``..``+length`` covers Indirect Data (bytes that stand for others)."""

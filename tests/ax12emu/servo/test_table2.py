@@ -201,3 +201,23 @@ def test_a_write_that_also_sets_its_own_bounds_is_judged_on_them_as_written(monk
                         ErrorNumber.NONE, ErrorNumber.NONE, ErrorNumber.DATA_RANGE,
                         ErrorNumber.NONE, ErrorNumber.NONE, ErrorNumber.NONE,
                         ErrorNumber.NONE, ErrorNumber.NONE, ErrorNumber.NONE]
+
+
+def test_indirect_data_pointing_at_indirect_data_follows_the_chain():
+    """Indirect Address 1 -> Indirect Data 2, Indirect Address 2 -> LED: writing Indirect Data 1 sets the LED, as the
+    data it stands for does (it was stored in Indirect Data 2's own byte: success, yet LED 0 and Data 2 reading 0);
+    a chain closing on itself stands for the byte where it closes."""
+    from ax12emu.protocol.servo_models import model
+    from ax12emu.servo.table2 import Table2
+
+    table = Table2(model("xl430-w250").layout())
+    data1, data2 = table.layout.by_name["indirect_data_1"].address, table.layout.by_name["indirect_data_2"].address
+    table.set("indirect_address_1", data2)
+    table.set("indirect_address_2", table.layout.by_name["led"].address)
+    check = table.check_write(data1, b"\x01")
+    assert not check.error
+    table.apply(check)
+    assert table.get("led") == 1 and table.read(data2, 1) == (b"\x01", 0) and table.read(data1, 1) == (b"\x01", 0)
+    table.set("indirect_address_2", data1)  # a loop: 1 -> 2 -> 1
+    table.apply(table.check_write(data1, b"\x07"))
+    assert table.read(data1, 1)[0] == b"\x07" and table.get("led") == 1
