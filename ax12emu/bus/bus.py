@@ -282,10 +282,11 @@ class Bus(ServosById[VirtualServo]):
 
     # -- life cycle --------------------------------------------------------------------
     def save_state(self) -> None:
-        """Write every servo's EEPROM to the state store (if any)."""
+        """Write every servo's EEPROM to the state store (if any); a failure is said once, as mid-session, and the
+        bus closes anyway (a server told to stop exits cleanly, whatever became of its state directory)."""
         if self.state_store is not None:
             for slot, servo in zip(self.slots, self.servos):
-                self.state_store.save(slot, servo.table)
+                self.state_store.save_or_say(slot, servo.table)
 
     def close(self) -> None:
         """Save state; safe to call more than once."""

@@ -70,10 +70,11 @@ class DecodedBus:
 
     # -- life cycle --------------------------------------------------------------------
     def save_state(self) -> None:
-        """Write every servo's EEPROM area to the state store (if any)."""
+        """Write every servo's EEPROM area to the state store (if any); a failure is said once, as mid-session, and
+        the bus closes anyway."""
         if self.state_store is not None:
             for slot, servo in self._persisted():
-                self.state_store.save(slot, servo.table, servo.backup)
+                self.state_store.save_or_say(slot, servo.table, servo.backup)
 
     def close(self) -> None:
         """Save state; safe to call more than once."""

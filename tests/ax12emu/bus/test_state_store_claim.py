@@ -59,6 +59,7 @@ def test_an_ax12_bus_whose_directory_goes_serves_on_and_says_so_once(tmp_path, c
             replies = bus.receive(encode_instruction(1, 0x03, bytes([5, delay])))
             assert len(replies) == 1 and replies[0].data[4] == 0  # answered, no error
     assert bus.servo(1).table.get("return_delay_time") == 20
+    bus.close()  # a server told to stop: it closes, saying nothing more (it raised, and serve exited 1)
     failures = [r for r in caplog.records if "could not keep the EEPROM" in r.getMessage()]
     assert len(failures) == 1, [r.getMessage() for r in caplog.records]
 
@@ -70,4 +71,5 @@ def test_a_protocol_2_bus_whose_directory_goes_serves_on(tmp_path, caplog):
     with caplog.at_level(logging.ERROR, logger="ax12emu.bus.state_store"):
         replies = bus.receive(encode_instruction2(1, Instruction2.WRITE, bytes((31, 0, 60))))  # Temperature Limit
     assert len(replies) == 1 and bus.servo(1).table.get("temperature_limit") == 60
+    bus.close()
     assert any("could not keep the EEPROM" in r.getMessage() for r in caplog.records)
