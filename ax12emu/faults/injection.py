@@ -31,12 +31,13 @@ What a client sees, fault by fault (dynamixel-sdk's names):
   ``error`` value, e.g. ``0x20``) and Alarm Shutdown (address 18) acts on them
   (torque limit 0, or torque off in the 2006 profile), as the firmware does.
 * ``stall``: the shaft is blocked: Present Position freezes, Present Speed
-  reads 0, Moving stays 1 while the goal is not reached, Present Load reads
-  full scale, and after ``overload_after_s`` simulated seconds of driving the
-  Overload bit (0x20) is raised.  The physical model holds the shaft in its
-  own mechanics (the motor pushes against the block: full drive, heating,
-  the model's overload alarm); for the kinematic model the registers are held
-  here and its ``angle_rad`` pinned.
+  reads 0 and Present Load full scale.  The physical model holds the shaft in
+  its own mechanics (the motor pushes against the block: full drive, heating,
+  its Overload after ``ServoParams.overload_delay_s``, Moving as its setpoint
+  says); for the kinematic model the registers are held here, its
+  ``angle_rad`` pinned, Moving stays 1 while the goal is not reached, and the
+  Overload bit (0x20) comes after ``overload_after_s`` simulated seconds of
+  driving.
 
 Servos are named by *slot*, the ID they were launched with (``--ids``), so a
 fault stays on the same servo when a client changes its ID.
@@ -231,20 +232,25 @@ class Faults:
         model.set_blocked(blocked)
         self.bus.plant.tables_changed()
 
-    def stall(self, slot: int, *, overload_after_s: float = 1.0) -> None:
+    def stall(self, slot: int, *, overload_after_s: float | None = None) -> None:
         """Block the shaft where it is now.
 
         A model that can hold a shaft (the physical one) does it in its
         mechanics, so speed, load, heating and the overload alarm follow from
         the motor pushing against the block (after the model's own overload
-        delay); otherwise the registers are held here.
+        delay, ``ServoParams.overload_delay_s``: a time given here is refused);
+        otherwise the registers are held here, Overload after
+        ``overload_after_s`` (default 1 s).
         """
         index = self._index(slot)
         if self._model_blocks():
+            if overload_after_s is not None:  # it was ignored, silently
+                raise ValueError("stall: the physical model trips Overload after its own overload delay "
+                                 "(ServoParams.overload_delay_s, in a params file), not a time given here")
             self._blocked.add(index)
             self._set_model_blocked()
             return
-        self._stall_overload_s = overload_after_s
+        self._stall_overload_s = 1.0 if overload_after_s is None else overload_after_s
         self._stalls[index] = _Stall(self.bus.servos[index].table.get("present_position"))
         self.after_physics()
 

@@ -161,6 +161,8 @@ def test_stalled_shaft_in_the_physical_model():
     """Physical model: the blocked shaft stays put while the motor drives at full load; the model's own
     overload timer (0.5 s) raises Overload; released, the servo moves on from where it was held."""
     with VirtualBus([1], virtual_time=True) as vbus, sdk_port(vbus.port) as (port, ph):
+        with pytest.raises(ValueError, match="overload_delay_s"):  # it was ignored, silently
+            vbus.faults.stall(1, overload_after_s=3.0)
         vbus.faults.stall(1)
         assert ph.write1ByteTxRx(port, 1, 24, 1) == (COMM_SUCCESS, 0)
         assert ph.write2ByteTxRx(port, 1, 30, 800) == (COMM_SUCCESS, 0)
