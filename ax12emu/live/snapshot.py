@@ -102,17 +102,22 @@ class Unit:
     wheel: tuple[str, float] | None = None
 
 
+#: The position readings' scale: degrees per count from the model file's range and the table (:func:`_model_field`).
+POSITION_SCALE = "position_range_deg/goal_span"
+
 #: Units by register name.  Sources (ROBOTIS e-manual): AX-12A "Present Speed(38)": about 0.111 rpm in
 #: joint mode, about 0.1 % of the output in wheel mode, bit 10 the direction; "Present Load(40)": 0.1 %
 #: of the maximum torque, bit 10 the direction; "Present Voltage(42)": 10 times the volts; the XL-320
 #: and the MX series the same, their speed units in their model files' ``[classic]`` (0.111, 0.114 rpm);
 #: X series "Present Velocity(128)": 0.229 rpm, "Present Load(126)": 0.1 %, "Present PWM(124)": 0.113 %
 #: ("PWM Limit(36)": 885 = 100 %), "Present Input Voltage(144)": 0.1 V, "Present Temperature(146)": 1 °C.
-#: Positions (0.088 deg on the X series, 0.29 deg on the AX-12A) and currents (1 mA, 2.69 mA) differ
-#: per model: each model file states them.
+#: Positions and currents (1 mA, 2.69 mA) differ per model: each model file states them.  A position count is
+#: the file's position range over the goal register's span (300 deg over 0..1023 on the AX-12A, 360 over
+#: 0..4095 on the X series), as the dial draws it; the data sheets' rounded resolution (0.29 deg) put 1023
+#: at 296.7 deg on a 300 deg dial.
 REGISTER_UNITS: Mapping[str, Unit] = {
-    "present_position": Unit("deg", model_field="physical.resolution_deg"),
-    "goal_position": Unit("deg", model_field="physical.resolution_deg"),
+    "present_position": Unit("deg", model_field=POSITION_SCALE),
+    "goal_position": Unit("deg", model_field=POSITION_SCALE),
     "present_velocity": Unit("rpm", 0.229),
     "goal_velocity": Unit("rpm", 0.229),
     "present_speed": Unit("rpm", 0.111, model_field="classic.speed_unit_rpm", direction_bit=True, wheel=("%", 0.1)),
@@ -171,8 +176,13 @@ def model_of(servo: Any, protocol: float) -> ServoModel | None:
     return _models_by_number(protocol_name(protocol)).get(servo.table.get("model_number"))
 
 
-def _model_field(spec: ServoModel | None, field: str) -> Any:
-    """``"section.name"`` of a model file (``physical.resolution_deg``), None where the file has no such number."""
+def _model_field(spec: ServoModel | None, field: str, layout: Any = None) -> Any:
+    """``"section.name"`` of a model file (``physical.current_unit_ma``), None where the file has no such number;
+    :data:`POSITION_SCALE`: degrees per position count, the position range over the goal register's span."""
+    if field == POSITION_SCALE:
+        range_deg = getattr(getattr(spec, "physical", None), "position_range_deg", None)
+        goal = layout.by_name.get("goal_position") if layout is not None else None
+        return None if range_deg is None or goal is None or not goal.maximum else range_deg / goal.maximum
     section, name = field.split(".")
     return getattr(getattr(spec, section, None), name, None)
 
@@ -220,7 +230,7 @@ def _plan(layout: Any, spec: ServoModel | None) -> _Plan:
         if unit is None:
             readings.append(_Reading(name, register, "", None, 0, None))
             continue
-        from_file = _model_field(spec, unit.model_field) if unit.model_field else None
+        from_file = _model_field(spec, unit.model_field, layout) if unit.model_field else None
         per_raw = from_file if from_file is not None else unit.per_raw
         direction = (classic.direction_bit if classic is not None else DIRECTION_BIT) if unit.direction_bit and not by_name[register].signed else None
         # Wheel-mode speed is a share of the output unless the model file says it is a speed (the MX series).

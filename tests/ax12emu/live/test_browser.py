@@ -158,7 +158,7 @@ def test_x_series_cards_on_a_mixed_wire_show_units_and_take_their_own_alarms(pag
             assert "XL430-W250 · protocol 2.0" in x_card.locator(".model").inner_text()
             page.wait_for_function("document.querySelector('#servo-1-p20 .dial')?.dataset.present === '2048'", timeout=5000)
             fields = x_card.locator(".fields").inner_text()
-            assert "2048 (180.2°)" in fields and "rpm" in fields and "11.1 V" in fields and "position 0..4095" in fields
+            assert "2048 (180.0°)" in fields and "rpm" in fields and "11.1 V" in fields and "position 0..4095" in fields
             x_card.locator("select[data-field=alarm]").select_option("electrical_shock")
             x_card.locator("button[data-act=alarm]").click()
             page.wait_for_function(

@@ -44,7 +44,7 @@ def test_x_series_servos_show_their_own_registers_and_units():
     assert xl430["registers"]["goal_position"] == 3000 and xl430["registers"]["present_position"] == table["present_position"]
     assert "cw_angle_limit" not in xl430["registers"] and xl430["registers"]["operating_mode"] == 3
     one = readings(xl430)
-    resolution_deg = model("xl430-w250").physical.resolution_deg
+    resolution_deg = 360 / 4095  # the dial's: 0..4095 over a turn
     assert one["position"]["raw"] == table["present_position"]
     assert one["position"]["value"] == pytest.approx(table["present_position"] * resolution_deg, abs=1e-3)
     assert one["goal"]["value"] == pytest.approx(3000 * resolution_deg, abs=1e-3)
@@ -85,7 +85,7 @@ def test_a_mixed_wire_shows_both_protocols_with_one_id_each():
     ax, x1, x2 = frame["servos"]
     assert [(s["protocol"], s["id"], s["model"]) for s in frame["servos"]] == [("1.0", 1, "AX-12A"), ("2.0", 1, "XL430-W250"), ("2.0", 2, "XL430-W250")]
     assert readings(ax)["velocity"]["register"] == "present_speed" and readings(ax)["position"]["value"] == pytest.approx(
-        ax["registers"]["present_position"] * model("ax-12a").physical.resolution_deg, abs=1e-3
+        ax["registers"]["present_position"] * 300 / 1023, abs=1e-3  # 0..1023 over 300 degrees (0.29 is rounded)
     )
     assert ax["mode"] == "joint" and ax["limits"] == [0, 1023]
     assert ax["faults"] == ["present_temperature held at 80"] and readings(ax)["temperature"]["raw"] == 80
@@ -175,7 +175,7 @@ def test_an_xl320_is_read_by_its_own_table_names_with_no_code_of_its_own():
     one = readings(joint)
     assert speed & 0x400 and one["velocity"]["register"] == "present_speed" and one["velocity"]["raw"] == -(speed & 0x3FF)
     assert one["voltage"]["value"] == pytest.approx(voltage / 10)
-    assert one["goal"]["value"] == pytest.approx(100 * model("xl-320").physical.resolution_deg)
+    assert one["goal"]["value"] == pytest.approx(100 * 300 / 1023, abs=1e-3)
     assert joint["dial"] == {"max": 1023, "range_deg": model("xl-320").physical.position_range_deg}
     # In wheel mode its Present Speed is a share of the output ("the unit is about 0.1%", its model file's wheel_output).
     assert readings(wheel)["velocity"]["unit"] == "%" and readings(wheel)["velocity"]["raw"] == -(wheel_speed & 0x3FF)
@@ -208,3 +208,12 @@ def test_an_mx_wire_shows_each_model_in_its_files_units_and_modes():
     assert speed["value"] == pytest.approx(speed["raw"] * model("mx-28").classic.speed_unit_rpm, abs=1e-3)
     assert readings(ax)["velocity"]["value"] == 0
     assert mx["alarm_bits"] == ax["alarm_bits"]  # both answer with Protocol 1.0 status error bits
+
+
+def test_an_ax_12a_at_its_last_count_reads_the_end_of_its_dial():
+    """Goal 1023 is 300 degrees, where the dial draws it (the data sheet's rounded 0.29 deg a count read 296.7)."""
+    with VirtualBus([1], transport="inprocess", virtual_time=True) as bus:
+        bus.write(1, "goal_position", 1023)
+        servo = take(bus.bus)["servos"][0]
+    goal = next(r for r in servo["readings"] if r["name"] == "goal")
+    assert goal["value"] == pytest.approx(300.0) and servo["dial"] == {"max": 1023, "range_deg": 300}
