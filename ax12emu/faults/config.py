@@ -103,6 +103,13 @@ class FaultConfig:
         ``stall`` and ``hold``); on a Protocol 1.0 wire with MX servos: :class:`~.injection.Faults1X`.  On a wire mixing protocols: :class:`~.injection.MixedFaults`, where
         a slot launched on both protocols is a ValueError (the options cannot name the protocol).
         """
+        named = [slot for slot, *_ in (*self.vanish, *self.duplicate, *self.alarm)] + list(self.stall)
+        both = set(getattr(getattr(bus, "bus1", None), "slots", ())) & set(getattr(getattr(bus, "bus2", None), "slots", ()))
+        for slot in named:
+            if slot in both:  # the Python API's answer (protocol=) is no option here
+                raise ValueError(f"ID {slot} was launched on both protocols of this wire, and a fault option cannot say "
+                                 "which servo it means: launch them on different IDs, or inject the fault from Python "
+                                 "(bus.faults.<fault>(..., protocol=1.0 or 2.0))")
         faults = faults_for(bus, seed=self.seed)
         faults.set_reply_faults(
             drop=self.drop, corrupt=self.corrupt, delay=self.delay, delay_s=self.delay_s, ids=self.fault_ids or None

@@ -104,8 +104,9 @@ def test_faults_name_a_servo_by_slot_and_protocol(mixed):
 def test_fault_options_on_a_mixed_wire():
     with VirtualBus(servo="1:ax-12a,2:xl430-w250", transport="inprocess", faults=FaultConfig(vanish=((2, None, None),))) as bus:
         assert bus.faults.active(2) == ["vanished"]
-    with pytest.raises(ValueError, match="ID 1 was launched on both protocols"):
+    with pytest.raises(ValueError, match="ID 1 was launched on both protocols") as caught:
         VirtualBus(servo=MIXED, transport="inprocess", faults=FaultConfig(stall=(1,)))
+    assert "a fault option cannot say which" in str(caught.value)  # not "give protocol=", which an option cannot
 
 
 def test_a_url_builds_a_mixed_wire():
