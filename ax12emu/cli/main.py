@@ -59,9 +59,17 @@ def _eeprom_busy_ms(text: str) -> float:
     return value
 
 
+class _OneLineParser(argparse.ArgumentParser):
+    """argparse, its errors one line on stderr (as every other user error of the program), not the usage block:
+    the bad flag is what a user needs to see; ``--help`` shows the rest."""
+
+    def error(self, message: str):  # type: ignore[override]
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser for all subcommands."""
-    parser = argparse.ArgumentParser(prog="ax12emu", description="A virtual Dynamixel AX-12+ bus (Protocol 1.0).")
+    parser = _OneLineParser(prog="ax12emu", description="A virtual Dynamixel servo bus (Protocol 1.0 and 2.0).")
     parser.add_argument("--version", action="version", version=f"ax12emu {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 

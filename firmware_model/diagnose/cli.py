@@ -78,9 +78,16 @@ class Input:
     facts: dict = field(default_factory=dict)
 
 
+class _OneLineParser(argparse.ArgumentParser):
+    """argparse, its errors one line on stderr (the bad option, not the usage block; ``--help`` shows that)."""
+
+    def error(self, message: str):  # type: ignore[override]
+        self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
+
+
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     """The command line (pure: no I/O)."""
-    p = argparse.ArgumentParser(prog="python -m firmware_model.diagnose", description=__doc__.splitlines()[0])
+    p = _OneLineParser(prog="python -m firmware_model.diagnose", description=__doc__.splitlines()[0])
     p.add_argument("trace", metavar="MEASURED.csv",
                    help="measured trace: the project's CSV (firmware_model.diagnose.trace) or a Wizard 2 graph export")
     p.add_argument("--out", required=True, metavar="DIR", help="where report.md, plots and params.toml go")

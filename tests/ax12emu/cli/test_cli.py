@@ -32,11 +32,12 @@ def run(*args: str) -> subprocess.CompletedProcess:
     ],
 )
 def test_bad_flags_exit_2_with_usage(args, message):
-    """argparse rejects bad flags with exit 2 and a usage line naming the problem."""
+    """argparse rejects bad flags with exit 2 and one line naming the problem (not the 17-line usage block)."""
     result = run(*args)
     assert result.returncode == 2
     assert "Traceback" not in result.stderr
     assert any(part in result.stderr for part in message.split("|")), result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1 and "--help" in result.stderr, result.stderr
 
 
 def test_corrupt_state_file_is_one_line(tmp_path):
