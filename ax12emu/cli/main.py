@@ -84,7 +84,8 @@ def build_parser() -> argparse.ArgumentParser:
     serve.add_argument(
         "--baud", type=_positive_float, metavar="BPS",
         help="with --servo: every servo starts at this bit rate (its Baud Rate register set to the value its own model "
-        "gives that rate: an MX runs up to 3000000, an AX-12A up to 1000000; default: each model's factory rate, "
+        "gives that rate: an MX runs up to 3000000, an AX-12A up to 2000000 (Baud Rate 0; its data sheet stops at "
+        "1000000); default: each model's factory rate, "
         "57600 on the X series, 1000000 on the AX and MX series)",
     )
     where = serve.add_mutually_exclusive_group()
