@@ -32,6 +32,7 @@ log = logging.getLogger(__name__)
 #: How long a new client waits for the connected one's hang-up to land before it is refused: a
 #: client that hangs up and reconnects at once can have its FIN trail the new handshake (on
 #: loopback the two may be queued on different CPUs); seen once in 200 reconnections on CI.
+#: The wait is the serving loop's passes, never a blocking call.
 HANGUP_GRACE_S = 0.002
 #: How long a client that has half-closed is kept for the replies it is owed: a servo answers within
 #: its Return Delay Time (at most 508 us), an injected ``--delay`` within its own bound.
@@ -78,6 +79,8 @@ class TcpTransport(Transport):
             raise
         self._listener.setblocking(False)
         self._client: socket.socket | None = None
+        #: A client that came while one was connected: (socket, peer, until when it waits for that one's hang-up).
+        self._pending: tuple[socket.socket, object, float] | None = None
         #: When the connected client half-closed (its EOF came), None while it may still send.
         self._eof_at: float | None = None
         self.host, self.port = self._listener.getsockname()[:2]
@@ -103,6 +106,8 @@ class TcpTransport(Transport):
         # and its EOF must be seen before the new connection, or that one is refused.
         if self._client is not None and self._eof_at is not None and time.monotonic() - self._eof_at > HALF_CLOSE_LINGER_S:
             self._drop_client()
+        if self._pending is not None:
+            self._settle_pending()
         if self._client is not None and self._eof_at is None:
             return [self._client.fileno(), self._listener.fileno()]
         return [self._listener.fileno()]
@@ -138,21 +143,43 @@ class TcpTransport(Transport):
             return
         if self._client is not None and (self._eof_at is not None or self._hung_up()):
             self._drop_client()
-        if self._client is not None:
-            self.refused += 1
-            log.warning("refused a second client from %s: one host at a time", peer)
-            conn.close()
-            return
+        if self._client is None:
+            self._take(conn, peer)
+        elif self._pending is not None:  # one waits already: this one is turned away
+            self._refuse(conn, peer)
+        else:
+            # The connected client may have hung up with its FIN still on the way: the new one waits up to
+            # HANGUP_GRACE_S for it, settled by :meth:`fds` on the serving loop's next passes (waiting here, in
+            # select, held the loop 2 ms for every refused client: a reconnecting one slowed the host 4x).
+            conn.setblocking(False)
+            self._pending = (conn, peer, time.monotonic() + HANGUP_GRACE_S)
+
+    def _settle_pending(self) -> None:
+        conn, peer, deadline = self._pending  # type: ignore[misc]
+        if self._client is None or self._eof_at is not None or self._hung_up():
+            self._pending = None
+            self._drop_client()
+            self._take(conn, peer)
+        elif time.monotonic() >= deadline:
+            self._pending = None
+            self._refuse(conn, peer)
+
+    def _take(self, conn: socket.socket, peer: object) -> None:
         conn.setblocking(False)
         conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         self._client = conn
         self.connections += 1
         log.info("client connected from %s", peer)
 
+    def _refuse(self, conn: socket.socket, peer: object) -> None:
+        self.refused += 1
+        log.warning("refused a second client from %s: one host at a time", peer)
+        conn.close()
+
     def _hung_up(self) -> bool:
-        """Whether the connected client has hung up with nothing left unread (waits HANGUP_GRACE_S at most)."""
+        """Whether the connected client has hung up with nothing left unread (asked without waiting)."""
         client = self._client
-        readable, _, _ = select.select([client], [], [], HANGUP_GRACE_S)
+        readable, _, _ = select.select([client], [], [], 0.0)
         if not readable:
             return False
         try:
@@ -187,4 +214,7 @@ class TcpTransport(Transport):
 
     def close(self) -> None:
         self._drop_client()
+        if self._pending is not None:
+            self._pending[0].close()
+            self._pending = None
         self._listener.close()
