@@ -99,6 +99,17 @@ def _trace_writer(path: str | None, **header: str) -> TraceWriter | None:
         raise UrlError(f"{EXPECTED}: trace={path}: {exc.strerror or exc}") from None
 
 
+def heard_at_8n1(bytesize: int, parity: str, break_held: bool) -> bool:
+    """Whether a servo's UART (8 data bits, no parity, 1 stop bit) takes a host's bytes in this format.
+
+    Extra stop bits are idle line, and a mark parity bit (always 1) reads as the stop bit: heard.  Fewer data
+    bits put the host's stop bit among the servo's data bits and the next start bit on its stop bit; an even,
+    odd or space parity bit is 0 on the stop bit for many bytes; a held break is a line held low: framing
+    errors, so no packet (whose every byte must arrive whole) reaches the servo.
+    """
+    return bytesize == 8 and parity in ("N", "M") and not break_held
+
+
 class UrlError(SerialException, ValueError):
     """A malformed ax12emu:// URL: both a SerialException (pyserial's habit) and a ValueError."""
 
@@ -278,6 +289,8 @@ class Serial(SerialBase):
         payload = bytes(to_bytes(data))
         if self.logger:
             self.logger.debug("write %s", payload.hex(" "))
+        if not heard_at_8n1(self._bytesize, self._parity, bool(self._break_state)):
+            return len(payload)  # sent, into framing errors
         try:
             return self._link.write(payload, float(self._baudrate))
         except LinkClosed as exc:

@@ -159,3 +159,29 @@ def test_firmware_quirks_in_the_url():
         assert _write(link, 5, 0) == encode_status(1, 0)
         link.write(PING)
         assert link.read(6) == encode_status(1, 0)  # answers at once
+
+
+@pytest.mark.parametrize(("settings", "heard"), [
+    ({}, True),
+    ({"stopbits": serial.STOPBITS_TWO}, True),  # the extra stop bit is idle line
+    ({"parity": serial.PARITY_MARK}, True),  # always 1: read as the stop bit
+    ({"bytesize": serial.SEVENBITS}, False),
+    ({"parity": serial.PARITY_EVEN}, False),
+    ({"parity": serial.PARITY_ODD}, False),
+])
+def test_a_host_in_another_byte_format_is_heard_as_an_8n1_uart_would(settings, heard):
+    """The servos' UARTs run 8N1 (e-manual, AX-12A specifications: "8bit,1stop,No Parity"): a host at 7 bits or with a parity bit
+    sends framing errors (it was answered as if 8N1)."""
+    with serial.serial_for_url("ax12emu://?ids=1", baudrate=1_000_000, timeout=0.2, **settings) as link:
+        link.write(PING)
+        assert (link.read(6) == encode_status(1, 0)) is heard
+
+
+def test_a_held_break_is_heard_as_nothing():
+    with serial.serial_for_url("ax12emu://?ids=1", baudrate=1_000_000, timeout=0.2) as link:
+        link.break_condition = True
+        link.write(PING)
+        assert link.read(6) == b""
+        link.break_condition = False
+        link.write(PING)
+        assert link.read(6) == encode_status(1, 0)
