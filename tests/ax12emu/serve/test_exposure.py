@@ -53,7 +53,7 @@ def test_binding_beyond_loopback_needs_the_flag():
     for where in ("0.0.0.0:0", "192.0.2.1:0", "example.com:0"):
         result = run("serve", "--tcp", where)
         assert result.returncode == 2 and "Traceback" not in result.stderr
-        assert result.stderr.strip().splitlines()[-1].endswith("binding beyond loopback needs --allow-remote"), result.stderr
+        assert "binding beyond loopback needs --allow-remote" in result.stderr.strip().splitlines()[-1], result.stderr
         assert result.stdout == ""
 
 
@@ -173,13 +173,12 @@ def test_runtime_errors_are_one_line(tmp_path):
 
 
 def test_argparse_errors_end_in_one_error_line():
-    """Bad flags: exit 2, no traceback, and the last line is the single error message (after argparse's usage)."""
+    """Bad flags: exit 2, no traceback, and one line: the error and where the usage is (not argparse's usage block)."""
     for args in (["serve", "--ids", "300"], ["serve", "--voltage", "nan"], ["serve", "--tcp", "127.0.0.1:99999"]):
         result = run(*args)
         lines = result.stderr.strip().splitlines()
         assert result.returncode == 2 and "Traceback" not in result.stderr
-        assert lines[0].startswith("usage:") and "error:" in lines[-1]
-        assert sum("error:" in line for line in lines) == 1
+        assert len(lines) == 1 and "error:" in lines[0] and "--help" in lines[0], result.stderr
 
 
 @pytest.mark.parametrize("value", ["nan", "inf"])
