@@ -39,8 +39,10 @@ MX and XL-320 pages):
   is the firmware's ``step_s``): ours, the e-manual gives the classic controller's units nowhere.
 * Present Speed and Present Load: magnitude with the direction bit (set: clockwise); Present Speed in
   ``speed_unit_rpm``, or in wheel mode with ``wheel_output = "pwm"`` the output share ("the unit is
-  about 0.1%", e-manual XL-320 "Present Speed(39)"); Present Load the motor current as a share of the
-  stall current (the firmware's Present Load, 0.1 % of it, on models without current sensing).
+  about 0.1%", e-manual XL-320 "Present Speed(39)"); Present Load the output (Present PWM) as a share of
+  ``output_full_scale``: "Present load is an inferred value based on the internal output value"
+  (control_table_present_load.md, the MX and XL-320 pages), as the AX-12A's, not the winding's current
+  (a shaft pushed round with the output at 0 reads no load).
 * Shutdown and Hardware Error Status: each family's bits (``errors``) for the firmware's protections.
 
 What only the MX series has (e-manual, MX-28/64/106 Protocol 1.0 pages and their shared texts in
@@ -127,11 +129,10 @@ def _encode_signed(value: float, bit: int, full_scale: int) -> int:
 class ClassicMap:
     """The translation between one classic table's registers and the X-series firmware's commands and readings."""
 
-    def __init__(self, units: Classic, registers: Iterable[str], *, load_per_sensed: float = 1023 / 1000,
+    def __init__(self, units: Classic, registers: Iterable[str], *,
                  step_s: float = 0.001, name: str = "", no_load_speed_rpm: float = 0.0,
                  current_limit_units: float = 0.0) -> None:
-        """``registers``: the table's register names; ``load_per_sensed``: Present Load units per unit of the
-        firmware's Present Current/Load reading; ``step_s``: the firmware's control step;
+        """``registers``: the table's register names; ``step_s``: the firmware's control step;
         ``no_load_speed_rpm``: the profile speed of Moving Speed 0 (0: the X series' step); ``current_limit_units``:
         the current (in the model's current unit) at Torque Limit 100 %, for Goal Torque."""
         self.units = units
@@ -150,7 +151,6 @@ class ClassicMap:
             raise ValueError(f"{name or 'a classic table'}: the classic map needs {', '.join(missing)} in the table")
         #: X pulses per classic position unit.
         self.pulses_per_unit = PULSES_PER_REV / 360.0 * units.position_span_deg / units.position_units
-        self.load_per_sensed = load_per_sensed
         self.step_s = step_s
         output = PWM_FULL_SCALE / units.output_full_scale
         per_sample = {"p": units.p_gain_factor,
@@ -170,22 +170,13 @@ class ClassicMap:
         """The map of a model file with a ``[classic]`` section; ``ValueError`` naming the file when it has none."""
         if spec.classic is None:
             raise ValueError(f"{spec.path or spec.name}: no [classic] section (the table's units for the X-series firmware)")
-        # The firmware reports Present Load in 0.1 % of the stall current on a model without current sensing,
-        # and Present Current in the model's unit on one with it.
         units = spec.classic
         physical = spec.physical
-        if physical.current_unit_ma is None:
-            load_per_sensed = units.output_full_scale / 1000.0
-        else:
-            stall_a = physical.rating_at().stall_current_a
-            if stall_a is None:
-                raise ValueError(f"{spec.path}: Present Load needs the rating's stall_current_a")
-            load_per_sensed = physical.current_unit_ma * 1e-3 / stall_a * units.output_full_scale
         rating = physical.rating_at()
         current_limit = 0.0
         if physical.current_unit_ma is not None and rating.stall_current_a is not None:
             current_limit = rating.stall_current_a / (physical.current_unit_ma * 1e-3)
-        return cls(units, (entry.name for entry in spec.entries), load_per_sensed=load_per_sensed, step_s=step_s,
+        return cls(units, (entry.name for entry in spec.entries), step_s=step_s,
                    name=spec.path or spec.name, no_load_speed_rpm=rating.no_load_speed_rpm,
                    current_limit_units=current_limit)
 
@@ -337,7 +328,7 @@ class ClassicMap:
         out = {
             "present_position": position,
             "present_speed": _encode_signed(speed, bit, speed_full),
-            "present_load": _encode_signed(sensed.present_current * self.load_per_sensed, bit, full),
+            "present_load": _encode_signed(sensed.present_pwm * full / PWM_FULL_SCALE, bit, full),
             "present_voltage": sensed.present_input_voltage,
             "present_temperature": sensed.present_temperature,
             "moving": sensed.moving,

@@ -69,7 +69,7 @@ def test_readings_come_back_in_classic_units_with_the_direction_bit(xl320):
     regs = xl320.sensed_to_registers(sensed, joint)
     assert regs["present_position"] == 812
     assert regs["present_speed"] == 1024 + round(100 * 0.229 / 0.111)  # clockwise
-    assert regs["present_load"] == 1024 + round(400 * 1023 / 1000)  # 40 % of the stall current, clockwise
+    assert regs["present_load"] == round(300 * 1023 / 885)  # the output's share, counter-clockwise (not the current)
     assert (regs["present_voltage"], regs["present_temperature"], regs["moving"], regs["torque_enable"]) == (74, 31, 1, 0)
     assert regs["hardware_error_status"] == 0x01 | 0x04  # Overload and Input Voltage in the XL-320's bits
     wheel = xl320.sensed_to_registers(sensed, xl320.commands({**JOINT, "control_mode": 1}))
