@@ -227,3 +227,19 @@ def test_the_mx_106_drive_mode_reverse_bit_turns_the_other_way(drive_mode, angle
             assert abs(bus.angle_deg(1) - angle_deg) < 1.0
         finally:
             port.closePort()
+
+
+def test_present_load_is_the_output_so_a_shaft_pushed_round_with_no_output_reads_none(mx28):
+    """"Present load is an inferred value based on the internal output value" (control_table_present_load.md): with
+    Torque Limit 0 the output is 0 whatever the push (it read 18 %, the winding's braking current)."""
+    bus, port, ph = mx28
+    assert ph.write1ByteTxRx(port, 1, 18, 0) == (COMM_SUCCESS, 0)
+    assert ph.write2ByteTxRx(port, 1, GOAL_POSITION, 2048) == (COMM_SUCCESS, 0)
+    bus.step(0.2)
+    assert ph.write2ByteTxRx(port, 1, 34, 0) == (COMM_SUCCESS, 0)
+    bus.set_external_torque(1, 0.5)
+    bus.step(1.0)
+    assert bus.read(1, "present_speed") & 0x3FF > 20 and bus.read(1, "present_load") & 0x3FF == 0
+    assert ph.write2ByteTxRx(port, 1, 34, 1023) == (COMM_SUCCESS, 0)
+    bus.step(1.0)  # driving back against the push: a load, counter-clockwise of it
+    assert bus.read(1, "present_load") & 0x3FF > 100
