@@ -488,16 +488,19 @@ def check_defaults(ctx: Context) -> "str | Note":
 
 # -- destructive ---------------------------------------------------------------------------
 def check_id_change(ctx: Context) -> str:
-    """Writing the ID is answered from the old ID; then only the new ID answers; restored."""
+    """Writing the ID is answered from the old ID; then only the new ID answers; restored.
+
+    Restored also when the write's reply was lost: a servo that moved is moved back whatever the check
+    found (left at the free ID, a real robot's servo would be lost to its program).
+    """
     old, new = ctx.target, ctx.free_id()
-    moved = False
+    expect(ctx.silent(encode_instruction(new, Instruction.PING)), f"ID {new}, the free ID this check moves to, answers")
     try:
         ctx.must_put(old, "id", new)
-        moved = True
         ctx.status(new, Instruction.PING)
         expect(ctx.silent(encode_instruction(old, Instruction.PING)), f"old ID {old} still answers")
     finally:
-        if moved:
+        if ctx.answers(encode_instruction(new, Instruction.PING)):
             ctx.put(new, "id", old)
     ctx.status(old, Instruction.PING)
     return f"{old}->{new}->{old}"
@@ -508,16 +511,15 @@ def check_baud_change(ctx: Context) -> "str | Note":
     servo = ctx.target
     original = ctx.get(servo, "baud_rate")
     host = ctx.link.baud
-    changed = False
     try:
         ctx.must_put(servo, "baud_rate", _SLOW_BAUD_REGISTER)
-        changed = True
         old_rate_silent = ctx.silent(encode_instruction(servo, Instruction.PING))
         ctx.link.baud = _SLOW_HOST_BPS
         rtt = statistics.median(ctx.ping_rtts(servo, 3))
     finally:
-        if changed:
-            ctx.link.baud = _SLOW_HOST_BPS
+        # Restored wherever the servo answers at the slow rate, the write's reply lost or not.
+        ctx.link.baud = _SLOW_HOST_BPS
+        if ctx.answers(encode_instruction(servo, Instruction.PING)):
             ctx.put(servo, "baud_rate", original)
         ctx.link.baud = host
     ctx.status(servo, Instruction.PING)
@@ -526,21 +528,37 @@ def check_baud_change(ctx: Context) -> "str | Note":
 
 
 def check_reset(ctx: Context) -> str:
-    """RESET restores factory defaults (ID 1, 1 Mbps); the table is then written back."""
+    """RESET restores factory defaults (ID 1, 1 Mbps); the table is then written back.
+
+    Only where nothing else answers at ID 1, where the reset servo lands: two servos there would collide,
+    and the write-back would rewrite both ("If Dynamixel with the same ID is connected, packet will
+    collide", e-manual).  The write-back runs however the check ends, a lost reply to the RESET included.
+    """
     servo = 1 if 1 in ctx.ids else ctx.target
-    before = ctx.table(servo)
     host = ctx.link.baud
+    if servo != 1:
+        ctx.link.baud = 1_000_000
+        try:
+            taken = ctx.answers(encode_instruction(1, Instruction.PING))
+        finally:
+            ctx.link.baud = host
+        if taken:
+            raise Skipped("a servo not under test answers at ID 1, where RESET would put this one")
+    before = ctx.table(servo)
     lay = layout(ctx.profile)
-    status = ctx.status(servo, Instruction.RESET)
-    figure = f"answered by id={status.id}"
-    ctx.link.baud = 1_000_000
     try:
+        status = ctx.status(servo, Instruction.RESET)
+        figure = f"answered by id={status.id}"
+        ctx.link.baud = 1_000_000
         after = ctx.table(1)
         differ = table_differences(lay.defaults, after, ctx.profile, DYNAMIC | {"goal_position", "torque_limit"})
         expect(not differ, "after RESET: " + ", ".join(differ))
     finally:
-        _write_back(ctx, before)
-        ctx.link.baud = host
+        ctx.link.baud = 1_000_000  # where a reset servo listens, the RESET's reply seen or not
+        try:
+            _write_back(ctx, before)
+        finally:
+            ctx.link.baud = host
     ctx.status(servo, Instruction.PING)
     return figure + "; table at defaults; restored"
 

@@ -127,3 +127,27 @@ def test_a_misspelt_check_or_a_bad_timeout_is_an_error_not_a_pass_or_a_hang(argv
     result = subprocess.run([sys.executable, "-m", "ax12emu", "conformance", "ax12emu://?ids=1", *argv],
                             capture_output=True, text=True, timeout=60)
     assert result.returncode == 2 and says in result.stderr, (result.returncode, result.stdout, result.stderr)
+
+
+def test_reset_leaves_a_servo_not_under_test_alone():
+    """Testing ID 2 beside a servo at ID 1: the RESET check would put ID 2 on ID 1 and write its table back to both
+    (servo 1 ended with servo 2's ID and table); it is skipped, and servo 1 is as it was."""
+    with VirtualBus([1, 2], transport="inprocess", model="kinematic") as bus:
+        bus.write(1, "ccw_angle_limit", 800)
+        before = bus.table(1)
+        report = conformance.run(bus.port, [2], destructive=True, only=["RESET"], timeout_s=CONFORMANCE_TIMEOUT_S,
+                                 silence_s=EMULATOR_SILENCE_S)
+        assert report.outcome("RESET") == "skip" and bus.table(1) == before and bus.read(2, "id") == 2
+
+
+def test_a_destructive_check_that_fails_mid_way_still_puts_the_servo_back():
+    """A RESET answered from the new ID (--reset-reply-id new) fails the check, and the servo gets its ID and table
+    back (it was left at ID 1 with the factory table, and the report did not say)."""
+    from ax12emu.servo.virtual_servo import ServoOptions
+
+    with VirtualBus([2], transport="inprocess", model="kinematic", options=ServoOptions(reset_reply_from_new_id=True)) as bus:
+        bus.write(2, "ccw_angle_limit", 800)
+        report = conformance.run(bus.port, [2], destructive=True, only=["RESET"], timeout_s=CONFORMANCE_TIMEOUT_S,
+                                 silence_s=EMULATOR_SILENCE_S)
+        assert report.outcome("RESET") == FAIL and "came from id=1" in next(r.figure for r in report.results if r.name == "RESET")
+        assert bus.bus.ids == [2] and bus.read(2, "ccw_angle_limit") == 800
