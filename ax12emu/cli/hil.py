@@ -77,7 +77,8 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     decode = sub.add_parser("decode", help="print a bus trace (or a raw byte capture) as decoded packets")
     decode.add_argument("file", metavar="FILE", help="a JSON-lines trace from serve --trace, or a binary capture")
     decode.add_argument("--raw", action="store_true", help="treat FILE as a raw capture even if it looks like JSON")
-    decode.add_argument("--profile", choices=sorted(PROFILES), default=DEFAULT_PROFILE, help="register names of this profile")
+    decode.add_argument("--profile", choices=sorted(PROFILES),
+                        help=f"the AX-12As' register names by this profile (default: the trace header's, else {DEFAULT_PROFILE})")
     decode.add_argument("--protocol", choices=("auto", "1.0", "both"), default="auto",
                         help="frame Protocol 1.0 only, or 1.0 and 2.0 (a wire of X-series servos, alone or beside "
                         "AX-12s); auto: both when the trace names 2.0 servos or the bytes hold a 2.0 header")
@@ -120,13 +121,17 @@ def _decode(args: argparse.Namespace) -> int:
     from ax12emu.tracing.trace import read_capture, read_raw, trace_header
 
     chunks = read_raw(args.file) if args.raw else read_capture(args.file)
-    servos = args.servo if args.servo is not None else (None if args.raw else trace_header(args.file).get("servos"))
+    header = {} if args.raw else trace_header(args.file)
+    servos = args.servo if args.servo is not None else header.get("servos")
+    profile = args.profile if args.profile is not None else header.get("profile", DEFAULT_PROFILE)
+    if profile not in PROFILES:  # the header is a file's word: checked as the flag is
+        raise ValueError(f"{args.file}: the header's profile {profile!r} is none of {', '.join(sorted(PROFILES))}")
     if servos is not None and not isinstance(servos, str):
         raise ValueError(f"{args.file}: the header's servos must be a text such as \"1-5:xm430-w350\", got {servos!r}")
     if args.servo is not None and ":" not in args.servo:  # serve's bare MODEL takes its IDs from --ids; decode has none
         raise ValueError(f"--servo {args.servo}: decode needs IDS:MODEL[,IDS:MODEL...] (e.g. 1-5:xm430-w350)")
     protocol = None if args.protocol == "auto" else args.protocol
-    for item in decode(chunks, profile=args.profile, protocol=protocol, servos=servos):
+    for item in decode(chunks, profile=profile, protocol=protocol, servos=servos):
         print(format_decoded(item))
     return 0
 

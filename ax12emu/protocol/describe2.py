@@ -64,9 +64,18 @@ def _name(instruction: int) -> str:
         return f"INSTR_{instruction:#04x}"
 
 
-def describe_instruction2(packet: InstructionPacket2, names: Mapping[int, str] | None = None) -> str:
-    """One line: instruction, ID and what it asks."""
+def describe_instruction2(packet: InstructionPacket2, names: Mapping[int, str] | None = None,
+                          names_by_id: Mapping[int, Mapping[int, str]] | None = None) -> str:
+    """One line: instruction, ID and what it asks.
+
+    ``names_by_id``: each servo's names, for the blocks of a Sync or Bulk packet (models on one wire need not share
+    addresses: the XL-320's 32 is Moving Speed, the XL430's Max Voltage Limit); ``names`` where it has none.
+    """
     head = f"{_name(packet.instruction)} id={packet.id}"
+
+    def of(servo_id: int) -> Mapping[int, str] | None:
+        return names_by_id.get(servo_id, names) if names_by_id else names
+
     if not packet.crc_ok:
         return f"{head} BAD-CRC"
     parsed = parse_params(packet.instruction, packet.params)
@@ -81,14 +90,16 @@ def describe_instruction2(packet: InstructionPacket2, names: Mapping[int, str] |
         return f"{head} {parsed.option.name}"
     if isinstance(parsed, SyncRead):
         ids = ",".join(str(i) for i in parsed.ids)
-        return f"{head} {_at(parsed.address, names)} length={parsed.length} ids={ids}"
+        at = {_at(parsed.address, of(i)) for i in parsed.ids} or {_at(parsed.address, names)}
+        where = at.pop() if len(at) == 1 else f"@{parsed.address}"  # named only where every listed servo agrees
+        return f"{head} {where} length={parsed.length} ids={ids}"
     if isinstance(parsed, SyncWrite):
-        blocks = " ".join(f"[id={i} {_write(parsed.address, data, names)}]" for i, data in parsed.writes)
+        blocks = " ".join(f"[id={i} {_write(parsed.address, data, of(i))}]" for i, data in parsed.writes)
         return f"{head} {blocks}" if blocks else head
     if isinstance(parsed, BulkRead):
-        return head + "".join(f" [id={i} {_at(a, names)} length={n}]" for i, a, n in parsed.reads)
+        return head + "".join(f" [id={i} {_at(a, of(i))} length={n}]" for i, a, n in parsed.reads)
     if isinstance(parsed, BulkWrite):
-        return head + "".join(f" [id={i} {_write(a, data, names)}]" for i, a, data in parsed.writes)
+        return head + "".join(f" [id={i} {_write(a, data, of(i))}]" for i, a, data in parsed.writes)
     return head
 
 

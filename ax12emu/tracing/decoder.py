@@ -41,7 +41,7 @@ from ax12emu.protocol.describe2 import describe_instruction2, describe_status2
 from ax12emu.protocol.framing import Framer
 from ax12emu.protocol.framing2 import DEFAULT_MAX_LENGTH, Framer2
 from ax12emu.protocol.packets import BROADCAST_ID, Instruction, InstructionPacket
-from ax12emu.protocol.packets2 import HEADER2, InstructionPacket2, StatusPacket2
+from ax12emu.protocol.packets2 import HEADER2, Instruction2, InstructionPacket2, StatusPacket2
 from ax12emu.protocol.servo_models import model, model_names
 from ax12emu.protocol.servo_spec import parse_servo_spec
 
@@ -105,27 +105,33 @@ class Decoded(NamedTuple):
 
     @property
     def raw(self) -> bytes:
-        """Wire bytes of the packet (with its checksum as received if it was corrupt)."""
+        """Wire bytes of the packet (with its checksum as received if it was corrupt): as the decoder saw them,
+        else rebuilt (a packet made in code, with a correct checksum)."""
         if self.wire or self.packet is None:
             return self.wire
-        if isinstance(self.packet, (InstructionPacket2, StatusPacket2)):
-            return self.packet.encode()
-        data = self.packet.encode()
-        return data if self.packet.checksum_ok else data[:-1] + bytes((data[-1] ^ 0xFF,))
+        return self.packet.encode()
 
 
 class _Stream:
-    """One framer per direction, counting what it throws away."""
+    """One framer per direction, counting what it throws away and keeping the bytes of the packets it completes."""
+
+    #: Bytes kept to give a packet its wire bytes: the longest Protocol 1.0 frame.
+    _KEEP = DEFAULT_MAX_LENGTH + 6
 
     def __init__(self) -> None:
         self.framer = Framer()
         self.discarded = 0
+        self.recent = bytearray()
 
-    def feed(self, data: bytes, t: float | None) -> tuple[list[InstructionPacket], int]:
+    def feed(self, data: bytes, t: float | None) -> tuple[list[tuple[InstructionPacket, bytes]], int]:
+        """Bytes in; the packets they complete with their wire bytes (a corrupt one's checksum as received), and
+        how many bytes were thrown away."""
+        self.recent += data
+        del self.recent[: -self._KEEP]
         packets = self.framer.feed(data, t)
         lost = self.framer.discarded_bytes - self.discarded
         self.discarded = self.framer.discarded_bytes
-        return packets, lost
+        return [(packet, bytes(self.recent[-_wire1(packet):])) for packet in packets], lost
 
 
 class _BothStream:
@@ -181,7 +187,10 @@ class _Conversation:
             return ECHO
         if direction == OUT:
             return STATUS
-        broadcast_ping = last is not None and last.id == BROADCAST_ID and last.instruction == Instruction.PING
+        # After a broadcast PING every servo answers, each with a bare status (no parameters on Protocol 1.0): a
+        # packet with parameters is the host's next instruction (a capture went on reading everything as replies).
+        broadcast_ping = (last is not None and last.id == BROADCAST_ID and last.instruction == Instruction.PING
+                          and not packet.params)
         if last is not None and (broadcast_ping or (packet.id == last.id and not self.answered)):
             return STATUS
         if packet.instruction not in _INSTRUCTIONS and packet.instruction < 0x80:
@@ -194,18 +203,25 @@ class _Conversation:
         last = self.request2
         if isinstance(packet, StatusPacket2):
             latency = None if chunk.t is None or self.t2 is None else chunk.t - self.t2
-            text = describe_status2(packet, last, names.get(packet.id, self._common(names)))
+            asked = last if last is not None and last.id in (packet.id, BROADCAST_ID) else None  # as _asked_of
+            text = describe_status2(packet, asked, names.get(packet.id, self._common(names)))
             return Decoded(chunk.t, STATUS, packet, text, latency, wire=wire)
         table = names.get(packet.id, self._common(names))
         if chunk.direction != IN and last is not None and packet == last:
-            return Decoded(chunk.t, ECHO, packet, "echo of " + describe_instruction2(packet, table), wire=wire)
+            return Decoded(chunk.t, ECHO, packet, "echo of " + describe_instruction2(packet, table, names), wire=wire)
         self.request2, self.t2 = packet, chunk.t
-        return Decoded(chunk.t, INSTRUCTION, packet, describe_instruction2(packet, table), wire=wire)
+        return Decoded(chunk.t, INSTRUCTION, packet, describe_instruction2(packet, table, names), wire=wire)
 
     @staticmethod
     def _common(names: Mapping[int, Mapping[int, str]]) -> Mapping[int, str] | None:
         """Names for a packet to the broadcast ID: the first servo's table (the X series share their addresses)."""
         return next(iter(names.values()), None)
+
+    def _asked_of(self, servo_id: int) -> InstructionPacket | None:
+        """The last instruction, if a status from ``servo_id`` can answer it (to that ID, or broadcast): its data
+        is named by that request's addresses, and by no other servo's."""
+        request = self.request
+        return request if request is not None and request.id in (servo_id, BROADCAST_ID) else None
 
     def describe(self, packet: InstructionPacket, chunk: Chunk, profile: str, tables: Mapping[int, Layout]) -> Decoded:
         """A Protocol 1.0 packet, its registers named by its ID's table in ``tables``, else ``profile``'s."""
@@ -213,7 +229,7 @@ class _Conversation:
         if kind == STATUS:
             latency = None if chunk.t is None or self.t is None else chunk.t - self.t
             self.answered = True
-            text = describe_status(packet.id, packet.instruction, packet.params, self.request,
+            text = describe_status(packet.id, packet.instruction, packet.params, self._asked_of(packet.id),
                                    tables.get(packet.id, profile), packet.checksum_ok)
             return Decoded(chunk.t, STATUS, packet, text, latency)
         if kind == ECHO:
@@ -240,6 +256,21 @@ class Decoder:
         self._streams = {IN: _Stream(), OUT: _Stream(), None: _Stream()}
         self._talk = _Conversation()
 
+    def _follow_id_write(self, packet: AnyPacket) -> None:
+        """A WRITE of the ID register moves that servo's table to its new ID (its later packets are named by it)."""
+        if isinstance(packet, InstructionPacket):
+            table = self.tables1.get(packet.id)
+            if (table is not None and packet.instruction == Instruction.WRITE and packet.checksum_ok
+                    and len(packet.params) >= 2 and packet.params[0] == table.by_name["id"].address
+                    and packet.params[1] < BROADCAST_ID):
+                self.tables1[packet.params[1]] = self.tables1.pop(packet.id)
+        elif isinstance(packet, InstructionPacket2):
+            names = self.names.get(packet.id)
+            if (names is not None and packet.instruction == Instruction2.WRITE and packet.crc_ok
+                    and len(packet.params) >= 3 and names.get(packet.params[0] | packet.params[1] << 8) == "id"
+                    and packet.params[2] < 0xFD):
+                self.names[packet.params[2]] = self.names.pop(packet.id)
+
     def feed(self, chunk: Chunk, out: list[Decoded] | None = None) -> list[Decoded]:
         """Append the packets ``chunk`` completes to ``out`` (a new list by default) and return it."""
         out = [] if out is None else out
@@ -253,7 +284,22 @@ class Decoder:
                 if out and out[-1].kind == GARBAGE and out[-1].t == chunk.t:
                     lost += out.pop().discarded
                 out.append(Decoded(chunk.t, GARBAGE, None, f"{lost} byte(s) discarded while hunting for a frame", discarded=lost))
-            out.extend(self._talk.describe(packet, chunk, self.profile, self.tables1) for packet in packets)
+            for packet, wire in packets:
+                out.append(self._talk.describe(packet, chunk, self.profile, self.tables1)._replace(wire=wire))
+                if out[-1].kind == INSTRUCTION:
+                    self._follow_id_write(packet)
+        return out
+
+    def finish(self, out: list[Decoded] | None = None) -> list[Decoded]:
+        """Append what is left at the end of a trace, bytes no frame completed, to ``out`` (a new list by default)."""
+        out = [] if out is None else out
+        if self.protocol == "both":
+            left = {direction: stream.unclaimed for direction, stream in self._both.items()}
+        else:
+            left = {direction: stream.framer.buffered for direction, stream in self._streams.items()}
+        for count in left.values():
+            if count:
+                out.append(Decoded(None, GARBAGE, None, f"{count} byte(s) at the end that no frame completed", discarded=count))
         return out
 
     def _feed_both(self, chunk: Chunk, out: list[Decoded]) -> list[Decoded]:
@@ -267,6 +313,8 @@ class Decoder:
                     out.append(self._talk.describe(packet, chunk, self.profile, self.tables1)._replace(wire=wire))
                 else:
                     out.append(self._talk.describe2(packet, wire, chunk, self.names))
+                if out[-1].kind == INSTRUCTION:
+                    self._follow_id_write(packet)
         return out
 
 
@@ -288,7 +336,7 @@ def decode(chunks: Iterable[Chunk], *, profile: str = DEFAULT_PROFILE, protocol:
     out: list[Decoded] = []
     for chunk in chunks:
         decoder.feed(chunk, out)
-    return out
+    return decoder.finish(out)
 
 
 #: Column shown for each kind.

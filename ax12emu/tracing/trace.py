@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import datetime
 import json
+import math
 import os
 import time
 from collections.abc import Iterator
@@ -84,15 +85,32 @@ class TraceWriter:
         self.close()
 
 
+#: The largest file a decode reads (bytes): a trace of hours of a busy bus is well under it, and a device file
+#: (``/dev/zero``) or a wrong file would otherwise be read until memory runs out.
+MAX_TRACE_BYTES = 512 * 1024 * 1024
+
+
+def _check_size(path: str | os.PathLike[str]) -> None:
+    size = os.stat(path).st_size
+    if size > MAX_TRACE_BYTES or not Path(path).is_file():
+        raise ValueError(f"{path}: not a trace file of at most {MAX_TRACE_BYTES // 2**20} MB "
+                         f"({'not a regular file' if not Path(path).is_file() else f'{size} bytes'})")
+
+
 def read_trace(path: str | os.PathLike[str]) -> Iterator[Chunk]:
-    """Chunks of a JSON-lines trace; a bad line raises ValueError naming its number."""
-    with open(path, encoding="utf-8") as handle:
-        for number, line in enumerate(handle, 1):
-            line = line.strip()
-            if not line:
-                continue
+    """Chunks of a JSON-lines trace; a bad line raises ValueError naming its number (a time before the last one's
+    too: a trace's times are the recorder's monotonic clock)."""
+    _check_size(path)
+    last_t = -math.inf
+    with open(path, "rb") as handle:
+        for number, raw in enumerate(handle, 1):
             try:
+                line = raw.decode("utf-8-sig" if number == 1 else "utf-8").strip()
+                if not line:
+                    continue
                 record = json.loads(line)
+                if not isinstance(record, dict):
+                    raise ValueError(f"a JSON object per line, got {type(record).__name__}")
                 if "format" in record:
                     if record["format"] != TRACE_FORMAT:
                         raise ValueError(f"unknown trace format {record['format']!r}")
@@ -100,31 +118,43 @@ def read_trace(path: str | os.PathLike[str]) -> Iterator[Chunk]:
                 direction = record["dir"]
                 if direction not in (IN, OUT):
                     raise ValueError(f"dir must be {IN!r} or {OUT!r}")
-                yield Chunk(float(record["t"]), direction, bytes.fromhex(record["data"]))
-            except (ValueError, KeyError, TypeError) as exc:
-                raise ValueError(f"{path}:{number}: not a trace line ({exc})") from None
+                t = record["t"]
+                if isinstance(t, bool) or not isinstance(t, (int, float)) or not math.isfinite(t):
+                    raise ValueError(f"t must be a finite number of seconds, got {t!r}")
+                if t < last_t:
+                    raise ValueError(f"t {t} is before the line before's {last_t}")
+                last_t = t
+                yield Chunk(float(t), direction, bytes.fromhex(record["data"]))
+            except (ValueError, KeyError, TypeError, RecursionError) as exc:  # RecursionError: JSON nested too deep
+                reason = "nested too deep" if isinstance(exc, RecursionError) else exc
+                raise ValueError(f"{path}:{number}: not a trace line ({reason})") from None
+
+
+#: The longest header line read: a wire of every ID on both protocols names ~500 servos in it (6 kB).
+MAX_HEADER_BYTES = 64 * 1024
 
 
 def trace_header(path: str | os.PathLike[str]) -> dict:
     """The header line of a JSON-lines trace (``profile``, and ``servos`` for a Protocol 2.0 bus); {} for a raw capture."""
     with open(path, "rb") as handle:
-        first = handle.readline(4096).strip()
+        first = handle.readline(MAX_HEADER_BYTES).strip().removeprefix(b"\xef\xbb\xbf")  # a UTF-8 byte-order mark
     if not first.startswith(b"{"):
         return {}
     try:
         record = json.loads(first)
-    except ValueError:
+    except (ValueError, RecursionError):
         return {}
     return record if isinstance(record, dict) and record.get("format") == TRACE_FORMAT else {}
 
 
 def read_raw(path: str | os.PathLike[str]) -> Iterator[Chunk]:
     """A binary capture of the line (host and servo bytes interleaved) as one chunk."""
+    _check_size(path)
     yield Chunk(None, None, Path(path).read_bytes())
 
 
 def read_capture(path: str | os.PathLike[str]) -> Iterator[Chunk]:
     """A JSON-lines trace if the file starts like one, else a raw binary capture."""
     with open(path, "rb") as handle:
-        start = handle.read(64).lstrip()
+        start = handle.read(64).removeprefix(b"\xef\xbb\xbf").lstrip()  # a byte-order mark: still a trace
     return read_trace(path) if start.startswith(b"{") else read_raw(path)
