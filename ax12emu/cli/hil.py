@@ -106,7 +106,8 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     check.add_argument("--profile", choices=sorted(PROFILES), default=DEFAULT_PROFILE, help="expected control-table defaults")
     check.add_argument("--only", action="append", metavar="CHECK", help="run only this check (repeatable)")
     check.add_argument("--protocol", choices=("1.0", "2.0"), default="1.0",
-                       help="1.0 (AX/MX) or 2.0 (X series; the table comes from the model number each servo pings)")
+                       help="1.0 (the AX-12's table and defaults) or 2.0 (X series; the table comes from the model number each "
+                       "servo pings)")
 
     cli_models.add_command(sub)
 

@@ -240,9 +240,18 @@ def check_split_packet(ctx: Context) -> str:
         time.sleep(0.001)
     ctx.link.sent.append(packet)
     ctx.link.write_raw(packet[-1:])
-    response = ctx.link.receive(start=time.perf_counter())
+    response = _reply_past_echoes(ctx, (packet,), start=time.perf_counter())
     expect(response.status is not None and response.status.id == ctx.target, "no reply to a PING sent byte by byte")
     return f"{len(packet)} bytes over {_ms(time.perf_counter() - start)}"
+
+
+def _reply_past_echoes(ctx: Context, sent: tuple[bytes, ...], *, start: float | None = None):
+    """The next status packet, skipping the echoes of ``sent`` a half-duplex adapter hands back (an echo read as
+    the reply passed these checks with no servo at all)."""
+    while True:
+        response = ctx.link.receive(start=start)
+        if response.status is None or response.status.encode() not in sent:
+            return response
 
 
 def check_back_to_back(ctx: Context) -> str:
@@ -253,20 +262,28 @@ def check_back_to_back(ctx: Context) -> str:
     ctx.link.flush_input()
     ctx.link.sent.extend((first, then))
     ctx.link.write_raw(first + then)
-    a = ctx.link.receive()
-    b = ctx.link.receive()
+    a = _reply_past_echoes(ctx, (first, then))
+    b = _reply_past_echoes(ctx, (first, then))
     expect(a.status is not None and a.status.id == ctx.target, "first packet unanswered")
     expect(b.status is not None and b.status.id == second and len(b.status.params) == 2, "second packet unanswered")
     return f"replies from {ctx.target} then {second}"
+
+
+def _clean_ping(ctx: Context) -> None:
+    """A PING answered as a PING is: no instruction error bits and no parameters (a reply to the garbage glued to
+    the PING, with Instruction or Checksum Error and bytes of data, passed as "answered")."""
+    status = ctx.status(ctx.target, Instruction.PING)
+    expect(not status.error & ~_ALARMS and not status.params,
+           f"PING answered with {describe_error(status.error & ~_ALARMS) or 'no error'} and {len(status.params)} data bytes")
 
 
 def check_resync(ctx: Context) -> str:
     """After garbage, repeated 0xFF, a truncated packet and an impossible LENGTH, the next PING is answered."""
     ctx.link.write_raw(bytes(range(0, 0xFE, 7)) + b"\xff\xff\xff\xff" + bytes((ctx.target,)) + b"\x04\x02")
     time.sleep(0.1)
-    ctx.status(ctx.target, Instruction.PING)
+    _clean_ping(ctx)
     ctx.link.write_raw(b"\xff\xff" + bytes((ctx.target,)) + b"\x00\x00")
-    ctx.status(ctx.target, Instruction.PING)
+    _clean_ping(ctx)
     return "PING answered after garbage + truncated packet (100 ms pause) and after LENGTH 0"
 
 
@@ -551,7 +568,10 @@ def check_reset(ctx: Context) -> str:
         figure = f"answered by id={status.id}"
         ctx.link.baud = 1_000_000
         after = ctx.table(1)
-        differ = table_differences(lay.defaults, after, ctx.profile, DYNAMIC | {"goal_position", "torque_limit"})
+        # Firmware Version and Moving Speed have no initial value on the e-manual's AX-12A page ("-"): a real
+        # servo's are its own, not this profile's.
+        differ = table_differences(lay.defaults, after, ctx.profile,
+                                   DYNAMIC | {"goal_position", "torque_limit", "firmware_version", "moving_speed"})
         expect(not differ, "after RESET: " + ", ".join(differ))
     finally:
         ctx.link.baud = 1_000_000  # where a reset servo listens, the RESET's reply seen or not

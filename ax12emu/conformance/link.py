@@ -93,8 +93,10 @@ class Link:
         return Framer()
 
     def _is_echo(self, packet, echo: bytes) -> bool:
-        # Protocol 1.0 status and instruction packets share one frame: only the echo itself is skipped.
-        return bool(echo) and packet.encode() == echo
+        # Protocol 1.0 status and instruction packets share one frame: only the echo itself is skipped, compared
+        # field by field, so the echo of a packet sent with a wrong checksum (re-encoded, a right one) is found too.
+        return (len(echo) >= 6 and packet.id == echo[2] and packet.instruction == echo[4]
+                and bytes(packet.params) == bytes(echo[5:-1]))
 
     def _status(self, packet, rtt_s: float) -> Response | Response2:
         if packet is None:

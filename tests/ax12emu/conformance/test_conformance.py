@@ -151,3 +151,22 @@ def test_a_destructive_check_that_fails_mid_way_still_puts_the_servo_back():
                                  silence_s=EMULATOR_SILENCE_S)
         assert report.outcome("RESET") == FAIL and "came from id=1" in next(r.figure for r in report.results if r.name == "RESET")
         assert bus.bus.ids == [2] and bus.read(2, "ccw_angle_limit") == 800
+
+
+def test_an_echoing_adapter_neither_fails_the_suite_nor_stands_in_for_a_servo(emulator):
+    """A half-duplex adapter hands back every byte the host sends (--echo): the suite passes through it, its
+    echoes (that of a packet with a wrong checksum too) never taken for replies; and an ID nobody has fails
+    (the split-packet and back-to-back checks passed on the echo alone)."""
+    served = emulator("--ids", "1,2", "--echo", "--tcp", "127.0.0.1:0")
+    report = conformance.run(served.port, IDS, timeout_s=CONFORMANCE_TIMEOUT_S, silence_s=EMULATOR_SILENCE_S)
+    assert report.passed, report.table()
+    from ax12emu.conformance.checks import Context, Failed, check_back_to_back, check_split_packet
+    from ax12emu.conformance.link import Link, open_port
+
+    link = Link(open_port(served.port, 1_000_000), timeout_s=CONFORMANCE_TIMEOUT_S, silence_s=EMULATOR_SILENCE_S)
+    try:
+        for check in (check_split_packet, check_back_to_back):
+            with pytest.raises(Failed):
+                check(Context(link, [7, 9]))  # nobody has IDs 7 and 9: only the echoes come back
+    finally:
+        link.close()
