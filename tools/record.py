@@ -91,7 +91,11 @@ def record(port_name: str, servo_id: int, baud: int, duration_s: float, rate_hz:
     from dynamixel_sdk import COMM_SUCCESS, PacketHandler, PortHandler
 
     port, ph = PortHandler(port_name), PacketHandler(1.0)
-    if not port.openPort():
+    try:
+        opened = port.openPort()
+    except (OSError, ValueError) as exc:  # pyserial's SerialException is an OSError: a missing or non-tty path
+        raise SystemExit(f"cannot open {port_name}: {exc}") from None
+    if not opened:
         raise SystemExit(f"cannot open {port_name}")
     goal = _TABLE["goal_position"]
     first = _TABLE[_PRESENT[0]].address
