@@ -493,6 +493,22 @@ def return_delay_figure(ctx: Any, servo: int) -> str:
     return figure
 
 
+def check_alarms(ctx: Context) -> "str | Note":
+    """The alarm bits each servo's PING carries (Input Voltage, Overheating, Overload: "Status Packet" > "Error").
+
+    Not a failure of the protocol: the other checks look past them, so they are said here, where a servo
+    that is overheating or out of its voltage range would otherwise pass unseen.
+    """
+    raised = {}
+    for servo_id in ctx.ids:
+        alarms = ctx.status(servo_id, Instruction.PING).error & _ALARMS
+        if alarms:
+            raised[servo_id] = describe_error(alarms)
+    if raised:
+        return Note("alarms: " + "; ".join(f"ID {servo_id} {what}" for servo_id, what in raised.items()))
+    return "none"
+
+
 def check_defaults(ctx: Context) -> "str | Note":
     """Registers at the profile's factory defaults (ID, and values the firmware sets, excepted)."""
     ignore = DYNAMIC | {"id", "goal_position", "torque_limit"}
@@ -606,6 +622,7 @@ CHECKS: tuple[Check, ...] = (
     Check("absent ID is silent", check_absent_id),
     Check("model number", check_model_number),
     Check("read whole table", check_read_table),
+    Check("alarms", check_alarms),
     Check("defaults", check_defaults),
     Check("packet split into bytes", check_split_packet),
     Check("two packets in one write", check_back_to_back),

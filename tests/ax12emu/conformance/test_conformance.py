@@ -170,3 +170,13 @@ def test_an_echoing_adapter_neither_fails_the_suite_nor_stands_in_for_a_servo(em
                 check(Context(link, [7, 9]))  # nobody has IDs 7 and 9: only the echoes come back
     finally:
         link.close()
+
+
+def test_alarms_a_servo_raises_are_said_not_passed_over():
+    """Every other check looks past the alarm bits, so an overloaded servo passed unseen: the alarms check says it."""
+    report = conformance.run("ax12emu://?ids=1,2&alarm=1:overload", IDS, only=["alarms"], timeout_s=CONFORMANCE_TIMEOUT_S,
+                             silence_s=EMULATOR_SILENCE_S)
+    assert report.outcome("alarms") == "note" and "ID 1 OVERLOAD" in report.table()
+    clean = conformance.run("ax12emu://?ids=1,2", IDS, only=["alarms"], timeout_s=CONFORMANCE_TIMEOUT_S,
+                            silence_s=EMULATOR_SILENCE_S)
+    assert clean.outcome("alarms") == "pass"
