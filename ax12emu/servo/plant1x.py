@@ -103,8 +103,7 @@ class Plant1X(SteppedPlant):
 
     def reboot(self) -> None:
         """Power-up (RESET): the firmware restarts; the servo has put the table back."""
-        self.firmware.reboot()
-        self.firmware.restore_output()
+        self.firmware.reboot()  # which clears a cut output too
         self._values = {}
         self.write_back()
         self.command()
