@@ -654,11 +654,8 @@ class Faults1X(Faults2):
 
     def _hold_alarms(self, slot: int, bits: int) -> None:
         """The MX's firmware holds the conditions of the status-packet ``bits`` (0: none) present, then the copy."""
-        from ax12emu.servo.classic import X_ERROR_BITS  # loaded with the MX bus, not before
-
         servo = self._servo2(slot)
-        names = dict(servo.plant.classic.units.errors)
-        self._firmware(slot, "alarm").hold_errors(sum(X_ERROR_BITS[name] for name, bit in names.items() if bit & bits))
+        self._firmware(slot, "alarm").hold_errors(servo.plant.classic.errors_to_x(bits))
         servo.plant.write_back()
 
     def duplicate(self, slot: int, as_id: int) -> None:

@@ -220,17 +220,21 @@ class ClassicMap:
                 error |= classic_bit
         return error
 
+    def errors_to_x(self, classic_bits: int) -> int:
+        """The family's own error bits (Shutdown, the status packet's alarms) as Hardware Error Status bits."""
+        x_bits = 0
+        for classic_bit, x_bit in self._x_bits:
+            if classic_bits & classic_bit:
+                x_bits |= x_bit
+        return x_bits
+
     # -- registers -> firmware ---------------------------------------------------------------
     def commands(self, values: Mapping[str, int]) -> XCommands:
         """The X commands the classic registers ``values`` (name -> value, as the table holds them) mean."""
         units = self.units
         full = units.output_full_scale
         torque_pwm = int(round(min(values.get("torque_limit", full), full) * PWM_FULL_SCALE / full))
-        shutdown = 0
-        for classic_bit, x_bit in self._x_bits:
-            if values.get("shutdown", 0) & classic_bit:
-                shutdown |= x_bit
-        cmd = XCommands(torque_enable=values.get("torque_enable", 0), shutdown=shutdown)
+        cmd = XCommands(torque_enable=values.get("torque_enable", 0), shutdown=self.errors_to_x(values.get("shutdown", 0)))
         for name in ("temperature_limit", "min_voltage_limit", "max_voltage_limit"):
             if name in values:
                 setattr(cmd, name, values[name])  # same units on both (deg C, 0.1 V)
