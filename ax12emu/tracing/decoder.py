@@ -169,6 +169,12 @@ def _wire1(packet: InstructionPacket) -> int:
     return len(packet.params) + 6
 
 
+def _asked_of(request, servo_id: int):
+    """``request`` (the last instruction, either protocol) if a status from ``servo_id`` can answer it (it went to
+    that ID, or to all): the status's data is named by that request's addresses, and by no other servo's."""
+    return request if request is not None and request.id in (servo_id, BROADCAST_ID) else None
+
+
 class _Conversation:
     """The last instruction: it names a READ's data and says who may answer."""
 
@@ -203,8 +209,7 @@ class _Conversation:
         last = self.request2
         if isinstance(packet, StatusPacket2):
             latency = None if chunk.t is None or self.t2 is None else chunk.t - self.t2
-            asked = last if last is not None and last.id in (packet.id, BROADCAST_ID) else None  # as _asked_of
-            text = describe_status2(packet, asked, names.get(packet.id, self._common(names)))
+            text = describe_status2(packet, _asked_of(last, packet.id), names.get(packet.id, self._common(names)))
             return Decoded(chunk.t, STATUS, packet, text, latency, wire=wire)
         table = names.get(packet.id, self._common(names))
         if chunk.direction != IN and last is not None and packet == last:
@@ -217,19 +222,13 @@ class _Conversation:
         """Names for a packet to the broadcast ID: the first servo's table (the X series share their addresses)."""
         return next(iter(names.values()), None)
 
-    def _asked_of(self, servo_id: int) -> InstructionPacket | None:
-        """The last instruction, if a status from ``servo_id`` can answer it (to that ID, or broadcast): its data
-        is named by that request's addresses, and by no other servo's."""
-        request = self.request
-        return request if request is not None and request.id in (servo_id, BROADCAST_ID) else None
-
     def describe(self, packet: InstructionPacket, chunk: Chunk, profile: str, tables: Mapping[int, Layout]) -> Decoded:
         """A Protocol 1.0 packet, its registers named by its ID's table in ``tables``, else ``profile``'s."""
         kind = self.classify(packet, chunk.direction)
         if kind == STATUS:
             latency = None if chunk.t is None or self.t is None else chunk.t - self.t
             self.answered = True
-            text = describe_status(packet.id, packet.instruction, packet.params, self._asked_of(packet.id),
+            text = describe_status(packet.id, packet.instruction, packet.params, _asked_of(self.request, packet.id),
                                    tables.get(packet.id, profile), packet.checksum_ok)
             return Decoded(chunk.t, STATUS, packet, text, latency)
         if kind == ECHO:
