@@ -68,6 +68,8 @@ github ROBOTIS-GIT/emanual _includes/en/dxl/):
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
+from functools import reduce
+from operator import or_
 
 from ax12emu.protocol.servo_models import Classic, ServoModel
 from firmware_model.xseries.firmware import PULSES_PER_REV, PWM_FULL_SCALE
@@ -214,19 +216,11 @@ class ClassicMap:
 
     def errors_to_classic(self, hardware_error_status: int) -> int:
         """The firmware's Hardware Error Status bits as the family's own error bits (``errors``)."""
-        error = 0
-        for classic_bit, x_bit in self._x_bits:
-            if hardware_error_status & x_bit:
-                error |= classic_bit
-        return error
+        return reduce(or_, (classic_bit for classic_bit, x_bit in self._x_bits if hardware_error_status & x_bit), 0)
 
     def errors_to_x(self, classic_bits: int) -> int:
         """The family's own error bits (Shutdown, the status packet's alarms) as Hardware Error Status bits."""
-        x_bits = 0
-        for classic_bit, x_bit in self._x_bits:
-            if classic_bits & classic_bit:
-                x_bits |= x_bit
-        return x_bits
+        return reduce(or_, (x_bit for classic_bit, x_bit in self._x_bits if classic_bits & classic_bit), 0)
 
     # -- registers -> firmware ---------------------------------------------------------------
     def commands(self, values: Mapping[str, int]) -> XCommands:
