@@ -32,9 +32,9 @@ import logging
 from collections.abc import Callable, Iterable, Iterator
 
 from ax12emu.protocol.framing import Framer
-from ax12emu.protocol.packets import BROADCAST_ID, MAX_ID, Instruction, InstructionPacket, encode_status
+from ax12emu.protocol.packets import BROADCAST_ID, MAX_ID, Instruction, InstructionPacket, encode_status, parse_bulk_read
 from ax12emu.protocol.servo_models import ServoModel
-from ax12emu.servo.request_handler1x import handle1x, listed_read, parse_bulk_read, status_byte
+from ax12emu.servo.request_handler1x import handle1x, listed_read, status_byte
 from ax12emu.servo.servo1x import Servo1X, Servo1XOptions
 
 from .bus import Bus, Interceptor

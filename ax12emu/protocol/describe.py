@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 from .control_table import DEFAULT_PROFILE, Layout, layout
-from .packets import Instruction, InstructionPacket, StatusError
+from .packets import Instruction, InstructionPacket, StatusError, parse_bulk_read
 
 __all__ = ["describe_instruction", "describe_error", "describe_status"]
 
@@ -51,6 +51,14 @@ def _registers(address: int, data: bytes, profile: str | Layout) -> str:
     return " ".join(parts)
 
 
+def _span(address: int, length: int, profile: str | Layout) -> str:
+    """What a read of ``length`` bytes from ``address`` asks for, in register names."""
+    lay = _table(profile)
+    entries = lay.owner[address : address + length]
+    names = sorted({lay.entries[i].name for i in entries if i >= 0}, key=str)
+    return f"address={address} length={length} ({', '.join(names) or 'unused'})"
+
+
 def describe_instruction(packet: InstructionPacket, profile: str | Layout = DEFAULT_PROFILE,
                          tables: Mapping[int, Layout] | None = None) -> str:
     """One line: instruction, ID and what it asks, in register names.
@@ -69,10 +77,11 @@ def describe_instruction(packet: InstructionPacket, profile: str | Layout = DEFA
         head += " BAD-CHECKSUM"
     params = packet.params
     if packet.instruction == Instruction.READ and len(params) == 2:
-        lay = _table(table)
-        entries = lay.owner[params[0] : params[0] + params[1]]
-        names = sorted({lay.entries[i].name for i in entries if i >= 0}, key=str)
-        return f"{head} address={params[0]} length={params[1]} ({', '.join(names) or 'unused'})"
+        return f"{head} {_span(params[0], params[1], table)}"
+    blocks = parse_bulk_read(bytes(params)) if packet.instruction == Instruction.BULK_READ else None
+    if blocks:
+        spans = (f"[id={b.servo_id} {_span(b.address, b.length, tables.get(b.servo_id, profile))}]" for b in blocks)
+        return f"{head} " + " ".join(spans)
     if packet.instruction in (Instruction.WRITE, Instruction.REG_WRITE) and len(params) >= 2:
         return f"{head} {_registers(params[0], bytes(params[1:]), table)}"
     if packet.instruction == Instruction.SYNC_WRITE and len(params) >= 2 and params[1]:
@@ -102,4 +111,9 @@ def describe_status(
         return head
     if request is not None and request.instruction == Instruction.READ and len(request.params) == 2:
         return f"{head} {_registers(request.params[0], bytes(params), profile)}"
+    if request is not None and request.instruction == Instruction.BULK_READ:
+        # A Bulk Read is answered by every listed servo in turn, each with its own block's data.
+        block = next((b for b in parse_bulk_read(bytes(request.params)) or () if b.servo_id == packet_id), None)
+        if block is not None:
+            return f"{head} {_registers(block.address, bytes(params), profile)}"
     return f"{head} params={bytes(params).hex(' ')}"

@@ -19,6 +19,7 @@ from typing import NamedTuple
 
 __all__ = [
     "BROADCAST_ID",
+    "BulkReadRequest",
     "MAX_ID",
     "HEADER",
     "Instruction",
@@ -28,6 +29,7 @@ __all__ = [
     "checksum",
     "encode_instruction",
     "encode_status",
+    "parse_bulk_read",
 ]
 
 #: Packets to this ID are executed by every servo and answered by none.
@@ -123,3 +125,30 @@ def encode_status(packet_id: int, error: int, params: bytes | bytearray = b"") -
     if error & 0x80:
         raise ValueError(f"status error byte must not have bit 7 set, got {error:#04x}")
     return _encode(packet_id, error, params)
+
+
+class BulkReadRequest(NamedTuple):
+    """One servo's part of a Bulk Read: (ID, start address, length)."""
+
+    servo_id: int
+    address: int
+    length: int
+
+
+def parse_bulk_read(params: bytes) -> list[BulkReadRequest] | None:
+    """Bulk Read's parameters: 0x00, then (length, ID, address) per servo; None if malformed.
+
+    "If an identical ID is designated multiple times, only the first designated parameter will be
+    processed" (e-manual, "Bulk Read"): later repeats are dropped here.
+    """
+    if len(params) < 4 or (len(params) - 1) % 3 or params[0] != 0x00:
+        return None
+    seen: set[int] = set()
+    out = []
+    for at in range(1, len(params), 3):
+        length, servo_id, address = params[at], params[at + 1], params[at + 2]
+        if servo_id in seen:
+            continue
+        seen.add(servo_id)
+        out.append(BulkReadRequest(servo_id, address, length))
+    return out

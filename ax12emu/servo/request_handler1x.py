@@ -27,14 +27,19 @@ Policy, with sources (ROBOTIS e-manual, "Protocol 1.0", https://emanual.robotis.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import NamedTuple
 
-from ax12emu.protocol.packets import BROADCAST_ID, Instruction, InstructionPacket, StatusError, encode_status
+from ax12emu.protocol.packets import (
+    BROADCAST_ID,
+    Instruction,
+    InstructionPacket,
+    StatusError,
+    encode_status,
+)
 
 from .request_handler import MAX_READ_BYTES, Outcome, answers, ping, silent_read_length, write_handlers
 from .servo1x import Servo1X
 
-__all__ = ["BulkReadRequest", "HANDLERS", "Outcome1X", "handle1x", "listed_read", "parse_bulk_read", "status_byte"]
+__all__ = ["HANDLERS", "Outcome1X", "handle1x", "listed_read", "status_byte"]
 
 #: The AX-12's answer (:class:`~.request_handler.Outcome`): who replies, when, with which error bits.
 Outcome1X = Outcome
@@ -78,33 +83,6 @@ HANDLERS: dict[int, Handler] = {
     Instruction.REBOOT: _after_reply,
     **write_handlers(Servo1X.write, Servo1X.check_write),
 }
-
-
-class BulkReadRequest(NamedTuple):
-    """One servo's part of a Bulk Read: (ID, start address, length)."""
-
-    servo_id: int
-    address: int
-    length: int
-
-
-def parse_bulk_read(params: bytes) -> list[BulkReadRequest] | None:
-    """Bulk Read's parameters: 0x00, then (length, ID, address) per servo; None if malformed.
-
-    "If an identical ID is designated multiple times, only the first designated parameter will be
-    processed" (e-manual, "Bulk Read"): later repeats are dropped here.
-    """
-    if len(params) < 4 or (len(params) - 1) % 3 or params[0] != 0x00:
-        return None
-    seen: set[int] = set()
-    out = []
-    for at in range(1, len(params), 3):
-        length, servo_id, address = params[at], params[at + 1], params[at + 2]
-        if servo_id in seen:
-            continue
-        seen.add(servo_id)
-        out.append(BulkReadRequest(servo_id, address, length))
-    return out
 
 
 #: The instructions Status Return Level 1 answers besides PING: an MX's Bulk Read reads too.

@@ -40,7 +40,7 @@ from ax12emu.protocol.describe import describe_instruction, describe_status
 from ax12emu.protocol.describe2 import describe_instruction2, describe_status2
 from ax12emu.protocol.framing import Framer
 from ax12emu.protocol.framing2 import DEFAULT_MAX_LENGTH, Framer2
-from ax12emu.protocol.packets import BROADCAST_ID, Instruction, InstructionPacket
+from ax12emu.protocol.packets import BROADCAST_ID, Instruction, InstructionPacket, parse_bulk_read
 from ax12emu.protocol.packets2 import HEADER2, Instruction2, InstructionPacket2, StatusPacket2
 from ax12emu.protocol.servo_models import model, model_names
 from ax12emu.protocol.servo_spec import parse_servo_spec
@@ -182,6 +182,8 @@ class _Conversation:
         self.request: InstructionPacket | None = None
         self.t: float | None = None
         self.answered = False
+        #: A Bulk Read's listed IDs yet to answer, each with its block's length: they answer in turn.
+        self.bulk_pending: dict[int, int] = {}
         self.request2: InstructionPacket2 | None = None
         self.t2: float | None = None
 
@@ -198,6 +200,10 @@ class _Conversation:
         broadcast_ping = (last is not None and last.id == BROADCAST_ID and last.instruction == Instruction.PING
                           and not packet.params)
         if last is not None and (broadcast_ping or (packet.id == last.id and not self.answered)):
+            return STATUS
+        # After a Bulk Read each listed servo answers with its block's data (its error byte can equal an
+        # instruction code: Input Voltage is PING's).
+        if self.bulk_pending.get(packet.id) == len(packet.params):
             return STATUS
         if packet.instruction not in _INSTRUCTIONS and packet.instruction < 0x80:
             return STATUS
@@ -228,12 +234,15 @@ class _Conversation:
         if kind == STATUS:
             latency = None if chunk.t is None or self.t is None else chunk.t - self.t
             self.answered = True
+            self.bulk_pending.pop(packet.id, None)
             text = describe_status(packet.id, packet.instruction, packet.params, _asked_of(self.request, packet.id),
                                    tables.get(packet.id, profile), packet.checksum_ok)
             return Decoded(chunk.t, STATUS, packet, text, latency)
         if kind == ECHO:
             return Decoded(chunk.t, ECHO, packet, "echo of " + describe_instruction(packet, profile, tables))
         self.request, self.t, self.answered = packet, chunk.t, False
+        blocks = parse_bulk_read(bytes(packet.params)) if packet.instruction == Instruction.BULK_READ else None
+        self.bulk_pending = {b.servo_id: b.length for b in blocks or ()}
         return Decoded(chunk.t, INSTRUCTION, packet, describe_instruction(packet, profile, tables))
 
 

@@ -2,10 +2,10 @@
 
 from __future__ import annotations
 
-from ax12emu.protocol.packets import BROADCAST_ID, Instruction, InstructionPacket, StatusError
+from ax12emu.protocol.packets import BROADCAST_ID, Instruction, InstructionPacket, StatusError, parse_bulk_read
 from ax12emu.protocol.servo_models import model
 from ax12emu.servo.plant1x import build_plant1x
-from ax12emu.servo.request_handler1x import handle1x, parse_bulk_read
+from ax12emu.servo.request_handler1x import handle1x
 from ax12emu.servo.servo1x import Servo1X, Servo1XOptions, baud_bps_1x
 
 

@@ -79,3 +79,32 @@ def test_the_cli_decodes_a_trace_by_its_header(tmp_path, capsys):
         {"t": 0.0, "dir": IN, "data": encode_instruction(5, Instruction.WRITE, bytes([GOAL_ACCELERATION, 9])).hex(" ")}) + "\n")
     assert main(["decode", str(path)]) == 0
     assert "WRITE id=5 goal_acceleration=9" in capsys.readouterr().out
+
+
+def test_a_bulk_read_and_its_replies_are_named_by_each_listed_servos_block(tmp_path):
+    path = tmp_path / "bulk.jsonl"
+    # MX-28 at ID 1: Present Position (2 bytes); MX-64 at ID 2: P Gain (1 byte), the e-manual's "Bulk Read".
+    bulk = encode_instruction(0xFE, Instruction.BULK_READ, bytes([0x00, 2, 1, PRESENT_POSITION, 1, 2, P_GAIN]))
+    with VirtualBus(servo="1:mx-28,2:mx-64", transport="inprocess", baud_bps=BAUD, trace=str(path)) as bus:
+        with serial.serial_for_url(bus.port, baudrate=BAUD, timeout=0.5) as link:
+            link.write(bulk)
+            assert len(link.read(8 + 7)) == 15
+    decoded = decode(read_trace(path), servos=trace_header(path)["servos"])
+    texts = [d.text for d in decoded]
+    assert texts[0] == ("BULK_READ id=254 [id=1 address=36 length=2 (present_position)] "
+                        "[id=2 address=28 length=1 (p_gain)]")
+    assert [d.kind for d in decoded] == [INSTRUCTION, STATUS, STATUS]
+    assert texts[1].startswith("STATUS id=1 ok present_position=")
+    assert texts[2] == "STATUS id=2 ok p_gain=32"
+
+
+def test_a_bulk_read_reply_with_an_alarm_is_still_a_reply_on_a_raw_capture():
+    # No direction recorded: a reply's error byte 0x01 (Input Voltage) is PING's instruction code.
+    bulk = encode_instruction(0xFE, Instruction.BULK_READ, bytes([0x00, 2, 1, PRESENT_POSITION, 2, 2, PRESENT_POSITION]))
+    chunks = [Chunk(0.0, None, bulk), Chunk(0.001, None, encode_status(1, 0x01, bytes([0, 2]))),
+              Chunk(0.002, None, encode_status(2, 0x01, bytes([1, 2]))),
+              Chunk(0.003, None, encode_instruction(2, Instruction.PING))]
+    decoded = decode(chunks, servos="1:mx-28,2:mx-28")
+    assert [d.kind for d in decoded] == [INSTRUCTION, STATUS, STATUS, INSTRUCTION]
+    assert decoded[1].text == "STATUS id=1 INPUT_VOLTAGE present_position=512"
+    assert decoded[2].text == "STATUS id=2 INPUT_VOLTAGE present_position=513"
