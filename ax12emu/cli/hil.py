@@ -91,7 +91,8 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     check.add_argument("port", metavar="PORT", help="device path or pyserial URL (socket://HOST:PORT, ax12emu://...)")
     check.add_argument("--ids", type=_typed(_ids), default=[1], metavar="LIST", help="IDs on the bus to check (default 1)")
     check.add_argument("--baud", type=int, default=None,
-                       help="host bit rate (default 1000000; with --protocol 2.0, 57600: the X series' factory Baud Rate 1)")
+                       help="host bit rate (default 1000000, the AX series' factory rate: an MX at its factory Baud Rate 34 needs "
+                       "57600; with --protocol 2.0, 57600: the X series' factory Baud Rate 1)")
     check.add_argument("--timeout-ms", type=positive_float, default=50.0, metavar="MS", help="reply timeout (default 50)")
     check.add_argument("--silence-ms", type=positive_float, default=None, metavar="MS",
                        help="how long a packet that must get no reply is listened to (default: the reply timeout, safe "
@@ -103,11 +104,12 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                        "profiles; up to about a turn each way at a third of the no-load speed, torque on, then off and "
                        "every register put back). A flag of its own, apart from --destructive: those put the bus at risk "
                        "(ID, baud), these what is on the horn; run them only with the horn free to turn")
-    check.add_argument("--profile", choices=sorted(PROFILES), default=DEFAULT_PROFILE, help="expected control-table defaults")
+    check.add_argument("--profile", choices=sorted(PROFILES), default=DEFAULT_PROFILE, help="the AX-12A's table edition whose defaults are expected "
+                       "(other models: their model file's)")
     check.add_argument("--only", action="append", metavar="CHECK", help="run only this check (repeatable)")
     check.add_argument("--protocol", choices=("1.0", "2.0"), default="1.0",
-                       help="1.0 (the AX-12's table and defaults) or 2.0 (X series; the table comes from the model number each "
-                       "servo pings)")
+                       help="1.0 (AX and MX series; the table comes from the model number each servo holds) or 2.0 (X series; "
+                       "the table comes from the model number each servo pings)")
 
     cli_models.add_command(sub)
 

@@ -6,9 +6,10 @@ user with hardware finds where they differ in one command
 same checks over a pty, TCP and in process.  The suite reads every table
 before the first check and after the last, and reports any register that
 changed as the last check ("table unchanged"): the non-destructive set must
-leave the device as it found it.  The Protocol 2.0 suite (:mod:`.checks2`)
-first pings every ID and takes its control table from the model file its
-model number names.
+leave the device as it found it.  Both suites first identify every ID and
+take its control table from the model file its model number names: the
+Protocol 1.0 suite (:mod:`.checks`) reads Model Number, the Protocol 2.0
+suite (:mod:`.checks2`) pings.
 """
 
 from __future__ import annotations
@@ -113,8 +114,7 @@ def run_on_link(
                          f"checks are: {', '.join(check.name for check in checks)}")
     results: list[Result] = []
     try:
-        if isinstance(ctx, Context2):
-            ctx.identify()
+        ctx.identify()
         for servo_id in ctx.ids:
             ctx.before[servo_id] = ctx.table(servo_id)
     except (Failed, OSError) as exc:
@@ -136,7 +136,7 @@ def run_on_link(
 def _unchanged(ctx: Context) -> str:
     differ = []
     for servo_id, before in ctx.before.items():
-        differ += [f"ID {servo_id}: {d}" for d in table_differences(before, ctx.table(servo_id), ctx.profile)]
+        differ += [f"ID {servo_id}: {d}" for d in table_differences(before, ctx.table(servo_id), ctx.layout(servo_id))]
     if differ:
         raise Failed("; ".join(differ))
     return f"{len(ctx.before)} table(s) read before and after: identical"

@@ -2,7 +2,12 @@
 
 Why it exists: the same checks must judge the emulator and a real AX-12,
 so each one states what Protocol 1.0 (e-manual, 2006 manual) says a servo
-does and measures what the device did.  A check returns its measured figure
+does and measures what the device did.  Every Protocol 1.0 servo (AX-12A,
+AX-18A, the MX series) keeps its Model Number at address 0, so the suite
+reads it first (:meth:`Context.identify`) and takes that model file's table:
+its registers' addresses, sizes, ranges and factory defaults, and what its
+firmware knows (:func:`knows_bulk_read`).  The AX-12A's is ``--profile``'s
+edition of its table.  A check returns its measured figure
 (pass), raises :class:`Failed` with the figure (fail) or :class:`Skipped`
 with the reason, or returns a :class:`Note` where the sources allow more
 than one behaviour (the figure says which one this device shows).
@@ -26,24 +31,40 @@ from dataclasses import dataclass, field
 from enum import IntEnum
 from typing import Any, ClassVar, NamedTuple
 
-from ax12emu.protocol.control_table import EEPROM_END, TABLE_SIZE, Access, Area, layout
+from ax12emu.bus.wire import servo_family
+from ax12emu.protocol.control_table import AX12_MODEL, EEPROM_END, Access, Area, layout
 from ax12emu.protocol.describe import describe_error
 from ax12emu.protocol.packets import BROADCAST_ID, Instruction, StatusError, encode_instruction
+from ax12emu.protocol.registers import Entry, Layout
+from ax12emu.protocol.servo_models import ServoModel, model, model_names
 
 from .link import Link, Response
 
-__all__ = ["Check", "CHECKS", "Context", "Failed", "Skipped", "Note", "DYNAMIC", "table_differences"]
+__all__ = ["Check", "CHECKS", "Context", "Failed", "Skipped", "Note", "DYNAMIC", "table_differences", "knows_bulk_read",
+           "model_for_number1"]
 
-#: Registers the firmware changes by itself; never compared.
+#: Registers the firmware changes by itself; never compared.  The AX tables' sensed values, and the MX
+#: series' Realtime Tick(50) (milliseconds since power-up) and Current(68) (2048 + the sensed current).
 DYNAMIC = frozenset(
-    {"present_position", "present_speed", "present_load", "present_voltage", "present_temperature", "moving"}
+    {"present_position", "present_speed", "present_load", "present_voltage", "present_temperature", "moving",
+     "realtime_tick", "current"}
 )
+#: Where every Protocol 1.0 table keeps Model Number (2 bytes at address 0: e-manual, each 1.0 model's
+#: "Control Table"), read before the servo's model, hence its table, is known.
+MODEL_NUMBER_AT = layout().by_name["model_number"]
+#: An instruction code no Protocol 1.0 firmware defines (the e-manual's instruction table stops at 0x06, 0x08,
+#: 0x83 and 0x92): the undefined instruction sent to a servo whose firmware knows Bulk Read.
+UNDEFINED_INSTRUCTION = 0x50
+#: Host bit rates a USB adapter offers: a Baud Rate value's rate (2,000,000 / (value + 1), e-manual "Baud
+#: Rate(4)") is taken as the nearest of them within a UART's 3 % (34 gives 57,142 bps: the adapter's 57,600).
+_HOST_RATES_BPS = (9600, 19200, 38400, 57600, 115200, 200_000, 250_000, 400_000, 500_000, 1_000_000, 2_000_000)
 #: How long to leave a servo alone per byte written into its EEPROM: it answers the write,
 #: then ignores packets while it writes (xevelabs' USB2AX protocol notes: "up to 9 ms per
 #: byte based on the ATMega8 datasheet", measured about 6 +/- 1 ms), so the datasheet's bound.
 EEPROM_WAIT_S_PER_BYTE = 0.009
-#: Baud Rate register value used by the baud check and the host rate that matches it.
-_SLOW_BAUD_REGISTER, _SLOW_HOST_BPS = 34, 57600
+#: Baud Rate register value the baud check moves a servo to, and the one it takes where the servo runs at that
+#: already (the MX series' factory 34): 57,600 and 1,000,000 bps, rates every AX and MX page lists.
+_SLOW_BAUD_REGISTER, _FAST_BAUD_REGISTER = 34, 1
 
 
 class Failed(Exception):
@@ -66,10 +87,35 @@ def expect(condition: bool, figure: str) -> None:
         raise Failed(figure)
 
 
-def table_differences(before: bytes, after: bytes, profile: str, ignore: frozenset[str] = DYNAMIC) -> list[str]:
-    """Registers that differ between two table images, as "name a->b"."""
+def host_bps(baud_register: int) -> int:
+    """The host rate that talks to a servo whose Baud Rate register is ``baud_register``."""
+    nominal = 2_000_000 / (baud_register + 1)
+    nearest = min(_HOST_RATES_BPS, key=lambda rate: abs(rate - nominal))
+    return nearest if abs(nearest - nominal) <= 0.03 * nominal else round(nominal)
+
+
+def model_for_number1(number: int) -> ServoModel | None:
+    """The shipped Protocol 1.0 model file whose model number is ``number``."""
+    return next((model(key) for key in model_names()
+                 if model(key).model_number == number and "1.0" in model(key).protocols), None)
+
+
+def knows_bulk_read(spec: ServoModel) -> bool:
+    """Whether ``spec``'s Protocol 1.0 firmware knows Bulk Read (0x92).
+
+    The MX series' does (:mod:`ax12emu.servo.request_handler1x`: "adds Bulk Read (0x92), which the AX-12
+    lacks"); the AX series' answers it with Instruction Error, as any undefined instruction (the 2006 AX-12
+    manual lists no 0x92).  The model files do not say it for Protocol 1.0 (``unsupported_instructions`` is
+    Protocol 2.0's), so the suite asks the one place that gives each Protocol 1.0 model its firmware, the
+    AX series' or the MX series', as the emulator itself does when it builds a wire.
+    """
+    return servo_family(spec.key) == "MX"
+
+
+def table_differences(before: bytes, after: bytes, table: Layout | str, ignore: frozenset[str] = DYNAMIC) -> list[str]:
+    """Registers of ``table`` (a layout, or an AX-12A profile's name) that differ between two images, as "name a->b"."""
     out = []
-    for entry in layout(profile).entries:
+    for entry in (layout(table) if isinstance(table, str) else table).entries:
         if entry.name in ignore:
             continue
         a = int.from_bytes(before[entry.address : entry.end], "little")
@@ -129,12 +175,15 @@ class Transactions:
 
 @dataclass
 class Context(Transactions):
-    """What the checks share: the link, the IDs under test, the tables found at the start."""
+    """What the checks share: the link, the IDs under test, each ID's model and the tables found at the start."""
 
     link: Link
     ids: list[int]
     profile: str = "ax12a"
     destructive: bool = False
+    #: Model file of each ID, found from the Model Number it holds (:meth:`identify`); None where no Protocol 1.0
+    #: model file has that number.  An ID never looked up is taken for an AX-12A.
+    models: dict[int, ServoModel | None] = field(default_factory=dict)
     #: Table image of each ID read before the first check.
     before: dict[int, bytes] = field(default_factory=dict)
 
@@ -146,6 +195,46 @@ class Context(Transactions):
     def free_id(self) -> int:
         """An ID no servo under test has (counting down from 253)."""
         return next(i for i in range(253, -1, -1) if i not in self.ids)
+
+    # -- each servo's model and table ---------------------------------------------------
+    def identify(self) -> None:
+        """Read every ID's Model Number and look up its Protocol 1.0 model file (None: there is none).
+
+        An unknown number does not stop the suite: the model-number check fails saying so, and the
+        other checks judge the servo by the AX-12A's table.  A user with a servo the project has no
+        file for (an RX or EX series servo, a newer firmware's number) learns more from a table whose
+        protocol checks mostly still apply, the Protocol 1.0 series sharing its first 50 addresses,
+        than from a run that stops; only the checks that need the model's own factory table (defaults,
+        RESET) skip.
+        """
+        for servo_id in self.ids:
+            number = int.from_bytes(self.read(servo_id, MODEL_NUMBER_AT.address, MODEL_NUMBER_AT.size), "little")
+            self.models[servo_id] = model_for_number1(number)
+
+    def spec(self, servo_id: int) -> ServoModel | None:
+        """``servo_id``'s model file: None if its model number names none, the AX-12A's if it was never looked up."""
+        return self.models[servo_id] if servo_id in self.models else model(AX12_MODEL)
+
+    def known(self, servo_id: int) -> ServoModel:
+        """``servo_id``'s model file; :class:`Skipped` where its model number names none."""
+        spec = self.spec(servo_id)
+        if spec is None:
+            raise Skipped(f"ID {servo_id}: its model number names no model file, so its factory table is unknown")
+        return spec
+
+    def layout(self, servo_id: int) -> Layout:
+        """The table of ``servo_id``'s model (the AX-12A's in ``profile``'s edition); the AX-12A's for an unknown model."""
+        spec = self.spec(servo_id)
+        if spec is None:
+            return layout(self.profile)
+        return spec.layout(self.profile if self.profile in spec.profiles else None)
+
+    def entry(self, servo_id: int, name: str, table: Layout | None = None) -> Entry:
+        """A register of ``servo_id``'s table (or of ``table``); skips the check where the model has none."""
+        entry = (self.layout(servo_id) if table is None else table).by_name.get(name)
+        if entry is None:
+            raise Skipped(f"ID {servo_id}'s table has no {name}")
+        return entry
 
     # -- transactions (status, silent, ping_rtts: :class:`Transactions`) ----------------
     def transact(self, packet: bytes, *, timeout_s: float | None = None) -> Response:
@@ -166,14 +255,14 @@ class Context(Transactions):
         expect(not status.error & ~_ALARMS, f"READ {address}+{length}: {describe_error(status.error)}")
         return status.params
 
-    def get(self, servo_id: int, name: str) -> int:
-        """A register by name."""
-        entry = layout(self.profile).by_name[name]
+    def get(self, servo_id: int, name: str, table: Layout | None = None) -> int:
+        """A register by name, from ``servo_id``'s table (or ``table``: a servo that has just moved ID)."""
+        entry = self.entry(servo_id, name, table)
         return int.from_bytes(self.read(servo_id, entry.address, entry.size), "little")
 
-    def put(self, servo_id: int, name: str, value: int) -> int:
+    def put(self, servo_id: int, name: str, value: int, table: Layout | None = None) -> int:
         """WRITE a register by name; returns the reply's instruction error bits (alarms masked)."""
-        entry = layout(self.profile).by_name[name]
+        entry = self.entry(servo_id, name, table)
         status = self.status(servo_id, Instruction.WRITE, bytes((entry.address,)) + value.to_bytes(entry.size, "little"))
         return status.error & ~_ALARMS
 
@@ -182,9 +271,17 @@ class Context(Transactions):
         error = self.put(servo_id, name, value)
         expect(not error, f"WRITE {name}={value}: {describe_error(error)}")
 
-    def table(self, servo_id: int) -> bytes:
-        """The whole control table."""
-        return self.read(servo_id, 0, TABLE_SIZE)
+    def table(self, servo_id: int, table: Layout | None = None) -> bytes:
+        """The whole control table of ``servo_id``'s model (or ``table``), in one READ."""
+        return self.read(servo_id, 0, (self.layout(servo_id) if table is None else table).table_size)
+
+    def address(self, name: str) -> int:
+        """The address of register ``name`` in every table under test, for a packet they all act on (SYNC_WRITE, a
+        broadcast WRITE); skips the check where two tables disagree."""
+        found = {self.entry(servo_id, name).address for servo_id in self.ids}
+        if len(found) != 1:
+            raise Skipped(f"{name} is at different addresses in the tables under test ({sorted(found)})")
+        return found.pop()
 
 
 def eeprom_wait(packet: bytes) -> None:
@@ -290,7 +387,7 @@ def check_resync(ctx: Context) -> str:
 def check_checksum(ctx: Context) -> "str | Note":
     """A packet with a wrong checksum is not executed."""
     led = ctx.get(ctx.target, "led")
-    bad = bytearray(encode_instruction(ctx.target, Instruction.WRITE, bytes((25, 1 - led))))
+    bad = bytearray(encode_instruction(ctx.target, Instruction.WRITE, bytes((ctx.entry(ctx.target, "led").address, 1 - led))))
     bad[-1] ^= 0xFF
     response = ctx.link.transact(bytes(bad))
     try:
@@ -305,26 +402,34 @@ def check_checksum(ctx: Context) -> "str | Note":
 
 # -- instructions ------------------------------------------------------------------------
 def check_model_number(ctx: Context) -> str:
-    """READ of Model Number gives 12 (AX-12) on every ID."""
-    figures = []
+    """READ of Model Number gives, on every ID, a number a Protocol 1.0 model file has (12 the AX-12A, 29 the MX-28, ...)."""
+    figures, unknown = [], []
     for servo_id in ctx.ids:
-        data = ctx.read(servo_id, 0, 3)
-        model = int.from_bytes(data[:2], "little")
-        expect(model == 12, f"ID {servo_id}: model number {model}")
-        figures.append(f"{servo_id}: model {model} fw {data[2]}")
+        data = ctx.read(servo_id, MODEL_NUMBER_AT.address, 3)
+        number = int.from_bytes(data[:2], "little")
+        spec = model_for_number1(number)
+        if spec is None:
+            unknown.append(f"ID {servo_id}: model number {number}")
+        else:
+            figures.append(f"{servo_id}: model {number} ({spec.name}) fw {data[2]}")
+    if unknown:
+        known = ", ".join(f"{other.name} {other.model_number}" for other in map(model, model_names()) if "1.0" in other.protocols)
+        raise Failed("; ".join(unknown) + f" names no Protocol 1.0 model file (known: {known}); the other checks judged "
+                     "it by the AX-12A's table, its defaults and RESET unchecked")
     return "; ".join(figures)
 
 
 def check_read_table(ctx: Context) -> str:
-    """READ of the whole table (50 bytes) in one packet."""
+    """READ of the whole table (the model's: 50 bytes on the AX series, 74 on the MX) in one packet."""
     data = ctx.table(ctx.target)
     return f"{len(data)} bytes"
 
 
 def check_read_past_table(ctx: Context) -> str:
-    """READ past address 49 sets the Range bit."""
-    status = ctx.status(ctx.target, Instruction.READ, bytes((49, 2)))
-    expect(bool(status.error & StatusError.RANGE), f"READ 49+2: {describe_error(status.error)}")
+    """READ from the table's last address past its end sets the Range bit."""
+    last = ctx.layout(ctx.target).table_size - 1
+    status = ctx.status(ctx.target, Instruction.READ, bytes((last, 2)))
+    expect(bool(status.error & StatusError.RANGE), f"READ {last}+2: {describe_error(status.error)}")
     return f"{describe_error(status.error & ~_ALARMS)}, {len(status.params)} data bytes"
 
 
@@ -364,7 +469,7 @@ def check_angle_limit(ctx: Context) -> str:
     if cw == ccw == 0:
         raise Skipped("wheel mode")
     limit = max(cw, min(ccw, 1000) - 1, goal)
-    if limit >= 1023:
+    if limit >= ctx.entry(ctx.target, "goal_position").maximum:  # 1023 on the AX series, 4095 on the MX
         raise Skipped("no room above Goal Position")
     try:
         if limit != ccw:
@@ -378,21 +483,28 @@ def check_angle_limit(ctx: Context) -> str:
 
 
 def check_instruction_error(ctx: Context) -> str:
-    """An undefined instruction (BULK_READ on an AX-12) and ACTION with nothing registered set Instruction."""
-    status = ctx.status(ctx.target, Instruction.BULK_READ, b"\x00")
-    expect(bool(status.error & StatusError.INSTRUCTION), f"BULK_READ: {describe_error(status.error)}")
+    """An undefined instruction and ACTION with nothing registered set Instruction.
+
+    The undefined instruction is Bulk Read (0x92) where the model's firmware lacks it (the AX series), else
+    one no Protocol 1.0 firmware defines (0x50): an MX answers Bulk Read, and a servo of unknown model may.
+    """
+    spec = ctx.spec(ctx.target)
+    undefined = Instruction.BULK_READ if spec is not None and not knows_bulk_read(spec) else UNDEFINED_INSTRUCTION
+    name = Instruction.BULK_READ.name if undefined == Instruction.BULK_READ else f"{undefined:#04x}"
+    status = ctx.status(ctx.target, undefined, b"\x00")
+    expect(bool(status.error & StatusError.INSTRUCTION), f"{name}: {describe_error(status.error)}")
     if ctx.get(ctx.target, "registered"):
         raise Skipped("a REG_WRITE is pending on the device")
     status = ctx.status(ctx.target, Instruction.ACTION)
     expect(bool(status.error & StatusError.INSTRUCTION), f"ACTION: {describe_error(status.error)}")
-    return "BULK_READ: INSTRUCTION; bare ACTION: INSTRUCTION"
+    return f"{name}: INSTRUCTION; bare ACTION: INSTRUCTION"
 
 
 def check_reg_write_action(ctx: Context) -> str:
     """REG_WRITE sets Registered and waits; ACTION applies it and clears Registered."""
     led = ctx.get(ctx.target, "led")
     try:
-        status = ctx.status(ctx.target, Instruction.REG_WRITE, bytes((25, 1 - led)))
+        status = ctx.status(ctx.target, Instruction.REG_WRITE, bytes((ctx.entry(ctx.target, "led").address, 1 - led)))
         expect(not status.error & ~_ALARMS, f"REG_WRITE: {describe_error(status.error)}")
         expect(ctx.get(ctx.target, "registered") == 1, "Registered is not 1 after REG_WRITE")
         expect(ctx.get(ctx.target, "led") == led, "REG_WRITE took effect before ACTION")
@@ -407,23 +519,53 @@ def check_reg_write_action(ctx: Context) -> str:
 def check_sync_write(ctx: Context) -> str:
     """SYNC_WRITE (to 0xFE) sets every listed servo and nobody answers."""
     leds = {i: ctx.get(i, "led") for i in ctx.ids}
-    body = bytes((25, 1)) + b"".join(bytes((i, 1 - leds[i])) for i in ctx.ids)
+    at = ctx.address("led")
+    body = bytes((at, 1)) + b"".join(bytes((i, 1 - leds[i])) for i in ctx.ids)
     try:
         expect(ctx.silent(encode_instruction(BROADCAST_ID, Instruction.SYNC_WRITE, body)), "SYNC_WRITE was answered")
         for servo_id in ctx.ids:
             expect(ctx.get(servo_id, "led") == 1 - leds[servo_id], f"ID {servo_id} not written")
     finally:
-        restore = bytes((25, 1)) + b"".join(bytes((i, leds[i])) for i in ctx.ids)
+        restore = bytes((at, 1)) + b"".join(bytes((i, leds[i])) for i in ctx.ids)
         ctx.link.send(encode_instruction(BROADCAST_ID, Instruction.SYNC_WRITE, restore))
         time.sleep(0.005)
     return f"{len(ctx.ids)} servo(s) written, silent"
+
+
+def check_bulk_read(ctx: Context) -> str:
+    """Bulk Read (0x92) to 0xFE: each listed servo answers its own block (ID, address, length), in list order.
+
+    On the servos under test whose firmware knows it (:func:`knows_bulk_read`); at least two, as the e-manual
+    says of it "this cannot be used to read a single module" (Protocol 1.0, "Bulk Read").  Each reads a
+    block of its own table read at the start (from address 0: Model Number, Firmware Version, ID).
+    """
+    listed = [servo_id for servo_id in ctx.ids if (spec := ctx.spec(servo_id)) is not None and knows_bulk_read(spec)]
+    if len(listed) < 2:
+        raise Skipped(f"needs two servos whose firmware knows Bulk Read (the MX series); {len(listed)} under test")
+    blocks = {servo_id: (MODEL_NUMBER_AT.address, 4 + k % 2) for k, servo_id in enumerate(listed)}  # lengths 4, 5, 4, ...
+    packet = encode_instruction(BROADCAST_ID, Instruction.BULK_READ,
+                                b"\x00" + b"".join(bytes((length, servo_id, address)) for servo_id, (address, length) in blocks.items()))
+    first = ctx.link.transact(packet)
+    answers = [first] + [_reply_past_echoes(ctx, (packet,)) for _ in listed[1:]]
+    for servo_id, response in zip(listed, answers):
+        address, length = blocks[servo_id]
+        status = response.status
+        expect(status is not None, f"no answer from ID {servo_id} in its turn (IDs {', '.join(map(str, listed))} listed)")
+        assert status is not None
+        expect(status.checksum_ok and status.id == servo_id,
+               f"ID {servo_id}'s turn answered by id={status.id}{'' if status.checksum_ok else ', checksum bad'}")
+        expect(not status.error & ~_ALARMS, f"ID {servo_id}: {describe_error(status.error)}")
+        want = ctx.before[servo_id][address : address + length]
+        expect(bytes(status.params) == want, f"ID {servo_id} read {bytes(status.params).hex(' ')}, its table holds {want.hex(' ')}")
+    return f"IDs {', '.join(map(str, listed))} answered in list order"
 
 
 def check_broadcast_write(ctx: Context) -> str:
     """WRITE to 0xFE acts on every servo and nobody answers."""
     leds = {i: ctx.get(i, "led") for i in ctx.ids}
     try:
-        expect(ctx.silent(encode_instruction(BROADCAST_ID, Instruction.WRITE, bytes((25, 1)))), "broadcast WRITE answered")
+        expect(ctx.silent(encode_instruction(BROADCAST_ID, Instruction.WRITE, bytes((ctx.address("led"), 1)))),
+               "broadcast WRITE answered")
         for servo_id in ctx.ids:
             expect(ctx.get(servo_id, "led") == 1, f"ID {servo_id} not written")
     finally:
@@ -446,20 +588,21 @@ def check_status_return_level(ctx: Context) -> str:
     servo = ctx.target
     level = ctx.get(servo, "status_return_level")
     led = ctx.get(servo, "led")
-    write_led = encode_instruction(servo, Instruction.WRITE, bytes((25, led)))
-    read_led = encode_instruction(servo, Instruction.READ, bytes((25, 1)))
+    led_at, level_at = ctx.entry(servo, "led").address, ctx.entry(servo, "status_return_level").address
+    write_led = encode_instruction(servo, Instruction.WRITE, bytes((led_at, led)))
+    read_led = encode_instruction(servo, Instruction.READ, bytes((led_at, 1)))
     ping = encode_instruction(servo, Instruction.PING)
     try:
-        ctx.transact(encode_instruction(servo, Instruction.WRITE, bytes((16, 1))))
+        ctx.transact(encode_instruction(servo, Instruction.WRITE, bytes((level_at, 1))))
         expect(ctx.silent(write_led), "level 1 answered a WRITE")
         expect(ctx.answers(read_led), "level 1 did not answer a READ")
         expect(ctx.answers(ping), "level 1 did not answer PING")
         # at level 1 this WRITE gets no answer: listened to for the silence window, not the reply timeout
-        ctx.transact(encode_instruction(servo, Instruction.WRITE, bytes((16, 0))), timeout_s=ctx.link.silence_s)
+        ctx.transact(encode_instruction(servo, Instruction.WRITE, bytes((level_at, 0))), timeout_s=ctx.link.silence_s)
         expect(ctx.silent(read_led), "level 0 answered a READ")
         expect(ctx.answers(ping), "level 0 did not answer PING")
     finally:
-        ctx.send(encode_instruction(servo, Instruction.WRITE, bytes((16, 2))))
+        ctx.send(encode_instruction(servo, Instruction.WRITE, bytes((level_at, 2))))
         if level != 2:
             ctx.put(servo, "status_return_level", level)
     return "0: PING only; 1: PING+READ; 2: all"
@@ -510,10 +653,11 @@ def check_alarms(ctx: Context) -> "str | Note":
 
 
 def check_defaults(ctx: Context) -> "str | Note":
-    """Registers at the profile's factory defaults (ID, and values the firmware sets, excepted)."""
+    """Registers at the model's factory defaults (the AX-12A's: the profile's; ID, and values the firmware sets, excepted)."""
     ignore = DYNAMIC | {"id", "goal_position", "torque_limit"}
-    lay = layout(ctx.profile)
-    differ = table_differences(lay.defaults, ctx.before[ctx.target], ctx.profile, ignore)
+    ctx.known(ctx.target)
+    lay = ctx.layout(ctx.target)
+    differ = table_differences(lay.defaults, ctx.before[ctx.target], lay, ignore)
     if differ:
         return Note("differs: " + ", ".join(differ))
     return "all at defaults"
@@ -527,6 +671,7 @@ def check_id_change(ctx: Context) -> str:
     found (left at the free ID, a real robot's servo would be lost to its program).
     """
     old, new = ctx.target, ctx.free_id()
+    table = ctx.layout(old)  # the servo's own, at whichever ID it answers
     expect(ctx.silent(encode_instruction(new, Instruction.PING)), f"ID {new}, the free ID this check moves to, answers")
     try:
         ctx.must_put(old, "id", new)
@@ -534,43 +679,51 @@ def check_id_change(ctx: Context) -> str:
         expect(ctx.silent(encode_instruction(old, Instruction.PING)), f"old ID {old} still answers")
     finally:
         if ctx.answers(encode_instruction(new, Instruction.PING)):
-            ctx.put(new, "id", old)
+            ctx.put(new, "id", old, table)
     ctx.status(old, Instruction.PING)
     return f"{old}->{new}->{old}"
 
 
 def check_baud_change(ctx: Context) -> "str | Note":
-    """After Baud Rate 34 the servo answers at 57,600 bps; restored."""
+    """After Baud Rate 34 the servo answers at 57,600 bps (after 1, at 1,000,000, where it runs at 34); restored."""
     servo = ctx.target
     original = ctx.get(servo, "baud_rate")
+    value = _SLOW_BAUD_REGISTER if original != _SLOW_BAUD_REGISTER else _FAST_BAUD_REGISTER
+    rate = host_bps(value)
     host = ctx.link.baud
     try:
-        ctx.must_put(servo, "baud_rate", _SLOW_BAUD_REGISTER)
+        ctx.must_put(servo, "baud_rate", value)
         old_rate_silent = ctx.silent(encode_instruction(servo, Instruction.PING))
-        ctx.link.baud = _SLOW_HOST_BPS
+        ctx.link.baud = rate
         rtt = statistics.median(ctx.ping_rtts(servo, 3))
     finally:
-        # Restored wherever the servo answers at the slow rate, the write's reply lost or not.
-        ctx.link.baud = _SLOW_HOST_BPS
+        # Restored wherever the servo answers at the new rate, the write's reply lost or not.
+        ctx.link.baud = rate
         if ctx.answers(encode_instruction(servo, Instruction.PING)):
             ctx.put(servo, "baud_rate", original)
         ctx.link.baud = host
     ctx.status(servo, Instruction.PING)
-    figure = f"answers at {_SLOW_HOST_BPS} bps ({_ms(rtt)}); at {host} bps: {'silent' if old_rate_silent else 'still answered'}"
+    figure = f"answers at {rate} bps ({_ms(rtt)}); at {host} bps: {'silent' if old_rate_silent else 'still answered'}"
     return figure if old_rate_silent else Note(figure + " (the port carries no line rate?)")
 
 
 def check_reset(ctx: Context) -> str:
-    """RESET restores factory defaults (ID 1, 1 Mbps); the table is then written back.
+    """RESET restores the model's factory defaults (ID 1, its factory rate: 1 Mbps on the AX series, 57,600 bps
+    on the MX); the table is then written back.
 
     Only where nothing else answers at ID 1, where the reset servo lands: two servos there would collide,
     and the write-back would rewrite both ("If Dynamixel with the same ID is connected, packet will
     collide", e-manual).  The write-back runs however the check ends, a lost reply to the RESET included.
+    Skipped for a model no file describes: its factory table is unknown, and a write-back by the AX-12A's
+    table would leave its other registers at their factory values.
     """
     servo = 1 if 1 in ctx.ids else ctx.target
+    ctx.known(servo)
+    lay = ctx.layout(servo)
+    factory = host_bps(lay.by_name["baud_rate"].default)
     host = ctx.link.baud
     if servo != 1:
-        ctx.link.baud = 1_000_000
+        ctx.link.baud = factory
         try:
             taken = ctx.answers(encode_instruction(1, Instruction.PING))
         finally:
@@ -578,43 +731,43 @@ def check_reset(ctx: Context) -> str:
         if taken:
             raise Skipped("a servo not under test answers at ID 1, where RESET would put this one")
     before = ctx.table(servo)
-    lay = layout(ctx.profile)
     try:
         status = ctx.status(servo, Instruction.RESET)
         figure = f"answered by id={status.id}"
-        ctx.link.baud = 1_000_000
-        after = ctx.table(1)
+        ctx.link.baud = factory
+        after = ctx.table(1, lay)
         # Firmware Version and Moving Speed have no initial value on the e-manual's AX-12A page ("-"): a real
         # servo's are its own, not this profile's.
-        differ = table_differences(lay.defaults, after, ctx.profile,
+        differ = table_differences(lay.defaults, after, lay,
                                    DYNAMIC | {"goal_position", "torque_limit", "firmware_version", "moving_speed"})
         expect(not differ, "after RESET: " + ", ".join(differ))
     finally:
-        ctx.link.baud = 1_000_000  # where a reset servo listens, the RESET's reply seen or not
+        ctx.link.baud = factory  # where a reset servo listens, the RESET's reply seen or not
         try:
-            _write_back(ctx, before)
+            _write_back(ctx, before, lay)
         finally:
             ctx.link.baud = host
     ctx.status(servo, Instruction.PING)
     return figure + "; table at defaults; restored"
 
 
-def _write_back(ctx: Context, image: bytes) -> None:
-    """Write a saved table back to the reset servo (now ID 1 at 1 Mbps): ID and baud last."""
-    lay = layout(ctx.profile)
+def _write_back(ctx: Context, image: bytes, lay: Layout) -> None:
+    """Write a saved table (of layout ``lay``) back to the reset servo (now ID 1 at its factory rate): ID and baud last.
+
+    Registers the firmware sets (:data:`DYNAMIC`; the MX's Current(68) is writable) are left to it."""
     last = ("id", "baud_rate")
     for entry in lay.entries:
-        if entry.access is not Access.RW or entry.name in last or entry.name == "lock":
+        if entry.access is not Access.RW or entry.name in last or entry.name == "lock" or entry.name in DYNAMIC:
             continue
         value = int.from_bytes(image[entry.address : entry.end], "little")
         if entry.area is Area.RAM and entry.name == "torque_enable":
             continue
-        ctx.put(1, entry.name, value)
+        ctx.put(1, entry.name, value, lay)
     by_name = lay.by_name
-    ctx.put(1, "torque_enable", by_name["torque_enable"].value_in(image))
+    ctx.put(1, "torque_enable", by_name["torque_enable"].value_in(image), lay)
     servo_id = by_name["id"].value_in(image)
-    ctx.put(1, "id", servo_id)
-    ctx.put(servo_id, "baud_rate", by_name["baud_rate"].value_in(image))
+    ctx.put(1, "id", servo_id, lay)
+    ctx.put(servo_id, "baud_rate", by_name["baud_rate"].value_in(image), lay)
 
 
 CHECKS: tuple[Check, ...] = (
@@ -635,6 +788,7 @@ CHECKS: tuple[Check, ...] = (
     Check("instruction error", check_instruction_error),
     Check("REG_WRITE + ACTION", check_reg_write_action),
     Check("SYNC_WRITE", check_sync_write),
+    Check("BULK_READ", check_bulk_read),
     Check("broadcast WRITE", check_broadcast_write),
     Check("broadcast PING", check_broadcast_ping),
     Check("status return levels", check_status_return_level),

@@ -180,3 +180,48 @@ def test_alarms_a_servo_raises_are_said_not_passed_over():
     clean = conformance.run("ax12emu://?ids=1,2", IDS, only=["alarms"], timeout_s=CONFORMANCE_TIMEOUT_S,
                             silence_s=EMULATOR_SILENCE_S)
     assert clean.outcome("alarms") == "pass"
+
+
+@pytest.mark.parametrize(("servo", "ids", "baud"), [
+    ("mx-28", [1], 57_600),  # the MX series' factory Baud Rate 34
+    ("mx-64", [1], 57_600),
+    ("mx-106", [1], 57_600),
+    ("ax-18a", [1], 1_000_000),
+    ("1:ax-12a,2:mx-28", [1, 2], 1_000_000),
+    ("1:mx-28,2:ax-18a,3:mx-106", [3, 2, 1], 1_000_000),  # an MX the target, two of them for Bulk Read
+])
+def test_the_protocol1_suite_takes_each_servos_table_from_its_model_number(servo, ids, baud):
+    """Every Protocol 1.0 model served passes the whole suite, destructive checks included: each servo is judged by
+    its own model file's table (the suite took every servo for an AX-12: an MX-28's model number 29, its 74-byte
+    table and its factory 57,600 bps after RESET failed, as did an AX-18A's defaults)."""
+    url = f"ax12emu://?servo={servo}" + ("" if baud == 57_600 else f"&baud={baud}")
+    report = conformance.run(url, ids, baud=baud, destructive=True, timeout_s=CONFORMANCE_TIMEOUT_S,
+                             silence_s=EMULATOR_SILENCE_S)
+    assert report.passed, report.table()
+    for name in ("model number", "read whole table", "read past the table", "instruction error", "ID change",
+                 "baud change", "RESET", "table unchanged"):
+        assert report.outcome(name) == PASS, report.table()
+    figures = {r.name: r.figure for r in report.results}
+    if servo.startswith("mx"):  # a lone MX at its factory rate: its own defaults, its own 74 bytes
+        assert report.outcome("defaults") == PASS and figures["read whole table"] == "74 bytes", report.table()
+        assert figures["instruction error"].startswith("0x50: INSTRUCTION"), report.table()  # an MX knows Bulk Read
+    if servo == "ax-18a":
+        assert report.outcome("defaults") == PASS and figures["instruction error"].startswith("BULK_READ"), report.table()
+    assert report.outcome("BULK_READ") == (PASS if servo.count("mx") >= 2 else "skip"), report.table()
+
+
+def test_a_model_number_no_file_has_fails_that_check_and_the_rest_judge_by_the_ax12_table(monkeypatch):
+    """A servo whose model number names no Protocol 1.0 model file (an RX-28, say) fails the model-number check, which
+    says so; the checks that need its factory table skip, and the rest judge it by the AX-12A's table."""
+    from ax12emu.conformance import checks
+
+    known = checks.model_for_number1
+    monkeypatch.setattr(checks, "model_for_number1", lambda number: None if number == 12 else known(number))
+    report = conformance.run("ax12emu://?ids=1", [1], destructive=True, timeout_s=CONFORMANCE_TIMEOUT_S,
+                             silence_s=EMULATOR_SILENCE_S, only=["model number", "defaults", "read past the table",
+                                                                  "instruction error", "RESET"])
+    figures = {r.name: r.figure for r in report.results}
+    assert report.outcome("model number") == FAIL and "model number 12 names no Protocol 1.0 model file" in figures["model number"]
+    assert report.outcome("defaults") == "skip" and report.outcome("RESET") == "skip", report.table()
+    assert report.outcome("read past the table") == PASS and report.outcome("table unchanged") == PASS, report.table()
+    assert figures["instruction error"].startswith("0x50: INSTRUCTION"), report.table()  # it may know Bulk Read
