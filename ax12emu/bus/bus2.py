@@ -16,8 +16,8 @@ see ``reply.merge_replies``):
 * an instruction to one ID: that servo, Return Delay Time after (2 us units), as on Protocol 1.0;
 * broadcast Ping: "All devices send their Status Packet according to their arranged order".
   The e-manual gives no times.  Each servo answers in the slot of its ID: the servo with ID n
-  starts ``RDT + n * (its Ping status time + RDT)`` after the instruction, so consecutive IDs from
-  0 follow each other back to back.  A slot per ID rather than "after the previous answer" because
+  starts ``RDT + n * (its Ping status time + the longest RDT, 508 us)`` after the instruction, so the
+  answers never overlap whatever Return Delay Time each servo has.  A slot per ID rather than "after the previous answer" because
   a lone servo with a high ID answers late on real hardware (Dynamixel2Arduino issue 106: at
   2 Mbps a lone ID 5 needed a longer timeout than IDs 1 and 2), and dynamixel-sdk's broadcastPing
   and Dynamixel2Arduino's wait grow with the highest ID (3 ms per ID), not with the servo count;
@@ -743,10 +743,12 @@ class Bus2(ServosById[Servo2], DecodedBus):
             outcome = handle2(servo, packet._replace(id=servo.id))
             if outcome.reply is None:
                 continue
-            delay_s = servo.return_delay_s
+            # A slot as wide as an answer after the longest Return Delay Time: each servo answers in its own
+            # whatever delay the others have (slots of their own delays overlapped: one servo left at the
+            # factory 500 us among servos set to 0 collided with the next ID's answer).
             wire_s = len(outcome.reply) * BITS_PER_BYTE / servo.baud_bps
-            replies.append(Reply(servo.id, outcome.reply, delay_s + servo.id * (wire_s + delay_s), servo.baud_bps,
-                                 servo.id * wire_s))
+            replies.append(Reply(servo.id, outcome.reply, servo.return_delay_s + servo.id * (wire_s + MAX_RETURN_DELAY_S),
+                                 servo.baud_bps, servo.id * wire_s))
         return replies
 
     def _listed(self, packet: InstructionPacket2, line_bps: float | None) -> list[Reply]:
@@ -841,8 +843,9 @@ class Bus2(ServosById[Servo2], DecodedBus):
                 pieces = _fast_shares_on_wire(pieces, parts, answered, twins)
             at_s = answered[0][0].return_delay_s
             wire_s = 0.0
-            for (servo, _, _), piece in zip(answered, pieces):
-                replies.append(Reply(BROADCAST_ID, piece, at_s + wire_s, servo.baud_bps, wire_s))
+            for k, ((servo, _, _), piece) in enumerate(zip(answered, pieces)):
+                # Each share is named by its servo (a fault on some IDs reaches the packet they share in).
+                replies.append(Reply(servo.id, piece, at_s + wire_s, servo.baud_bps, wire_s, continues=k > 0))
                 wire_s += len(piece) * BITS_PER_BYTE / servo.baud_bps
             return replies
         at_s = wire_s = 0.0
@@ -859,6 +862,11 @@ class Bus2(ServosById[Servo2], DecodedBus):
             replies.append(reply)
             wire_s += len(status) * BITS_PER_BYTE / baud
         return replies
+
+
+#: The longest Return Delay Time (254 in 2 us units, e-manual "Return Delay Time(9)"): the width a broadcast Ping's
+#: slot leaves for a servo's delay.
+MAX_RETURN_DELAY_S = 254 * 2e-6
 
 
 def _writes_by_id(packet: InstructionPacket2) -> tuple[int, dict[int, bytes]]:

@@ -28,6 +28,9 @@ class Reply(NamedTuple):
     #: Of ``delay_s``, the time on the wire of the replies laid before this one (a bus that lays its
     #: replies one after another, ``in_sequence``); without pacing bytes take no time, so it is left out.
     wire_s: float = 0.0
+    #: This is the next part of the previous reply's status packet (a servo's share of a Fast Sync/Bulk Read's
+    #: one packet): lost, late or corrupt, the packet is, not the share.
+    continues: bool = False
 
 
 def merge_replies(replies: Sequence[Reply], start_s: float, *, per_byte: bool,

@@ -85,6 +85,9 @@ class StateStore:
         self._lock_fd: int | None = None
         #: Slots whose last save failed (said once each, until one succeeds).
         self._failing: set[int] = set()
+        #: Slot -> the servo's own ID while its ID register shows another (a fault's duplicate): a fault is not
+        #: the servo's configuration, so what is kept is the ID it had.
+        self.own_ids: dict[int, int] = {}
 
     def claim(self) -> None:
         """Take the directory for this process, one server per state directory as one servo per EEPROM; a
@@ -199,6 +202,8 @@ class StateStore:
             for entry in table.layout.entries
             if entry.area is Area.EEPROM and entry.access is Access.RW
         }
+        if slot in self.own_ids:
+            registers["id"] = self.own_ids[slot]
         # The model number keys the image to its model: a different model started on the same ID (a
         # Protocol 2.0 bus mixes models, each with its own EEPROM layout) must not take it for its own.
         document = {"format": FORMAT, "profile": table.profile.name, "model_number": table.get("model_number"),

@@ -12,7 +12,9 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from .injection import HW_ERROR_NAMES, Faults, MixedFaults, faults_for, parse_alarm_bits
+from ax12emu.protocol.ids import parse_ids
+
+from .injection import HW_ERROR_NAMES, MAX_REPLY_DELAY_S, Faults, MixedFaults, faults_for, parse_alarm_bits
 
 if TYPE_CHECKING:
     from ax12emu.bus.bus import Bus
@@ -26,6 +28,13 @@ def _fraction(text: str) -> float:
     value = float(text)
     if not 0.0 <= value <= 1.0:
         raise ValueError(f"expected a fraction 0..1, got {text}")
+    return value
+
+
+def _delay_s(text: str) -> float:
+    value = float(text)
+    if not 0.0 <= value <= MAX_REPLY_DELAY_S:
+        raise ValueError(f"expected seconds 0..{MAX_REPLY_DELAY_S:g}, got {text}")
     return value
 
 
@@ -64,7 +73,8 @@ def _alarm(text: str) -> tuple[int, int | str]:
 
 
 def _ids(text: str) -> tuple[int, ...]:
-    return tuple(int(part) for part in text.split(",") if part.strip())
+    """An ID list as ``--ids`` takes it ("1,2,5", "1-3")."""
+    return tuple(parse_ids(text))
 
 
 @dataclass(frozen=True)
@@ -144,7 +154,7 @@ FAULT_OPTIONS: Mapping[str, tuple[Callable[[str], object], bool]] = {
     "drop": (_fraction, False),
     "corrupt": (_fraction, False),
     "delay": (_fraction, False),
-    "delay_s": (float, False),
+    "delay_s": (_delay_s, False),
     "fault_ids": (_ids, False),
     "seed": (int, False),
     "vanish": (_vanish, True),

@@ -82,7 +82,8 @@ if TYPE_CHECKING:
     from ax12emu.servo.servo2 import Servo2
     from ax12emu.servo.virtual_servo import VirtualServo
 
-__all__ = ["Faults", "Faults2", "Faults1X", "MixedFaults", "ALARM_NAMES", "HW_ERROR_NAMES", "parse_alarm_bits", "faults_for"]
+__all__ = ["Faults", "Faults2", "Faults1X", "MixedFaults", "ALARM_NAMES", "HW_ERROR_NAMES", "MAX_REPLY_DELAY_S", "parse_alarm_bits",
+           "faults_for"]
 
 log = logging.getLogger(__name__)
 
@@ -98,6 +99,9 @@ _ALARM_BITS = sum(set(ALARM_NAMES.values()))
 _ALARM_FIRST = {name: bit for name, bit in ALARM_NAMES.items() if name == next(n for n, b in ALARM_NAMES.items() if b == bit)}
 #: Present Load full scale with the direction bit clear (e-manual, Present Load).
 _FULL_LOAD = 1023
+#: The longest reply delay taken: far beyond any client's timeout a reply is already lost to it; a longer one
+#: (inf) overflowed the wire's pacing and stopped the server.
+MAX_REPLY_DELAY_S = 60.0
 
 
 def parse_alarm_bits(text: str, names: Mapping[str, int] | None = None) -> int:
@@ -121,6 +125,8 @@ def parse_alarm_bits(text: str, names: Mapping[str, int] | None = None) -> int:
 @dataclass
 class _Stall:
     position: int
+    #: How long the firmware drives against the block before Overload (each stall its own).
+    overload_after_s: float = 1.0
     driving_since_s: float | None = None
 
 
@@ -143,7 +149,6 @@ class Faults:
         self._stalls: dict[int, _Stall] = {}
         #: Servos whose shaft the model itself holds (see stall()).
         self._blocked: set[int] = set()
-        self._stall_overload_s = 1.0
         self._held: dict[int, dict[str, int]] = {}
         #: What was done, for tests and logs.
         self.dropped = 0
@@ -172,8 +177,8 @@ class Faults:
                 raise ValueError(f"{name} must be a fraction 0..1, got {value}")
         if drop + corrupt + delay > 1.0 + 1e-12:
             raise ValueError(f"drop + corrupt + delay must not exceed 1, got {drop + corrupt + delay}")
-        if not delay_s >= 0:
-            raise ValueError(f"delay_s must be >= 0, got {delay_s}")
+        if not 0 <= delay_s <= MAX_REPLY_DELAY_S:  # (NaN too) an infinite delay overflowed the wire's pacing
+            raise ValueError(f"delay_s must lie in 0..{MAX_REPLY_DELAY_S:g} s, got {delay_s}")
         self.drop, self.corrupt, self.delay, self.delay_s = drop, corrupt, delay, delay_s
         self.reply_ids = None if ids is None else frozenset(ids)
 
@@ -211,6 +216,9 @@ class Faults:
             raise ValueError(f"ID {as_id} is outside 0..253")
         servo = self.bus.servos[index]
         self._duplicates.setdefault(index, servo.id)
+        store = getattr(self.bus, "state_store", None)
+        if store is not None:  # a --state-dir keeps the servo's own ID, not the fault's (it outlived the run)
+            store.own_ids[slot] = self._duplicates[index]
         servo.table.set("id", as_id)
         self.bus.reindex()
 
@@ -219,6 +227,9 @@ class Faults:
         index = self._index(slot)
         if index in self._duplicates:
             self.bus.servos[index].table.set("id", self._duplicates.pop(index))
+            store = getattr(self.bus, "state_store", None)
+            if store is not None:
+                store.own_ids.pop(slot, None)
             self.bus.reindex()
 
     def _model_blocks(self) -> bool:
@@ -250,8 +261,10 @@ class Faults:
             self._blocked.add(index)
             self._set_model_blocked()
             return
-        self._stall_overload_s = 1.0 if overload_after_s is None else overload_after_s
-        self._stalls[index] = _Stall(self.bus.servos[index].table.get("present_position"))
+        after_s = 1.0 if overload_after_s is None else overload_after_s
+        if not 0 <= after_s < float("inf"):
+            raise ValueError(f"stall: overload_after_s must be a finite time >= 0, got {overload_after_s}")
+        self._stalls[index] = _Stall(self.bus.servos[index].table.get("present_position"), after_s)
         self.after_physics()
 
     def release(self, slot: int) -> None:
@@ -276,7 +289,10 @@ class Faults:
         """
         index = self._index(slot)
         servo = self.bus.servos[index]
-        servo.table.layout.by_name[name]  # KeyError for an unknown register
+        if value is not None:
+            value = _in_bytes(servo.table.layout.by_name[name], value)  # KeyError for an unknown register
+        else:
+            servo.table.layout.by_name[name]  # KeyError for an unknown register
         held = self._held.setdefault(index, {})
         if value is None:
             held.pop(name, None)
@@ -355,10 +371,17 @@ class Faults:
         """Drop, corrupt or delay status packets by the configured fractions."""
         if not (self.drop or self.corrupt or self.delay):
             return replies
-        out = []
+        # One status packet may come in parts (a Fast Sync/Bulk Read's, a share from each servo): one fate for it.
+        packets: list[list[Reply]] = []
         for reply in replies:
-            if self.reply_ids is not None and reply.servo_id not in self.reply_ids:
-                out.append(reply)
+            if reply.continues and packets:
+                packets[-1].append(reply)
+            else:
+                packets.append([reply])
+        out: list[Reply] = []
+        for parts in packets:
+            if self.reply_ids is not None and not any(part.servo_id in self.reply_ids for part in parts):
+                out.extend(parts)
                 continue
             draw = self._rng.random()
             if draw < self.drop:
@@ -366,11 +389,12 @@ class Faults:
                 continue
             if draw < self.drop + self.corrupt:
                 self.corrupted += 1
-                reply = reply._replace(data=reply.data[:-1] + bytes((reply.data[-1] ^ 0xFF,)))
+                last = parts[-1]  # its checksum or CRC
+                parts[-1] = last._replace(data=last.data[:-1] + bytes((last.data[-1] ^ 0xFF,)))
             elif draw < self.drop + self.corrupt + self.delay:
                 self.delayed += 1
-                reply = reply._replace(delay_s=reply.delay_s + self.delay_s)
-            out.append(reply)
+                parts = [part._replace(delay_s=part.delay_s + self.delay_s) for part in parts]
+            out.extend(parts)
         return out
 
     def after_physics(self) -> None:
@@ -399,13 +423,22 @@ class Faults:
             if driving:
                 if stall.driving_since_s is None:
                     stall.driving_since_s = now_s
-                if now_s - stall.driving_since_s >= self._stall_overload_s:
+                if now_s - stall.driving_since_s >= stall.overload_after_s:
                     servo.alarms |= int(StatusError.OVERLOAD)
                     self._shutdown(servo, int(StatusError.OVERLOAD))
             else:
                 stall.driving_since_s = None
             if holdable:
                 model.set_angle(index, stall.position * RAD_PER_POSITION_UNIT)
+
+
+def _in_bytes(entry, value: int) -> int:
+    """``value`` if the register ``entry`` can show it; a ValueError otherwise (it wrapped: a held 300 degrees read
+    44 while an X-series firmware judged 300)."""
+    low, high = entry.byte_range
+    if not low <= int(value) <= high:
+        raise ValueError(f"hold: {entry.name} holds {low}..{high}, got {value}")
+    return int(value)
 
 
 #: Alarm bits a held sensor reading can raise.
@@ -492,10 +525,13 @@ class Faults2(Faults):
         self._alarms[index] = self._alarms.get(index, 0) | value
 
     def clear_alarm(self, slot: int) -> None:
-        """A latched error clears only by REBOOT: the servo reboots, as the REBOOT instruction does."""
+        """A latched error clears only by REBOOT: the servo reboots, as the REBOOT instruction does; not if the client
+        has already rebooted it (a second reboot turned off a torque it had turned back on)."""
         index = self._index(slot)
-        self._alarms.pop(index, None)
-        self._servo2(slot).reboot()
+        if index in self._alarms:
+            self._forget_cleared_alarms(index, self._servo2(slot).plant.firmware.sense().hardware_error_status)
+        if self._alarms.pop(index, None) is not None:
+            self._servo2(slot).reboot()
 
     def stall(self, slot: int, *, overload_after_s: float | None = None) -> None:
         """Block the shaft where it is; the overload follows after the firmware's own overload time."""
@@ -532,6 +568,8 @@ class Faults2(Faults):
 
     def _hold_reading(self, slot: int, name: str, field: str, value: int | None) -> None:
         """Pin the firmware's reading ``field`` (the table's register ``name``) at ``value``; None frees it."""
+        if value is not None:
+            value = _in_bytes(self._servo2(slot).table.layout.by_name[name], value)
         self._firmware(slot, "hold").hold_reading(field, value)
         self._servo2(slot).plant.write_back()
         index = self._index(slot)
@@ -718,6 +756,9 @@ class MixedFaults:
             if sub.faults is None:
                 sub.faults = faults_for(sub, seed=seed)
             self.by_protocol[protocol] = sub.faults  # type: ignore[assignment]
+        # One random stream for the wire's replies, as on a bus of one protocol: two streams from one seed drew
+        # alike, so a 1.0 and a 2.0 reply were always lost together, never one of them.
+        self.by_protocol[2.0]._rng = self.by_protocol[1.0]._rng
 
     def of(self, slot: int, protocol: float | None = None) -> Faults:
         """The faults of the protocol whose servo was launched as ``slot``."""

@@ -115,6 +115,11 @@ def _ping(servo: Servo2, params: Params) -> tuple[int, bytes]:
 
 
 def _read(servo: Servo2, params: Read) -> tuple[int, bytes]:
+    if params.address + params.length > servo.table.size:
+        # "If the requested item is outside the range of the Control Table, the returned Status packet will include
+        # an Access Error in its error field, and return with no parameters" (e-manual, Protocol 2.0, Read): a client
+        # that indexes the data anyway (dynamixel-sdk's read4ByteTxRx) fails here as on a real servo.
+        return ErrorNumber.ACCESS, b""
     return listed_read(servo, params.address, params.length)
 
 

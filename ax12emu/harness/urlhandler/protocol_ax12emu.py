@@ -170,8 +170,11 @@ class Serial(SerialBase):
             options = urllib.parse.parse_qs(parts.query, keep_blank_values=True, strict_parsing=bool(parts.query))
         except ValueError as exc:
             raise UrlError(f"{EXPECTED}: {exc}") from None
-        repeated = sorted(key for key, values in options.items() if len(values) > 1)
-        if repeated:  # which one counts would be a guess (ids=1&ids=2 served ID 2 alone)
+        # Which one counts would be a guess (ids=1&ids=2 served ID 2 alone); a fault that names one servo repeats as
+        # its serve flag does (stall=1&stall=2), one per servo.
+        repeated = sorted(key for key, values in options.items()
+                          if len(values) > 1 and not (key in FAULT_OPTIONS and FAULT_OPTIONS[key][1]))
+        if repeated:
             raise UrlError(f"{EXPECTED}: {', '.join(repeated)} given more than once")
         blank = sorted(key for key, values in options.items() if not values[-1].strip())
         if blank:  # params= served the default model and trace= recorded nothing, without a word

@@ -176,10 +176,22 @@ def test_broadcast_ping_every_servo_in_the_slot_of_its_id():
     bus, _ = recording_bus(ids=(5, 1, 3), key="xl430-w250")
     replies = bus.receive(h("Ping broadcast"))
     assert [r.servo_id for r in replies] == [1, 3, 5]
-    slot_s = 14 * BITS_PER_BYTE / 57600 + 500e-6
+    slot_s = 14 * BITS_PER_BYTE / 57600 + 508e-6  # the answer and the longest Return Delay Time
     for reply in replies:
         assert reply.delay_s == pytest.approx(500e-6 + reply.servo_id * slot_s)
         assert decode_packet2(reply.data).params == (1060).to_bytes(2, "little") + bytes((45,))
+
+
+def test_broadcast_ping_answers_never_overlap_whatever_each_servos_return_delay():
+    """One servo left at the factory 500 us among servos set to 0 (as lerobot configures them): the slots of each
+    servo's own delay overlapped, ID 2's answer started before ID 1's ended and the host decoded neither."""
+    bus, _ = recording_bus(ids=(1, 2, 3), key="xl430-w250")
+    for servo_id in (2, 3):
+        send(bus, servo_id, Instruction2.WRITE, bytes((9, 0, 0)))  # Return Delay Time 0
+    replies = bus.receive(h("Ping broadcast"))
+    spans = [(r.delay_s, r.delay_s + len(r.data) * BITS_PER_BYTE / r.baud_bps) for r in replies]
+    assert [r.servo_id for r in replies] == [1, 2, 3]
+    assert all(end <= next_start for (_, end), (next_start, _) in zip(spans, spans[1:])), spans
 
 
 def test_broadcast_write_is_executed_silently_and_broadcast_read_not_at_all(xm):
@@ -250,8 +262,8 @@ def test_crc_error_is_answered_with_error_3(xm):
 def test_error_numbers_byte_for_byte(xm, instruction, params, error):
     bus, _ = xm
     replies = send(bus, 1, instruction, params)
-    data = bytes(8) if instruction == Instruction2.READ and len(params) == 4 else b""
-    assert [r.data for r in replies] == [encode_status2(1, error, data)]
+    # A Read past the table: Access Error "and return with no parameters" (e-manual, Read's note).
+    assert [r.data for r in replies] == [encode_status2(1, error, b"")]
 
 
 def test_eeprom_write_with_torque_on_is_access_error(xm):
@@ -388,21 +400,21 @@ def test_a_protocol_1_model_is_refused():
 
 
 def test_replies_timed_in_sequence_keep_the_wire_paced_and_their_order_and_delays_unpaced():
-    """A broadcast Ping's answers: paced, each byte leaves when its slot on the wire ends (ID n's answer n slots
-    of a status and a Return Delay Time in); unpaced, bytes take no time, so each answer leaves whole, in ID
-    order, its own Return Delay Time after the one before it (ID n: n + 1 Return Delay Times)."""
+    """A broadcast Ping's answers: paced, each byte leaves when its slot on the wire ends (ID n's answer its Return
+    Delay Time and n slots of a status and the longest Return Delay Time in); unpaced, bytes take no time, so each
+    answer leaves whole, in ID order (ID n: its Return Delay Time and n longest ones)."""
     bus, _ = recording_bus(ids=(1, 2), key="xl430-w250")
     replies = bus.receive(h("Ping broadcast"))
-    rdt_s, byte_s = 500e-6, BITS_PER_BYTE / 57600
+    rdt_s, slot_rdt_s, byte_s = 500e-6, 508e-6, BITS_PER_BYTE / 57600
     status_s = len(replies[0].data) * byte_s
     paced = merge_replies(replies, 10.0, per_byte=True, in_sequence=bus.replies_in_sequence)
     assert b"".join(data for _, data in paced) == b"".join(r.data for r in replies)
-    for reply, first_byte_s in zip(replies, (rdt_s + status_s + rdt_s, rdt_s + 2 * (status_s + rdt_s))):
+    for reply, first_byte_s in zip(replies, (rdt_s + status_s + slot_rdt_s, rdt_s + 2 * (status_s + slot_rdt_s))):
         k = sum(len(r.data) for r in replies if r.servo_id < reply.servo_id)
         assert paced[k][0] == pytest.approx(10.0 + first_byte_s + byte_s, abs=byte_s / 2)  # on the byte grid
     chunks = merge_replies(replies, 10.0, per_byte=False, in_sequence=bus.replies_in_sequence)
     assert [data for _, data in chunks] == [r.data for r in replies]
-    assert [t for t, _ in chunks] == pytest.approx([10.0 + 2 * rdt_s, 10.0 + 3 * rdt_s])
+    assert [t for t, _ in chunks] == pytest.approx([10.0 + rdt_s + slot_rdt_s, 10.0 + rdt_s + 2 * slot_rdt_s])
 
 
 def test_requests_too_big_to_answer_do_not_crash_the_bus(xm):
@@ -411,9 +423,9 @@ def test_requests_too_big_to_answer_do_not_crash_the_bus(xm):
     assert send(bus, 0xFE, Instruction2.FAST_SYNC_READ, bytes((0, 0, 0xFF, 0xFF, 1, 2, 3))) == []
     # The broadcast ID in a Fast list: the servos before it answer, the chain stops there.
     assert len(send(bus, 0xFE, Instruction2.FAST_SYNC_READ, bytes((0, 0, 2, 0, 1, 0xFE, 2)))) == 1
-    # A READ of 65535 bytes: Access Error with the table's worth of zeros, not a 64 KiB packet.
+    # A READ of 65535 bytes: Access Error and no data (e-manual, Read), not a 64 KiB packet.
     reply = status(bus, 1, Instruction2.READ, bytes((0, 0, 0xFF, 0xFF)))
-    assert (reply.error, len(reply.params)) == (ErrorNumber.ACCESS, 662)
+    assert (reply.error, len(reply.params)) == (ErrorNumber.ACCESS, 0)
 
 
 def test_random_packets_and_noise_never_raise():

@@ -27,3 +27,16 @@ def test_fault_config_rejects_bad_values():
                              ({"duplicate": ["1"]}, "SLOT:ID"), ({"vanish": ["1:2"]}, "ID:EVERY_S:FOR_S")):
         with pytest.raises(ValueError, match=message):
             FaultConfig.from_options(options)
+
+
+@pytest.mark.parametrize("text", ["inf", "nan", "-0.1", "61", "1e308"])
+def test_a_reply_delay_it_cannot_time_is_refused(text):
+    """An infinite delay was taken and overflowed the wire's pacing at the first delayed reply (the server died)."""
+    with pytest.raises(ValueError, match="delay_s: expected seconds 0..60"):
+        FaultConfig.from_options({"delay": ["1"], "delay_s": [text]})
+
+
+def test_fault_ids_take_id_lists_as_ids_does():
+    assert FaultConfig.from_options({"fault_ids": ["1-3,7"]}).fault_ids == (1, 2, 3, 7)
+    with pytest.raises(ValueError, match="fault_ids: ID 300 is outside"):
+        FaultConfig.from_options({"fault_ids": ["300"]})

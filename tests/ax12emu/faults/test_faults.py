@@ -214,3 +214,40 @@ def test_serve_fault_flags(emulator):
         assert comm_of(ph.ping(port, 2)) == COMM_RX_TIMEOUT
         value, comm, error = ph.ping(port, 1)
         assert (value, comm, error) == (12, COMM_SUCCESS, StatusError.OVERHEATING)
+
+
+def test_a_duplicate_is_not_kept_in_the_state_directory(tmp_path):
+    """A fault is not the servo's configuration: with --state-dir, the next run without it had two servos at ID 1."""
+    from ax12emu.bus.state_store import StateStore
+
+    with Bus([1, 2], state_store=StateStore(tmp_path)) as bus:
+        faults = Faults(bus)
+        faults.duplicate(2, 1)
+        bus.receive(encode_instruction(1, 0x03, bytes((5, 0))))  # an EEPROM write (Return Delay Time) while it lasts
+    with Bus([1, 2], state_store=StateStore(tmp_path)) as bus:
+        assert [servo.id for servo in bus.servos] == [1, 2]
+        assert bus.servos[1].table.get("return_delay_time") == 0
+
+
+def test_each_stall_keeps_its_own_overload_time():
+    """One servo stalled for 5 s and another for the default 1 s: the second stall's time was the bus's, for both."""
+    with VirtualBus([1, 2], model="kinematic", transport="inprocess", virtual_time=True) as bus:
+        for servo_id in (1, 2):
+            bus.write(servo_id, "torque_enable", 1)
+        bus.faults.stall(1, overload_after_s=5.0)
+        bus.faults.stall(2)
+        for servo_id in (1, 2):
+            bus.write(servo_id, "goal_position", 700)  # away from where the shafts are held
+        for _ in range(4):  # the stall's drive timer runs from the first step that sees the goal
+            bus.step(0.6)
+        assert [bool(bus.call(lambda b, k=k: b.servos[k].alarms) & StatusError.OVERLOAD) for k in (0, 1)] == [False, True]
+
+
+def test_a_held_reading_the_register_cannot_show_is_refused():
+    """300 degrees wrapped to 44 in the register."""
+    bus = Bus([1])
+    faults = Faults(bus)
+    with pytest.raises(ValueError, match=r"present_temperature holds 0..255, got 300"):
+        faults.hold(1, "present_temperature", 300)
+    faults.hold(1, "present_temperature", 90)
+    assert bus.servos[0].table.get("present_temperature") == 90

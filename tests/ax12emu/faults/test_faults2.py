@@ -251,3 +251,22 @@ def test_an_xl320_holds_only_the_readings_its_table_shows_in_the_firmwares_units
         bus.faults.hold(1, "present_voltage", None)
         bus.step(0.01)
         assert bus.read(1, "present_voltage") == 74
+
+
+def test_clearing_faults_after_the_client_rebooted_does_not_reboot_again(xl430):
+    """The client cleared the forced error itself (REBOOT) and turned the torque on: lifting the faults changed
+    nothing then, where it rebooted the servo again and its torque went off."""
+    bus, port, ph = xl430
+    bus.faults.force_alarm(1, "overheating")
+    ph.reboot(port, 1)
+    assert ph.write1ByteTxRx(port, 1, TORQUE_ENABLE, 1) == (COMM_SUCCESS, 0)
+    bus.faults.clear()
+    assert bus.read(1, "torque_enable") == 1
+
+
+def test_a_held_reading_the_register_cannot_show_is_refused_on_the_x_series(xl430):
+    """The register showed 44 while the firmware judged 300 (Alert with the register under the limit)."""
+    bus, port, ph = xl430
+    with pytest.raises(ValueError, match=r"present_temperature holds 0..255, got 300"):
+        bus.faults.hold(1, "present_temperature", 300)
+    assert ph.read1ByteTxRx(port, 1, HARDWARE_ERROR) == (0, COMM_SUCCESS, 0)

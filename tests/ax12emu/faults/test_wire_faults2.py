@@ -113,3 +113,43 @@ def test_url_fault_options_apply_to_a_2_0_bus():
         assert link.read(14) == b""
         link.write(encode_instruction2(1, Instruction2.PING))
         assert len(link.read(14)) == 14
+
+
+def test_a_fast_sync_read_is_lost_corrupted_or_delayed_whole():
+    """Its answer is one status packet the servos build share by share: a fault took single shares, so the host got
+    a headerless tail or a packet with a share cut out; a fault on one ID missed the packet it shares in."""
+    with VirtualBus([1, 2, 3], servo="xl430-w250", transport="inprocess", virtual_time=True) as bus:
+        port, ph = sdk2(bus.port)
+        try:
+            read = GroupSyncRead(port, ph, PRESENT_POSITION, 4)
+            for servo_id in (1, 2, 3):
+                read.addParam(servo_id)
+            bus.faults.set_reply_faults(drop=1.0, ids=[2])
+            assert read.fastSyncRead() == COMM_RX_TIMEOUT
+            bus.faults.set_reply_faults(corrupt=1.0, ids=[3])
+            assert read.fastSyncRead() == COMM_RX_CORRUPT
+            bus.faults.set_reply_faults(drop=0.5)
+            results = [read.fastSyncRead() for _ in range(40)]
+            assert set(results) == {COMM_SUCCESS, COMM_RX_TIMEOUT}  # all or nothing, never a broken packet
+            assert bus.faults.dropped == 1 + results.count(COMM_RX_TIMEOUT)  # one per packet, not per share
+        finally:
+            port.closePort()
+
+
+def test_a_mixed_wires_two_protocols_lose_replies_independently():
+    """Both protocols' reply faults drew from two generators of one seed: a 1.0 and a 2.0 reply were always lost
+    together, never one of them (the case robot code most needs to survive)."""
+    with VirtualBus(servo="1:ax-12a,2:xl430-w250", baud_bps=1_000_000, transport="inprocess",
+                    faults=FaultConfig(drop=0.5, seed=3)) as bus:
+        port = UrlPortHandler(bus.port)
+        assert port.openPort() and port.setBaudRate(1_000_000)
+        try:
+            p1, p2 = PacketHandler(1.0), PacketHandler(2.0)
+            one_lost = 0
+            for _ in range(40):
+                lost1 = p1.read1ByteTxRx(port, 1, 3)[1] != COMM_SUCCESS
+                lost2 = p2.read1ByteTxRx(port, 2, 7)[1] != COMM_SUCCESS
+                one_lost += lost1 != lost2
+            assert one_lost >= 5, one_lost  # independent draws: about half of 40
+        finally:
+            port.closePort()

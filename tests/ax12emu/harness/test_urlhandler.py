@@ -57,7 +57,7 @@ def test_host_baud_must_match():
         ("ax12emu://?ids=1&ids=2", "ids given more than once"),  # served ID 2 alone, silently
         ("ax12emu://?trace=/no/such/folder/bus.jsonl", "trace=/no/such/folder/bus.jsonl: No such file"),
         ("ax12emu://?servo=xl430-w250&ids=1&trace=/no/such/folder/bus.jsonl", "trace=.*No such file"),
-        ("ax12emu://?delay=1&delay_s=nan", "delay_s must be >= 0"),  # a bare ValueError from the faults
+        ("ax12emu://?delay=1&delay_s=nan", "delay_s: expected seconds 0..60"),  # a bare ValueError from the faults
         ("ax12emu://?params=&virtual_time=1", "params= given no value"),  # served the default model, silently
         ("ax12emu://?servo=xl430-w250&trace=", "trace= given no value"),
     ],
@@ -135,6 +135,16 @@ def test_faults_in_the_url():
     with serial.serial_for_url("ax12emu://?ids=1&drop=1&seed=3", baudrate=1_000_000, timeout=0.05) as link:
         link.write(PING)
         assert link.read(6) == b""
+
+
+def test_a_fault_on_one_servo_repeats_per_servo_as_its_serve_flag_does():
+    """vanish=1&vanish=2 was refused as "given more than once": no URL could unplug (stall, alarm) two servos."""
+    with serial.serial_for_url("ax12emu://?ids=1,2,3&vanish=1&vanish=2", baudrate=1_000_000, timeout=0.05) as link:
+        for servo_id, answers in ((1, False), (2, False), (3, True)):
+            link.write(encode_instruction(servo_id, 0x01))
+            assert bool(link.read(6)) is answers, servo_id
+    with pytest.raises(UrlError, match="ids given more than once"):
+        serial.serial_for_url("ax12emu://?ids=1&ids=2")
 
 
 def _write(link, address: int, *data: int) -> bytes:
