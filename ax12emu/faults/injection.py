@@ -200,7 +200,14 @@ class Faults:
         if not value or value & ~_ALARM_BITS:
             raise ValueError(f"the AX-12's alarm bits are {', '.join(f'{k} {v:#04x}' for k, v in _ALARM_FIRST.items())}; "
                              f"got {value:#04x}")
-        self._alarms[self._index(slot)] = value
+        index = self._index(slot)
+        self._alarms[index] = value
+        self._raise_forced(self.bus.servos[index], value)  # at once, not at the next packet: a live view shows it
+
+    def _raise_forced(self, servo: "VirtualServo", bits: int) -> None:
+        """The firmware's own reaction to alarms it finds: the bits in every status, Alarm Shutdown's output cut."""
+        servo.alarms |= bits
+        self._shutdown(servo, bits)
 
     def clear_alarm(self, slot: int) -> None:
         """Lift forced alarms; the model's own alarms, if any, return at its next step."""
@@ -354,8 +361,7 @@ class Faults:
         if index in self._held:
             bits |= _held_alarms(servo)
         if bits:
-            servo.alarms |= bits
-            self._shutdown(servo, bits)
+            self._raise_forced(servo, bits)
         return True
 
     def _shutdown(self, servo: "VirtualServo", bits: int) -> None:
@@ -398,10 +404,13 @@ class Faults:
         return out
 
     def after_physics(self) -> None:
-        """Hold stalled shafts after the model has stepped."""
-        if not (self._stalls or self._held):
+        """Hold stalled shafts and forced alarms after the model has stepped (its step wrote its own alarms: a forced
+        one showed only from the next packet, and a Torque Limit written meanwhile drove the shaft until then)."""
+        if not (self._stalls or self._held or self._alarms):
             return
         bus = self.bus
+        for index, bits in self._alarms.items():
+            self._raise_forced(bus.servos[index], bits)
         for index, held in self._held.items():
             table = bus.servos[index].table
             for name, value in held.items():

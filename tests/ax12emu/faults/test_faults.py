@@ -251,3 +251,18 @@ def test_a_held_reading_the_register_cannot_show_is_refused():
         faults.hold(1, "present_temperature", 300)
     faults.hold(1, "present_temperature", 90)
     assert bus.servos[0].table.get("present_temperature") == 90
+
+
+def test_a_forced_alarm_acts_at_once_and_holds_between_packets():
+    """The bits showed, and Alarm Shutdown cut the output, only when a packet reached the servo: a live view of an idle
+    bus showed no alarm, and a Torque Limit written meanwhile drove the shaft until the next packet."""
+    with VirtualBus([1], model="kinematic", transport="inprocess", virtual_time=True) as bus:
+        bus.write(1, "torque_enable", 1)
+        bus.faults.force_alarm(1, "overload")
+        assert bus.call(lambda b: b.servos[0].alarms) & StatusError.OVERLOAD
+        assert bus.read(1, "torque_limit") == 0  # Alarm Shutdown selects Overload by default
+        bus.write(1, "torque_limit", 1023)
+        bus.write(1, "goal_position", 200)
+        bus.step(0.5)
+        assert bus.read(1, "torque_limit") == 0
+        assert bus.call(lambda b: b.servos[0].alarms) & StatusError.OVERLOAD
