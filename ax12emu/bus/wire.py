@@ -86,7 +86,7 @@ def build_wire_of(models: Sequence[tuple[int, str]], *, clock: WallClock | Virtu
     Protocol 1.0: AX-12As and AX-18As on the AX-12 bus (:class:`Bus`, ``options1``; their physics is ``choice1``,
     by default ``choice``'s supply and torque as the X series' takes them); MX servos on :class:`Bus1X` (``options1x``), which
     holds the AX bus inside when both are named.  Protocol 2.0: :class:`Bus2` (``options``).  Every servo
-    starts at its model's factory rate (1,000,000 bps on the AX and MX series, 57,600 on the X series) unless
+    starts at its model's factory rate (1,000,000 bps on the AX series, 57,600 on the MX (Baud Rate 34) and X series) unless
     ``baud_bps``, which each servo turns into its own Baud Rate value.  ``state_store1``/``state_store2``: where
     each protocol's servos keep their EEPROM area (IDs are per protocol, so apart); ``load_state`` False starts
     from factory defaults and still saves there.

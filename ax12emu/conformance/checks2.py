@@ -240,6 +240,20 @@ class Context2(Transactions):
         """Torque Enable(64) is 1."""
         return bool(self.get(servo_id, "torque_enable"))
 
+    def turn_torque_on(self, servo_id: int) -> None:
+        """Torque Enable 1, for a check that needs the torque on; skipped while a hardware error is latched.
+
+        [CT] Hardware Error Status(70) / Shutdown(63): a detected error turns the torque off and keeps it off until
+        REBOOT, so such a servo cannot take the check (it failed the check's own figures instead, though it did
+        what the e-manual says).  A servo that accepts the write and leaves the torque off otherwise fails.
+        """
+        hardware = self.get(servo_id, "hardware_error_status")
+        if hardware:
+            raise Skipped(f"ID {servo_id}'s Hardware Error Status is {hardware:#04x}: its torque stays off until "
+                          "REBOOT, and this check needs it on")
+        self.must_put(servo_id, "torque_enable", 1)
+        expect(self.torque_on(servo_id), f"ID {servo_id}: Torque Enable 1 written and answered, but it reads 0")
+
 
 def _u16(value: int) -> bytes:
     return value.to_bytes(2, "little")
@@ -510,7 +524,7 @@ def _torque_held(ctx: Context2, servo: int) -> Iterator[bool]:
             present = ctx.get(servo, "present_position")
             if ctx.put(servo, "goal_position", present):
                 raise Skipped(f"Present Position {present} is not a valid Goal Position here")
-            ctx.must_put(servo, "torque_enable", 1)
+            ctx.turn_torque_on(servo)
         yield was_on
     finally:
         if not was_on and goal is not None:
@@ -1175,7 +1189,7 @@ def _velocity_body(ctx: Context2, servo: int) -> str:
     tolerance = max(2.0, VELOCITY_TOLERANCE * goal)
     sample = _sampler(ctx, servo, ("velocity_trajectory", "present_velocity", "present_position"))
     ctx.must_put(servo, "goal_velocity", 0)
-    ctx.must_put(servo, "torque_enable", 1)
+    ctx.turn_torque_on(servo)
     start = time.perf_counter()
     _timed_put(ctx, servo, "goal_velocity", goal)
     close = 0
@@ -1236,7 +1250,7 @@ def _current_body(ctx: Context2, servo: int) -> str:
     pwm_limit = abs(ctx.get(servo, "goal_pwm"))
     sample = _sampler(ctx, servo, ("present_pwm", "present_current", "present_velocity", "present_position"))
     ctx.must_put(servo, "goal_current", 0)
-    ctx.must_put(servo, "torque_enable", 1)
+    ctx.turn_torque_on(servo)
     figures = []
     for sign in (1, -1):
         target = sign * goal
@@ -1323,7 +1337,7 @@ def _profile_body(ctx: Context2, servo: int, time_based: bool) -> str:
     if not low <= present <= high:
         raise Skipped(f"ID {servo}: Present Position {present} is outside the position limits {low}..{high}")
     ctx.must_put(servo, "goal_position", present)
-    ctx.must_put(servo, "torque_enable", 1)
+    ctx.turn_torque_on(servo)
     origin = ctx.get(servo, "present_position")  # "ΔPos, the distance ... between desired position and present position"
     sign = 1 if origin < (low + high) / 2 else -1
     goal = origin + sign * PROFILE_TRAVEL_PULSES

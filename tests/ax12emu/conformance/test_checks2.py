@@ -164,6 +164,20 @@ def test_velocity_mode_fails_against_a_shaft_held_back():
     assert result.outcome == conformance.FAIL and "Present Velocity" in result.figure, report.table()
 
 
+def test_a_servo_with_a_latched_hardware_error_skips_the_checks_that_need_its_torque():
+    """Its torque stays off until REBOOT, as the e-manual says: "EEPROM locked by torque", "result fail" and the
+    motion checks failed it on their own figures, though it did what it must."""
+    from ax12emu import VirtualBus
+
+    needs_torque = ["EEPROM locked by torque", "result fail", "velocity mode", "velocity-based profile", "time-based profile"]
+    with VirtualBus([1], servo="xl430-w250", transport="inprocess", virtual_time=True) as bus:
+        bus.faults.force_alarm(1, "overheating")
+        report = conformance.run(bus.port, [1], protocol="2.0", baud=57_600, motion=True, only=needs_torque)
+    outcomes = {r.name: (r.outcome, r.figure) for r in report.results if r.name in needs_torque}
+    assert all(outcome == conformance.SKIP and "Hardware Error Status is 0x04" in figure
+               for outcome, figure in outcomes.values()), report.table()
+
+
 #: What the suite cannot ask of the XL-320's classic table, each skipped with its reason.
 XL320_SKIPS = {
     "result fail": "the e-manual gives Control Table Backup to the X430/540 and X330 only",
