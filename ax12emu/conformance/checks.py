@@ -569,6 +569,9 @@ def check_broadcast_write(ctx: Context) -> str:
         for servo_id in ctx.ids:
             expect(ctx.get(servo_id, "led") == 1, f"ID {servo_id} not written")
     finally:
+        # The broadcast also lit the LED of any servo on the bus that is not under test: put every LED back to its
+        # factory 0 the same way, then those under test to what they were.
+        ctx.send(encode_instruction(BROADCAST_ID, Instruction.WRITE, bytes((ctx.address("led"), 0))))
         for servo_id, led in leds.items():
             ctx.put(servo_id, "led", led)
     return "all written, silent"

@@ -140,6 +140,14 @@ def test_reset_leaves_a_servo_not_under_test_alone():
         assert report.outcome("RESET") == "skip" and bus.table(1) == before and bus.read(2, "id") == 2
 
 
+def test_the_broadcast_write_check_leaves_a_servo_not_under_test_dark():
+    """A broadcast reaches every servo on the bus: one not under test kept its LED lit after the check."""
+    with VirtualBus([1, 2, 3], transport="inprocess", model="kinematic") as bus:
+        report = conformance.run(bus.port, [1, 2], only=["broadcast WRITE"], timeout_s=CONFORMANCE_TIMEOUT_S,
+                                 silence_s=EMULATOR_SILENCE_S)
+        assert report.outcome("broadcast WRITE") == "pass" and bus.read(3, "led") == 0
+
+
 def test_a_destructive_check_that_fails_mid_way_still_puts_the_servo_back():
     """A RESET answered from the new ID (--reset-reply-id new) fails the check, and the servo gets its ID and table
     back (it was left at ID 1 with the factory table, and the report did not say)."""
