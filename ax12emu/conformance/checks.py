@@ -571,7 +571,7 @@ def check_broadcast_write(ctx: Context) -> str:
     finally:
         # The broadcast also lit the LED of any servo on the bus that is not under test: put every LED back to its
         # factory 0 the same way, then those under test to what they were.
-        ctx.send(encode_instruction(BROADCAST_ID, Instruction.WRITE, bytes((ctx.address("led"), 0))))
+        ctx.silent(encode_instruction(BROADCAST_ID, Instruction.WRITE, bytes((ctx.address("led"), 0))))  # (its echo too)
         for servo_id, led in leds.items():
             ctx.put(servo_id, "led", led)
     return "all written, silent"
@@ -611,14 +611,21 @@ def check_status_return_level(ctx: Context) -> str:
     return "0: PING only; 1: PING+READ; 2: all"
 
 
-def check_return_delay(ctx: Context) -> str:
+def check_return_delay(ctx: Context) -> "str | Note":
     """Return Delay Time (2 us per unit) shows in the round trip: measured against a delay of 0."""
     return return_delay_figure(ctx, ctx.target)
 
 
-def return_delay_figure(ctx: Any, servo: int) -> str:
+#: A fastest round trip at Return Delay Time 0 this long is the link's own latency, not the servo's: a USB adapter's
+#: latency timer (an FTDI's 16 ms by default) holds a short status back whatever the servo's half millisecond.
+LINK_HIDES_DELAY_S = 0.002
+
+
+def return_delay_figure(ctx: Any, servo: int) -> "str | Note":
     """The fastest PING round trip at Return Delay Time 250 (or the servo's own, if 100 or more) less the fastest
-    at 0 must be at least 0.6 x the delay (both protocols: 2 us a unit); the register is restored."""
+    at 0 must be at least 0.6 x the delay (both protocols: 2 us a unit); the register is restored.  Where the link
+    itself takes :data:`LINK_HIDES_DELAY_S` or more, a difference too small is a note, not a failure: the
+    adapter, not the servo, decides when the reply is seen."""
     original = ctx.get(servo, "return_delay_time")
     slow = original if original >= 100 else 250
     count = 30
@@ -635,6 +642,9 @@ def return_delay_figure(ctx: Any, servo: int) -> str:
     measured = slow_rtt - fast_rtt
     figure = f"{slow} ({expected * 1e6:.0f} us): {_ms(slow_rtt)}; 0: {_ms(fast_rtt)} (fastest of {count}); difference {measured * 1e6:.0f} us"
     # Lower bound only: a busy host adds time to both, never removes the servo's wait.
+    if measured < 0.6 * expected and fast_rtt >= LINK_HIDES_DELAY_S:
+        return Note(f"{figure}: the link's own latency ({_ms(fast_rtt)} at 0) is too coarse to see the delay; "
+                    "lower the adapter's latency timer (FTDI: 1 ms) to judge it")
     expect(measured >= 0.6 * expected, figure)
     return figure
 

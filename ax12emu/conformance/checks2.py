@@ -884,7 +884,7 @@ def check_status_return_level(ctx: Context2) -> str:
     return "0: PING only; 1: PING+READ; 2: all"
 
 
-def check_return_delay(ctx: Context2) -> str:
+def check_return_delay(ctx: Context2) -> "str | Note":
     """[CT] Return Delay Time(9): the status packet is returned after the set time, 2 us per unit,
     0 ~ 254 (default 250 = 500 us).  The fastest Ping round trip at 250 minus the fastest at 0 is at
     least 0.6 x 500 us (a busy host only adds time).  An EEPROM register: skipped with torque on."""
