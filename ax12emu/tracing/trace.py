@@ -49,7 +49,9 @@ class TraceWriter:
 
     def __init__(self, path: str | os.PathLike[str], *, profile: str = "ax12a", servos: str | None = None) -> None:
         self.path = Path(path)
-        self._file: IO[str] | None = open(self.path, "w", encoding="utf-8")
+        # Line-buffered: the file keeps up with the wire, so a trace read while the server runs, or left by one that
+        # was killed (a CI timeout's SIGKILL), holds the traffic up to its last packet, the part a failure is in.
+        self._file: IO[str] | None = open(self.path, "w", encoding="utf-8", buffering=1)
         self._start = time.monotonic()
         header = {
             "format": TRACE_FORMAT,

@@ -100,3 +100,17 @@ def test_a_byte_order_mark_and_a_device_file(tmp_path):
     assert "PING id=1" in _decode_cli(str(path)).stdout  # a trace, not a raw capture of 68 discarded bytes
     result = _decode_cli("/dev/zero")  # read without end, until memory ran out
     assert result.returncode != 0 and "not a regular file" in result.stderr and "Traceback" not in result.stderr
+
+
+def test_a_trace_on_disk_keeps_up_with_the_wire(tmp_path):
+    """Buffered, a short session's trace read while the server ran was empty (and `decode` printed nothing), and a
+    server killed hard lost the tail it was killed in."""
+    from ax12emu.tracing.trace import TraceWriter
+
+    path = tmp_path / "live.jsonl"
+    writer = TraceWriter(path)
+    writer.record("in", b"\xff\xff\x01\x02\x01\xfb", now=1.0)
+    try:
+        assert len(path.read_text().splitlines()) == 2  # header and the chunk, before any flush or close
+    finally:
+        writer.close()
