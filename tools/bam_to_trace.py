@@ -13,12 +13,12 @@ Usage::
 
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ax12emu.cli.arg_types import OneLineParser, file_name, output_file  # noqa: E402
 from ax12emu.protocol.servo_models import model as servo_model  # noqa: E402
 from firmware_model.diagnose.bam_trace import bam_trace  # noqa: E402
 from firmware_model.diagnose.trace import Trace, write_trace  # noqa: E402
@@ -39,17 +39,17 @@ def convert(log_path: str | Path, model_key: str = DEFAULT_MODEL) -> Trace:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("log", help="a BAM pendulum log (JSON)")
-    p.add_argument("out", help="the trace CSV to write")
+    p = OneLineParser(description=__doc__.splitlines()[0])
+    p.add_argument("log", type=file_name, help="a BAM pendulum log (JSON)")
+    p.add_argument("out", type=output_file, help="the trace CSV to write")
     p.add_argument("--model", default=DEFAULT_MODEL, help=f"servo model file key (default {DEFAULT_MODEL})")
     args = p.parse_args(argv)
     try:
         trace = convert(args.log, args.model)
+        write_trace(trace, args.out)  # an OUT it may not write is the user's path too, not a traceback
     except (ValueError, KeyError, OSError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"{p.prog}: error: {exc}", file=sys.stderr)
         return 2
-    write_trace(trace, args.out)
     print(f"{args.out}: {len(trace)} rows, {trace.t[-1]:.2f} s", file=sys.stderr)
     return 0
 

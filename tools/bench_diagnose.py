@@ -59,6 +59,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import live_dataset  # noqa: E402
 
+from ax12emu.cli.arg_types import (  # noqa: E402
+    OneLineParser,
+    name_list,
+    nonnegative_int,
+    positive_float,
+    positive_int,
+)
 from firmware_model.diagnose.cli import load_input, parse_args  # noqa: E402
 from firmware_model.diagnose.effects import LIBRARY  # noqa: E402
 from firmware_model.diagnose.search import diagnose  # noqa: E402
@@ -204,38 +211,43 @@ def run_recorded(args: argparse.Namespace, folder: Path) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     """Run the sweep and print the table."""
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--seeds", type=int, default=5, help="seeds per effect (default 5)")
-    p.add_argument("--clean", type=int, default=20, help="clean traces for the false-positive rate (default 20)")
-    p.add_argument("--cogging", type=int, default=5, help="traces with an out-of-library effect (default 5)")
-    p.add_argument("--duration", type=float, default=20.0)
-    p.add_argument("--rate", type=float, default=100.0)
-    p.add_argument("--jobs", type=int, default=1)
+    p = OneLineParser(description=__doc__.splitlines()[0])
+    p.add_argument("--seeds", type=nonnegative_int, default=5, help="seeds per effect (default 5)")
+    p.add_argument("--clean", type=nonnegative_int, default=20,
+                   help="clean traces for the false-positive rate (default 20)")
+    p.add_argument("--cogging", type=nonnegative_int, default=5, help="traces with an out-of-library effect (default 5)")
+    p.add_argument("--duration", type=positive_float, default=20.0)
+    p.add_argument("--rate", type=positive_float, default=100.0)
+    p.add_argument("--jobs", type=positive_int, default=1)
     p.add_argument("--live", action="store_true", help="record like a real-time client (see above)")
-    p.add_argument("--effects", metavar="LIST", help="hide only these effects (default: every library effect)")
-    p.add_argument("--recorded", type=int, default=0, metavar="N",
+    p.add_argument("--effects", type=name_list(LIBRARY), metavar="LIST",
+                   help="hide only these effects (default: every library effect)")
+    p.add_argument("--recorded", type=nonnegative_int, default=0, metavar="N",
                    help="live recordings with a hidden effect, through dynamixel-sdk from ax12emu serve (default 0)")
-    p.add_argument("--recorded-clean", type=int, metavar="M", help="clean live recordings (default: N)")
-    p.add_argument("--recorded-duration", type=float, default=10.0, help="seconds of each recording's excitation "
-                   "(default 10; Stribeck friction's adds a 6 s breakaway block)")
+    p.add_argument("--recorded-clean", type=nonnegative_int, metavar="M", help="clean live recordings (default: N)")
+    p.add_argument("--recorded-duration", type=positive_float, default=10.0, help="seconds of each recording's "
+                   "excitation (default 10; Stribeck friction's adds a 6 s breakaway block)")
     p.add_argument("--recorded-dir", metavar="DIR", help="keep the recordings here and reuse those already there")
-    p.add_argument("--wizard-steps", type=int, default=0, metavar="N",
+    p.add_argument("--wizard-steps", type=nonnegative_int, default=0, metavar="N",
                    help="Wizard-style single steps per bar and without one (default 0)")
     args = p.parse_args(argv)
     if args.recorded_clean is None:
         args.recorded_clean = args.recorded
-    if min(args.seeds, args.clean, args.cogging, args.recorded, args.recorded_clean, args.wizard_steps) < 0 or args.jobs < 1:
-        p.error("counts must be >= 0 and --jobs >= 1")
-    if not args.recorded_duration > 0 or not 0 < args.rate <= 1000:
-        p.error("--recorded-duration must be positive and --rate in (0, 1000]")
+    if not args.rate <= 1000:
+        p.error("--rate must be in (0, 1000]")
+    if round(args.duration * args.rate) < 2:  # a synthetic trace of fewer readings is no trace
+        p.error("--duration x --rate must give at least 2 readings")
     if args.recorded or args.recorded_clean:  # first, so no diagnosis runs beside a recording
         if args.recorded_dir:
-            Path(args.recorded_dir).mkdir(parents=True, exist_ok=True)
+            try:
+                Path(args.recorded_dir).mkdir(parents=True, exist_ok=True)
+            except OSError as exc:  # a file of that name, or no permission: the user's path, said before any work
+                p.exit(2, f"{p.prog}: error: --recorded-dir: {exc}\n")
             run_recorded(args, Path(args.recorded_dir))
         else:
             with tempfile.TemporaryDirectory(prefix="bench_recorded_") as tmp:
                 run_recorded(args, Path(tmp))
-    hide = args.effects.split(",") if args.effects else list(LIBRARY)
+    hide = args.effects or list(LIBRARY)
     jobs = [(e, s, args.duration, args.rate, args.live) for e in hide for s in range(args.seeds)]
     jobs += [("none", 1000 + s, args.duration, args.rate, args.live) for s in range(args.clean)]
     jobs += [("cogging", 2000 + s, args.duration, args.rate, args.live) for s in range(args.cogging)]

@@ -47,7 +47,6 @@ Usage: ``python tools/bench_protocol.py [--seconds 2] [--rounds 3] [--web [socke
 
 from __future__ import annotations
 
-import argparse
 import os
 import select
 import signal
@@ -60,6 +59,14 @@ import time
 from pathlib import Path
 
 from dynamixel_sdk import COMM_RX_CORRUPT, COMM_SUCCESS, GroupSyncRead, GroupSyncWrite, PacketHandler, PortHandler
+
+from ax12emu.cli.arg_types import OneLineParser, positive_float, positive_int
+from ax12emu.protocol.servo_models import model as servo_model
+from ax12emu.protocol.servo_models import model_names
+
+#: What ``--model`` may name: the Protocol 2.0 loop reads and writes the X series' control table (Present
+#: Position at 132), which an XL-320's or a Protocol 1.0 model's is not; another would fail only once served.
+X_MODELS = tuple(k for k in model_names() if servo_model(k).protocols == ("2.0",) and servo_model(k).classic is None)
 
 #: Per byte written into the EEPROM area, how long to leave the servo alone (about 6 ms measured, 9 ms by the datasheet).
 EEPROM_WAIT_S = 0.009
@@ -530,9 +537,9 @@ def measure_web_cost(emulator: list[str], seconds: float, client_kind: str = "so
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seconds", type=float, default=2.0, help="measuring time per configuration")
-    parser.add_argument("--rounds", type=int, default=3,
+    parser = OneLineParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=positive_float, default=2.0, help="measuring time per configuration")
+    parser.add_argument("--rounds", type=positive_int, default=3,
                         help="the RDT 0 comparison runs --seconds x --rounds per server, in 0.2 s turns (default 3)")
     parser.add_argument("--web", nargs="?", const="socket", choices=("socket", "chromium"),
                         help="only the live view's cost: reads with and without --web and a streaming client "
@@ -540,10 +547,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--protocol", choices=("1.0", "2.0"), default="1.0",
                         help="2.0: only the Protocol 2.0 loop (Sync Read + Sync Write of six X-series servos) "
                              "against a bare Protocol 2.0 responder, in 0.2 s turns")
-    parser.add_argument("--model", default="xl430-w250", help="with --protocol 2.0: the X-series model served")
+    parser.add_argument("--model", default="xl430-w250", choices=X_MODELS,
+                        help="with --protocol 2.0: the X-series model served")
     args = parser.parse_args(argv)
-    if args.rounds < 1 or not args.seconds > 0:
-        parser.error("--rounds must be >= 1 and --seconds > 0")
     emulator = [sys.executable, "-m", "ax12emu", "serve"]
     if args.protocol == "2.0":
         print(f"machine: {os.cpu_count()} cores, Python {sys.version.split()[0]}, load {os.getloadavg()[0]:.1f}")

@@ -14,7 +14,6 @@ Usage: ``python tools/bench_protocol2.py [--seconds 2] [--servos 6] [--model xl4
 
 from __future__ import annotations
 
-import argparse
 import statistics
 import sys
 import time
@@ -25,10 +24,17 @@ from dynamixel_sdk import COMM_SUCCESS, GroupBulkRead, GroupSyncRead, GroupSyncW
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from ax12emu.cli.arg_types import OneLineParser, int_range, positive_float  # noqa: E402
 from ax12emu.harness.served import start_served  # noqa: E402
+from ax12emu.protocol.packets2 import MAX_ID2  # noqa: E402
+from ax12emu.protocol.servo_models import model as servo_model  # noqa: E402
+from ax12emu.protocol.servo_models import model_names  # noqa: E402
 
 BAUD = 1_000_000
 PRESENT_POSITION, GOAL_POSITION, RETURN_DELAY_TIME, LED = 132, 116, 9, 65
+#: What ``--model`` may name: the addresses above are the X series' control table, which an XL-320's or a
+#: Protocol 1.0 model's is not; another would fail only once served.
+X_MODELS = tuple(k for k in model_names() if servo_model(k).protocols == ("2.0",) and servo_model(k).classic is None)
 
 
 def measure(name: str, transaction: Callable[[], bool], seconds: float) -> list[float]:
@@ -88,10 +94,10 @@ def run(seconds: float, servos: int, model: str) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seconds", type=float, default=2.0, help="measuring time per transaction kind")
-    parser.add_argument("--servos", type=int, default=6, help="servos on the bus (IDs 1..N)")
-    parser.add_argument("--model", default="xl430-w250", help="the X-series model (ax12emu models)")
+    parser = OneLineParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=positive_float, default=2.0, help="measuring time per transaction kind")
+    parser.add_argument("--servos", type=int_range(1, MAX_ID2), default=6, help="servos on the bus (IDs 1..N)")
+    parser.add_argument("--model", default="xl430-w250", choices=X_MODELS, help="the X-series model (ax12emu models)")
     args = parser.parse_args(argv)
     run(args.seconds, args.servos, args.model)
     return 0

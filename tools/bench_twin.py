@@ -18,7 +18,6 @@ Usage: ``python tools/bench_twin.py [--seeds 2] [--jobs 2]``
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import sys
 import tempfile
@@ -33,6 +32,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import real_ax12a  # noqa: E402
 
+from ax12emu.cli.arg_types import OneLineParser, positive_int  # noqa: E402
 from firmware_model.diagnose.cli import load_input, parse_args  # noqa: E402
 from firmware_model.diagnose.search import diagnose  # noqa: E402
 from firmware_model.diagnose.synthetic import wizard_step_export  # noqa: E402
@@ -129,12 +129,10 @@ def run(seeds: int, jobs: int, servos: list[str] | None = None, bars: tuple[floa
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--seeds", type=int, default=2, help="loaded steps per servo and bar (default 2)")
-    p.add_argument("--jobs", type=int, default=1, help="diagnoses at once (default 1)")
+    p = OneLineParser(description=__doc__.splitlines()[0])
+    p.add_argument("--seeds", type=positive_int, default=2, help="loaded steps per servo and bar (default 2)")
+    p.add_argument("--jobs", type=positive_int, default=1, help="diagnoses at once (default 1)")
     args = p.parse_args(argv)
-    if args.seeds < 1 or args.jobs < 1:
-        p.error("--seeds and --jobs must be >= 1")
     run(args.seeds, args.jobs)
     return 0
 

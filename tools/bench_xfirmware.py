@@ -15,7 +15,6 @@ Usage: ``python tools/bench_xfirmware.py [--seconds S] [--repeat R]``
 
 from __future__ import annotations
 
-import argparse
 import statistics
 import sys
 import time
@@ -23,6 +22,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ax12emu.cli.arg_types import OneLineParser, positive_float, positive_int  # noqa: E402
 from firmware_model.xseries.firmware import build_x_servo  # noqa: E402
 from firmware_model.xseries.interface import XCommands  # noqa: E402
 
@@ -63,11 +63,13 @@ def run_once(model: str, scenario: str, seconds: float) -> float:
     return (time.perf_counter() - start) / steps * 1e6
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seconds", type=float, default=5.0, help="simulated seconds per run")
-    parser.add_argument("--repeat", type=int, default=3, help="runs per figure (best and median reported)")
-    args = parser.parse_args()
+def main(argv: list[str] | None = None) -> None:
+    parser = OneLineParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=positive_float, default=5.0, help="simulated seconds per run")
+    parser.add_argument("--repeat", type=positive_int, default=3, help="runs per figure (best and median reported)")
+    args = parser.parse_args(argv)
+    if int(args.seconds * 1000) < 1:  # the model is stepped 1 ms at a time: a shorter run has no step to time
+        parser.error(f"--seconds must be at least 0.001 (one 1 ms step), got {args.seconds:g}")
     print(f"{'model':12} {'scenario':8} {'best us/step':>13} {'median':>8}")
     for model in MODELS:
         for scenario in ("moving", "holding", "off"):

@@ -19,7 +19,6 @@ Usage: ``python tools/churn.py [--pty-opens 1000] [--tcp-connects 1000]``
 
 from __future__ import annotations
 
-import argparse
 import random
 import select
 import socket
@@ -30,6 +29,7 @@ from dataclasses import dataclass, field
 
 import serial
 
+from ax12emu.cli.arg_types import OneLineParser, nonnegative_int
 from ax12emu.protocol.framing import DEFAULT_SILENCE_TIMEOUT_S
 from ax12emu.protocol.packets import encode_instruction, encode_status
 
@@ -194,10 +194,11 @@ def _sdk_read(path: str) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     """Run the three phases against fresh emulators; print counts; exit 1 on a failure."""
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--pty-opens", type=int, default=1000)
-    parser.add_argument("--tcp-connects", type=int, default=1000)
-    parser.add_argument("--intruders", type=int, default=200)
+    parser = OneLineParser(description=__doc__.split("\n\n")[0])
+    # 0 leaves a phase out; a negative count ran it as 0 and printed it as done
+    parser.add_argument("--pty-opens", type=nonnegative_int, default=1000)
+    parser.add_argument("--tcp-connects", type=nonnegative_int, default=1000)
+    parser.add_argument("--intruders", type=nonnegative_int, default=200)
     args = parser.parse_args(argv)
     failures = 0
     process, path = _start()

@@ -27,7 +27,6 @@ Usage: ``python tools/crash_state.py [--iterations 100] [--seed N]``
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import random
@@ -43,6 +42,7 @@ from pathlib import Path
 
 import serial
 
+from ax12emu.cli.arg_types import OneLineParser, file_name, positive_int
 from ax12emu.protocol.packets import encode_instruction
 
 #: Factory state (no write yet): ID 1, Return Delay 250, CW 0, CCW 1023.
@@ -100,7 +100,8 @@ def _start(state_dir: Path) -> tuple[subprocess.Popen, str]:
     if not line:
         process.kill()
         _, err = process.communicate(timeout=5)
-        raise RuntimeError(f"the emulator did not start: {err.strip()}")
+        why = (err.strip().splitlines() or [f"exit status {process.returncode}"])[-1]  # its one-line error
+        raise RuntimeError(f"the emulator did not start: {why}")
     return process, line
 
 
@@ -121,7 +122,13 @@ def run(iterations: int, *, seed: int = 0, state_dir: Path | None = None, max_ki
     k_last = -1  # the write the state holds (verified on restart)
     try:
         for iteration in range(iterations):
-            process, port = _start(directory)
+            try:
+                process, port = _start(directory)
+            except RuntimeError as exc:
+                if not iteration:  # the state folder as given (a file, unwritable, a state it refuses): the caller's
+                    raise
+                report.failures.append(f"iteration {iteration}: restart after SIGKILL: {exc}")
+                break
             leftovers = [p.name for p in directory.iterdir() if p.name.endswith(".tmp")]
             if leftovers:
                 report.failures.append(f"iteration {iteration}: temporary files survived a restart: {leftovers}")
@@ -221,14 +228,19 @@ def _count_acks(data: bytes, k_last: int) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """Parse arguments, run the kills, print the figures; exit 1 on any failure."""
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--iterations", type=int, default=100)
+    parser = OneLineParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--iterations", type=positive_int, default=100)
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--state-dir", type=Path, help="keep the state here (default: a temporary directory)")
+    parser.add_argument("--state-dir", type=file_name, help="keep the state here (default: a temporary directory)")
     parser.add_argument("-v", "--verbose", action="store_true", help="one line per iteration")
     args = parser.parse_args(argv)
     started = time.monotonic()
-    report = run(args.iterations, seed=args.seed, state_dir=args.state_dir, log=print if args.verbose else None)
+    try:
+        report = run(args.iterations, seed=args.seed, state_dir=None if args.state_dir is None else Path(args.state_dir),
+                     log=print if args.verbose else None)
+    except RuntimeError as exc:  # the emulator's first start refused --state-dir (a file, unwritable, a bad state)
+        print(f"{parser.prog}: error: {exc}", file=sys.stderr)
+        return 2
     print(f"iterations: {report.iterations} in {time.monotonic() - started:.1f} s; SIGKILL with a write "
           f"unacknowledged: {report.kills_mid_burst}; file newer than the last ack: {report.ahead_of_ack}")
     print(f"writes sent: {report.writes_sent}, acknowledged: {report.writes_acked}; "

@@ -65,7 +65,6 @@ modules the target reaches and printed with the missed lines.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import io
 import json
@@ -98,6 +97,7 @@ from hypothesis import strategies as st
 from ax12emu.bus.bus import Bus
 from ax12emu.bus.bus1x import Bus1X
 from ax12emu.bus.clock import VirtualClock
+from ax12emu.cli.arg_types import OneLineParser, file_name, positive_float, positive_int
 from ax12emu.protocol.control_table import TABLE_SIZE, Access, layout
 from ax12emu.protocol.framing import DEFAULT_SILENCE_TIMEOUT_S, MAX_FRAME_BYTES, Framer
 from ax12emu.protocol.packets import BROADCAST_ID, Instruction, StatusError, checksum, encode_instruction, encode_status
@@ -1168,14 +1168,16 @@ def report_failure(stats: Any, failure_file: str, tool: str) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """Parse arguments, fuzz, print figures; exit 1 on a failure."""
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--inputs", type=int, default=1_000_000, help="inputs (chunks) to feed (default 1,000,000)")
-    parser.add_argument("--seconds", type=float, help="stop after this long even if fewer inputs were fed")
+    parser = OneLineParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--inputs", type=positive_int, default=1_000_000,
+                        help="inputs (chunks) to feed (default 1,000,000)")
+    parser.add_argument("--seconds", type=positive_float, help="stop after this long even if fewer inputs were fed")
     parser.add_argument("--seed", type=int, help="seed hypothesis (default: random)")
     parser.add_argument("--wire", choices=("ax12", "mx"), help="only this wire (default: both, 2:1)")
     parser.add_argument("--no-coverage", action="store_true", help="skip coverage measurement (faster)")
-    parser.add_argument("--replay", metavar="FILE", help="rerun one case written on a failure")
-    parser.add_argument("--failure-file", default="fuzz-failure.json", help="where a failing case is written")
+    parser.add_argument("--replay", type=file_name, metavar="FILE", help="rerun one case written on a failure")
+    parser.add_argument("--failure-file", type=file_name, default="fuzz-failure.json",
+                        help="where a failing case is written")
     args = parser.parse_args(argv)
 
     if args.replay:

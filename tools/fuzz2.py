@@ -73,7 +73,6 @@ Usage::
 
 from __future__ import annotations
 
-import argparse
 import collections
 import dataclasses
 import importlib.util
@@ -113,6 +112,7 @@ from ax12emu.bus.bus import Bus  # noqa: E402
 from ax12emu.bus.bus2 import Bus2  # noqa: E402
 from ax12emu.bus.clock import VirtualClock  # noqa: E402
 from ax12emu.bus.mixed import MixedBus  # noqa: E402
+from ax12emu.cli.arg_types import OneLineParser, file_name, positive_float, positive_int  # noqa: E402
 from ax12emu.protocol.framing import Framer  # noqa: E402
 from ax12emu.protocol.framing2 import DEFAULT_MAX_LENGTH, DEFAULT_SILENCE_TIMEOUT_S  # noqa: E402
 from ax12emu.protocol.packets import BROADCAST_ID, Instruction  # noqa: E402
@@ -1240,14 +1240,16 @@ def fuzz(max_inputs: int, *, seconds: float | None = None, seed: int | None = No
 
 def main(argv: list[str] | None = None) -> int:
     """Parse arguments, fuzz, print figures; exit 1 on a failure."""
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--inputs", type=int, default=1_000_000, help="inputs (chunks) to feed (default 1,000,000)")
-    parser.add_argument("--seconds", type=float, help="stop after this long even if fewer inputs were fed")
+    parser = OneLineParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--inputs", type=positive_int, default=1_000_000,
+                        help="inputs (chunks) to feed (default 1,000,000)")
+    parser.add_argument("--seconds", type=positive_float, help="stop after this long even if fewer inputs were fed")
     parser.add_argument("--seed", type=int, help="seed hypothesis (default: random)")
     parser.add_argument("--bus", choices=("2.0", "mixed"), help="only this bus (default: both, 2:1)")
     parser.add_argument("--no-coverage", action="store_true", help="skip coverage measurement (faster)")
-    parser.add_argument("--replay", metavar="FILE", help="rerun one case written on a failure")
-    parser.add_argument("--failure-file", default="fuzz2-failure.json", help="where a failing case is written")
+    parser.add_argument("--replay", type=file_name, metavar="FILE", help="rerun one case written on a failure")
+    parser.add_argument("--failure-file", type=file_name, default="fuzz2-failure.json",
+                        help="where a failing case is written")
     args = parser.parse_args(argv)
 
     if args.replay:

@@ -34,7 +34,6 @@ Usage: ``python tools/live_dataset.py OUT.csv --key KEY.json [--knob none|arm|..
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import sys
@@ -51,6 +50,7 @@ sys.path.insert(0, str(ROOT))
 
 from record import record  # noqa: E402
 
+from ax12emu.cli.arg_types import OneLineParser, nonnegative_int, output_file, positive_float  # noqa: E402
 from ax12emu.harness.served import start_served  # noqa: E402
 from firmware_model.diagnose.effects import LIBRARY  # noqa: E402
 from firmware_model.diagnose.trace import Trace, write_trace  # noqa: E402
@@ -311,13 +311,13 @@ def record_live(knob: str, seed: int, duration_s: float = 10.0, rate_hz: float =
 
 def main(argv: list[str] | None = None) -> int:
     """Record one live trace and its key."""
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("out", nargs="?", help="trace CSV to write")
-    p.add_argument("--key", help="answer key JSON to write (keep it away from the workflow)")
+    p = OneLineParser(description=__doc__.splitlines()[0])
+    p.add_argument("out", nargs="?", type=output_file, help="trace CSV to write")
+    p.add_argument("--key", type=output_file, help="answer key JSON to write (keep it away from the workflow)")
     p.add_argument("--knob", default="none", help="what to hide (--list shows them; default none)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--duration", type=float, default=10.0, help="seconds of the main excitation (default 10)")
-    p.add_argument("--rate", type=float, default=100.0, help="readings per second (default 100)")
+    p.add_argument("--seed", type=nonnegative_int, default=0, help="seeds numpy's generator, which refuses < 0")
+    p.add_argument("--duration", type=positive_float, default=10.0, help="seconds of the main excitation (default 10)")
+    p.add_argument("--rate", type=positive_float, default=100.0, help="readings per second (default 100)")
     p.add_argument("--list", action="store_true", help="print the knobs and the effect each hides, and exit")
     args = p.parse_args(argv)
     if args.list:
@@ -330,8 +330,8 @@ def main(argv: list[str] | None = None) -> int:
         p.error(f"unknown knob {args.knob!r}; known: {', '.join(KNOBS)}")
     if not servable(args.knob):
         p.error(f"knob {args.knob!r} needs an [effects] field the served model does not have yet")
-    if not args.duration > 0 or not 0 < args.rate <= 1000:
-        p.error("--duration must be positive and --rate in (0, 1000]")
+    if not args.rate <= 1000:
+        p.error("--rate must be in (0, 1000]")
     trace, key = record_live(args.knob, args.seed, args.duration, args.rate)
     write_trace(trace, args.out)
     Path(args.key).write_text(json.dumps(key, indent=2), encoding="utf-8")

@@ -21,7 +21,6 @@ Usage: ``python tools/live_flood.py [--connections 1000] [--stuck 50] [--seconds
 
 from __future__ import annotations
 
-import argparse
 import base64
 import os
 import resource
@@ -37,6 +36,7 @@ from dynamixel_sdk import COMM_SUCCESS, PacketHandler
 
 import ax12emu  # noqa: E402, F401 - first: once tests/ is on the path its ax12emu folder would shadow the package
 import firmware_model  # noqa: E402, F401 - and its firmware_model folder this one
+from ax12emu.cli.arg_types import OneLineParser, nonnegative_int, positive_float
 
 sys.path.append(os.path.join(os.path.dirname(__file__), "..", "tests"))
 from emu_testkit import UrlPortHandler  # noqa: E402
@@ -123,15 +123,13 @@ def request_flood(page_url: str, clients: int, seconds: float, port, ph) -> None
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--connections", type=int, default=1000)
-    parser.add_argument("--stuck", type=int, default=50, help="WebSocket clients that never read")
-    parser.add_argument("--seconds", type=float, default=3.0)
-    parser.add_argument("--requests", type=int, default=0, metavar="N",
+    parser = OneLineParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--connections", type=nonnegative_int, default=1000)
+    parser.add_argument("--stuck", type=nonnegative_int, default=50, help="WebSocket clients that never read")
+    parser.add_argument("--seconds", type=positive_float, default=3.0)
+    parser.add_argument("--requests", type=nonnegative_int, default=0, metavar="N",
                         help="also measure while N clients send GET /api/servos back to back")
     args = parser.parse_args(argv)
-    if args.connections < 0 or args.stuck < 0 or args.requests < 0 or not args.seconds > 0:
-        parser.error("--connections, --stuck and --requests must be >= 0 and --seconds > 0")
     soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
     resource.setrlimit(resource.RLIMIT_NOFILE, (min(hard, max(soft, args.connections + args.stuck + 256)), hard))
     # The server's own log counts the clients it drops (the page's packet log, which the reads scroll, lost them).

@@ -13,7 +13,6 @@ show breakaway/Stribeck friction, see firmware_model.diagnose.excitation).
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from pathlib import Path
@@ -22,23 +21,41 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ax12emu.cli.arg_types import (  # noqa: E402
+    OneLineParser,
+    name_list,
+    nonnegative_float,
+    nonnegative_int,
+    output_file,
+    positive_float,
+)
+from firmware_model.diagnose.effects import LIBRARY  # noqa: E402
 from firmware_model.diagnose.synthetic import draw_effect, make_trace  # noqa: E402
 from firmware_model.diagnose.trace import write_trace  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:
     """Write the trace and the key."""
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("out", help="trace CSV to write")
-    p.add_argument("--key", required=True, help="answer key JSON to write (keep it away from the workflow)")
-    p.add_argument("--effects", default="none", help="comma-separated hidden effects, or 'none'")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--duration", type=float, default=20.0, help="seconds (default 20)")
-    p.add_argument("--rate", type=float, default=100.0, help="samples per second (default 100)")
-    p.add_argument("--breakaway", type=float, default=0.0, help="seconds of breakaway block at the end (default 0)")
+    p = OneLineParser(description=__doc__.splitlines()[0])
+    p.add_argument("out", type=output_file, help="trace CSV to write")
+    p.add_argument("--key", type=output_file, required=True,
+                   help="answer key JSON to write (keep it away from the workflow)")
+    p.add_argument("--effects", type=name_list(("none", *LIBRARY, "cogging")), default=["none"],
+                   help="comma-separated hidden effects, or 'none'")
+    p.add_argument("--seed", type=nonnegative_int, default=0, help="seeds numpy's generator, which refuses < 0")
+    p.add_argument("--duration", type=positive_float, default=20.0, help="seconds (default 20)")
+    p.add_argument("--rate", type=positive_float, default=100.0, help="samples per second (default 100)")
+    p.add_argument("--breakaway", type=nonnegative_float, default=0.0,
+                   help="seconds of breakaway block at the end (default 0)")
     args = p.parse_args(argv)
+    if "none" in args.effects and args.effects != ["none"]:
+        p.error("--effects none stands alone (a clean servo)")
+    if round(args.duration * args.rate) < 2:  # a trace of fewer readings is no trace
+        p.error("--duration x --rate must give at least 2 readings")
+    if not args.breakaway < args.duration:
+        p.error("--breakaway must be shorter than --duration")
     rng = np.random.default_rng(args.seed + 100_000)
-    names = [] if args.effects == "none" else args.effects.split(",")
+    names = [] if args.effects == ["none"] else args.effects
     hidden = {n: draw_effect(n, rng) for n in names}
     trace, key = make_trace(hidden, args.seed, args.duration, args.rate, breakaway_s=args.breakaway)
     write_trace(trace, args.out)

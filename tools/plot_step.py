@@ -20,6 +20,14 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ax12emu.cli.arg_types import (  # noqa: E402
+    OneLineParser,
+    file_name,
+    finite_float,
+    int_range,
+    output_file,
+    positive_float,
+)
 from firmware_model.interface import Commands  # noqa: E402
 from firmware_model.params import HOLDING_TORQUE_NM, MOVE_60_DEG_S, ServoParams  # noqa: E402
 from firmware_model.physical import PhysicalModel  # noqa: E402
@@ -49,19 +57,27 @@ def simulate(params: ServoParams, volts: float, degrees: float, moving_speed: in
 
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     """Command line."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", default="step_response.png", help="PNG to write (default step_response.png)")
-    parser.add_argument("--volts", type=float, default=9.6, help="supply voltage (default 9.6)")
-    parser.add_argument("--degrees", type=float, default=60.0, help="step size in degrees (default 60)")
-    parser.add_argument("--moving-speed", type=int, default=0, help="Moving Speed register (default 0 = full)")
-    parser.add_argument("--duration", type=float, default=0.6, help="simulated seconds (default 0.6)")
-    parser.add_argument("--params", type=Path, help="TOML parameter file (default: built-in)")
+    parser = OneLineParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", type=output_file, default="step_response.png",
+                        help="PNG to write (default step_response.png)")
+    parser.add_argument("--volts", type=positive_float, default=9.6, help="supply voltage (default 9.6)")
+    parser.add_argument("--degrees", type=finite_float, default=60.0, help="step size in degrees (default 60)")
+    parser.add_argument("--moving-speed", type=int_range(0, 1023), default=0,
+                        help="Moving Speed register (default 0 = full)")
+    parser.add_argument("--duration", type=positive_float, default=0.6, help="simulated seconds (default 0.6)")
+    parser.add_argument("--params", type=file_name, help="TOML parameter file (default: built-in)")
     return parser.parse_args(argv)
 
 
 def main(argv: list[str] | None = None) -> int:
     """Simulate, plot, write the PNG."""
     args = parse_args(argv)
+    try:  # a params file it cannot read, or a supply outside the parameters' range: one line, before any work
+        params = ServoParams.from_toml(args.params) if args.params else ServoParams()
+        params.check_supply(args.volts)
+    except (ValueError, OSError) as exc:
+        print(f"plot_step.py: error: {exc}", file=sys.stderr)
+        return 2
     try:
         import matplotlib
 
@@ -70,7 +86,6 @@ def main(argv: list[str] | None = None) -> int:
     except ImportError:
         print("plot_step needs matplotlib: pip install matplotlib", file=sys.stderr)
         return 2
-    params = ServoParams.from_toml(args.params) if args.params else ServoParams()
     runs = {v: simulate(params, v, args.degrees, args.moving_speed, args.duration) for v in sorted({7.0, args.volts, 10.0})}
     main_run = runs[args.volts]
     fig, (ax_pos, ax_speed, ax_load) = plt.subplots(3, 1, sharex=True, figsize=(8, 9))

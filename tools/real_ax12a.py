@@ -39,7 +39,6 @@ Exit status 2 with a message if the data folder is missing or a recording in it 
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import math
 import sys
@@ -50,6 +49,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ax12emu.cli.arg_types import OneLineParser, int_range  # noqa: E402
 from ax12emu.protocol.control_table import AX12_MODEL  # noqa: E402
 from ax12emu.servo.model_factory import ax_bus_model, datasheet_params  # noqa: E402
 from firmware_model.diagnose.synthetic import step_response  # noqa: E402
@@ -424,15 +424,14 @@ def _plot(curves: dict, out: Path) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = OneLineParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", type=Path, default=DEFAULT_DATA, help="folder with the Wizard exports")
-    ap.add_argument("--goal", type=int, default=500, help="the Goal Position the step went to (not recorded)")
+    ap.add_argument("--goal", type=int_range(0, 1023), default=500,
+                    help="the Goal Position the step went to (not recorded)")
     ap.add_argument("--plot", type=Path, default=None, help="write a figure (needs matplotlib)")
     ap.add_argument("--fit-on", default=FIT_ON, metavar="FILE",
                     help=f"the unloaded AX-12A step in --data the twin is fitted on (default {FIT_ON})")
     args = ap.parse_args(argv)
-    if not 0 <= args.goal <= 1023:
-        ap.error(f"--goal must be 0..1023, got {args.goal}")
     if Path(args.fit_on).name != args.fit_on:
         ap.error(f"--fit-on names a file in --data, not a path: {args.fit_on!r}")
     return run(args.data, args.goal, args.plot, args.fit_on)

@@ -64,7 +64,6 @@ Exit status 2 with a message if the data folder is missing.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import sys
 from pathlib import Path
@@ -77,6 +76,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import real_ax12a  # noqa: E402
 
+from ax12emu.cli.arg_types import OneLineParser, int_range  # noqa: E402
 from firmware_model.diagnose.cli import load_input, parse_args  # noqa: E402
 from firmware_model.diagnose.metrics import effective_count, robust_cost  # noqa: E402
 from firmware_model.diagnose.nuisance import fit_onsets  # noqa: E402
@@ -321,16 +321,15 @@ def run(data: Path, goal: int, joint: bool = False, synthetic: bool = False) -> 
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = OneLineParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", type=Path, default=real_ax12a.DEFAULT_DATA, help="folder with the Wizard exports")
-    ap.add_argument("--goal", type=int, default=500, help="the Goal Position the step went to (not recorded)")
+    ap.add_argument("--goal", type=int_range(0, 1023), default=500,
+                    help="the Goal Position the step went to (not recorded)")
     ap.add_argument("--joint", action="store_true", help="also fit supply, inertia and gear play together on the "
                                                          "unloaded step and diagnose every step from that twin")
     ap.add_argument("--synthetic", action="store_true", help="also diagnose each loaded step as the closed twin with "
                                                              "the bar would have recorded it (can the workflow see it?)")
     args = ap.parse_args(argv)
-    if not 0 <= args.goal <= 1023:
-        ap.error(f"--goal must be 0..1023, got {args.goal}")
     return run(args.data, args.goal, args.joint, args.synthetic)
 
 

@@ -25,7 +25,6 @@ moves, which show breakaway/Stribeck friction; see firmware_model.diagnose.excit
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from pathlib import Path
@@ -34,7 +33,16 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ax12emu.cli.arg_types import (  # noqa: E402
+    OneLineParser,
+    int_range,
+    nonnegative_float,
+    output_file,
+    positive_float,
+    positive_int,
+)
 from ax12emu.protocol.control_table import layout  # noqa: E402
+from ax12emu.protocol.packets import MAX_ID  # noqa: E402
 from firmware_model.diagnose.excitation import program  # noqa: E402
 from firmware_model.diagnose.trace import Trace, write_trace  # noqa: E402
 
@@ -146,14 +154,15 @@ def record(port_name: str, servo_id: int, baud: int, duration_s: float, rate_hz:
 
 def main(argv: list[str] | None = None) -> int:
     """Record and write the trace."""
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = OneLineParser(description=__doc__.splitlines()[0])
     p.add_argument("port", help="serial port, e.g. /dev/ttyUSB0 (or an emulator's pty)")
-    p.add_argument("out", help="trace CSV to write")
-    p.add_argument("--id", type=int, default=1)
-    p.add_argument("--baud", type=int, default=1_000_000)
-    p.add_argument("--duration", type=float, default=20.0)
-    p.add_argument("--rate", type=float, default=100.0)
-    p.add_argument("--breakaway", type=float, default=0.0, help="seconds of breakaway block at the end (default 0)")
+    p.add_argument("out", type=output_file, help="trace CSV to write")
+    p.add_argument("--id", type=int_range(0, MAX_ID), default=1)  # not 254: a broadcast is never answered
+    p.add_argument("--baud", type=positive_int, default=1_000_000)
+    p.add_argument("--duration", type=positive_float, default=20.0)
+    p.add_argument("--rate", type=positive_float, default=100.0)
+    p.add_argument("--breakaway", type=nonnegative_float, default=0.0,
+                   help="seconds of breakaway block at the end (default 0)")
     p.add_argument("--write", action="append", default=[], metavar="NAME=VALUE",
                    help="set a register before the excitation, e.g. torque_limit=512 (repeatable)")
     args = p.parse_args(argv)
@@ -161,8 +170,10 @@ def main(argv: list[str] | None = None) -> int:
         writes = parse_writes(args.write)
     except ValueError as exc:
         p.error(str(exc))
-    if not 0 < args.rate <= 1000 or not args.duration > 0:
-        p.error("--rate must be in (0, 1000] and --duration positive")
+    if not args.rate <= 1000:
+        p.error("--rate must be in (0, 1000]")
+    if not args.breakaway < args.duration:  # the excitation ends with it: found here, not after opening the port
+        p.error("--breakaway must be shorter than --duration")
     try:
         trace = record(args.port, args.id, args.baud, args.duration, args.rate, args.breakaway, writes)
     except RuntimeError as exc:  # a set-up write unanswered, or no reading at all: the servo or port is not there

@@ -17,7 +17,6 @@ Usage: ``python tools/screenshots.py [--out tools/figures]`` (needs tmux, chromi
 
 from __future__ import annotations
 
-import argparse
 import json
 import shutil
 import socket
@@ -30,6 +29,8 @@ import urllib.request
 from pathlib import Path
 
 from dynamixel_sdk import PacketHandler, PortHandler
+
+from ax12emu.cli.arg_types import OneLineParser, positive_float
 
 ROOT = Path(__file__).resolve().parent.parent
 CHROMIUM = "/usr/bin/chromium"
@@ -102,9 +103,10 @@ def small_png(path: Path, colours: int = 64) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = OneLineParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=ROOT / "tools" / "figures", help="where the PNGs go")
-    parser.add_argument("--seconds", type=float, default=6.0, help="how long the servos are driven before the pictures")
+    parser.add_argument("--seconds", type=positive_float, default=6.0,
+                        help="how long the servos are driven before the pictures")
     args = parser.parse_args(argv)
     for tool in ("tmux", CHROMIUM):
         if shutil.which(tool) is None:
@@ -113,7 +115,10 @@ def main(argv: list[str] | None = None) -> int:
     from rich.console import Console
     from rich.text import Text
 
-    args.out.mkdir(parents=True, exist_ok=True)
+    try:
+        args.out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:  # a file of that name, or no permission: said before tmux and the browser start
+        parser.exit(2, f"{parser.prog}: error: --out: {exc}\n")
     with tempfile.TemporaryDirectory() as tmp:
         link = Path(tmp, "ax12")
         web_port = free_port()

@@ -46,7 +46,6 @@ Usage: ``python tools/soak.py [--seconds 600] [--servos 4] [--protocol 1.0|2.0|m
 
 from __future__ import annotations
 
-import argparse
 import os
 import select
 import subprocess
@@ -55,6 +54,10 @@ import time
 from dataclasses import dataclass, field
 
 from dynamixel_sdk import COMM_SUCCESS, GroupSyncRead, GroupSyncWrite, PacketHandler, PortHandler
+
+from ax12emu.cli.arg_types import OneLineParser, positive_float, positive_int
+from ax12emu.protocol.packets import MAX_ID
+from ax12emu.protocol.packets2 import MAX_ID2
 
 PRESENT_POSITION, GOAL_POSITION, MOVING, RETURN_DELAY, MODEL_NUMBER, TORQUE_ENABLE = 36, 30, 46, 5, 0, 24
 #: After a one-byte EEPROM write an AX-12 ignores packets for about 6 ms (9 ms by the ATMega8 datasheet).
@@ -510,31 +513,43 @@ def report(result: SoakResult, servos: int, protocol: str = "1.0") -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """Start an emulator, soak it, print the figures; exit 1 unless everything held."""
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--seconds", type=float, default=600.0, help="how long to run (default 600)")
-    parser.add_argument("--servos", type=int, default=4, help="servos on the bus, IDs 1..N (default 4)")
-    parser.add_argument("--goal-period", type=float, default=0.5, help="seconds between goal flips (default 0.5)")
+    parser = OneLineParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--seconds", type=positive_float, default=600.0, help="how long to run (default 600)")
+    parser.add_argument("--servos", type=positive_int, default=4, help="servos on the bus, IDs 1..N (default 4)")
+    parser.add_argument("--goal-period", type=positive_float, default=0.5,
+                        help="seconds between goal flips (default 0.5)")
     parser.add_argument("--protocol", choices=tuple(PROTOCOLS), default="1.0",
                         help="AX-12As on Protocol 1.0 (default), XL430-W250s on 2.0, or N of each on one wire")
     parser.add_argument("--attach", nargs=2, metavar=("PORT", "PID"),
                         help="soak an emulator already serving IDs 1..N on PORT (process PID) instead of starting one")
     parser.add_argument("serve_args", nargs="*", help="extra arguments for ax12emu serve (after --)")
     args = parser.parse_args(argv)
-    if args.attach:
-        result = soak(args.attach[0], int(args.attach[1]), args.seconds, args.servos, goal_period_s=args.goal_period,
-                      protocol=args.protocol)
-        print(report(result, args.servos, args.protocol))
-        return 0 if result.ok else 1
-    process, path = start_emulator(args.servos, args.serve_args, args.protocol)
+    highest = MAX_ID if args.protocol == "1.0" else MAX_ID2  # Protocol 2.0 reserves ID 253
+    if args.servos > highest:
+        parser.error(f"--servos: IDs 1..N on Protocol {args.protocol} end at {highest}, got {args.servos}")
+    if args.attach and not (args.attach[1].isdigit() and int(args.attach[1]) > 0):
+        parser.error(f"--attach PORT PID: {args.attach[1]!r} is not a process id")
     try:
-        result = soak(path, process.pid, args.seconds, args.servos, goal_period_s=args.goal_period,
-                      protocol=args.protocol)
-        if process.poll() is not None:
-            result.problems.append(f"the emulator exited with {process.returncode}")
-            result.lost += 1
-    finally:
-        process.kill()
-        process.wait()
+        if args.attach:
+            result = soak(args.attach[0], int(args.attach[1]), args.seconds, args.servos,
+                          goal_period_s=args.goal_period, protocol=args.protocol)
+            print(report(result, args.servos, args.protocol))
+            return 0 if result.ok else 1
+        process, path = start_emulator(args.servos, args.serve_args, args.protocol)
+        try:
+            result = soak(path, process.pid, args.seconds, args.servos, goal_period_s=args.goal_period,
+                          protocol=args.protocol)
+            if process.poll() is not None:
+                result.problems.append(f"the emulator exited with {process.returncode}")
+                result.lost += 1
+        finally:
+            process.kill()
+            process.wait()
+    # An emulator that does not start (arguments after -- it refuses), a PORT it cannot open (pyserial's
+    # SerialException is an OSError), a PID with no /proc entry, a servo that refuses the set-up writes.
+    except (RuntimeError, OSError) as exc:
+        print(f"{parser.prog}: error: {exc}", file=sys.stderr)
+        return 2
     print(report(result, args.servos, args.protocol))
     return 0 if result.ok else 1
 

@@ -43,7 +43,16 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from ax12emu.cli.arg_types import (  # noqa: E402
+    OneLineParser,
+    file_name,
+    name_list,
+    nonnegative_float,
+    positive_float,
+)
 from ax12emu.harness.served import start_served  # noqa: E402
+from ax12emu.servo.model_factory import parse_arm  # noqa: E402
+from firmware_model.diagnose.effects import LIBRARY  # noqa: E402
 from firmware_model.diagnose.trace import Trace, TraceFormatError, read_trace, write_trace  # noqa: E402
 
 #: The hidden effect when none is given: an arm whose weight moment (0.34 N m) is a quarter of the stall torque.
@@ -205,23 +214,36 @@ def live_recorder(duration_s: float, rate_hz: float, breakaway_s: float) -> Reco
     return _record
 
 
+def _arm(text: str) -> str:
+    """``--arm`` as serve takes it, checked here: serve would refuse it only after the set-up, as a failed recording."""
+    try:
+        parse_arm(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return text
+
+
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     """Command line."""
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = OneLineParser(description=__doc__.splitlines()[0])
     hidden = p.add_argument_group("the hidden effect (public knobs of the measured servo)")
-    hidden.add_argument("--arm", metavar="MASS_KG,LENGTH_M", help=f"an arm under gravity (default {DEFAULT_ARM} "
-                        "when no other knob is given)")
-    hidden.add_argument("--hidden-params", metavar="FILE", help="a params file (effects included) for the measured servo")
-    hidden.add_argument("--voltage", type=float, metavar="V", help="the measured servo's supply voltage")
+    hidden.add_argument("--arm", type=_arm, metavar="MASS_KG,LENGTH_M", help=f"an arm under gravity (default "
+                        f"{DEFAULT_ARM} when no other knob is given)")
+    hidden.add_argument("--hidden-params", type=file_name, metavar="FILE",
+                        help="a params file (effects included) for the measured servo")
+    hidden.add_argument("--voltage", type=positive_float, metavar="V", help="the measured servo's supply voltage")
     hidden.add_argument("--write", action="append", default=[], metavar="NAME=VALUE",
                         help="a register written before the measured servo's excitation (not the twin's), "
                              "e.g. torque_limit=600")
-    p.add_argument("--duration", type=float, default=20.0, help="seconds per recording (default 20)")
-    p.add_argument("--rate", type=float, default=100.0, help="reads per second (default 100)")
-    p.add_argument("--breakaway", type=float, default=4.0, help="seconds of breakaway block at the end (default 4)")
-    p.add_argument("--out", default="twin_check_out", help="folder for the recordings and the diagnosis")
+    p.add_argument("--duration", type=positive_float, default=20.0, help="seconds per recording (default 20)")
+    p.add_argument("--rate", type=positive_float, default=100.0, help="reads per second (default 100)")
+    p.add_argument("--breakaway", type=nonnegative_float, default=4.0,
+                   help="seconds of breakaway block at the end (default 4)")
+    p.add_argument("--out", type=file_name, default="twin_check_out", help="folder for the recordings and the diagnosis")
     p.add_argument("--floor", action="store_true", help="also record the measured servo again (the repeatability floor)")
-    p.add_argument("--effects", metavar="LIST", help="restrict the diagnosis to these effects (comma-separated)")
+    # checked here, as the diagnosis checks it, so a misspelt effect is not found after the first recording
+    p.add_argument("--effects", type=name_list(LIBRARY), metavar="LIST",
+                   help="restrict the diagnosis to these effects (comma-separated)")
     args = p.parse_args(argv)
     if not (args.arm or args.hidden_params or args.voltage or args.write):
         args.arm = DEFAULT_ARM
@@ -251,7 +273,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.voltage:
         hidden += ["--voltage", str(args.voltage)]
     record = live_recorder(args.duration, args.rate, args.breakaway)
-    diagnose_args = ("--effects", args.effects) if args.effects else ()
+    diagnose_args = ("--effects", ",".join(args.effects)) if args.effects else ()
     try:
         result = run_loop(record, hidden, writes, Path(args.out).resolve(), args.floor, diagnose_args)
     except (RecordingError, TraceFormatError) as exc:

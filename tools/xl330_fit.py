@@ -30,7 +30,6 @@ Exit status 2 with a message if the data folder or its logs at the fitting gain 
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 from pathlib import Path
@@ -39,6 +38,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ax12emu.cli.arg_types import OneLineParser, nonnegative_int, positive_int  # noqa: E402
 from ax12emu.protocol.servo_models import model as servo_model  # noqa: E402
 from firmware_model.diagnose.bam_fit import BASELINE, MODEL, fit, initial_values, physics_from, position_mae  # noqa: E402
 from firmware_model.xseries.bam_log import PendulumLog, read_bam_log  # noqa: E402
@@ -116,16 +116,21 @@ def _plot(held: list[PendulumLog], fits: dict, out: Path):
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = OneLineParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--data", type=Path, default=DEFAULT_DATA, help="folder of BAM XL330 logs")
-    parser.add_argument("--fit-kp", type=int, default=100, help="fit on the logs at this Position P Gain")
-    parser.add_argument("--max-evaluations", type=int, default=400, help="cap on replays of the fitting set per model")
+    parser.add_argument("--fit-kp", type=nonnegative_int, default=100, help="fit on the logs at this Position P Gain")
+    parser.add_argument("--max-evaluations", type=positive_int, default=400,
+                        help="cap on replays of the fitting set per model")
     parser.add_argument("--plot", type=Path, default=None, help="write a figure of the predicted logs (needs matplotlib)")
     args = parser.parse_args(argv)
     if not args.data.is_dir():
         print(f"no XL330 logs: {args.data} is not a folder (see ../shared/reference/real-xl330/README.md)", file=sys.stderr)
         return 2
-    by_kp = read_logs(args.data)
+    try:
+        by_kp = read_logs(args.data)
+    except (ValueError, OSError) as exc:  # a log in the folder that is no BAM log (or unreadable): name it, no traceback
+        print(f"xl330_fit.py: error: {exc}", file=sys.stderr)
+        return 2
     if args.fit_kp not in by_kp:
         print(f"no logs at kp = {args.fit_kp} in {args.data} (gains there: {sorted(by_kp)})", file=sys.stderr)
         return 2

@@ -24,7 +24,7 @@ from ax12emu.bus import Bus
 from ax12emu.bus.clock import WallClock
 from ax12emu.bus.state_store import StateFileError, StateStore
 from ax12emu.cli import hil as cli_hil
-from ax12emu.cli.arg_types import file_name
+from ax12emu.cli.arg_types import OneLineParser, file_name
 from ax12emu.cli.arg_types import finite_float as _finite_float
 from ax12emu.cli.arg_types import positive_float as _positive_float
 from ax12emu.protocol.control_table import AX12_MODEL, DEFAULT_PROFILE, PROFILES
@@ -59,17 +59,9 @@ def _eeprom_busy_ms(text: str) -> float:
     return value
 
 
-class _OneLineParser(argparse.ArgumentParser):
-    """argparse, its errors one line on stderr (as every other user error of the program), not the usage block:
-    the bad flag is what a user needs to see; ``--help`` shows the rest."""
-
-    def error(self, message: str):  # type: ignore[override]
-        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
-
-
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser for all subcommands."""
-    parser = _OneLineParser(prog="ax12emu", description="A virtual Dynamixel servo bus (Protocol 1.0 and 2.0).")
+    parser = OneLineParser(prog="ax12emu", description="A virtual Dynamixel servo bus (Protocol 1.0 and 2.0).")
     parser.add_argument("--version", action="version", version=f"ax12emu {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
