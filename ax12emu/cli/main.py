@@ -78,7 +78,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="with --servo: every servo starts at this bit rate (its Baud Rate register set to the value its own model "
         "gives that rate: an MX runs up to 3000000, an AX-12A up to 2000000 (Baud Rate 0; its data sheet stops at "
         "1000000); default: each model's factory rate, "
-        "57600 on the X series, 1000000 on the AX and MX series)",
+        "57600 on the X and MX series (an MX's Baud Rate 34), 1000000 on the AX series)",
     )
     where = serve.add_mutually_exclusive_group()
     where.add_argument("--pty", action="store_true", help="serve on a pseudo-terminal (the default)")
@@ -186,8 +186,6 @@ def _check_servo_spec(parser: argparse.ArgumentParser, args: argparse.Namespace,
                                              also=protocol1_keys())
     except ValueError as exc:
         parser.error(f"--servo: {exc}")
-    if all(key == AX12_MODEL for _, key in args.servo_models):
-        parser.error("--servo: no Protocol 2.0 servo; serve AX-12As without --servo")
     defaults = parser.parse_args(["serve"])
     families = {servo_family(key) for _, key in args.servo_models}
     for dest in (*_PROTOCOL1_ONLY, *_APPLIES_TO):
@@ -209,7 +207,8 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     if args.command == "serve" and args.servo is not None:
         _check_servo_spec(parser, args, sys.argv[1:] if argv is None else list(argv))
     elif args.command == "serve" and args.baud is not None:
-        parser.error("--baud applies with --servo (the AX-12A bus starts at 1000000)")
+        parser.error("--baud applies with --servo (AX-12As at another rate: --servo ax-12a --baud BPS; without it "
+                     "they start at their factory 1000000)")
     if args.command == "serve":
         if args.link and args.tcp:
             parser.error("--link applies to a pty, not to --tcp")

@@ -35,7 +35,7 @@ def test_a_model_for_every_id_and_per_id_models():
         (["--baud", "1000000"], "--baud applies with --servo"),
         (["--servo", "xl430-w250", "--baud", "250000"], "runs at 9600, 57600, 115200, 1000000"),
         (["--servo", "1:ax-12a,2:xl430-w250", "--baud", "4500000"], "ID 1 (AX-12A) cannot run at 4500000 bps"),
-        (["--servo", "1-2:ax-12a"], "no Protocol 2.0 servo"),
+        (["--servo", "ax-12a", "--arm", "0.1,0.1"], "--arm is not available with --servo yet"),
         (["--servo", "1:ax-12a,1:ax-12a,2:xl430-w250"], "ID 1 is given two models"),
         (["--servo", "xl430-w250", "--goal-torque", "unchanged"], "--goal-torque applies to AX series and MX series"),
         (["--servo", "mx-28", "--eeprom-busy-ms", "0"], "--eeprom-busy-ms applies to AX series servos"),
@@ -66,3 +66,17 @@ def test_servo_faults_from_the_flags(emulator):
         assert ph.ping(port, 3)[1] == COMM_RX_TIMEOUT
     finally:
         port.closePort()
+
+
+def test_ax12as_alone_start_at_another_rate_with_servo_and_baud(emulator):
+    """`--servo ax-12a --baud 57600` was refused ("no Protocol 2.0 servo", though AX-18As alone were taken), so
+    AX-12As could only start at 1 Mbps: at 57,600 bps they answer, their Baud Rate register 34."""
+    import serial
+
+    from ax12emu.protocol.packets import Instruction, encode_instruction
+
+    served = emulator("--servo", "ax-12a", "--ids", "1-2", "--baud", "57600", "--tcp", "127.0.0.1:0")
+    with serial.serial_for_url(served.port, baudrate=57600, timeout=1.0) as link:
+        link.write(encode_instruction(2, Instruction.READ, bytes((4, 1))))
+        reply = link.read(7)
+    assert reply[2] == 2 and reply[5] == 34, reply.hex(" ")
