@@ -60,7 +60,8 @@ def wait_for(predicate, timeout_s: float, what: str):
 
 
 def post(url: str, message: dict) -> None:
-    request = urllib.request.Request(url + "api/control", data=json.dumps(message).encode(), method="POST")
+    request = urllib.request.Request(url + "api/control", data=json.dumps(message).encode(), method="POST",
+                                     headers={"Content-Type": "application/json"})  # as the page sends them
     with urllib.request.urlopen(request, timeout=5) as answer:
         answer.read()
 

@@ -156,10 +156,19 @@ class ServedControls:
 
 
 # -- parameters ---------------------------------------------------------------------------
+#: Longest echo of a refused value in an error: JSON integers have no size limit (``1`` and 400 zeros is one).
+_SHOWN_MAX = 40
+
+
+def _shown(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= _SHOWN_MAX else f"{text[:_SHOWN_MAX - 3]}... ({len(text)} characters)"
+
+
 def _int(name: str, low: int, high: int) -> Callable[[Any], int]:
     def check(value: Any) -> int:
         if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
-            raise ControlError(f"{name} must be an integer {low}..{high}, got {value!r}")
+            raise ControlError(f"{name} must be an integer {low}..{high}, got {_shown(value)}")
         return value
 
     return check
@@ -169,8 +178,9 @@ def _number(name: str, low: float, high: float, *, optional: bool = False) -> Ca
     def check(value: Any) -> float | None:
         if value is None and optional:
             return None
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or not low <= value <= high:
-            raise ControlError(f"{name} must be a number {low:g}..{high:g}{' or null' if optional else ''}, got {value!r}")
+        # Compared before any float(): an integer past the float range (JSON has no limit) is refused, not an OverflowError.
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not low <= value <= high or not math.isfinite(value):
+            raise ControlError(f"{name} must be a number {low:g}..{high:g}{' or null' if optional else ''}, got {_shown(value)}")
         return float(value)
 
     return check
@@ -193,7 +203,7 @@ def _protocol(value: Any) -> float | None:
     if value is None:
         return None
     if isinstance(value, bool) or value not in (1, 2):
-        raise ControlError(f"protocol must be 1.0, 2.0 or null, got {value!r}")
+        raise ControlError(f"protocol must be 1.0, 2.0 or null, got {_shown(value)}")
     return float(value)
 
 
@@ -311,7 +321,12 @@ def apply(controls: Controls, message: Any) -> str:
     defaults = action.defaults or {}
     for key, check in action.params.items():
         if key in message:
-            params[key] = check(message[key])
+            try:
+                params[key] = check(message[key])
+            except ControlError:
+                raise
+            except Exception as exc:  # a value no check foresaw is the message's fault, never the emulator's
+                raise ControlError(f"{name}: {key} {_shown(message[key])} cannot be taken: {type(exc).__name__}: {exc}") from None
         elif key in defaults:
             params[key] = defaults[key]
         else:

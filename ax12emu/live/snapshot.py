@@ -25,6 +25,7 @@ from typing import Any
 from ax12emu.faults.injection import ALARM_NAMES, HW_ERROR_NAMES
 from ax12emu.protocol.packets import StatusError
 from ax12emu.protocol.servo_models import ServoModel, model, model_names
+from ax12emu.servo.classic import CURRENT_ZERO
 
 from .buses import AnyBus, parts, protocol_name
 
@@ -42,6 +43,8 @@ REGISTERS = (
     "drive_mode",
     "cw_angle_limit",
     "ccw_angle_limit",
+    "multi_turn_offset",
+    "resolution_divider",
     "min_position_limit",
     "max_position_limit",
     "velocity_limit",
@@ -64,6 +67,7 @@ REGISTERS = (
     "alarm_led",
     "present_pwm",
     "present_current",
+    "current",
     "present_load",
     "present_velocity",
     "present_speed",
@@ -100,6 +104,8 @@ class Unit:
     #: In wheel mode where the wheel output is a share of the output (the AX-12A; ``[classic]``
     #: ``wheel_output = "pwm"``): this unit and its size per count instead.
     wheel: tuple[str, float] | None = None
+    #: The raw value that reads zero (the MX series' Current(68): 2048).
+    zero: int = 0
 
 
 #: The position readings' scale: degrees per count from the model file's range and the table (:func:`_model_field`).
@@ -111,6 +117,8 @@ POSITION_SCALE = "position_range_deg/goal_span"
 #: and the MX series the same, their speed units in their model files' ``[classic]`` (0.111, 0.114 rpm);
 #: X series "Present Velocity(128)": 0.229 rpm, "Present Load(126)": 0.1 %, "Present PWM(124)": 0.113 %
 #: ("PWM Limit(36)": 885 = 100 %), "Present Input Voltage(144)": 0.1 V, "Present Temperature(146)": 1 °C.
+#: MX-64/MX-106 "Current(68)": "I = ( 4.5mA ) * (CURRENT - 2048)", the unit the model file's ``current_unit_ma``
+#: and the zero the firmware model's (:data:`~ax12emu.servo.classic.CURRENT_ZERO`, so view and servo agree).
 #: Positions and currents (1 mA, 2.69 mA) differ per model: each model file states them.  A position count is
 #: the file's position range over the goal register's span (300 deg over 0..1023 on the AX-12A, 360 over
 #: 0..4095 on the X series), as the dial draws it; the data sheets' rounded resolution (0.29 deg) put 1023
@@ -124,6 +132,7 @@ REGISTER_UNITS: Mapping[str, Unit] = {
     "moving_speed": Unit("rpm", 0.111, model_field="classic.speed_unit_rpm", direction_bit=True, wheel=("%", 0.1)),
     "present_current": Unit("mA", model_field="physical.current_unit_ma"),
     "goal_current": Unit("mA", model_field="physical.current_unit_ma"),
+    "current": Unit("mA", model_field="physical.current_unit_ma", zero=CURRENT_ZERO),
     "present_load": Unit("%", 0.1, direction_bit=True),
     "present_pwm": Unit("%", 0.113),
     "goal_pwm": Unit("%", 0.113),
@@ -139,14 +148,16 @@ READINGS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("position", ("present_position",)),
     ("goal", ("goal_position",)),
     ("velocity", ("present_velocity", "present_speed")),
-    ("current", ("present_current",)),
+    ("current", ("present_current", "current")),
     ("load", ("present_load",)),
     ("pwm", ("present_pwm",)),
     ("voltage", ("present_input_voltage", "present_voltage")),
     ("temperature", ("present_temperature",)),
 )
 
-#: Operating Mode(11) values (e-manual X series): (name, whether the position limits bound the goal).
+#: Operating Mode(11) values (e-manual X series): (name, whether the goal is a position).  Whether the
+#: position limits bound that goal is the table's own rule (the goal register's ``ranges_when``: unused in
+#: Extended and Current-based Position Control Mode), so the view says what the servo checks.
 #: Tables without it (AX-12, XL-320, MX series) are in joint or wheel mode (and the MX series in
 #: multi-turn mode) as their angle limits and the model file's ``[classic]`` mode register say.
 MODES: Mapping[str, Mapping[int, tuple[str, bool]]] = {
@@ -154,7 +165,7 @@ MODES: Mapping[str, Mapping[int, tuple[str, bool]]] = {
         0: ("current", False),
         1: ("velocity", False),
         3: ("position", True),
-        4: ("extended position", False),
+        4: ("extended position", True),
         5: ("current-based position", True),
         16: ("PWM", False),
     },
@@ -198,6 +209,11 @@ class _Reading:
     direction_mask: int
     #: (unit, per count) in wheel mode, where it differs.
     wheel: tuple[str, float] | None
+    #: The raw value that reads zero.
+    zero: int = 0
+    #: A position the table holds as two's complement in multi-turn mode (``[classic]`` ``multi_turn_limit``:
+    #: the MX series' Goal Position takes -28,672..28,672 there): the register's width in bits, else 0.
+    multi_turn_bits: int = 0
 
 
 @dataclass(frozen=True)
@@ -235,7 +251,10 @@ def _plan(layout: Any, spec: ServoModel | None) -> _Plan:
         direction = (classic.direction_bit if classic is not None else DIRECTION_BIT) if unit.direction_bit and not by_name[register].signed else None
         # Wheel-mode speed is a share of the output unless the model file says it is a speed (the MX series).
         wheel = unit.wheel if classic is None or classic.wheel_output == "pwm" else None
-        readings.append(_Reading(name, register, unit.unit if per_raw is not None else "", per_raw, 0 if direction is None else 1 << direction, wheel))
+        multi_turn = unit.model_field == POSITION_SCALE and getattr(classic, "multi_turn_limit", None) is not None
+        bits = 8 * by_name[register].size if multi_turn and not by_name[register].signed else 0
+        readings.append(_Reading(name, register, unit.unit if per_raw is not None else "", per_raw, 0 if direction is None else 1 << direction,
+                                 wheel, unit.zero, bits))
     if "hardware_error_status" in by_name:  # Protocol 2.0: the latched errors (the classic tables' own bits in their file)
         errors = dict(sorted(((n, b) for n, b in classic.errors), key=lambda item: item[1])) if classic is not None and classic.errors else HW_ERROR_BITS
     else:
@@ -245,25 +264,47 @@ def _plan(layout: Any, spec: ServoModel | None) -> _Plan:
     return plan
 
 
-def _readings(plan: _Plan, registers: Mapping[str, int], wheel: bool) -> list[dict[str, Any]]:
+def _readings(plan: _Plan, registers: Mapping[str, int], mode: str) -> list[dict[str, Any]]:
     out = []
+    wheel, multi_turn = mode == "wheel", mode == "multi-turn"
+    # Multi-turn mode: "Present position = (Real Position / Resolution Divider) + Multi-turn Offset" (the MX
+    # pages' Resolution Divider(22)), so a count is the divider's number of the file's position units.
+    divider = max(1, registers.get("resolution_divider", 1)) if multi_turn else 1
     for reading in plan.readings:
-        raw = registers[reading.register]
+        # "raw" is the count with its sign, as the plots draw it: a direction bit read as a sign, a zero offset
+        # taken off (the register itself is in ``registers``).
+        raw = registers[reading.register] - reading.zero
         mask = reading.direction_mask
         if mask:
             raw = -(raw & (mask - 1)) if raw & mask else raw & (mask - 1)
+        bits = reading.multi_turn_bits
+        if multi_turn and bits:
+            raw = raw - (1 << bits) if raw & (1 << (bits - 1)) else raw
         unit, per_raw = reading.wheel if wheel and reading.wheel is not None else (reading.unit, reading.per_raw)
+        if bits:
+            per_raw = None if per_raw is None else per_raw * divider
         value = None if per_raw is None else round(raw * per_raw, 3)
         out.append({"name": reading.name, "register": reading.register, "raw": raw, "value": value, "unit": unit})
     return out
 
 
-def _mode(registers: Mapping[str, int], spec: ServoModel | None) -> tuple[str, bool]:
+def _table_limits(layout: Any, row: Any) -> bool:
+    """Whether the table's own limits (Goal Position's ``min_from``/``max_from``) bound the goal now: not where
+    its ``ranges_when`` selects a range without them (as :meth:`~ax12emu.servo.table2.Table2.range_of`)."""
+    goal = layout.by_name.get("goal_position")
+    for mode in goal.mode_ranges if goal is not None else ():
+        if layout.by_name[mode.register].value_in(row) in mode.values:
+            return mode.limits
+    return True
+
+
+def _mode(registers: Mapping[str, int], spec: ServoModel | None, layout: Any, row: Any) -> tuple[str, bool]:
     """The mode's name and whether the position limits bound the goal in it."""
     for register, names in MODES.items():
         if register in registers:
             value = registers[register]
-            return names.get(value, (f"mode {value}", True))
+            name, position = names.get(value, (f"mode {value}", True))
+            return name, position and _table_limits(layout, row)
     classic = getattr(spec, "classic", None)
     cw, ccw = LIMITS[0]
     limits = (registers.get(cw), registers.get(ccw))
@@ -284,8 +325,8 @@ def _servo(protocol: float, servo: Any, slot: int, faults_active: Callable[[int]
     plan = _plan(table.layout, spec)
     row = table.row
     registers = {name: entry.value_in(row) for name, entry in plan.registers}
-    mode, limits_apply = _mode(registers, spec)
-    readings = _readings(plan, registers, wheel=mode == "wheel")
+    mode, limits_apply = _mode(registers, spec, table.layout, row)
+    readings = _readings(plan, registers, mode)
     limits = next(([registers[lo], registers[hi]] for lo, hi in LIMITS if lo in registers and hi in registers), None)
     # Protocol 2.0: Hardware Error Status, latched, shown by the Alert bit; 1.0: the status packet's error bits.
     alarms = registers["hardware_error_status"] if "hardware_error_status" in registers else getattr(servo, "alarms", 0)

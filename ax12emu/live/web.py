@@ -15,7 +15,7 @@ Routes (all answers JSON except the page and its assets):
   faults), the clock and the bus statistics, for scripts.
 * ``GET /api/log?n=N``: the newest packet-log lines (``ax12emu decode``'s).
 * ``GET /api/actions``: the controls and their parameters.
-* ``POST /api/control``: one control, ``{"action": NAME, ...}``
+* ``POST /api/control``: one control, ``{"action": NAME, ...}`` as ``application/json``
   (see :mod:`ax12emu.live.controls`); also accepted as a WebSocket text message.
 * ``GET /ws``: a WebSocket of frames at the sampler's rate.
 
@@ -31,11 +31,20 @@ controls) are answered at most ``REQUESTS_PER_S`` a second, the rest wait
 their turn or, past ``MAX_REQUEST_WAIT_S``, get 503; past ``max_connections`` open
 connections a new one gets 503 and is closed; idle keep-alive connections
 close after ``KEEPALIVE_S``.
+
+Other web pages: the server answers only requests addressed to it (a ``Host`` of the bound address,
+``localhost``, ``127.0.0.1`` or ``[::1]`` with its port; any IP address when bound to every interface),
+so a page on a name that an attacker's DNS points at this machine (DNS rebinding) gets 403; a control
+(a ``POST``, or the WebSocket its text messages are) from a page of another origin gets 403 (the
+browser names the page's origin in ``Origin``); and ``/api/control`` takes ``Content-Type:
+application/json`` alone (415 otherwise), a type no other page can send without the browser first
+asking this server, which answers no such question.
 """
 
 from __future__ import annotations
 
 import asyncio
+import ipaddress
 import json
 import logging
 import socket
@@ -43,6 +52,7 @@ import threading
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
+from urllib.parse import urlsplit
 
 from aiohttp import WSMsgType, web
 from aiohttp.http_exceptions import HttpProcessingError
@@ -83,6 +93,42 @@ MAX_REQUEST_WAIT_S = 2.0
 #: otherwise hold its connection (and, many of them, every slot) for good; the keep-alive limit covers only
 #: idle connections.
 BODY_TIMEOUT_S = 5.0
+
+
+#: Host names that always mean this machine (the loopback address by name and number).
+LOOPBACK_NAMES = ("localhost", "127.0.0.1", "::1")
+#: Addresses that bind every interface: requests to any of the machine's addresses reach the server.
+_EVERY_INTERFACE = ("", "0.0.0.0", "::")
+#: The one type ``/api/control`` takes: another origin's page can send a body as text/plain or a form without
+#: asking the server first, but not as JSON.
+CONTROL_TYPE = "application/json"
+
+
+def _authority(text: str) -> tuple[str, int] | None:
+    """``host[:port]`` (a Host header's, an Origin's after its scheme) as (lower-case host, port; 80 when absent),
+    None when it does not parse."""
+    try:
+        parts = urlsplit("//" + text)
+        host, port = parts.hostname, parts.port
+    except ValueError:  # a port that is not a number, a bracket left open
+        return None
+    if not host or parts.path or parts.query or parts.fragment or parts.username is not None:
+        return None
+    return host.lower(), 80 if port is None else port
+
+
+def _is_ip(host: str) -> bool:
+    try:
+        ipaddress.ip_address(host)
+    except ValueError:
+        return False
+    return True
+
+
+def _shown(value: Any, limit: int = 60) -> str:
+    """A header's value for a log line: quoted, at most ``limit`` characters of it."""
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 def _error(status: int, text: str) -> web.Response:
@@ -213,7 +259,7 @@ class WebServer:
         server_log = logging.getLogger("aiohttp.server")
         if _CLIENT_FAULTS not in server_log.filters:
             server_log.addFilter(_CLIENT_FAULTS)
-        app = web.Application(client_max_size=MAX_BODY_BYTES, middlewares=[self._paced])
+        app = web.Application(client_max_size=MAX_BODY_BYTES, middlewares=[self._paced, self._guarded])
         app.router.add_get("/", self._index)
         app.router.add_static("/assets/", ASSETS, show_index=False)
         app.router.add_get("/api/servos", self._servos)
@@ -299,13 +345,54 @@ class WebServer:
 
     @web.middleware
     async def _paced(self, request: web.Request, handler: Any) -> web.StreamResponse:
-        if request.path != "/ws":  # the frames are paced by the sampler; a socket's controls by _serve_messages
+        # The frames are paced by the sampler, a socket's controls by _serve_messages; a refused upgrade, as any
+        # other request, here (so refusals are logged at a bounded rate).
+        if request.path != "/ws" or self._refusal(request) is not None:
             wait = self._turn()
             if wait is None:
                 return _error(503, f"the live view answers {REQUESTS_PER_S:g} requests a second and more are "
                                    "waiting; frames stream on /ws")
             if wait:
                 await asyncio.sleep(wait)
+        return await handler(request)
+
+    # -- other web pages ---------------------------------------------------------------------
+    def _is_own_host(self, authority: tuple[str, int] | None) -> bool:
+        """Whether ``authority`` names this server: its port, and the bound address or a loopback name (any IP
+        address when bound to every interface: a page of another site can make the browser send an IP address
+        only by being served from it, which DNS rebinding cannot do)."""
+        if authority is None:
+            return False
+        host, port = authority
+        if port != self.port:
+            return False
+        bound = self.host.strip("[]").lower()
+        return host in LOOPBACK_NAMES or host == bound or (bound in _EVERY_INTERFACE and _is_ip(host))
+
+    def _refusal(self, request: web.Request) -> str | None:
+        """Why ``request`` comes from a page other than the live view's own (None: it does not)."""
+        host = request.headers.get("Host")
+        # Browsers always send Host; a client that sends none is a script, which no web page can make it do.
+        if host is not None and not self._is_own_host(_authority(host)):
+            return f"Host {_shown(host)} is not this server"
+        if request.method in ("GET", "HEAD") and request.path != "/ws":
+            return None  # reads: another origin's page cannot read the answer
+        origin = request.headers.get("Origin")
+        if origin is None:  # browsers name it on every POST and WebSocket: this client is a script (curl, urllib)
+            return None
+        scheme, _, rest = origin.partition("://")
+        if scheme.lower() != "http" or not self._is_own_host(_authority(rest)):
+            return f"Origin {_shown(origin)} is not this server's page"
+        return None
+
+    @web.middleware
+    async def _guarded(self, request: web.Request, handler: Any) -> web.StreamResponse:
+        """Another web page in the user's browser may neither drive the controls nor read the bus (see the module
+        text); after the pacing, so refusals too are answered (and logged) at most ``REQUESTS_PER_S`` a second."""
+        why = self._refusal(request)
+        if why is not None:
+            log.info("live view: refused %s %s: %s", request.method, _shown(request.path), why)
+            return _error(403, f"refused: {why}")
         return await handler(request)
 
     # -- routes -----------------------------------------------------------------------------
@@ -348,7 +435,8 @@ class WebServer:
         loop = asyncio.get_running_loop()
         try:
             said = await loop.run_in_executor(self._executor, apply, self.controls, message)
-        except ControlError as exc:
+        except ControlError as exc:  # the client's mistake: one line, as a client's other faults
+            log.info("live view: refused a control: %s", exc)
             return 400, {"error": str(exc)}
         except TimeoutError:
             return 503, {"error": "the bus did not answer in time"}
@@ -361,6 +449,9 @@ class WebServer:
     async def _control(self, request: web.Request) -> web.Response:
         if request.content_length is not None and request.content_length > MAX_BODY_BYTES:
             return _error(413, f"request body over {MAX_BODY_BYTES} bytes")
+        if request.content_type != CONTROL_TYPE:  # before the body is read: it will not be used
+            log.info("live view: refused a control sent as %s", _shown(request.headers.get("Content-Type")))
+            return _error(415, f"send a control as Content-Type: {CONTROL_TYPE}")
         try:
             data = await asyncio.wait_for(request.read(), BODY_TIMEOUT_S)
         except web.HTTPRequestEntityTooLarge:

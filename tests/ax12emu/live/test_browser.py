@@ -132,7 +132,8 @@ def test_a_bad_request_gets_a_clear_error_and_the_bus_keeps_running(page):
         open_view(page, bus)
         page.locator("#servo-1").wait_for(timeout=5000)
         answer = page.evaluate(
-            """async () => { const r = await fetch('/api/control', {method: 'POST', body: '{"action": 12'});
+            """async () => { const r = await fetch('/api/control', {method: 'POST', headers: {'Content-Type': 'application/json'},
+                                                                  body: '{"action": 12'});
                              return [r.status, await r.json()]; }"""
         )
         assert answer[0] == 400 and "not JSON" in answer[1]["error"]

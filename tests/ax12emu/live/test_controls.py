@@ -75,6 +75,11 @@ def test_hardware_errors_stalls_and_vanishing_go_through_faults2(x_bus):
         ({"action": "vanish", "slot": 1, "protocol": "2.0"}, "protocol must be 1.0, 2.0 or null"),
         ({"action": "external_torque", "id": 1, "nm": 1e9}, "nm must be a number -10..10"),
         ({"action": "step", "seconds": -1}, "seconds must be a number 0..10"),
+        # JSON integers have no size limit: past the float range, refused as out of range (not an OverflowError)
+        ({"action": "step", "seconds": 10**400}, "seconds must be a number 0..10, got 1000"),
+        ({"action": "external_torque", "id": 1, "nm": -(10**400)}, "(402 characters)"),
+        ({"action": "reply_faults", "drop": 10**400}, "drop must be a number 0..1"),
+        ({"action": "temperature", "id": 1, "celsius": 10**400}, "celsius must be a number 0..255 or null"),
     ],
 )
 def test_what_a_servo_cannot_take_is_refused_with_the_reason(x_bus, message, says):
@@ -148,3 +153,16 @@ def test_an_ax12_takes_only_its_alarms_by_number_too():
             with pytest.raises(ControlError, match="the AX-12's alarm bits are overload 0x20, overheating 0x04, input_voltage 0x01"):
                 apply(controls, {"action": "alarm", "slot": 1, "bits": bits})
         assert apply(controls, {"action": "alarm", "slot": 1, "bits": 0x20}) == "servo 1: alarm 32 forced"
+
+
+def test_a_parameter_no_check_foresaw_is_the_controls_error(x_bus, monkeypatch):
+    """Whatever a parameter's check raises is the message's fault: a ControlError (400), never the emulator's (500)."""
+    from ax12emu.live import controls as controls_module
+
+    def fussy(value):
+        raise OverflowError("int too large to convert to float")
+
+    action = controls_module.ACTIONS["step"]
+    monkeypatch.setitem(controls_module.ACTIONS, "step", controls_module.Action({"seconds": fussy}, action.run, action.says))
+    with pytest.raises(ControlError, match=r"step: seconds 1 cannot be taken: OverflowError: int too large"):
+        apply(x_bus[1], {"action": "step", "seconds": 1})

@@ -201,7 +201,8 @@ def test_a_control_body_that_stalls_gets_408_and_its_connection_is_closed(bus, m
     monkeypatch.setattr(web_module, "BODY_TIMEOUT_S", 0.5)
     host, port = host_port(bus.web_url)
     start = time.monotonic()
-    answer = _raw_request(host, port, b"POST /api/control HTTP/1.1\r\nHost: x\r\nContent-Length: 100\r\n\r\n{")
+    answer = _raw_request(host, port, f"POST /api/control HTTP/1.1\r\nHost: {host}:{port}\r\nContent-Type: application/json\r\n"
+                                      "Content-Length: 100\r\n\r\n{".encode())
     assert answer.startswith(b"HTTP/1.1 408") and b"did not arrive" in answer, answer[:200]
     assert time.monotonic() - start < 4.0  # closed by the server, not by the client's own 5 s timeout
 
@@ -252,7 +253,8 @@ def test_a_clients_own_faults_are_one_info_line_not_an_error_with_a_traceback(bu
         refused = _raw_request(host, port, b"POST /api/control HTTP/1.1\r\nHost: x\r\nContent-Length: -1\r\n\r\n")
         assert refused.split(b"\r\n")[0].endswith(b" 400 Bad Request"), refused[:100]
         with socket.create_connection((host, port), timeout=5) as sock:
-            sock.sendall(b"POST /api/control HTTP/1.1\r\nHost: x\r\nContent-Length: 100\r\n\r\n{")
+            sock.sendall(f"POST /api/control HTTP/1.1\r\nHost: {host}:{port}\r\nContent-Type: application/json\r\n"
+                         "Content-Length: 100\r\n\r\n{".encode())
             time.sleep(0.2)
         deadline = time.monotonic() + 3
         while time.monotonic() < deadline and len([r for r in caplog.records if r.name == "aiohttp.server"]) < 2:
@@ -285,3 +287,88 @@ def test_requests_past_the_rate_wait_their_turn_or_get_503(bus, monkeypatch):
     assert 4 <= len(served) <= 14 and len(served) + len(refused) == 20, answers
     assert served[-1] >= 0.3  # the last ones waited their turn
     assert all("requests a second" in text for text in refused)
+
+
+# -- other web pages in the user's browser -------------------------------------------------------
+def _send(url: str, body: bytes, headers: dict[str, str], method: str = "POST") -> tuple[int, dict]:
+    request = urllib.request.Request(url, data=body if method == "POST" else None, method=method, headers=headers)
+    try:
+        with urllib.request.urlopen(request, timeout=5) as answer:
+            return answer.status, json.loads(answer.read())
+    except urllib.error.HTTPError as error:
+        with error:
+            return error.code, json.loads(error.read())
+
+
+def _faults_of_slot_1(bus) -> list[str]:
+    time.sleep(0.15)  # a few sampler periods: a control that went through shows
+    return get_json(bus.web_url + "api/servos")[1]["servos"][0]["faults"]
+
+
+def test_a_control_from_another_origins_page_is_refused_and_logged_in_one_line(bus, caplog):
+    """Any page the user opens may POST here: as text/plain (a "simple" request, sent without asking the server
+    first) or naming its origin; only the live view's own page (its origin, JSON) is obeyed."""
+    url, own = bus.web_url + "api/control", bus.web_url.rstrip("/")
+    vanish = b'{"action": "vanish", "slot": 1}'
+    with caplog.at_level(logging.INFO, logger="ax12emu.live.web"):
+        status, body = _send(url, vanish, {"Content-Type": "text/plain;charset=UTF-8", "Origin": "http://evil.example"})
+        assert status == 403 and "evil.example" in body["error"], body
+        assert _send(url, vanish, {"Content-Type": "application/json", "Origin": "http://evil.example"})[0] == 403
+        assert _send(url, vanish, {"Content-Type": "application/json", "Origin": "null"})[0] == 403  # a sandboxed page
+        assert _send(url, vanish, {"Content-Type": "application/json", "Origin": own.replace("http:", "https:")})[0] == 403
+        status, body = _send(url, vanish, {"Content-Type": "text/plain"})  # no Origin (a form, a script): not JSON
+        assert status == 415 and "application/json" in body["error"], body
+        assert _faults_of_slot_1(bus) == []
+    refusals = [r for r in caplog.records if r.name == "ax12emu.live.web"]
+    assert len(refusals) == 5 and all(r.levelno == logging.INFO and r.exc_info is None and "\n" not in r.getMessage()
+                                      for r in refusals), [(r.levelname, r.getMessage()) for r in refusals]
+    assert _send(url, vanish, {"Content-Type": "application/json", "Origin": own})[0] == 200  # the page's own
+    assert _faults_of_slot_1(bus) == ["vanished"]
+
+
+def test_a_websocket_from_another_origins_page_is_refused(bus):
+    async def connect(origin: str | None) -> int | str:
+        async with aiohttp.ClientSession() as session:
+            try:
+                async with session.ws_connect(bus.web_url.replace("http", "ws") + "ws", origin=origin) as ws:
+                    return json.loads((await ws.receive(timeout=5)).data)["type"]
+            except aiohttp.WSServerHandshakeError as error:
+                return error.status
+
+    assert asyncio.run(connect("http://evil.example")) == 403
+    assert asyncio.run(connect(bus.web_url.rstrip("/"))) == "hello"
+    assert asyncio.run(connect(None)) == "hello"  # a script's client names no origin
+
+
+def test_a_request_addressed_to_another_host_is_refused(bus):
+    """DNS rebinding: a page on attacker.example whose name then points here is same-origin with itself, so the
+    browser sends its own name as Host: only this server's names (with its port) are answered."""
+    host, port = host_port(bus.web_url)
+    servos = bus.web_url + "api/servos"
+    status, body = _send(servos, b"", {"Host": f"attacker.example:{port}"}, method="GET")
+    assert status == 403 and "attacker.example" in body["error"], body
+    assert _send(servos, b"", {"Host": f"{host}:{port + 1}"}, method="GET")[0] == 403  # another port: another origin
+    for name in (f"{host}:{port}", f"localhost:{port}", f"LOCALHOST:{port}", f"[::1]:{port}"):
+        assert _send(servos, b"", {"Host": name}, method="GET")[0] == 200, name
+    vanish = b'{"action": "vanish", "slot": 1}'
+    rebound = {"Host": f"attacker.example:{port}", "Origin": f"http://attacker.example:{port}", "Content-Type": "application/json"}
+    assert _send(bus.web_url + "api/control", vanish, rebound)[0] == 403
+    assert _faults_of_slot_1(bus) == []
+
+
+def test_which_hosts_name_the_server():
+    """The bound address, the loopback names, and any IP address where the server binds every interface (a page of
+    another site cannot make the browser send an IP address as Host: DNS rebinding needs a name)."""
+    def server(host: str) -> WebServer:
+        return WebServer(sampler=None, controls=None, host=host, port=8080, allow_remote=True)  # type: ignore[arg-type]
+
+    local, lan, every, every6 = server("127.0.0.1"), server("192.168.1.5"), server("0.0.0.0"), server("::")
+    assert local._is_own_host(("localhost", 8080)) and local._is_own_host(("::1", 8080))
+    assert not local._is_own_host(("192.168.1.5", 8080)) and not local._is_own_host(("localhost", 80))
+    assert lan._is_own_host(("192.168.1.5", 8080)) and not lan._is_own_host(("192.168.1.6", 8080))
+    for wildcard in (every, every6):
+        assert wildcard._is_own_host(("192.168.1.6", 8080)) and wildcard._is_own_host(("fe80::1", 8080))
+        assert not wildcard._is_own_host(("pi.example", 8080)) and not wildcard._is_own_host(None)
+    assert web_module._authority("localhost") == ("localhost", 80)
+    assert web_module._authority("[::1]:8080") == ("::1", 8080)
+    assert web_module._authority("x:port") is None and web_module._authority("a@b:1") is None

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import logging
 import time
 import urllib.error
 import urllib.request
@@ -141,13 +142,23 @@ BAD_CONTROLS = [
     ({"action": "temperature", "id": 1, "celsius": float("nan")}, 400, "celsius must be a number"),
     ({"action": "vanish", "slot": 1, "extra": 1}, 400, "unknown parameter"),
     (b"x" * (MAX_BODY_BYTES + 1), 413, "over"),
+    # valid JSON whose integer is past the float range: refused as out of range, not a fault inside (500)
+    (b'{"action": "step", "seconds": 1' + b"0" * 400 + b"}", 400, "seconds must be a number 0..10"),
+    (b'{"action": "external_torque", "id": 1, "nm": -1' + b"0" * 400 + b"}", 400, "nm must be a number -10..10"),
+    (b'{"action": "reply_faults", "drop": 1' + b"0" * 400 + b"}", 400, "drop must be a number 0..1"),
 ]
 
 
-def test_bad_control_requests_get_a_clear_4xx_and_the_bus_keeps_answering(bus):
-    for body, status, says in BAD_CONTROLS:
-        got_status, got = post(bus.web_url + "api/control", body if isinstance(body, bytes) else json.dumps(body).encode())
-        assert got_status == status and says in got["error"], (body, got)
+def test_bad_control_requests_get_a_clear_4xx_and_the_bus_keeps_answering(bus, caplog):
+    with caplog.at_level(logging.INFO, logger="ax12emu.live.web"):
+        for body, status, says in BAD_CONTROLS:
+            got_status, got = post(bus.web_url + "api/control", body if isinstance(body, bytes) else json.dumps(body).encode())
+            assert got_status == status and says in got["error"], (body, got)
+    logged = [r for r in caplog.records if r.name == "ax12emu.live.web"]
+    # one INFO line per refused control, no error, no traceback (the body-less 413 and the unparsed ones: none)
+    assert logged and all(r.levelno == logging.INFO and r.exc_info is None and "\n" not in r.getMessage() for r in logged), [
+        (r.levelname, r.getMessage()) for r in logged]
+    assert sum("seconds must be a number" in r.getMessage() for r in logged) == 1
     with sdk_port(bus.port) as (port, ph):
         for servo_id in (1, 2, 7):
             assert ph.ping(port, servo_id)[1] == COMM_SUCCESS  # nothing half-done: no servo vanished
@@ -172,3 +183,76 @@ def test_binds_loopback_only_unless_allowed():
         assert bus.web_url.startswith("http://127.0.0.1:")
     with pytest.raises(ValueError, match="--allow-remote"):
         WebServer(sampler=None, controls=None, host="0.0.0.0", port=0)  # type: ignore[arg-type]
+
+
+def test_the_page_posts_its_controls_as_json():
+    """/api/control takes application/json alone (another origin's page cannot send it unasked): the page's own must."""
+    with VirtualBus([1], transport="inprocess", virtual_time=True, web=True) as bus, \
+            urllib.request.urlopen(bus.web_url + "assets/app.js", timeout=5) as script:
+        text = script.read().decode()
+    assert 'fetch("/api/control", {method: "POST", headers: {"Content-Type": "application/json"}' in text
+
+
+def readings_of(servo: dict) -> dict[str, dict]:
+    return {reading["name"]: reading for reading in servo["readings"]}
+
+
+def test_an_mx_in_multi_turn_mode_shows_a_position_below_zero_as_negative():
+    """Multi-turn mode ([classic] multi_turn_limit: both angle limits 4095) holds Goal and Present Position as two's
+    complement (-28,672..28,672): a goal 3000 counts back is -3000 (about -264 degrees), not 62,536 (5,498 degrees);
+    with Resolution Divider 2 each count is two of the file's units."""
+    with VirtualBus(servo="2:mx-64", transport="inprocess", virtual_time=True, web=True) as bus:
+        bus.write(2, "cw_angle_limit", 4095)
+        bus.write(2, "ccw_angle_limit", 4095)
+        bus.write(2, "torque_enable", 1)
+        bus.write(2, "goal_position", -3000 & 0xFFFF)  # as a host sends it
+        bus.step(3.0)
+        shaft_deg = bus.angle_deg(2)
+        servo = wait_for(lambda: (s := servos(bus)[2])["registers"]["goal_position"] == 62536 and s)
+        assert servo["mode"] == "multi-turn" and servo["limits"] is None
+        one = readings_of(servo)
+        assert one["goal"]["raw"] == -3000 and one["goal"]["value"] == pytest.approx(-3000 * 360 / 4095, abs=1e-3)
+        assert one["position"]["raw"] < 0 and one["position"]["value"] == pytest.approx(shaft_deg, abs=0.5)
+        bus.write(2, "torque_enable", 0)
+        bus.write(2, "resolution_divider", 2)
+        bus.write(2, "torque_enable", 1)
+        bus.write(2, "goal_position", -1500 & 0xFFFF)
+        bus.step(3.0)
+        shaft_deg = bus.angle_deg(2)
+        servo = wait_for(lambda: (s := servos(bus)[2])["registers"]["goal_position"] == -1500 & 0xFFFF and s)
+        one = readings_of(servo)
+        assert one["goal"]["raw"] == -1500 and one["goal"]["value"] == pytest.approx(-1500 * 2 * 360 / 4095, abs=1e-3)
+        assert one["position"]["value"] == pytest.approx(shaft_deg, abs=0.5)
+        bus.write(2, "torque_enable", 0)
+        bus.write(2, "ccw_angle_limit", 3000)  # joint mode: the same registers read unsigned again
+        servo = wait_for(lambda: (s := servos(bus)[2])["mode"] == "joint" and s)
+        assert readings_of(servo)["goal"]["raw"] == -1500 & 0xFFFF
+
+
+@pytest.mark.parametrize(("mode", "limits"), [(3, [0, 4095]), (4, None), (5, None)])
+def test_the_position_limits_are_shown_where_the_table_applies_them(mode, limits):
+    """Goal Position's ranges_when in the model file: the position limits are unused in Extended (4) and
+    Current-based (5) Position Control Mode, so the servo takes a goal past them and the view draws none."""
+    with VirtualBus(servo="1:xm430-w350", transport="inprocess", virtual_time=True, web=True) as bus:
+        bus.write(1, "operating_mode", mode)
+        bus.write(1, "torque_enable", 1)
+        goal = 6000 if limits is None else 3000
+        bus.write(1, "goal_position", goal)
+        bus.step(0.1)
+        servo = wait_for(lambda: (s := servos(bus)[1])["registers"]["goal_position"] == goal and s)
+    assert servo["registers"]["operating_mode"] == mode and servo["limits"] == limits
+
+
+def test_an_mx64_shows_its_current_in_ma_about_2048():
+    """MX-64/MX-106 Current(68): "I = ( 4.5mA ) * (CURRENT - 2048)", 4.5 mA the model file's current_unit_ma."""
+    with VirtualBus(servo="2:mx-64,3:mx-28", transport="inprocess", virtual_time=True, web=True) as bus:
+        bus.write(2, "torque_enable", 1)
+        bus.write(2, "goal_position", 3000)
+        bus.step(0.05)  # accelerating: a current flows
+        raw = bus.read(2, "current")
+        shown = wait_for(lambda: (s := servos(bus))[2]["registers"]["current"] == raw and s)
+    current = readings_of(shown[2])["current"]
+    assert raw != 2048 and shown[2]["registers"]["current"] == raw
+    assert (current["register"], current["raw"], current["unit"]) == ("current", raw - 2048, "mA")  # signed, as plotted
+    assert current["value"] == pytest.approx((raw - 2048) * 4.5, abs=1e-3)
+    assert "current" not in readings_of(shown[3]) and "load" in readings_of(shown[3])  # the MX-28 senses none
