@@ -101,6 +101,10 @@ class FaultConfig:
     #: Slots whose shaft is blocked.
     stall: tuple[int, ...] = ()
 
+    def __post_init__(self) -> None:
+        if self.fault_ids and not (self.drop or self.corrupt or self.delay):  # it did nothing, without a word
+            raise ValueError("fault_ids: names the IDs drop, corrupt and delay act on, and none of them is given")
+
     @property
     def active(self) -> bool:
         """Whether any fault is configured."""
@@ -113,6 +117,12 @@ class FaultConfig:
         ``stall`` and ``hold``); on a Protocol 1.0 wire with MX servos: :class:`~.injection.Faults1X`.  On a wire mixing protocols: :class:`~.injection.MixedFaults`, where
         a slot launched on both protocols is a ValueError (the options cannot name the protocol).
         """
+        if self.fault_ids:  # IDs no servo answers as: the reply faults did nothing, without a word
+            on_wire = set(bus.slots) | set(getattr(bus, "ids", ())) | {as_id for _, as_id in self.duplicate}
+            missing = sorted(set(self.fault_ids) - on_wire)
+            if missing:
+                raise ValueError(f"fault_ids: no servo on this wire answers as ID {', '.join(map(str, missing))} "
+                                 f"(its IDs: {', '.join(map(str, sorted(on_wire)))})")
         named = [slot for slot, *_ in (*self.vanish, *self.duplicate, *self.alarm)] + list(self.stall)
         both = set(getattr(getattr(bus, "bus1", None), "slots", ())) & set(getattr(getattr(bus, "bus2", None), "slots", ()))
         for slot in named:

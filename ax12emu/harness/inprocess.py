@@ -12,11 +12,13 @@ servo at another baud is deaf, as on a pty.
 
 Not modelled: wire time of the bytes (replies arrive whole), the
 adapter's echo.  Physics advances when a packet arrives (the bus brings the
-model up to date before it answers) and on :meth:`InProcessLink.advance`.
+model up to date before it answers), on :meth:`InProcessLink.advance`, and
+before a :meth:`InProcessLink.call` that asks (a wall-clock VirtualBus's).
 
 Links are found by name from a URL (``ax12emu://NAME``): pyserial builds
 a port from a string, so a small registry of weak references is the only
-way to reach a bus created elsewhere in the process.
+way to reach a bus created elsewhere in the process.  A name must come back
+out of that URL as it went in (:func:`check_name`).
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from __future__ import annotations
 import heapq
 import threading
 import time
+import urllib.parse
 import weakref
 from collections.abc import Callable
 from typing import Any
@@ -33,10 +36,19 @@ from ax12emu.bus.bus2 import Bus2
 from ax12emu.bus.reply import merge_replies
 from ax12emu.tracing.trace import IN, OUT, TraceWriter
 
-__all__ = ["InProcessLink", "register", "lookup", "LinkBusy", "LinkClosed"]
+__all__ = ["InProcessLink", "register", "lookup", "check_name", "is_registered", "NameTaken", "LinkBusy", "LinkClosed"]
 
 _REGISTRY: "weakref.WeakValueDictionary[str, InProcessLink]" = weakref.WeakValueDictionary()
 _REGISTRY_LOCK = threading.Lock()
+
+
+#: Characters a URL reads as its own parts: "/" (a path; "ax12emu:///" is a private bus), "?" (the options),
+#: "#" (a fragment) and brackets (an IPv6 host): a name holding one is not the name its port finds.
+_URL_PARTS = "/?#[]"
+
+
+class NameTaken(ValueError):
+    """Another in-process bus holds the name."""
 
 
 class LinkBusy(RuntimeError):
@@ -162,9 +174,16 @@ class InProcessLink:
             self._rx.clear()
 
     # -- bus side ----------------------------------------------------------------------
-    def call(self, fn: Callable[[Bus], Any]) -> Any:
-        """Run ``fn(bus)`` with the link locked, so no packet is handled meanwhile."""
+    def call(self, fn: Callable[[Bus], Any], *, advance: bool = False) -> Any:
+        """Run ``fn(bus)`` with the link locked, so no packet is handled meanwhile.
+
+        ``advance``: bring the physics up to the clock's present time first.  Why: nothing steps an in-process
+        bus between packets, so on the wall clock a caller would otherwise see the shaft where the last packet
+        left it, where a served bus (whose loop steps every millisecond) shows where it is now.
+        """
         with self.lock:
+            if advance:
+                self.bus.advance()
             return fn(self.bus)
 
     def advance(self) -> None:
@@ -173,12 +192,39 @@ class InProcessLink:
             self.bus.advance()
 
 
+def check_name(name: str) -> str:
+    """``name`` if ``ax12emu://NAME`` finds the bus named so; ValueError saying why not.
+
+    A blank name makes ``ax12emu://`` a port of a private bus of its own, and the URL's own characters
+    (:data:`_URL_PARTS`) or control characters (dropped by the URL parser) make it name another bus or none.
+    """
+    if not isinstance(name, str):
+        raise TypeError(f"name must be a text, got {type(name).__name__}")
+    if not name.strip():
+        raise ValueError(f"name {name!r} is blank: ax12emu:// without a name opens a private bus, not this one")
+    used = sorted({c for c in name if c in _URL_PARTS or not c.isprintable()})
+    if used:
+        raise ValueError(f"name {name!r} cannot be part of its port ax12emu://{name}: "
+                         f"{' '.join(map(repr, used))} {'is' if len(used) == 1 else 'are'} read as part of the URL")
+    parts = urllib.parse.urlsplit(f"ax12emu://{name}")
+    if (parts.netloc + parts.path).strip("/") != name:  # pragma: no cover - the rule above covers what urlsplit does
+        raise ValueError(f"name {name!r} does not come back out of its port ax12emu://{name}")
+    return name
+
+
 def register(name: str, link: InProcessLink) -> None:
-    """Make ``link`` reachable as ``ax12emu://NAME``."""
+    """Make ``link`` reachable as ``ax12emu://NAME``; :class:`NameTaken` if another bus holds it."""
+    check_name(name)
     with _REGISTRY_LOCK:
         if name in _REGISTRY:
-            raise ValueError(f"an in-process bus named {name!r} already exists")
+            raise NameTaken(f"an in-process bus named {name!r} already exists")
         _REGISTRY[name] = link
+
+
+def is_registered(name: str) -> bool:
+    """Whether a bus holds ``name`` now."""
+    with _REGISTRY_LOCK:
+        return name in _REGISTRY
 
 
 def unregister(name: str) -> None:

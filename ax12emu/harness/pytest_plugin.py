@@ -7,13 +7,23 @@ Windows) and closes it after the test, pass or fail::
 
     @pytest.mark.ax12_ids(1, 2)
     def test_arm(ax12_bus):
-        port = PortHandler(ax12_bus.port)
+        port = PortHandler(ax12_bus.port)     # a pty's path; without ptys, UrlPortHandler (below)
+
+Where there is no pty (Windows) the port is an ``ax12emu://NAME`` URL, which
+``serial.serial_for_url`` opens but dynamixel-sdk's ``PortHandler`` does not
+(it opens ``serial.Serial(name)``, device paths only): open it with a
+``PortHandler`` subclass whose ``setupPort`` calls ``serial_for_url`` (the
+``UrlPortHandler`` of ``tools/examples/robot_arm.py`` and docs/testing.md,
+which opens device paths too, so one handler serves both platforms).
 
 IDs come from the ``ax12_ids`` marker, or from indirect parametrization
-(``@pytest.mark.parametrize("ax12_bus", [[1, 2]], indirect=True)``); the
-default is ID 1.  The ``ax12_bus_options`` marker passes keyword arguments
-to :class:`~ax12emu.VirtualBus` (``transport="inprocess"``,
-``virtual_time=True``, ``faults=FaultConfig(...)``, ...).
+(``@pytest.mark.parametrize("ax12_bus", [[1, 2]], indirect=True)``, which
+wins over a module's or class's marker); the default is ID 1.  The
+``ax12_bus_options`` marker passes keyword arguments to
+:class:`~ax12emu.VirtualBus` (``transport="inprocess"``,
+``virtual_time=True``, ``faults=FaultConfig(...)``, ...).  IDs and servos
+given twice (``ax12_ids`` and ``ids=``, ``ax12_servo`` and ``servo=``, IDs
+beside a per-ID servo text) are a usage error, not a silent choice.
 
 Other models (the X series on Protocol 2.0, the MX series on Protocol 1.0): the ``ax12_servo``
 marker takes the servo text of ``ax12emu serve --servo`` (``@pytest.mark.ax12_servo("xl430-w250")``
@@ -98,11 +108,18 @@ def _marker_takes(marker: pytest.Mark, example: str, *, args: bool) -> None:
         raise pytest.UsageError(f"@pytest.mark.{marker.name} takes {'positional arguments' if args else 'keywords'}: {example}")
 
 
-def _marker_id(value: Any) -> int:
-    """One ID of ``ax12_ids``: an integer (numpy's too); a text such as "1,2" is a UsageError, not a deep one."""
+def _marker_id(value: Any, where: str = "@pytest.mark.ax12_ids", example: str = "ax12_ids(1, 2, 3)") -> int:
+    """One ID of ``ax12_ids`` (or of ``where``): an integer (numpy's too); a text such as "1,2" or a float such as
+    1.9 (which int() made ID 1) is a UsageError, not a deep one."""
     if isinstance(value, bool) or not isinstance(value, numbers.Integral):
-        raise pytest.UsageError(f"@pytest.mark.ax12_ids takes integer IDs, got {value!r}: ax12_ids(1, 2, 3)")
+        raise pytest.UsageError(f"{where} takes integer IDs, got {value!r}: {example}")
     return int(value)
+
+
+def _id_values(values: Any, where: str, example: str) -> list[int]:
+    """IDs given as one integer or a list, tuple or range of them, each checked as the ``ax12_ids`` marker's."""
+    items = values if isinstance(values, (list, tuple, range)) else [values]
+    return [_marker_id(value, where, example) for value in items]
 
 
 def _default_transport() -> str:
@@ -115,25 +132,44 @@ def ax12_bus(request: pytest.FixtureRequest) -> Iterator[Any]:
     from ax12emu.harness.virtual_bus import VirtualBus
 
     ids: list[int] | None = None  # VirtualBus's default: ID 1, or the IDs a per-ID servo text names
+    ids_from = ""  # where the IDs came from, for a UsageError naming both sides of a conflict
     marker = request.node.get_closest_marker("ax12_ids")
     if marker is not None:
         _marker_takes(marker, "ax12_ids(1, 2, 3) or ax12_ids([1, 2, 3])", args=True)
-        ids = [_marker_id(i) for arg in marker.args for i in (arg if isinstance(arg, (list, tuple, range)) else [arg])]
-    if hasattr(request, "param"):
-        ids = list(request.param) if isinstance(request.param, (list, tuple)) else [int(request.param)]
+        ids = [i for arg in marker.args for i in _id_values(arg, "@pytest.mark.ax12_ids", "ax12_ids(1, 2, 3)")]
+        ids_from = "ax12_ids"
+    if hasattr(request, "param"):  # the closer choice: a parametrized test under a module's or class's ax12_ids
+        ids = _id_values(request.param, "an indirect ax12_bus parameter",
+                         'parametrize("ax12_bus", [1, [2, 3], range(4, 7)], indirect=True)')
+        ids_from = "the indirect ax12_bus parameter"
     options: dict[str, Any] = {"transport": _default_transport()}
+    options_marker = request.node.get_closest_marker("ax12_bus_options")
+    given: dict[str, Any] = {}
+    if options_marker is not None:
+        _marker_takes(options_marker, "ax12_bus_options(virtual_time=True)", args=False)
+        given = dict(options_marker.kwargs)
+    if "ids" in given:
+        if ids is not None:
+            raise pytest.UsageError(f"ax12_bus_options(ids=...) and {ids_from} both give the IDs; give them once")
+        ids = _id_values(given.pop("ids"), "ax12_bus_options(ids=...)", "ax12_bus_options(ids=[1, 2])")
+        ids_from = "ax12_bus_options(ids=...)"
     servo_marker = request.node.get_closest_marker("ax12_servo")
     if servo_marker is not None:
         _marker_takes(servo_marker, 'ax12_servo("1-2:xl430-w250")', args=True)
         if len(servo_marker.args) != 1:
             raise pytest.UsageError('ax12_servo takes one servo text, e.g. ax12_servo("1-2:xl430-w250")')
-    servo = servo_marker.args[0] if servo_marker is not None else request.config.getoption("--ax12-servo", None)
+        if "servo" in given:
+            raise pytest.UsageError("ax12_servo and ax12_bus_options(servo=...) both give the servos; give them once")
+    # The test's own choice (the marker, or servo= among its options) before the command line's --ax12-servo.
+    servo, servo_from = ((servo_marker.args[0], "ax12_servo") if servo_marker is not None
+                         else (given.pop("servo"), "ax12_bus_options(servo=...)") if "servo" in given
+                         else (request.config.getoption("--ax12-servo", None), "--ax12-servo"))
     if servo is not None:
+        if ids is not None and isinstance(servo, str) and ":" in servo:
+            raise pytest.UsageError(f"{ids_from} and the per-ID servo text {servo!r} of {servo_from} both name the IDs; "
+                                    "give one of them (IDS:MODEL names them itself)")
         options["servo"] = servo
-    options_marker = request.node.get_closest_marker("ax12_bus_options")
-    if options_marker is not None:
-        _marker_takes(options_marker, "ax12_bus_options(virtual_time=True)", args=False)
-        options.update(options_marker.kwargs)
+    options.update(given)
     web = request.config.getoption("--ax12-web", False)
     if web:
         options.setdefault("web", request.config.getoption("--ax12-web-at"))

@@ -2,7 +2,15 @@
 
 Why it exists: tests, the live-recording tools and anyone scripting a run
 against a real serving process need the same three steps, and a process
-must be stopped by the id it was started with, even when the caller fails.
+must be stopped by the id it was started with, even when the caller fails
+(also when interrupted while it waits for the port line).
+
+The child's stderr (its log: a line per packet with ``-v``) goes to an
+unlinked temporary file, read through ``process.stderr``: a pipe that no
+one reads fills at 64 KiB and then blocks the child mid-write, so it stops
+answering and no longer sees SIGTERM.  Its stdout stays a pipe: ``serve``
+prints two lines there at most (the port, the live view's address), which
+callers read as they come.
 """
 
 from __future__ import annotations
@@ -12,6 +20,7 @@ import select
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -51,19 +60,46 @@ def start_served(args: Sequence[str], *, cwd: str | os.PathLike[str] | Path | No
     """Start ``python -m ax12emu serve ARGS`` (in ``cwd``) and wait for the port line on its stdout.
 
     Raises RuntimeError with the process's stderr if it exits or prints
-    nothing within ``timeout_s``; the process is killed first.
+    nothing within ``timeout_s``; the process is killed first, as it is
+    when anything else (Ctrl-C, a test's timeout) ends the wait.
     """
-    process = subprocess.Popen([sys.executable, "-m", "ax12emu", "serve", *args], cwd=cwd,
-                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        ready, _, _ = select.select([process.stdout], [], [], 0.1)
-        if ready:
-            line = process.stdout.readline().strip()
-            if line:
-                return ServedProcess(process, line)
-        if process.poll() is not None:
-            break
-    process.kill()
-    _, err = process.communicate(timeout=5)
+    log_fd, log_path = tempfile.mkstemp(prefix="ax12emu-serve-", suffix=".log")
+    try:
+        log_reader = open(log_path, encoding="utf-8", errors="replace")
+    finally:
+        os.unlink(log_path)  # gone from the directory; the child's descriptor and the reader keep the file
+    process: subprocess.Popen | None = None
+    try:
+        process = subprocess.Popen([sys.executable, "-m", "ax12emu", "serve", *args], cwd=cwd,
+                                   stdout=subprocess.PIPE, stderr=log_fd, text=True)
+        process.stderr = log_reader  # read as a pipe's end would be: process.stderr.read() once stopped
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            ready, _, _ = select.select([process.stdout], [], [], 0.1)
+            if ready:
+                line = process.stdout.readline().strip()
+                if line:
+                    return ServedProcess(process, line)
+            if process.poll() is not None:
+                break
+    except BaseException:  # the child is ours to stop by its own pid, whatever ended the wait (Ctrl-C, a timeout)
+        if process is not None:
+            _kill(process)
+        log_reader.close()
+        raise
+    finally:
+        os.close(log_fd)  # the child has its own copy
+    assert process is not None  # (started: the wait ran out, or the child exited first)
+    _kill(process)
+    err = log_reader.read()
+    log_reader.close()
     raise RuntimeError(f"ax12emu serve {' '.join(args)} did not start: {err.strip()}")
+
+
+def _kill(process: subprocess.Popen) -> None:
+    """Kill the child by its own pid and reap it; its stdout pipe is closed (its log stays readable)."""
+    if process.poll() is None:
+        os.kill(process.pid, signal.SIGKILL)
+    process.wait(5)
+    if process.stdout is not None:
+        process.stdout.close()

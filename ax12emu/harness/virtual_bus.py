@@ -63,7 +63,7 @@ from ax12emu.tracing.trace import TraceWriter
 from firmware_model.interface import AngleSettable, ServoModel
 from firmware_model.params import ServoParams
 
-from .inprocess import InProcessLink, register, unregister
+from .inprocess import InProcessLink, NameTaken, check_name, is_registered, register, unregister
 from .servos2 import build_wire, servo_list
 
 __all__ = ["VirtualBus", "TRANSPORTS"]
@@ -88,16 +88,20 @@ _instances_lock = threading.Lock()
 
 
 def _next_name() -> str:
+    """A name no in-process bus holds now ("bus1", "bus2", ...: a user may have named one so)."""
     global _instances
     with _instances_lock:
-        _instances += 1
-        return f"bus{_instances}"
+        while True:
+            _instances += 1
+            name = f"bus{_instances}"
+            if not is_registered(name):
+                return name
 
 
 def _check_types(*, options: Any, model: Any, faults: Any, servo: Any, baud_bps: Any) -> None:
     """A TypeError naming the argument whose type is wrong (they failed deep inside: ``model=5`` as "'int' object has
     no attribute 'n'")."""
-    if not isinstance(options, (ServoOptions, Servo2Options)):
+    if options is not None and not isinstance(options, (ServoOptions, Servo2Options)):
         raise TypeError(f"options must be a ServoOptions (AX-12A bus) or Servo2Options (servo=), got {type(options).__name__}")
     if (servo is None and model is not None and not isinstance(model, str)  # (servo= refuses any model object)
             and not callable(getattr(model, "advance", None))):
@@ -121,6 +125,17 @@ def _web_address(web: str | tuple[str, int] | bool | None) -> tuple[str, int] | 
         return parse_host_port(web)
     host, port = web
     return (str(host), int(port))
+
+
+def _check_local(what: str, address: tuple[str, int] | None, allow_remote: bool) -> None:
+    """ValueError for an address beyond loopback without ``allow_remote=True``: as ``ax12emu serve`` asks for
+    ``--allow-remote``, a bus other machines can reach (servos anyone may drive, a page anyone may use) is asked for
+    by name, never the side effect of an address such as 0.0.0.0."""
+    from ax12emu.serve.transports.tcp import is_loopback
+
+    if address is not None and not allow_remote and not is_loopback(address[0]):
+        raise ValueError(f"{what}: {address[0]} binds beyond loopback, where other machines reach it; "
+                         "pass allow_remote=True to mean that")
 
 
 def _find(bus: AnyBus, servo_id: int, protocol: float | None) -> tuple[Any, Any]:
@@ -164,7 +179,15 @@ class _FaultsOnBus:
 
 
 class VirtualBus:
-    """A running bus of virtual AX-12s with a port any client can open (``port``)."""
+    """A running bus of virtual AX-12s with a port any client can open (``port``).
+
+    ``virtual_time=True`` without ``options=``: a servo takes no busy time after an EEPROM write (6 ms a byte
+    on the wall clock), as ``ax12emu://?virtual_time=1``: simulated time stands still until :meth:`step`, so a
+    busy servo would be deaf until then; ``options=ServoOptions(eeprom_busy_s_per_byte=...)`` sets it.
+    ``allow_remote=True``: ``tcp_address`` and ``web`` may bind beyond loopback (as ``serve --allow-remote``).
+    ``name``: the in-process port is ``ax12emu://NAME``, so a name holding "/", "?", "#" or brackets, or a
+    blank one, is refused; without one a free name ``busN`` is taken.
+    """
 
     def __init__(
         self,
@@ -173,7 +196,7 @@ class VirtualBus:
         transport: str = "pty",
         virtual_time: bool = False,
         time_scale: float = 1.0,
-        options: ServoOptions | Servo2Options = ServoOptions(),
+        options: ServoOptions | Servo2Options | None = None,
         model: ServoModel | str | None = None,
         params: str | os.PathLike[str] | ServoParams | None = None,
         faults: FaultConfig | None = None,
@@ -184,6 +207,7 @@ class VirtualBus:
         name: str | None = None,
         tcp_address: tuple[str, int] = ("127.0.0.1", 0),
         web: str | tuple[str, int] | bool | None = None,
+        allow_remote: bool = False,
         servo: str | None = None,
         baud_bps: float | None = None,
     ) -> None:
@@ -194,6 +218,23 @@ class VirtualBus:
             from ax12emu.serve.transports.tcp import parse_host_port
 
             tcp_address = parse_host_port(tcp_address)
+        if transport == "tcp":
+            _check_local("tcp_address", tcp_address, allow_remote)
+        web_address = _web_address(web)
+        _check_local("web", web_address, allow_remote)
+        if name is not None and transport == "inprocess":
+            check_name(name)  # the port is ax12emu://NAME: a name the URL reads otherwise is a port to another bus or none
+        elif name is not None and not str(name).strip():
+            raise ValueError(f"name {name!r} is blank; leave it out for an automatic one")
+        if servo is not None and ids is not None and ":" in servo:
+            raise ValueError(f"ids= and the per-ID servo text {servo!r} both name the IDs; give one of them")
+        if options is None:
+            # In virtual time the clock stands still between steps, so a servo busy after an EEPROM write (6 ms a
+            # byte by default) would not answer again until bus.step(): none here, as ax12emu://?virtual_time=1.
+            options = ServoOptions(eeprom_busy_s_per_byte=0.0) if virtual_time else ServoOptions()
+            given_options = False
+        else:
+            given_options = True
         self.transport_name = transport
         self.virtual_time = virtual_time
         clock = VirtualClock() if virtual_time else WallClock(time_scale)
@@ -207,7 +248,9 @@ class VirtualBus:
             if model is not None or params is not None:
                 given = {} if params is None else ({"params": params} if isinstance(params, ServoParams) else {"params_path": params})
                 choice1 = ModelChoice(name=model or "physical", **given)
-            options1 = options if isinstance(options, ServoOptions) and options != ServoOptions() else None
+            options1 = options if isinstance(options, ServoOptions) and given_options and options != ServoOptions() else None
+            if options1 is None and virtual_time and _names_ax(servo, ids):
+                options1 = options if isinstance(options, ServoOptions) else ServoOptions(eeprom_busy_s_per_byte=0.0)
             options2 = options if isinstance(options, Servo2Options) else Servo2Options()
             self.bus = build_wire(servo, None if ids is None else _id_list(ids), clock=clock, baud_bps=baud_bps, options=options2,
                                   choice1=choice1, options1=options1)
@@ -232,9 +275,12 @@ class VirtualBus:
         self._pace, self._echo = pace, echo
         self._tcp_address = tcp_address
         #: Where to serve the live view (ax12emu.live): True for loopback on a free port, "HOST:PORT" or a pair.
-        self._web_address = _web_address(web)
+        self._web_address = web_address
+        self._allow_remote = allow_remote
         self._live: Any = None
-        self.name = name or _next_name()
+        #: No name given: an automatic one, which start() replaces should another bus have taken it meanwhile.
+        self._auto_name = name is None
+        self.name = _next_name() if name is None else name
         self.port = ""
         self._trace: TraceWriter | None = None
         self._transport: Any = None
@@ -261,7 +307,14 @@ class VirtualBus:
                 self._trace = self._open_trace(self._trace_path)
             if self.transport_name == "inprocess":
                 link = InProcessLink(self.bus, trace=self._trace)
-                register(self.name, link)  # a name another bus holds is refused here, and that bus keeps it
+                while True:
+                    try:
+                        register(self.name, link)  # a name another bus holds is refused here, and that bus keeps it
+                        break
+                    except NameTaken:
+                        if not self._auto_name:
+                            raise
+                        self.name = _next_name()
                 self._link = link
                 self.port = f"ax12emu://{self.name}"
                 self._start_live()
@@ -273,6 +326,10 @@ class VirtualBus:
             else:
                 host, port = self._tcp_address
                 self._transport = open_transport("tcp", host=host, port=port)
+                from ax12emu.serve.transports.tcp import is_loopback
+
+                if not is_loopback(host):  # (allow_remote=True): said, as serve --allow-remote says it
+                    log.warning("VirtualBus %s serving on %s, reachable from other machines", self.name, self._transport.url)
             self.port = self._transport.url
             self._server = BusServer(self.bus, self._transport, pace=self._pace, echo=self._echo, trace=self._trace)
             self._thread = threading.Thread(target=self._serve, name=f"ax12emu-{self.name}", daemon=True)
@@ -302,10 +359,10 @@ class VirtualBus:
             link.trace = tap
             self._live = LiveView(
                 self.call, controls=self, tap=tap, counters=lambda: {"packets_in": link.packets_in}, web=self._web_address,
-                **self.call(decoder_options),
+                allow_remote=self._allow_remote, **self.call(decoder_options),
             )
         else:
-            self._live = LiveView.for_server(self._server, controls=self, web=self._web_address)
+            self._live = LiveView.for_server(self._server, controls=self, web=self._web_address, allow_remote=self._allow_remote)
         self._live.start()
 
     @property
@@ -362,13 +419,26 @@ class VirtualBus:
     # -- running code where the bus lives ---------------------------------------------------
     def call(self, fn: Callable[[Bus], Any], timeout_s: float | None = None) -> Any:
         """Run ``fn(bus)`` between packets (on the serving thread, or under the link's lock); served on a pty or
-        TCP, wait at most ``timeout_s`` for it (default :data:`_CALL_TIMEOUT_S`)."""
+        TCP, wait at most ``timeout_s`` for it (default :data:`_CALL_TIMEOUT_S`).
+
+        On the wall clock ``fn`` sees the bus as it is now: the in-process link brings the physics up to the
+        present first, as the serving loop keeps it.  RuntimeError once the bus is closed, also for a call
+        waiting on the serving thread when it closes.
+        """
         if self._closed:  # its port is gone (a pty's name may be another's by now) and its state was saved
             raise RuntimeError(f"VirtualBus {self.name} is closed")
         if self._link is not None:
-            return self._link.call(fn)
-        if self._thread is not None and self._thread.is_alive():
-            return self._server.call(fn, _CALL_TIMEOUT_S if timeout_s is None else timeout_s)
+            return self._link.call(fn, advance=not self.virtual_time)
+        if self._thread is not None:
+            if self._thread.is_alive():
+                from ax12emu.serve.server import ServerStopped
+
+                try:
+                    return self._server.call(fn, _CALL_TIMEOUT_S if timeout_s is None else timeout_s)
+                except ServerStopped:
+                    raise RuntimeError(f"VirtualBus {self.name} is closed") from None
+            if self._closing:  # the loop has ended and close() is tearing the bus down under this thread
+                raise RuntimeError(f"VirtualBus {self.name} is closed")
         return fn(self.bus)
 
     def _faults(self, bus: Bus) -> Faults:
@@ -538,6 +608,17 @@ def _fitting(entry: Any, value: Any) -> int:
     if not low <= number <= high:
         raise ValueError(f"{entry.name} holds {low}..{high} ({entry.size} byte{'s' if entry.size > 1 else ''}), got {number}")
     return number
+
+
+def _names_ax(servo: str, ids: Iterable[int] | None) -> bool:
+    """Whether the servo text puts AX servos (AX-12A, AX-18A) on the wire: their bus takes ServoOptions.  False
+    for a text that does not parse, which the wire's builder then refuses naming the mistake."""
+    from ax12emu.bus.wire import servo_family, servo_models
+
+    try:
+        return any(servo_family(key) == "AX" for _, key in servo_models(servo, None if ids is None else _id_list(ids), mixed=True))
+    except (ValueError, KeyError, TypeError):
+        return False
 
 
 def _id_list(ids: Iterable[Any]) -> list[int]:

@@ -56,7 +56,7 @@ from ax12emu.tracing.trace import IN, OUT, TraceWriter
 
 from .transports.base import Transport
 
-__all__ = ["BusServer"]
+__all__ = ["BusServer", "ServerStopped"]
 
 log = logging.getLogger(__name__)
 
@@ -78,6 +78,10 @@ PHYSICS_DEFER_S = 0.0003
 EARLY_STEP_S = 0.00015
 #: What ``next`` returns from a finished physics step.
 _DONE = object()
+
+
+class ServerStopped(RuntimeError):
+    """A call that the serving loop will never run: it stopped first (its bus is being closed)."""
 
 
 class BusServer:
@@ -114,6 +118,8 @@ class BusServer:
         self._queue: list[list] = []  # [release_s, seq, data, is_reply], sorted
         self._seq = 0
         self._stop = False
+        #: The loop has ended: a call queued now would never run (see :meth:`call`).
+        self._stopped = False
         self._rx_busy_until = 0.0
         self._hot_until = 0.0
         #: Whether the pass under way put a status packet on the line.
@@ -282,9 +288,13 @@ class BusServer:
 
     # -- loop --------------------------------------------------------------------------
     def serve_forever(self) -> None:
-        """Run until :meth:`stop` is called."""
-        while not self._stop:
-            self.run_once()
+        """Run until :meth:`stop` is called; then fail the calls left waiting (no pass will run them)."""
+        try:
+            while not self._stop:
+                self.run_once()
+        finally:
+            self._stopped = True  # before the calls are failed: a call queued from now on fails itself
+            self._fail_calls()
 
     def run_once(self) -> None:
         """Wait for the next event and handle everything that is due."""
@@ -438,14 +448,27 @@ class BusServer:
         Why: the bus is not thread-safe, and a test thread changing a servo
         (or its faults) mid-packet would race the serving loop.  The loop
         wakes at least once per physics period, so this waits about 1 ms.
+        A call the loop will never run (it stopped before or while the call
+        waited) fails at once with :class:`ServerStopped`.
         """
         future: Future = Future()
         self._calls.append((fn, future))
+        if self._stopped:  # the loop ended before it could see this call: waiting would only time out
+            self._fail_calls()
         try:
             return future.result(timeout_s)
         except FuturesTimeout:
             raise TimeoutError(f"the serving loop did not finish the call within {timeout_s:g} s (a long step, "
-                               "or the loop has stopped); it may still run") from None
+                               "or a loop held up); it may still run") from None
+
+    def _fail_calls(self) -> None:
+        """Fail every queued call with :class:`ServerStopped` (each is taken off the queue once, by one thread)."""
+        while True:
+            try:
+                _, future = self._calls.popleft()
+            except IndexError:
+                return
+            future.set_exception(ServerStopped("the serving loop has stopped; the call did not run"))
 
     def _run_calls(self) -> None:
         self._read_pending()

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import time
 
+import serial
 from dynamixel_sdk import COMM_SUCCESS, PacketHandler, PortHandler
 
 TORQUE_ENABLE, GOAL_POSITION, MOVING_SPEED, PRESENT_POSITION, MOVING = 24, 30, 32, 36, 46
@@ -19,6 +20,25 @@ ALARMS = {0x01: "input voltage", 0x04: "overheating", 0x20: "overload"}
 #: AX-12 stops a few units short of or past the goal against its own static friction.
 POSITION_TOLERANCE = 4
 
+class UrlPortHandler(PortHandler):
+    """dynamixel-sdk's PortHandler, opening pyserial URLs as well as device paths.
+
+    The SDK opens its port with ``serial.Serial(name)``, which knows device paths only; where there is no
+    pty (Windows) the ``ax12_bus`` fixture's port is an ``ax12emu://`` URL, which ``serial_for_url`` opens
+    (as it opens ``socket://`` and a plain device path).
+    """
+
+    def setupPort(self, cflag_baud):
+        if self.is_open:  # setBaudRate: change the line speed; reopening would end a private ax12emu:// bus
+            self.ser.baudrate = self.baudrate
+        else:
+            self.ser = serial.serial_for_url(self.port_name, baudrate=self.baudrate, timeout=0)
+            self.is_open = True
+        self.ser.reset_input_buffer()
+        self.tx_time_per_byte = (1000.0 / self.baudrate) * 10.0
+        return True
+
+
 class CommError(RuntimeError):
     """A servo did not answer after every retry."""
 
@@ -27,7 +47,7 @@ class Arm:
     """Joints on one Protocol 1.0 bus."""
 
     def __init__(self, port_name: str, joint_ids: list[int], *, baud: int = 1_000_000, retries: int = 5) -> None:
-        self.port = PortHandler(port_name)
+        self.port = UrlPortHandler(port_name)
         self.packets = PacketHandler(1.0)
         self.joint_ids = joint_ids
         self.retries = retries

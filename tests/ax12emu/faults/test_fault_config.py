@@ -37,6 +37,17 @@ def test_a_reply_delay_it_cannot_time_is_refused(text):
 
 
 def test_fault_ids_take_id_lists_as_ids_does():
-    assert FaultConfig.from_options({"fault_ids": ["1-3,7"]}).fault_ids == (1, 2, 3, 7)
+    assert FaultConfig.from_options({"drop": ["1"], "fault_ids": ["1-3,7"]}).fault_ids == (1, 2, 3, 7)
     with pytest.raises(ValueError, match="fault_ids: ID 300 is outside"):
-        FaultConfig.from_options({"fault_ids": ["300"]})
+        FaultConfig.from_options({"drop": ["1"], "fault_ids": ["300"]})
+
+
+def test_fault_ids_that_would_do_nothing_are_refused():
+    """No servo answers as ID 7 here, and without drop, corrupt or delay the IDs name nothing: both ran silently."""
+    from ax12emu.bus.bus import Bus
+
+    with pytest.raises(ValueError, match=r"no servo on this wire answers as ID 7 \(its IDs: 1, 2\)"):
+        FaultConfig(drop=1.0, fault_ids=(7,)).install(Bus([1, 2]))
+    with pytest.raises(ValueError, match="none of them is given"):
+        FaultConfig(fault_ids=(1,))
+    assert FaultConfig(drop=1.0, fault_ids=(9,), duplicate=((2, 9),)).install(Bus([1, 2])).reply_ids == {9}

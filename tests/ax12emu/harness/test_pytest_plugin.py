@@ -127,3 +127,76 @@ def test_ax12_web_shows_a_bus_of_ax12_servo_models(tmp_path):
         if process.poll() is None:
             process.kill()
             process.communicate()
+
+
+#: Marks that gave a wrong bus or a deep error, and the UsageError each gives now, in the plugin's terms.
+MISUSED = {
+    "float_param": (['parametrize("ax12_bus", [1.9], indirect=True)'],  # served ID 1
+                    "an indirect ax12_bus parameter takes integer IDs, got 1.9"),
+    "text_param": (['parametrize("ax12_bus", ["1,2"], indirect=True)'],  # int()'s ValueError
+                   "an indirect ax12_bus parameter takes integer IDs, got '1,2'"),
+    "ids_twice": (["ax12_ids(1, 2)", "ax12_bus_options(ids=[3])"],  # a TypeError "got multiple values for argument 'ids'"
+                  "ax12_bus_options(ids=...) and ax12_ids both give the IDs; give them once"),
+    "servo_twice": (['ax12_servo("1-2:xl430-w250")', 'ax12_bus_options(servo="mx-28")'],  # the options' servo won
+                    "ax12_servo and ax12_bus_options(servo=...) both give the servos; give them once"),
+    "ids_beside_per_id_servo": (['ax12_servo("1-2:xl430-w250")', "ax12_ids(3)"],  # "--ids and a per-ID --servo list"
+                                "ax12_ids and the per-ID servo text '1-2:xl430-w250' of ax12_servo both name the IDs; "
+                                "give one of them"),
+    "text_id_in_options": (['ax12_bus_options(ids=["1"])'], "ax12_bus_options(ids=...) takes integer IDs, got '1'"),
+}
+
+
+def test_ids_and_servos_given_wrongly_or_twice_are_usage_errors_in_the_plugins_terms(pytester):
+    source = "import pytest\n"
+    for name, (marks, _) in MISUSED.items():
+        decorators = "".join(f"@pytest.mark.{mark}\n" for mark in marks)
+        source += f"\n\n{decorators}def test_{name}(ax12_bus):\n    pass\n"
+    pytester.makepyfile(source)
+    result = pytester.runpytest_inprocess("-p", "no:cacheprovider", "-rE")
+    result.assert_outcomes(errors=len(MISUSED))
+    out = result.stdout.str()
+    for name, (_, says) in MISUSED.items():
+        assert f"ERROR test_ids_and_servos_given_wrongly_or_twice_are_usage_errors_in_the_plugins_terms.py::test_{name}" in out
+        assert f"UsageError: {says}" in out, (name, out)
+    assert "--ids" not in out
+
+
+@pytest.mark.parametrize("ax12_bus", [range(2, 4), 5], indirect=True)
+def test_an_indirect_parameter_takes_a_range_or_one_id(ax12_bus):
+    assert ax12_bus.bus.ids in ([2, 3], [5])
+
+
+@pytest.mark.ax12_bus_options(ids=[4, 6], transport="inprocess")
+def test_ids_among_the_options_are_the_ids(ax12_bus):
+    assert ax12_bus.bus.ids == [4, 6]
+
+
+@pytest.mark.ax12_bus_options(servo="xl430-w250", transport="inprocess")
+def test_a_servo_among_the_options_is_the_servo(ax12_bus):
+    assert ax12_bus.read(1, "model_number") == 1060
+
+
+def test_without_a_pty_the_example_suite_opens_its_port(tmp_path):
+    """Where there is no pty (Windows) the fixture serves in process and its port is an ax12emu:// URL, which
+    dynamixel-sdk's PortHandler (serial.Serial) cannot open: the example's robot code opens it through its
+    UrlPortHandler.  Simulated here as the plugin detects it: no pty or termios module."""
+    import shutil
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    examples = Path(__file__).resolve().parents[3] / "tools" / "examples"
+    for name in ("robot_arm.py", "test_robot_arm.py", "pytest.ini"):
+        shutil.copy(examples / name, tmp_path / name)
+    (tmp_path / "conftest.py").write_text(
+        "import importlib.util\n\n"
+        "_find_spec = importlib.util.find_spec\n"
+        'importlib.util.find_spec = lambda name, *a, **k: None if name in ("pty", "termios") else _find_spec(name, *a, **k)\n\n\n'
+        "def pytest_collection_modifyitems(items):\n"
+        "    from ax12emu.harness.pytest_plugin import _default_transport\n\n"
+        '    assert _default_transport() == "inprocess"\n'
+    )
+    result = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider"], cwd=tmp_path,
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-2000:]
+    assert "5 passed" in result.stdout

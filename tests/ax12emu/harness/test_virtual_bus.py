@@ -109,3 +109,74 @@ def test_unknown_transport_is_a_value_error():
     """A misspelt transport names the choices."""
     with pytest.raises(ValueError, match="pty, tcp, inprocess"):
         VirtualBus([1], transport="usb")
+
+
+def _write(link, servo_id: int, address: int, *data: int) -> bytes:
+    link.write(encode_instruction(servo_id, 0x03, [address, *data]))
+    return link.read(6)
+
+
+def test_in_process_on_the_wall_clock_the_state_methods_see_the_shaft_now():
+    """Nothing steps an in-process bus between packets: a read a while after the last packet showed the shaft where
+    that packet left it (Present Position 512), where a pty's serving loop shows it at its goal."""
+    with VirtualBus([1], transport="inprocess") as bus:
+        with serial.serial_for_url(bus.port, baudrate=1_000_000, timeout=0.1) as link:
+            assert _write(link, 1, 30, 600 & 0xFF, 600 >> 8) == encode_status(1, 0)  # Goal Position 600 (torque on)
+            time.sleep(0.3)  # about 0.15 s at full speed
+            assert abs(bus.read(1, "present_position") - 600) <= 4
+            assert abs(bus.table(1)["present_position"] - 600) <= 4
+            assert bus.angle_deg(1) == pytest.approx(600 * 300 / 1023, abs=1.5)
+
+
+@pytest.mark.parametrize("transport", ["inprocess", "pty"])
+def test_in_virtual_time_a_servo_answers_right_after_an_eeprom_write(transport):
+    """The default busy time (6 ms a byte) never ends while the clock stands still: the servo was deaf until
+    bus.step(); none by default, as ax12emu://?virtual_time=1.  options= given keeps its own."""
+    from ax12emu.servo.virtual_servo import ServoOptions
+
+    with VirtualBus([1], transport=transport, virtual_time=True) as bus:
+        with serial.serial_for_url(bus.port, baudrate=1_000_000, timeout=0.1) as link:
+            assert _write(link, 1, 5, 10) == encode_status(1, 0)  # Return Delay Time: EEPROM
+            link.write(encode_instruction(1, 0x01))
+            assert link.read(6) == encode_status(1, 0)
+    with VirtualBus([1], transport="inprocess", virtual_time=True, options=ServoOptions()) as bus:
+        with serial.serial_for_url(bus.port, baudrate=1_000_000, timeout=0.05) as link:
+            assert _write(link, 1, 5, 10) == encode_status(1, 0)
+            link.write(encode_instruction(1, 0x01))
+            assert link.read(6) == b""  # busy, as asked, until the clock moves
+            bus.step(0.01)
+            link.write(encode_instruction(1, 0x01))
+            assert link.read(6) == encode_status(1, 0)
+
+
+def test_in_virtual_time_the_ax_servos_of_a_servo_text_answer_after_an_eeprom_write():
+    with VirtualBus(servo="1:ax-12a,2:xl430-w250", virtual_time=True, transport="inprocess", baud_bps=1_000_000) as bus:
+        with serial.serial_for_url(bus.port, baudrate=1_000_000, timeout=0.1) as link:
+            assert _write(link, 1, 5, 10) == encode_status(1, 0)
+            link.write(encode_instruction(1, 0x01))
+            assert link.read(6) == encode_status(1, 0)
+
+
+@pytest.mark.parametrize(("kwargs", "says"), [
+    ({"transport": "tcp", "tcp_address": "0.0.0.0:0"}, "tcp_address: 0.0.0.0 binds beyond loopback"),
+    ({"transport": "tcp", "tcp_address": ("192.0.2.1", 0)}, "tcp_address: 192.0.2.1 binds beyond loopback"),
+    ({"transport": "inprocess", "web": "0.0.0.0:0"}, "web: 0.0.0.0 binds beyond loopback"),
+])
+def test_binding_beyond_loopback_needs_allow_remote(kwargs, says):
+    """As serve asks for --allow-remote: a tcp_address of 0.0.0.0 served every interface without a word, while web=
+    on the same address was refused naming a flag the API has not."""
+    with pytest.raises(ValueError, match=f"{says}.*pass allow_remote=True") as refused:
+        VirtualBus([1], **kwargs)
+    assert "--allow-remote" not in str(refused.value)
+
+
+def test_allow_remote_serves_every_interface(caplog):
+    with VirtualBus([1], transport="tcp", tcp_address="0.0.0.0:0", allow_remote=True) as bus:
+        assert bus.port.startswith("socket://0.0.0.0:")
+    assert "reachable from other machines" in caplog.text
+
+
+def test_allow_remote_lets_the_live_page_bind_every_interface():
+    pytest.importorskip("aiohttp")
+    with VirtualBus([1], transport="inprocess", web="0.0.0.0:0", allow_remote=True) as bus:
+        assert bus.web_url is not None
