@@ -44,7 +44,10 @@ The format (``models/ax-12a.toml`` is the worked example)::
     recommended_voltage_v = 11.1
     ratings = [ { voltage_v = 12.0, stall_torque_nm = 1.5, stall_current_a = 1.4, no_load_speed_rpm = 61 } ]
     current_unit_ma = 2.69       # optional: Goal/Present Current's unit, where the table has them
-    rotor_inertia_at_motor_kg_m2 = 2e-8   # optional: the motor's rotor (else the AX-12A's, scaled by the gearing)
+    rotor_inertia_at_motor_kg_m2 = 2e-8   # optional: the motor's rotor (else the AX-12A's, scaled by the gearing,
+                                 # on the AX models; on the X-series firmware model, scaled by the motor's kind)
+    motor = "coreless"           # optional: the e-manual's "Motor" row, "cored" (absent: cored) or "coreless"
+                                 # ("Coreless", "Coreless(Maxon)", "Coreless DC"): how the X-series model scales its rotor
 
     [controller]                 # optional: how a real unit's control loop departs from the e-manual
     source = "..."               # the measurement that shows it
@@ -123,7 +126,9 @@ _RANGE_WHEN_KEYS = {"register", "values", "min", "max", "limits"}
 _PROFILE_KEYS = {"source", "overrides", "extra_entries", "lock_writable", "shutdown_clears"}
 _OVERRIDE_KEYS = {"default": "default", "min": "minimum", "max": "maximum"}
 _PHYSICAL_KEYS = {"source", "gear_ratio", "weight_g", "resolution_deg", "position_range_deg", "operating_voltage_v",
-                  "recommended_voltage_v", "ratings", "current_unit_ma", "rotor_inertia_at_motor_kg_m2"}
+                  "recommended_voltage_v", "ratings", "current_unit_ma", "rotor_inertia_at_motor_kg_m2", "motor"}
+#: The e-manual's "Motor" kinds a model file may name (every coreless kind it prints is "coreless" here).
+MOTOR_KINDS = ("cored", "coreless")
 _RATING_KEYS = {"voltage_v", "stall_torque_nm", "stall_current_a", "no_load_speed_rpm", "note"}
 _CONTROLLER_KEYS = {"source", "position_output_scale"}
 _MODE_CHANGE_KEYS = {"source", "defaults", "from_registers"}
@@ -167,6 +172,9 @@ class Physical:
     current_unit_ma: float | None = None
     #: The motor's rotor inertia at the motor shaft, kg m^2; None: no source gives it (the physics assumes the AX-12A's).
     rotor_inertia_at_motor_kg_m2: float | None = None
+    #: The e-manual's "Motor" row: "cored" or "coreless"; the X-series physics scales a rotor no source gives by
+    #: BAM's fits of that kind of motor (absent from the file: "cored").
+    motor: str = "cored"
 
     def rating_at(self, voltage_v: float | None = None) -> Rating:
         """The rating at ``voltage_v``, or at the recommended supply, or the first one listed."""
@@ -502,6 +510,8 @@ def _physical(where: _Where, raw: Any) -> Physical:
                  "rotor_inertia_at_motor_kg_m2") if k in raw}
     if optional.get("rotor_inertia_at_motor_kg_m2", 1.0) <= 0:
         raise where.error("physical.rotor_inertia_at_motor_kg_m2", f"must be positive, got {optional['rotor_inertia_at_motor_kg_m2']}")
+    if "motor" in raw:
+        optional["motor"] = where.choice(raw["motor"], "physical.motor", MOTOR_KINDS)
     return Physical(source=where.text(raw["source"], "physical.source"), gear_ratio=where.number(raw["gear_ratio"], "physical.gear_ratio"),
                     ratings=tuple(ratings), operating_voltage_v=(low, high), **optional)
 

@@ -92,9 +92,11 @@ X_CENTRE_PULSES = PULSES_PER_REV // 2
 X_VELOCITY_UNIT_RPM = 0.229
 #: X series Position P/I/D Gain divisors (e-manual "Position PID Gain(80, 82, 84)": KPP = P/128, KPI = I/65536, KPD = D/16).
 X_POSITION_GAIN_DIVISORS = {"p": 128.0, "i": 65536.0, "d": 16.0}
-#: Velocity P/I Gain for a wheel mode that runs Velocity Control Mode: the X series' initial values
-#: (XL430-W250 page, "Velocity PI Gain(76, 78)": 100 and 1,000); the classic tables have no such gains.
-WHEEL_VELOCITY_GAINS = (100, 1000)
+#: Velocity P/I Gain for a wheel mode that runs Velocity Control Mode (the MX series': ``wheel_output = "velocity"``):
+#: the same servo's under its Protocol 2.0 firmware (MX-106(2.0) page, "Velocity I Gain(76)" 1,920, "Velocity P
+#: Gain(78)" 100, as the XM430's); the classic tables have no such gains.  (The XL430's 1,000 left an MX-106 5 %
+#: short of a new wheel speed a second after it was written.)
+WHEEL_VELOCITY_GAINS = (100, 1920)
 #: The firmware's protection bits by the names the model files use (``[classic].errors``).
 X_ERROR_BITS = {"input_voltage": HW_ERROR_INPUT_VOLTAGE, "overheating": HW_ERROR_OVERHEATING, "overload": HW_ERROR_OVERLOAD}
 

@@ -50,7 +50,8 @@ def build_x_firmware(spec: ServoModel, choice: XModelChoice = XModelChoice()) ->
     firmware = build_x_servo(gear_ratio=physical.gear_ratio, ratings=ratings,
                              current_unit_a=None if unit_ma is None else unit_ma * 1e-3,
                              supply_v=supply_v, angle_rad=START_ANGLE_RAD,
-                             position_output_scale=spec.controller.position_output_scale)
+                             position_output_scale=spec.controller.position_output_scale,
+                             motor=physical.motor, rotor_inertia_at_motor_kg_m2=physical.rotor_inertia_at_motor_kg_m2)
     if choice.external_torque_nm:
         firmware.set_external_torque(choice.external_torque_nm)
     return firmware

@@ -38,14 +38,21 @@ Sources (ROBOTIS e-manual, X-series control tables, https://emanual.robotis.com/
 * "Moving(122)": 1 while |Present Velocity| > Moving Threshold(24), and always while a profile runs
   after a Goal Position write.  "Moving Status(123)": 0x01 in position, 0x02 profile ongoing, 0x08
   following error, 0x30 profile type; in-position and following error only in the position modes.
-  The e-manual gives no window for either: ours are :data:`IN_POSITION_PULSES` and
-  :data:`FOLLOWING_ERROR_PULSES`.
+  In-Position: "Whether or not the DYNAMIXEL has arrived to the desired Goal Position(116)", set "when
+  the positional deviation is smaller than a predefined value" (_includes/en/dxl/x/moving_status.md):
+  a window on Goal - Present Position, here once the profile has ended.  The e-manual gives no value
+  for it nor for the following error: ours are :data:`IN_POSITION_PULSES` and :data:`FOLLOWING_ERROR_PULSES`.
 * "Shutdown(63)" / "Hardware Error Status(70)": an error selected by Shutdown clears Torque Enable
   (output 0 %), and only REBOOT lets torque on again.  Shutdown selects what is detected ("when
   0x05 is defined as Shutdown, DYNAMIXEL can detect both Input Voltage Error and Overheating
   Error"), so an error not selected is not reported.  Overload "detects persistent load that exceeds
-  maximum output"; the e-manual gives no time, ours is ``overload_time_s``.  Overheating: a
-  first-order thermal model heated by the winding's I^2 R (:class:`ThermalParams`).
+  maximum output"; the e-manual gives no current and no time.  ROBOTIS staff describe it as a
+  current held over time ("When a high current flows for a few seconds, an overload occurs",
+  DynamixelSDK's issue tracker, for an XM430 held at about 0.94 A for about 5 s in Position mode), and
+  XM430s in Current-based Position mode with Goal Current 400 (1.08 A) are reported to trip: it
+  watches the winding's current whatever limits it, not whether the output is at its limit.  Ours
+  is that, the same in every mode: :data:`OVERLOAD_CURRENT_SHARE` and ``overload_time_s``.
+  Overheating: a first-order thermal model heated by the winding's I^2 R (:class:`ThermalParams`).
 
 Units in names: ``_pulses`` (0.088 deg), ``_pulses_s``, ``_a``, ``_v``, ``_s``, ``_c``; raw register
 values are plain ints named after their register.
@@ -82,6 +89,7 @@ __all__ = [
     "PULSES_PER_REV",
     "IN_POSITION_PULSES",
     "FOLLOWING_ERROR_PULSES",
+    "OVERLOAD_CURRENT_SHARE",
     "ThermalParams",
     "XFirmware",
     "build_x_servo",
@@ -92,10 +100,24 @@ PWM_FULL_SCALE = 885
 #: Encoder pulses per output turn (e-manual: 0.088 deg per unit, 0..4095 per turn).
 PULSES_PER_REV = 4096
 PULSE_RAD = 2.0 * math.pi / PULSES_PER_REV
-#: Distance from the goal within which Moving Status reports In-Position once the profile ended (ours).
-IN_POSITION_PULSES = 10
+#: Moving Status reports In-Position once the profile ended and Present Position is less than this from the goal
+#: (ours: the e-manual's "predefined value" is not given).  Why 20 (1.8 deg): a factory-default servo on a free
+#: shaft must get it, as a real one does, and a proportional-only loop (every X model's factory Position I Gain is
+#: 0) stops wherever its output no longer beats the servo's own friction: at the factory gains that dead band is
+#: up to 12 pulses on the XL330s at 5 V (16.5 at their lowest 3.7 V; 2 to 6 on the XC330, XL430 and XM430), so the
+#: former 10 left most XL330 moves without it.  20 is also the window `ax12emu conformance` holds real servos to.
+IN_POSITION_PULSES = 20
 #: Distance from Position Trajectory beyond which Moving Status reports a following error (ours: 1/8 turn).
 FOLLOWING_ERROR_PULSES = 512
+#: Overload (ours: the e-manual gives neither a current nor a time): the winding current, whatever limits it, is
+#: accounted over time against this share of the stall current at the present supply (``V / R``).  Above it the
+#: account grows by ``dt (|I| - s I_stall) / (I_stall - s I_stall)``, at most ``dt`` (so a full stall trips in
+#: ``overload_time_s``, 1 s); below it the account drains by the same formula (at zero current in 3 s from full);
+#: Overload when it reaches ``overload_time_s``.  Why a quarter: the e-manual's design rule ("Stable motions are
+#: possible with robots designed for loads with 1/5 or less of the stall torque") must never trip, and an XM430
+#: holding 0.94 A (0.42 of its 2.25 A stall at 12 V) must trip in "a few seconds" (ROBOTIS staff; the reporter
+#: saw about 5 s): 0.25 gives 4.4 s there, 3.3 s at Goal Current 400 in Current-based Position, and never at 0.2.
+OVERLOAD_CURRENT_SHARE = 0.25
 #: Extended and current-based position modes' Goal Position range (e-manual "Goal Position(116)": +-256 rev).
 EXTENDED_GOAL_LIMIT = 1_048_575
 #: Position Control Mode accepts Homing Offset only within this range (e-manual "Homing Offset(20)").
@@ -119,8 +141,12 @@ class ThermalParams:
     Why first order: the firmware only compares Present Temperature with Temperature Limit; one time
     constant reproduces "holding a stall for tens of seconds overheats" without claiming more.  The
     defaults are our estimates (ROBOTIS publishes no thermal data): 20 K/W to ambient and a 300 s
-    time constant, so a stall at 12 V (about 27 W in an XM430) reaches 80 C in about half a minute
-    while a servo holding 0.5 A warms by a few degrees.
+    time constant, so a stall at 12 V (about 27 W in an XM430) reaches 80 C in about half a minute.
+    Holding current heats as its square times the winding's resistance: 0.5 A settles some 27 K above
+    ambient in an XM430 (5.3 ohm, 1.3 W) and 44 K in an XL430 (8.7 ohm, 2.2 W: 69 C from a 25 C room,
+    close to its 72 C limit), nearly two thirds of that within the first 5 minutes.  (0.5 A is 0.39 of the
+    XL430's stall current at 11.1 V, above :data:`OVERLOAD_CURRENT_SHARE`: unless Shutdown leaves Overload
+    out, Overload stops it within seconds, long before it gets that warm.)
     """
 
     ambient_c: float = 25.0
@@ -424,10 +450,12 @@ class XFirmware:
             self._step_once()
 
     def _at_rest(self) -> bool:
-        """Torque off, shaft still, nothing pushing it, current zero: a step would change nothing but the temperature."""
+        """Torque off, shaft still, nothing pushing it, current zero, the overload account drained: a step would change
+        nothing but the temperature."""
         physics = self.physics
         return (
             not self._torque_on
+            and self._overload_elapsed_s == 0.0
             and physics.velocity_rad_s == 0.0
             and physics.current_a == 0.0
             and physics.external_torque_nm() == 0.0
@@ -494,13 +522,14 @@ class XFirmware:
             physics.step(0.0, step_s, driven=False)
             self._traj_pulses = self._counted_pulses()
             self._traj_velocity_pulses_s = 0.0
-        self._protect(saturated, step_s)
+        self._protect(step_s)
         # A held servo at rest repeats its step exactly: same angle and speed (a creep too slow to move
         # the angle's last bit counts as rest), duty, integrators and trajectory, no profile left to
-        # run, nothing saturated (the overload timer would run).  The inputs that could change it
-        # (commands, torque, load, supply) clear the flag.
+        # run, nothing saturated, an empty overload account (a current above its threshold, or one
+        # draining, changes it).  The inputs that could change it (commands, torque, load, supply) clear the flag.
         self._fixed = (
             not saturated
+            and self._overload_elapsed_s == 0.0
             and not self._profile_running()
             and self._traj_velocity_pulses_s == self._goal_velocity_pulses_s
             and self._state() == before
@@ -572,7 +601,7 @@ class XFirmware:
 
     # ------------------------------------------------------------------ protection
 
-    def _protect(self, saturated: bool, dt_s: float) -> None:
+    def _protect(self, dt_s: float) -> None:
         physics = self.physics
         current_a = physics.current_a
         thermal = self.thermal
@@ -583,15 +612,15 @@ class XFirmware:
         detected = 0
         if self._held_readings.get("present_temperature", self.temperature_c) > self._cmd.temperature_limit:
             detected |= HW_ERROR_OVERHEATING
-        # Overload: the output held at its limit while the motor draws at least half of what that duty
-        # would draw at stall, i.e. a load, not speed, keeps it at the limit.
-        stall_a = abs(self._duty) * physics.supply_v / self.resistance_ohm
-        if saturated and stall_a > 0.0 and abs(current_a) >= 0.5 * stall_a:
-            self._overload_elapsed_s += dt_s
+        # Overload: the current accounted over time, in every mode alike (OVERLOAD_CURRENT_SHARE).
+        stall_a = physics.supply_v / self.resistance_ohm
+        if stall_a > 0.0 or self._overload_elapsed_s:
+            threshold_a = OVERLOAD_CURRENT_SHARE * stall_a
+            rate = (abs(current_a) - threshold_a) / (stall_a - threshold_a) if stall_a > 0.0 else -1.0
+            account = self._overload_elapsed_s + dt_s * min(rate, 1.0)
+            self._overload_elapsed_s = min(max(account, 0.0), self.overload_time_s)
             if self._overload_elapsed_s >= self.overload_time_s:
                 detected |= HW_ERROR_OVERLOAD
-        else:
-            self._overload_elapsed_s = 0.0
         if detected:
             self._latch(detected)
         self._check_readings()
@@ -602,7 +631,7 @@ class XFirmware:
 
         What a firmware that reports conditions rather than latched errors shows (the MX series' Protocol 1.0
         status packets, ``ax12emu.servo.plant1x``): the temperature reading above Temperature Limit, the
-        supply outside the voltage limits, the overload held for ``overload_time_s``, the conditions a fault
+        supply outside the voltage limits, the overload account full (:data:`OVERLOAD_CURRENT_SHARE`), the conditions a fault
         injection holds.  An Overload that cut the output stays until :meth:`restore_output`: with no output
         the firmware cannot judge the load again.
         """
@@ -637,6 +666,8 @@ class XFirmware:
         detected &= self._cmd.shutdown
         if not detected:
             return
+        if own and detected & HW_ERROR_OVERLOAD:
+            self._overload_elapsed_s = 0.0  # acted on: the output is off, the account starts afresh
         if self.shutdown_cuts_output:
             self._cut_errors |= detected
             self._overload_cut = self._overload_cut or (own and bool(detected & HW_ERROR_OVERLOAD))
@@ -692,7 +723,7 @@ class XFirmware:
         if profile_on:
             status |= 0x02
         if position_mode and self._torque_on:
-            if not profile_on and abs(self._goal_pulses() - present) <= IN_POSITION_PULSES:
+            if not profile_on and abs(self._goal_pulses() - present) < IN_POSITION_PULSES:
                 status |= 0x01
             if abs(self._traj_pulses - present) > FOLLOWING_ERROR_PULSES:
                 status |= 0x08
@@ -753,8 +784,8 @@ class XFirmware:
         return latched
 
     def set_blocked(self, blocked: bool) -> None:
-        """Hold the output shaft still (or free it): the motor keeps driving into the block, so the
-        current rises to the stall current and the overload protection follows (:meth:`_protect`)."""
+        """Hold the output shaft still (or free it): the motor keeps driving into the block, so the current rises
+        to what the drive gives at stall, and the overload protection follows if that is high enough (:meth:`_protect`)."""
         self._fixed = False
         self.sensing_epoch += 1
         self.physics.blocked = bool(blocked)
@@ -805,6 +836,8 @@ def build_x_servo(
     thermal: ThermalParams | None = None,
     overload_time_s: float = 1.0,
     position_output_scale: float = 1.0,
+    motor: str = "cored",
+    rotor_inertia_at_motor_kg_m2: float | None = None,
 ) -> XFirmware:
     """One X-series servo from its data-sheet numbers: :class:`XFirmware` over :class:`.physics.XPhysics`.
 
@@ -812,9 +845,12 @@ def build_x_servo(
     rows (as in the model files); ``current_unit_a``: Goal/Present Current's unit in amperes (0.001
     on the XL330/XC330, 0.00269 on the XM430) or ``None`` on a model without current sensing (the
     XL430: Present Load in 0.1 % of the sheet's stall current at the rating nearest ``supply_v``);
-    ``position_output_scale``: see :class:`XFirmware` (0.5 measured on the XL330, else 1).
+    ``position_output_scale``: see :class:`XFirmware` (0.5 measured on the XL330, else 1); ``motor`` (the
+    e-manual's "Motor" row, "cored" or "coreless") and ``rotor_inertia_at_motor_kg_m2`` (where a source gives
+    it): the rotor, see :meth:`.physics.XPhysicsParams.from_datasheet`.
     """
-    params = XPhysicsParams.from_datasheet(gear_ratio=gear_ratio, ratings=ratings)
+    params = XPhysicsParams.from_datasheet(gear_ratio=gear_ratio, ratings=ratings, motor=motor,
+                                           rotor_inertia_at_motor_kg_m2=rotor_inertia_at_motor_kg_m2)
     physics = XPhysics(params, supply_v=supply_v, angle_rad=angle_rad)
     nearest = min(ratings, key=lambda rating: abs(rating[0] - supply_v))
     return XFirmware(

@@ -49,11 +49,29 @@ duty, against the servo's own friction: ``I = V / R``, ``S = c V - t_c`` with ``
 share of the motor's figures that BAM fitted on a real XL330 (``bam/params/xl330/m1.json``:
 ``friction_base`` 0.0128 N m against a stall torque ``kt vin / R`` of 0.712 N m at 7.4 V, 1.8 %;
 ``friction_viscous`` 0.00366 N m s/rad against the back-EMF damping ``kt**2 / R`` of 0.0372, 9.8 %).
-The rotor inertia is not on the data sheet either: BAM's fitted XL330 ``armature`` 0.00181 kg m**2 is
-2.2e-8 kg m**2 at the motor through 288.4**2, taken for the XL330 family's motor and scaled to
-other motors as geometrically similar motors scale (torque as the cube of the size, inertia as its
-fifth power: ``J ~ torque**(5/3)``, the torque being the sheet's stall torque at its highest rated
-voltage, at the motor).  Where the sheet's three figures cannot come from one motor with
+The rotor inertia is not on the data sheet either.  Where a model file gives it (``rotor_inertia_at_motor_kg_m2``,
+e.g. BAM's fit of that very servo) it is used as given.  Otherwise it is scaled as geometrically similar
+motors scale (torque as the cube of the size, inertia as its fifth power: ``J = k torque**(5/3)``, the
+torque being the sheet's stall torque at its highest rated voltage, at the motor), with the constant ``k``
+of the motor's kind, the e-manual's "Motor" row, because a coreless rotor (a self-supporting copper
+winding, no iron) has several times less inertia than a cored one of the same torque:
+
+* cored: BAM's fitted XL330 ``armature`` 0.00181 kg m**2 (``bam/params/xl330/m1.json``), 2.2e-8 kg m**2
+  at the motor through 288.4**2, for 0.60 / 288.4 N m.  The XL-320's own BAM fit (``bam/params/xl320/m1.json``,
+  0.00112 kg m**2 at the output) is 1.35 times what this gives it: the rule carries across cored motors.
+* coreless: BAM's fits of two real Maxon-coreless servos, the MX-64 (``bam/params/mx64/m1.json``
+  ``armature`` 0.01195 kg m**2, 2.99e-7 at the motor through 200**2, for 7.3 / 200 N m) and the MX-106
+  (``bam/params/mx106/m1.json`` 0.02661, 5.26e-7 through 225**2, for 10.0 / 225 N m).  ``k`` is their
+  geometric mean: it gives each of them within 13 % (1.13 and 0.89 times its fit), and it is 7.7 times
+  below the cored ``k``.  How uncertain: the two points span only 1.2x in torque, too little to fix the
+  exponent (through both exactly it would be 2.9, not 5/3); the coreless models the emulator scales
+  with it (MX-28, XM430, XC330) lie 2.3 to 10 times below them in motor torque, where the 5/3 and the
+  2.9 laws part by 3x (MX-28), 4x (XM430) and 17x (XC330).  The 5/3 law is kept because it is the one that
+  holds for the cored motors; its figures for those models are estimates good to a factor of a few,
+  the XC330's ("Coreless DC", maker not given) the least certain.  The MX-64 and MX-106 files give
+  their BAM fits directly.
+
+Where the sheet's three figures cannot come from one motor with
 an efficiency at most one (the XL330-M077: its stall torque per stall current is above its back-EMF
 constant), the stall current is the figure dropped: ``k_t = k_e`` and ``R = k_t / c``, so stall
 torque and no-load speed still hold and the stall current comes out higher than the sheet's.
@@ -71,8 +89,8 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass, fields
 
-__all__ = ["GRAVITY_M_S2", "XL330_ROTOR_INERTIA_AT_MOTOR_KG_M2", "XL330_MOTOR_STALL_TORQUE_NM", "COULOMB_SHARE",
-           "VISCOUS_SHARE", "XPhysicsParams", "XPhysics"]
+__all__ = ["GRAVITY_M_S2", "XL330_ROTOR_INERTIA_AT_MOTOR_KG_M2", "XL330_MOTOR_STALL_TORQUE_NM", "MOTOR_KINDS",
+           "ROTOR_INERTIA_PER_TORQUE_5_3", "COULOMB_SHARE", "VISCOUS_SHARE", "XPhysicsParams", "XPhysics"]
 
 #: Standard gravity, m/s**2.
 GRAVITY_M_S2 = 9.80665
@@ -82,6 +100,20 @@ XL330_ROTOR_INERTIA_AT_MOTOR_KG_M2 = 0.0018141672784458866 / 288.4**2
 #: Stall torque at the motor of that same motor, N m: the XL330-M288 sheet at its highest rated voltage
 #: (0.60 N m at 6.0 V) over 288.4, the reference for scaling the rotor inertia to other motors.
 XL330_MOTOR_STALL_TORQUE_NM = 0.60 / 288.4
+#: BAM's fitted ``armature`` (kg m**2 at the output, ``bam/params/<servo>/m1.json``), gear ratio and the sheet's
+#: stall torque at its highest rated voltage of the two Maxon-coreless servos BAM identified: the coreless reference.
+_BAM_CORELESS_FITS = ((0.011951238325312509, 200.0, 7.3),     # MX-64, bam/params/mx64/m1.json
+                      (0.026609234235148084, 225.0, 10.0))    # MX-106, bam/params/mx106/m1.json
+#: The e-manual's "Motor" kinds the rotor scaling knows (its specifications table: "Cored", "Coreless(Maxon)",
+#: "Coreless", "Coreless DC"; the coreless ones all "coreless" here).
+MOTOR_KINDS = ("cored", "coreless")
+#: ``k`` of ``J_rotor = k * motor_stall_torque**(5/3)`` (SI, at the motor) per motor kind: the cored one from BAM's
+#: XL330, the coreless one the geometric mean over BAM's MX-64 and MX-106 (module docstring: how uncertain).
+ROTOR_INERTIA_PER_TORQUE_5_3 = {
+    "cored": XL330_ROTOR_INERTIA_AT_MOTOR_KG_M2 / XL330_MOTOR_STALL_TORQUE_NM ** (5.0 / 3.0),
+    "coreless": math.exp(sum(math.log(armature / gear**2 / (stall / gear) ** (5.0 / 3.0))
+                             for armature, gear, stall in _BAM_CORELESS_FITS) / len(_BAM_CORELESS_FITS)),
+}
 #: Coulomb friction as a share of the stall drive ``k_t V / R`` (BAM's XL330 M1 fit, see the module docstring).
 COULOMB_SHARE = 0.01283272036582759 / (0.3866957639281311 * 7.4 / 4.017129222290597)
 #: Viscous friction as a share of the back-EMF damping ``k_t k_e / R`` (same source).
@@ -164,16 +196,23 @@ class XPhysicsParams:
 
     # ------------------------------------------------------------------ from a data sheet
     @classmethod
-    def from_datasheet(cls, *, gear_ratio: float, ratings: Sequence[tuple[float, float, float, float]]) -> XPhysicsParams:
+    def from_datasheet(cls, *, gear_ratio: float, ratings: Sequence[tuple[float, float, float, float]],
+                       motor: str = "cored", rotor_inertia_at_motor_kg_m2: float | None = None) -> XPhysicsParams:
         """Constants from the e-manual's ratings ``(voltage_v, stall_torque_nm, stall_current_a, no_load_speed_rpm)``.
 
         Derivation in the module docstring: least squares (relative) of ``I = V / R``, ``S = c V - t_c`` and
         ``N = (c V - t_c) / (c k_e (1 + VISCOUS_SHARE))`` over the ratings, friction as BAM's XL330 shares, the
-        inertia scaled from BAM's XL330.  With one rating the figures are met exactly.  A rating that no
+        rotor ``rotor_inertia_at_motor_kg_m2`` where a source gives it, else scaled from BAM's fits of the
+        ``motor`` kind (:data:`MOTOR_KINDS`).  With one rating the figures are met exactly.  A rating that no
         motor could give (non-positive figures) raises ``ValueError``.
         """
         if gear_ratio <= 0:
             raise ValueError(f"gear_ratio must be positive, got {gear_ratio!r}")
+        if motor not in ROTOR_INERTIA_PER_TORQUE_5_3:
+            raise ValueError(f"motor must be one of {', '.join(MOTOR_KINDS)}, got {motor!r}")
+        if rotor_inertia_at_motor_kg_m2 is not None and not (math.isfinite(rotor_inertia_at_motor_kg_m2)
+                                                              and rotor_inertia_at_motor_kg_m2 > 0):
+            raise ValueError(f"rotor_inertia_at_motor_kg_m2 must be positive, got {rotor_inertia_at_motor_kg_m2!r}")
         rows = [tuple(float(x) for x in r) for r in ratings]
         if not rows:
             raise ValueError("from_datasheet needs at least one rating")
@@ -198,8 +237,11 @@ class XPhysicsParams:
             # Keep torque and speed (what the servo does), drop the current: eta = 1.
             torque_constant = back_emf
             resistance = torque_constant / c
-        motor_stall_nm = max(rows)[1] / gear_ratio  # the sheet's stall torque at its highest voltage, at the motor
-        rotor = XL330_ROTOR_INERTIA_AT_MOTOR_KG_M2 * (motor_stall_nm / XL330_MOTOR_STALL_TORQUE_NM) ** (5.0 / 3.0)
+        if rotor_inertia_at_motor_kg_m2 is not None:
+            rotor = float(rotor_inertia_at_motor_kg_m2)
+        else:
+            motor_stall_nm = max(rows)[1] / gear_ratio  # the sheet's stall torque at its highest voltage, at the motor
+            rotor = ROTOR_INERTIA_PER_TORQUE_5_3[motor] * motor_stall_nm ** (5.0 / 3.0)
         return cls(
             gear_ratio=float(gear_ratio),
             resistance_ohm=resistance,

@@ -167,6 +167,9 @@ def test_bad_entries_are_refused_naming_file_and_field(extra, message):
         ("", '[physical]\nsource = "s"\ngear_ratio = 3\noperating_voltage_v = [6.0, 12.0]\nrotor_inertia_at_motor_kg_m2 = 0\n'
              'ratings = [ { voltage_v = 12.0, stall_torque_nm = 1.0, no_load_speed_rpm = 1 } ]',
          r"physical.rotor_inertia_at_motor_kg_m2: must be positive"),
+        ("", '[physical]\nsource = "s"\ngear_ratio = 3\noperating_voltage_v = [6.0, 12.0]\nmotor = "brushless"\n'
+             'ratings = [ { voltage_v = 12.0, stall_torque_nm = 1.0, no_load_speed_rpm = 1 } ]',
+         r"physical.motor: must be one of 'cored', 'coreless'"),
     ],
 )
 def test_bad_model_or_physical_sections_are_refused(header, physical, message):
@@ -281,3 +284,11 @@ def test_controller_departures_are_read_where_measured_and_absent_elsewhere():
     assert parse_model(_minimal(), "t", "t.toml").controller.position_output_scale == 1.0
     assert model("xl330-m288").controller.position_output_scale == 0.5
     assert model("xl430-w250").controller.position_output_scale == 1.0
+
+
+def test_every_model_file_names_its_motor_as_its_e_manual_page_does():
+    """The e-manual's "Motor" row (specifications): the MX-28/64/106 "Coreless(Maxon)", the XM430 "Coreless", the
+    XC330 "Coreless DC", the AX-18A "Coreless"; the XL330s, XL430, XL-320 and AX-12A "Cored"."""
+    coreless = {"ax-18a", "mx-28", "mx-64", "mx-106", "xm430-w350", "xc330-m288"}
+    assert {key: model(key).physical.motor for key in model_names()} == {
+        key: "coreless" if key in coreless else "cored" for key in model_names()}

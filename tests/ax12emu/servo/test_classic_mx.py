@@ -88,3 +88,25 @@ def test_the_mx_keys_are_checked(addition, message):
     assert text.rstrip().splitlines()[-1].startswith("errors")
     with pytest.raises(ValueError, match=message):
         parse_model(text + addition + "\n", "broken", "broken.toml")
+
+
+@pytest.mark.parametrize("key", ["mx-64", "mx-106"])
+def test_the_mx_position_loop_puts_out_what_bam_measured_on_real_mx_servos(key):
+    """Rhoban's BAM measured on real MX-64s and MX-106s with an oscilloscope: duty = 0.158 x P Gain x error (rad), at the
+    factory P Gain 32 7.9 / 1023 of full output per pulse, not the 4 / 1023 of Kp = P/8 read per position unit."""
+    import math
+
+    from ax12emu.servo.model_factory2 import build_x_firmware
+
+    spec = model(key)
+    cmd = ClassicMap.from_model(spec).commands({**JOINT, "goal_position": 2048})
+    firmware = build_x_firmware(spec)
+    firmware.command(cmd)
+    firmware.step_to(0.01)
+    firmware.set_blocked(True)  # the error stays what it is written as
+    cmd = ClassicMap.from_model(spec).commands({**JOINT, "goal_position": 2048 + 40, "moving_speed": 0})
+    cmd.profile_velocity = 0  # no profile: the whole error at once
+    firmware.command(cmd, goal_written=True)
+    firmware.step_to(0.02)
+    duty = firmware.sense().present_pwm / 885
+    assert duty == pytest.approx(0.158 * 32 * 40 * 2 * math.pi / 4096, rel=0.03)

@@ -45,3 +45,55 @@ def test_the_xl330_position_loop_drives_half_the_emanual_reading_as_measured():
     assert model("xl330-m288").controller.position_output_scale == 0.5
     ratio = pwm_after_goal_step("xl330-m288") / pwm_after_goal_step("xl430-w250")
     assert ratio == pytest.approx(0.5, abs=0.08)
+
+
+# ---------------------------------------------------------------------------- the rotor
+
+#: Rhoban's BAM fits of real servos, "armature" (kg m^2 at the output), bam/params/<servo>/m1.json: the MX-64 and
+#: MX-106 (Maxon coreless), the XL330 (cored, the reference of the cored scaling).
+BAM_ARMATURE = {"mx-64": 0.011951238325312509, "mx-106": 0.026609234235148084, "xl330-m288": 0.0018141672784458866}
+
+
+@pytest.mark.parametrize("key", sorted(BAM_ARMATURE))
+def test_the_rotor_of_a_servo_bam_fitted_is_bams_fit(key):
+    """The reflected rotor and gears the served servo accelerates are what BAM fitted on the real one (to 0.1 %):
+    from the scaling of the XL330's cored rotor the MX-64 had 8.6 and the MX-106 6.8 times that."""
+    inertia = build_x_firmware(model(key)).physics.params.inertia_kg_m2
+    assert inertia == pytest.approx(BAM_ARMATURE[key], rel=1e-3)
+
+
+@pytest.mark.parametrize("key", ["mx-28", "xm430-w350", "xc330-m288"])
+def test_a_coreless_servo_no_source_gives_a_rotor_for_is_scaled_from_the_coreless_fits(key):
+    """The model file says the motor is coreless (the e-manual's "Motor" row), so the rotor is scaled from BAM's
+    MX-64/MX-106 fits, several times below what the cored XL330's scaling gives the same motor torque."""
+    from firmware_model.xseries.physics import XPhysicsParams
+
+    spec = model(key)
+    assert spec.physical.motor == "coreless" and spec.physical.rotor_inertia_at_motor_kg_m2 is None
+    ratings = [(r.voltage_v, r.stall_torque_nm, r.stall_current_a, r.no_load_speed_rpm) for r in spec.physical.ratings]
+    cored = XPhysicsParams.from_datasheet(gear_ratio=spec.physical.gear_ratio, ratings=ratings, motor="cored")
+    served = build_x_firmware(spec).physics.params
+    assert served.inertia_kg_m2 == pytest.approx(cored.inertia_kg_m2 / 7.68, rel=0.01)
+
+
+def test_the_coreless_scaling_reproduces_both_bam_mx_fits_within_13_percent():
+    from firmware_model.xseries.physics import XPhysicsParams
+
+    for key in ("mx-64", "mx-106"):
+        physical = model(key).physical
+        ratings = [(r.voltage_v, r.stall_torque_nm, r.stall_current_a, r.no_load_speed_rpm) for r in physical.ratings]
+        scaled = XPhysicsParams.from_datasheet(gear_ratio=physical.gear_ratio, ratings=ratings, motor="coreless")
+        assert scaled.inertia_kg_m2 == pytest.approx(BAM_ARMATURE[key], rel=0.13)
+
+
+def test_an_mx_64_reaches_its_speed_as_fast_as_bams_fitted_rotor_lets_it():
+    """Full duty from rest, free shaft: 63 % of the no-load speed in about 14 ms (BAM's fitted rotor), not 115 ms."""
+    firmware = build_x_firmware(model("mx-64"))
+    firmware.command(XCommands(torque_enable=1, operating_mode=16, goal_pwm=885, pwm_limit=885))
+    speeds = []
+    for k in range(1, 301):
+        firmware.step_to(k * 0.001)
+        speeds.append(firmware.physics.velocity_rad_s)
+    rise_ms = next(i + 1 for i, speed in enumerate(speeds) if speed >= 0.632 * speeds[-1])
+    assert 10 <= rise_ms <= 20
+

@@ -385,9 +385,74 @@ def test_overload_not_selected_by_shutdown_is_not_reported():
     assert trace[-1].hardware_error_status == 0 and trace[-1].torque_enable == 1
 
 
+def _overload_after_s(servo: XFirmware, limit_s: float) -> float | None:
+    """Seconds until Hardware Error Status reads Overload, None if not within ``limit_s`` (10 ms resolution)."""
+    for k in range(1, int(round(limit_s * 100)) + 1):
+        servo.step_to(servo.time_s + 0.01)
+        if servo.sense().hardware_error_status & HW_ERROR_OVERLOAD:
+            return k / 100
+    return None
+
+
+@pytest.mark.parametrize(
+    ("case", "low_s", "high_s"),
+    [
+        ("full drive, blocked, Position mode", 0.9, 1.2),  # a full stall: the overload time
+        ("Goal PWM 885, blocked, PWM mode", 0.9, 1.2),  # the same current in another mode: the same time
+        ("Goal Current 400 (1.08 A), blocked, Current-based Position", 2.0, 6.0),  # below the PWM limit all the while
+        ("0.94 A holding a load, Position mode", 3.0, 8.0),  # ROBOTIS: "a high current ... for a few seconds"
+        ("Goal PWM 200 (0.51 A), blocked, Position mode", None, None),  # at its PWM limit, but little current
+        ("0.45 A holding a load, Position mode", None, None),  # 1/5 of the stall current: the e-manual's design load
+    ],
+)
+def test_overload_is_current_held_over_time_whatever_limits_it(case, low_s, high_s):
+    """XM430-W350 at 12 V (stall current 2.25 A in the model): Overload comes from the winding's current over time,
+    the same in every mode, not from the output sitting at its limit (``OVERLOAD_CURRENT_SHARE``)."""
+    servo, cmd = make(torque_enable=1, overload_time_s=1.0)
+    k_t = servo.physics.params.torque_constant_nm_a
+    if "PWM mode" in case:
+        write(servo, cmd, operating_mode=OperatingMode.PWM)
+        write(servo, cmd, torque_enable=1, goal_pwm=885)
+        servo.set_blocked(True)
+    elif "Current-based" in case:
+        write(servo, cmd, operating_mode=OperatingMode.CURRENT_BASED_POSITION)
+        write(servo, cmd, torque_enable=1, goal_current=400)
+        write(servo, cmd, goal_position=servo.sense().present_position + 1000)
+        servo.set_blocked(True)
+    elif "holding" in case:
+        amps = float(case.split(" A")[0])
+        servo.set_external_torque(-amps * k_t)
+    else:
+        pwm = 200 if "Goal PWM 200" in case else 885
+        write(servo, cmd, goal_pwm=pwm)
+        write(servo, cmd, goal_position=servo.sense().present_position + 1000)
+        servo.set_blocked(True)
+    tripped = _overload_after_s(servo, 30.0)
+    if low_s is None:
+        assert tripped is None and servo.sense().torque_enable == 1
+    else:
+        assert tripped is not None and low_s <= tripped <= high_s, tripped
+
+
+def test_the_overload_account_drains_when_the_current_falls():
+    """0.9 s of full stall, then 3 s free: the account has drained, and the next stall takes the whole overload
+    time again; with a shorter rest it trips sooner."""
+    for rest_s, low_s, high_s in ((3.0, 0.9, 1.2), (0.3, 0.05, 0.5)):
+        servo, cmd = make(torque_enable=1, operating_mode=OperatingMode.PWM, overload_time_s=1.0)
+        write(servo, cmd, torque_enable=1, goal_pwm=885)
+        servo.set_blocked(True)
+        assert _overload_after_s(servo, 0.9) is None
+        write(servo, cmd, goal_pwm=0)
+        servo.step_to(servo.time_s + rest_s)
+        write(servo, cmd, goal_pwm=885)
+        tripped = _overload_after_s(servo, 2.0)
+        assert tripped is not None and low_s <= tripped <= high_s, (rest_s, tripped)
+
+
 def test_overheating_from_winding_loss_shuts_down():
+    # Shutdown selects Overheating alone: 1.2 A is 0.82 of the stall current, which Overload would stop first.
     servo, cmd = make("XL330-M288", torque_enable=1, operating_mode=OperatingMode.CURRENT,
-                      thermal=ThermalParams(time_constant_s=20.0), temperature_limit=70)
+                      thermal=ThermalParams(time_constant_s=20.0), temperature_limit=70, shutdown=HW_ERROR_OVERHEATING)
     write(servo, cmd, goal_current=1200)
     hot = None
     for k in range(60):
