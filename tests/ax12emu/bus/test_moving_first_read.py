@@ -30,8 +30,8 @@ from ax12emu.protocol.control_table import AX12_MODEL
 from ax12emu.protocol.servo_models import model_names
 
 #: Moves a little beyond every table's position margin (the AX's Compliance Margin of a unit or two, the
-#: X firmware's In-Position window of 10 pulses, 0.9 deg) and a long one, in degrees so every table's units serve.
-MOVES_DEG = (1.5, 30.0)
+#: X firmware's In-Position window of 20 pulses, 1.8 deg) and a long one, in degrees so every table's units serve.
+MOVES_DEG = (2.5, 30.0)
 #: Moving Speed / Profile Velocity: 0 (the classic tables' "maximum rpm", the X series' no profile) and a slow speed.
 SPEEDS = (0, 100)
 PROFILE_ONGOING = 0x02
