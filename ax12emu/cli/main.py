@@ -140,7 +140,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--goal-torque",
         choices=("on", "unchanged"),
         default="on",
-        help="writing Goal Position turns the torque on, as AX/MX users report (default), or leaves Torque Enable as it is",
+        help="writing Goal Position (on the AX series Moving Speed too) turns the torque on, as AX/MX users report "
+        "(default), or leaves Torque Enable as it is",
     )
     serve.add_argument(
         "--eeprom-busy-ms",

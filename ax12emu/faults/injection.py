@@ -368,10 +368,7 @@ class Faults:
         table = servo.table
         if not bits & table.get("shutdown"):
             return
-        if table.profile.shutdown_clears == "torque_enable":
-            table.set("torque_enable", 0)
-        else:
-            table.set("torque_limit", 0)
+        table.set(table.profile.shutdown_clears or "torque_limit", 0)  # the register this edition's Shutdown clears
 
     def on_replies(self, replies: "list[Reply]") -> "list[Reply]":
         """Drop, corrupt or delay status packets by the configured fractions."""

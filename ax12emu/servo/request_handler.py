@@ -107,6 +107,14 @@ def _judge_write(servo: VirtualServo, address: int, data: bytes) -> tuple[np.nda
     return candidate, StatusError.NONE
 
 
+#: Registers whose write turns an AX's torque on (``ServoOptions.goal_position_enables_torque`` says why each).
+TORQUE_ON_REGISTERS = ("goal_position", "moving_speed")
+
+
+def _torque_on_entries(layout):
+    return [layout.by_name[name] for name in TORQUE_ON_REGISTERS]
+
+
 def _apply_write(servo: VirtualServo, address: int, data: bytes) -> StatusError:
     """Validate and commit one write, all-or-nothing, with the firmware's side effects."""
     table = servo.table
@@ -115,20 +123,26 @@ def _apply_write(servo: VirtualServo, address: int, data: bytes) -> StatusError:
         if error & StatusError.ANGLE_LIMIT and table.get("shutdown") & StatusError.ANGLE_LIMIT:
             # "providing that Angle Limit Error Bit(0x01) in the Alarm LED/Shutdown is set, the Alarm LED will start
             # blinking and the motor's output will be 0 [%]" (e-manual, AX-12A, Goal Position; the bit is the
-            # status packet's, 0x02); output 0 as every Alarm Shutdown makes it, through Torque Limit
-            table.set("torque_limit", 0)
+            # status packet's, 0x02); output 0 as every Alarm Shutdown makes it in this table's edition: through
+            # Torque Limit (the e-manual), or Torque Enable (the 2006 manual: "torque will be turned off")
+            table.set(table.profile.shutdown_clears or "torque_limit", 0)
         return error
     if address < EEPROM_END:
         servo.eeprom_dirty = True
         servo.eeprom_bytes_written += min(len(data), EEPROM_END - address)
-    goal = table.layout.by_name["goal_position"]
-    if servo.options.goal_position_enables_torque and address < goal.end and address + len(data) > goal.address:
+    if servo.options.goal_position_enables_torque and any(
+            address < entry.end and address + len(data) > entry.address for entry in _torque_on_entries(table.layout)):
         candidate[table.layout.by_name["torque_enable"].address] = 1
     table.row[:] = candidate
     return StatusError.NONE
 
 
 def _reset(servo: VirtualServo, packet: InstructionPacket) -> tuple[StatusError, bytes]:
+    if servo.table.get("lock"):
+        # "1: EEPROM area cannot be modified"; "the power must be turned off and then turned on again to change
+        # into 0" (e-manual, Lock): RESET rewrote the EEPROM and cleared Lock.  The e-manual does not say what a
+        # locked servo answers to RESET: the Range Error its refused EEPROM writes get.
+        return StatusError.RANGE, b""
     present = servo.table.get("present_position")
     servo.table.factory_reset()
     servo.table.set("present_position", present)

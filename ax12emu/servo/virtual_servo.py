@@ -49,14 +49,19 @@ class ServoOptions:
     #: RESET's status packet comes from the ID the packet was sent to (e-manual
     #: example: RESET to ID 0 answered by ID 0); True: from the new ID 1.
     reset_reply_from_new_id: bool = False
-    #: Writing Goal Position turns the torque on (Torque Enable becomes 1).  The
+    #: Writing Goal Position (or, on the AX series, Moving Speed) turns the torque on (Torque Enable becomes 1).  The
     #: e-manual's Torque Enable and Goal Position entries say nothing of it, but
     #: users and maintainers of AX/MX client libraries report it: pypot's author
     #: (Luos-io/Examples PR #17, "the goal position should only be set when the
     #: compliance is turned off, otherwise it will turn the motor back stiff"),
     #: poppy-docs issue #36 (after setting a goal position the motor "is no longer
     #: compliant") and pypot issue #121 (a goal sent to compliant motors makes them
-    #: twitch until the library turns torque off again).  False: torque stays off.
+    #: twitch until the library turns torque off again).  On the AX series writing
+    #: Moving Speed does it too: Luos-io/Pyluos issue #59 ("When doing the same
+    #: operation on a AX motors, it turn the motor stiff"; on MX motors it does not;
+    #: its maintainer: "a feature from dynamixel"), and pyax12's wheel example turns
+    #: the shaft with CW/CCW Angle Limit 0 and a Moving Speed write alone.  False:
+    #: torque stays off.
     goal_position_enables_torque: bool = True
     #: Seconds the servo ignores every packet (stays silent, acts on nothing) per
     #: byte written into the EEPROM area, counted from the write.  xevelabs' USB2AX

@@ -136,7 +136,7 @@ def test_every_way_of_writing_goal_position_turns_torque_on():
 
 def test_other_writes_and_refused_goals_leave_torque_off():
     bus = Bus([1], clock=VirtualClock())
-    bus.receive(_packet("moving_speed", 100))
+    bus.receive(_packet("punch", 100))  # (Moving Speed does turn an AX's torque on: test_request_handler)
     bus.receive(_packet("led", 1))
     assert _read(bus, "torque_enable") == 0
     bus.receive(_packet("cw_angle_limit", 400))

@@ -111,3 +111,35 @@ def test_a_goal_past_the_angle_limits_takes_the_output_to_zero_where_shutdown_se
     assert send(s, 0x03, [18, 36 | StatusError.ANGLE_LIMIT]).error == StatusError.NONE
     assert send(s, 0x03, [30, 0xF4, 1]).error == StatusError.ANGLE_LIMIT
     assert s.table.get("torque_limit") == 0 and s.table.get("goal_position") != 500
+
+
+def test_under_the_2006_profile_the_angle_limit_shutdown_turns_the_torque_off():
+    """The 2006 manual's Alarm Shutdown turns the torque off (its recovery: Torque Enable 1); the Angle Limit
+    Error zeroed Torque Limit there as under the e-manual, so that recovery left the servo limp."""
+    s = servo(profile="ax12-2006")
+    send(s, 0x03, [6, 100, 0, 200, 0])
+    send(s, 0x03, [18, 36 | StatusError.ANGLE_LIMIT])
+    send(s, 0x03, [24, 1])
+    assert send(s, 0x03, [30, 0xF4, 1]).error == StatusError.ANGLE_LIMIT
+    assert (s.table.get("torque_enable"), s.table.get("torque_limit")) == (0, 1023)
+
+
+def test_a_reset_cannot_go_around_lock():
+    """Lock: "EEPROM area cannot be modified", released only by a power cycle; RESET rewrote the EEPROM and Lock."""
+    s = servo()
+    send(s, 0x03, [5, 10])
+    send(s, 0x03, [47, 1])
+    assert send(s, 0x06).error == StatusError.RANGE
+    assert (s.table.get("lock"), s.table.get("return_delay_time")) == (1, 10)
+
+
+def test_on_the_ax_series_a_moving_speed_write_turns_the_torque_on():
+    """Luos-io/Pyluos #59: setting the speed on AX motors "turn[s] the motor stiff"; a wheel set up with both
+    angle limits 0 and Moving Speed alone (pyax12's example) stayed limp.  Not with --goal-torque unchanged."""
+    s = servo()
+    send(s, 0x03, [6, 0, 0, 0, 0])
+    assert send(s, 0x03, [32, 0, 2]).error == StatusError.NONE
+    assert s.table.get("torque_enable") == 1
+    s = servo(goal_position_enables_torque=False)
+    send(s, 0x03, [32, 0, 2])
+    assert s.table.get("torque_enable") == 0
