@@ -16,6 +16,7 @@ The format (``models/ax-12a.toml`` is the worked example)::
     source = "..."               # e-manual page and the emanual repository commit
     unsupported_instructions = ["clear"]  # optional: Protocol 2.0 instructions the model's firmware does not
                                  # know (Instruction2 names), where the e-manual's "Supported DYNAMIXEL" lists leave it out
+    broadcast_reset_all = "refused"  # optional: "executed" where a broadcast Factory Reset 0xFF resets every servo
 
     [table]
     size = 662                   # bytes: addresses 0 .. size-1
@@ -118,7 +119,9 @@ SHUTDOWN_CLEARS = ("torque_limit", "torque_enable")
 _ALWAYS_KNOWN = frozenset({Instruction2.PING, Instruction2.READ, Instruction2.WRITE, Instruction2.STATUS})
 
 _MODEL_KEYS = {"name", "model_number", "firmware_version", "protocols", "source", "baud_rates_bps",
-               "unsupported_instructions"}
+               "unsupported_instructions", "broadcast_reset_all"}
+#: What a Protocol 2.0 firmware does with Factory Reset 0xFF (reset all) to the broadcast ID.
+BROADCAST_RESET_ALL = ("refused", "executed")
 _TABLE_KEYS = {"size", "entries"}
 _ENTRY_KEYS = {"address", "size", "name", "access", "area", "default", "min", "max", "signed", "min_from", "max_from",
                "count", "first", "default_step", "note", "ranges_when", "values"}
@@ -275,6 +278,10 @@ class ServoModel:
     #: Protocol 2.0 instruction codes the firmware does not know: answered with Instruction Error, never listed
     #: among a Sync/Bulk Read's answers (``model.unsupported_instructions``).
     unsupported_instructions: frozenset[int] = frozenset()
+    #: Factory Reset 0xFF to the broadcast ID: "refused" (not carried out, "MX(2.0) FW42, X-series FW42 or above",
+    #: e-manual, Protocol 2.0, Factory Reset) or "executed" (a firmware before that safety feature: every servo
+    #: resets, to ID 1) (``model.broadcast_reset_all``).
+    broadcast_reset_all: str = "refused"
     _layouts: dict[str, Layout] = field(default_factory=dict, compare=False, repr=False)
 
     @property
@@ -681,6 +688,8 @@ def parse_model(text: str, key: str, path: str) -> ServoModel:
         mode_change=_mode_change(where, data.get("mode_change"), seen),
         classic=_classic(where, data.get("classic"), seen),
         unsupported_instructions=_unsupported(where, info.get("unsupported_instructions", []), protocols),
+        broadcast_reset_all=where.choice(info.get("broadcast_reset_all", "refused"), "model.broadcast_reset_all",
+                                         BROADCAST_RESET_ALL),
     )
 
 

@@ -315,7 +315,7 @@ def handle2(servo: Servo2, packet: InstructionPacket2, *, secondary: bool = Fals
         elif isinstance(params, Malformed):
             error, data = ErrorNumber.RESULT_FAIL, bytes(_read_length(servo, packet))
         elif (packet.id == BROADCAST_ID and instruction == Instruction2.FACTORY_RESET
-              and params.option is FactoryResetOption.ALL):
+              and params.option is FactoryResetOption.ALL and servo.spec.broadcast_reset_all == "refused"):
             return Outcome2(None, reply_id, delay_s, ErrorNumber.NONE)
         else:
             error, data = handler(servo, params)

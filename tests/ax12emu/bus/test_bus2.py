@@ -210,6 +210,15 @@ def test_factory_reset_all_is_not_executed_by_broadcast(xm):
     assert bus.servo(3).table.get("temperature_limit") == 80 and bus.ids == list(range(1, 8))
 
 
+def test_an_xl320_carries_a_broadcast_factory_reset_all_out():
+    """The refusal is "MX(2.0) FW42, X-series FW42 or above"'s (e-manual, Factory Reset): the XL-320, outside those,
+    resets (to ID 1) where it kept its ID and EEPROM."""
+    bus, _ = recording_bus(ids=(7,), key="xl-320")
+    send(bus, 7, Instruction2.WRITE, bytes((5, 0, 10)))  # Return Delay Time 10
+    send(bus, 0xFE, Instruction2.FACTORY_RESET, b"\xff")
+    assert bus.ids == [1] and bus.servo(1).table.get("return_delay_time") == 250
+
+
 def test_factory_reset_options(xm):
     bus, _ = xm
     send(bus, 4, Instruction2.WRITE, bytes((8, 0, 3)))
