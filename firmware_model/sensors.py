@@ -51,7 +51,8 @@ def registers(held_speed, held_drive, supply_v: float, temperature_c) -> dict[st
         "present_speed": speed_rad_s_to_raw(held_speed),
         "present_load": drive_to_load_raw(held_drive),
         "present_voltage": np.full(n, int(round(supply_v * 10.0)), dtype=np.int64),
-        "present_temperature": np.rint(np.asarray(temperature_c, dtype=float)).astype(np.int64),
+        # One byte: a reading past it saturates there (a thermistor's ADC does), never wraps.
+        "present_temperature": np.clip(np.rint(np.asarray(temperature_c, dtype=float)), 0, 255).astype(np.int64),
     }
 
 

@@ -20,10 +20,12 @@ Restore reads it at power-up.
 
 from __future__ import annotations
 
+import errno
 import fcntl
 import json
 import logging
 import os
+import stat
 import tempfile
 from pathlib import Path
 from typing import Protocol
@@ -60,13 +62,24 @@ class StateFileError(ValueError):
     """A state file exists but cannot be used; the message names the file."""
 
 
+def _open_regular(path: Path, flags: int, mode: int = 0o644) -> int:
+    """``os.open`` of a regular file; OSError for anything else.  O_NONBLOCK: a named pipe in its place blocked the
+    open (and the server's start, before it printed its port) until something wrote to it."""
+    fd = os.open(path, flags | os.O_NONBLOCK | getattr(os, "O_NOFOLLOW", 0), mode)
+    if not stat.S_ISREG(os.fstat(fd).st_mode):
+        os.close(fd)
+        raise OSError(errno.EINVAL, "not a regular file", str(path))
+    os.set_blocking(fd, True)
+    return fd
+
+
 def _document(path: Path) -> dict:
     """A state file's JSON object; ValueError (or OSError, RecursionError) where it is not one of this format.
 
     O_NOFOLLOW: a symlink planted in the directory cannot make the store read a file elsewhere (ELOOP, reported
     as an unusable state file).
     """
-    fd = os.open(path, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0))
+    fd = _open_regular(path, os.O_RDONLY)
     with os.fdopen(fd, encoding="utf-8") as handle:
         document = json.loads(handle.read())
     if not isinstance(document, dict) or document.get("format") != FORMAT:
@@ -101,7 +114,7 @@ class StateStore:
         if self._lock_fd is not None:
             return
         path = self.directory / LOCK_NAME
-        fd = os.open(path, os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0), 0o644)
+        fd = _open_regular(path, os.O_RDWR | os.O_CREAT)
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:

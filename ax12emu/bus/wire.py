@@ -113,10 +113,17 @@ def build_wire_of(models: Sequence[tuple[int, str]], *, clock: WallClock | Virtu
                     options=options, state_store=state_store2 if load_state else None)
         bus2.state_store = state_store2
     if baud_bps is not None:
-        for servo in bus1.servos if bus1 is not None else ():
-            _start_at_baud(servo, baud_bps)
-        for servo in bus2.servos if bus2 is not None else ():
-            servo.start_at_baud(baud_bps)
+        # A servo whose EEPROM the state directory kept starts at the Baud Rate it kept, as a real one does after a
+        # client changed it (``baud_bps`` overwrote it at every start, and the file with it).
+        def kept(store: StateStore | None, slot: int) -> bool:
+            return load_state and store is not None and store.path_for(slot).exists()
+
+        for slot, servo in zip(bus1.slots, bus1.servos) if bus1 is not None else ():
+            if not kept(state_store1, slot):
+                _start_at_baud(servo, baud_bps)
+        for slot, servo in zip(bus2.slots, bus2.servos) if bus2 is not None else ():
+            if not kept(state_store2, slot):
+                servo.start_at_baud(baud_bps)
     if bus1 is not None and bus2 is not None:
         return MixedBus(bus1, bus2)
     return bus1 if bus1 is not None else bus2  # type: ignore[return-value]

@@ -18,6 +18,7 @@ import signal
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ax12emu import __version__
 from ax12emu.bus import Bus
@@ -29,9 +30,12 @@ from ax12emu.cli.arg_types import finite_float as _finite_float
 from ax12emu.cli.arg_types import positive_float as _positive_float
 from ax12emu.protocol.control_table import AX12_MODEL, DEFAULT_PROFILE, PROFILES
 from ax12emu.protocol.ids import parse_ids
-from ax12emu.servo.model_factory import MODELS, ModelChoice, build_model, parse_arm
+from ax12emu.servo.model_factory import EXTERNAL_TORQUE_MAX_NM, MODELS, ModelChoice, build_model, parse_arm
 from ax12emu.servo.virtual_servo import ServoOptions
 from ax12emu.tracing.trace import TraceWriter
+
+if TYPE_CHECKING:
+    from ax12emu.serve import BusServer
 
 __all__ = ["parse_args", "main", "build_parser"]
 
@@ -50,6 +54,14 @@ def _arm(text: str) -> tuple[float, float]:
         return parse_arm(text)
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _external_torque(text: str) -> float:
+    value = _finite_float(text)
+    if not abs(value) <= EXTERNAL_TORQUE_MAX_NM:
+        raise argparse.ArgumentTypeError(f"must lie in -{EXTERNAL_TORQUE_MAX_NM:.0f}..{EXTERNAL_TORQUE_MAX_NM:.0f} N m "
+                                         f"(the heaviest --arm held level), got {text}")
+    return value
 
 
 def _eeprom_busy_ms(text: str) -> float:
@@ -78,7 +90,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="with --servo: every servo starts at this bit rate (its Baud Rate register set to the value its own model "
         "gives that rate: an MX runs up to 3000000, an AX-12A up to 2000000 (Baud Rate 0; its data sheet stops at "
         "1000000); default: each model's factory rate, "
-        "57600 on the X and MX series (an MX's Baud Rate 34), 1000000 on the AX series)",
+        "57600 on the X and MX series (an MX's Baud Rate 34), 1000000 on the AX series); a servo whose EEPROM "
+        "--state-dir kept starts at the rate it kept",
     )
     where = serve.add_mutually_exclusive_group()
     where.add_argument("--pty", action="store_true", help="serve on a pseudo-terminal (the default)")
@@ -115,7 +128,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="position controller: the e-manual's compliance control (default) or the 2008 report's PID",
     )
     physics.add_argument(
-        "--external-torque", type=_finite_float, default=0.0, metavar="NM", help="constant torque on every shaft, N m (+ = CCW)"
+        "--external-torque", type=_external_torque, default=0.0, metavar="NM", help="constant torque on every shaft, N m (+ = CCW)"
     )
     physics.add_argument("--arm", type=_arm, metavar="MASS_KG,LENGTH_M", help="an arm under gravity on every shaft")
     serve.add_argument(
@@ -301,8 +314,7 @@ def _serve2(args: argparse.Namespace) -> int:
     transport = _open_transport(args)
     server = BusServer(bus, transport, pace=args.pace, echo=args.echo, trace=trace)
     live = _open_live(args, server, transport, bus)
-    signal.signal(signal.SIGINT, lambda signum, frame: server.stop())
-    signal.signal(signal.SIGTERM, lambda signum, frame: server.stop())
+    _stop_on_signals(server)
     print(transport.url, flush=True)  # the first stdout line: the port, which scripts and tests read
     if live is not None and live.url:
         print(live.url, flush=True)
@@ -331,15 +343,16 @@ def _open_live(args: argparse.Namespace, server, transport, bus):
         return None
     try:
         from ax12emu.live import LiveView
-    except ImportError as exc:
-        print(f"ax12emu: --web and --monitor need the web extra: pip install 'ax12emu[web]' ({exc})", file=sys.stderr)
-        transport.close()
-        bus.close()
-        raise SystemExit(2) from None
-    try:
+
         return LiveView.for_server(
             server, seed=args.fault_seed, web=getattr(args, "web_address", None), allow_remote=args.allow_remote, monitor=args.monitor
         ).start()
+    except ImportError as exc:  # the page's and the monitor's libraries load at start: the web extra
+        print(f"ax12emu: --web and --monitor need the web extra: pip install 'ax12emu[web]' ({exc.__cause__ or exc})",
+              file=sys.stderr)
+        transport.close()
+        bus.close()
+        raise SystemExit(2) from None
     except OSError as exc:
         transport.close()
         bus.close()
@@ -403,14 +416,8 @@ def _serve(args: argparse.Namespace) -> int:
     transport = _open_transport(args)
     where = transport.url
     server = BusServer(bus, transport, pace=args.pace, echo=args.echo, trace=trace)
-
-    def _stop(signum: int, frame: object) -> None:
-        server.stop()
-
     live = _open_live(args, server, transport, bus)
-
-    signal.signal(signal.SIGINT, _stop)
-    signal.signal(signal.SIGTERM, _stop)
+    _stop_on_signals(server)
     print(where, flush=True)  # the first stdout line: the port, which scripts and tests read
     if live is not None and live.url:
         print(live.url, flush=True)
@@ -435,13 +442,24 @@ def _serve(args: argparse.Namespace) -> int:
     return 0
 
 
+#: Signals that stop a server cleanly (its --link removed, its state saved, "stopped" logged): Ctrl-C, kill, and
+#: the terminal or ssh session it runs in closing (SIGHUP: by default it died there, leaving its --link at a
+#: freed pty number the next terminal takes).
+STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
+
+
+def _stop_on_signals(server: BusServer) -> None:
+    for signum in STOP_SIGNALS:
+        signal.signal(signum, lambda signum, frame: server.stop())
+
+
 def _diagnose(arguments: list[str]) -> int:
     try:
         from firmware_model.diagnose.cli import main as diagnose_main
     except ImportError as exc:
         print(f"ax12emu: diagnose needs scipy and matplotlib: pip install 'ax12emu[diagnose]' ({exc})", file=sys.stderr)
         return 2
-    return diagnose_main(_from_the_served_servo(arguments))
+    return diagnose_main(_from_the_served_servo(arguments), prog="ax12emu diagnose")
 
 
 #: Where ``ax12emu diagnose`` writes the served servo's parameters it starts another AX model's export from.

@@ -76,12 +76,18 @@ class LiveView:
         """Start sampling and the views; on failure (a port in use) everything started is stopped."""
         try:
             if self._web_address is not None:
-                from .web import WebServer
+                try:
+                    from .web import WebServer
+                except ImportError as exc:  # aiohttp: the web extra
+                    raise ImportError(f"the live view needs the web extra: pip install 'ax12emu[web]' ({exc})") from exc
 
                 host, port = self._web_address
                 self.web = WebServer(self.sampler, self._controls, host=host, port=port, allow_remote=self._allow_remote).start()
             if self._monitor_wanted:
-                from .monitor import Monitor
+                try:
+                    from .monitor import Monitor
+                except ImportError as exc:  # rich: the web extra
+                    raise ImportError(f"the live view needs the web extra: pip install 'ax12emu[web]' ({exc})") from exc
 
                 self.monitor = Monitor(self.sampler, stream=self._monitor_stream).start()
             self.sampler.start()

@@ -51,6 +51,9 @@ class ModelChoice:
 #: The largest arm ``--arm`` takes: far beyond what any of these servos holds (an AX-12A's stall torque is about
 #: 1.5 N m; 100 kg at 10 m is 9.8 kN m), yet small enough that the physics stays finite (1e308 overflowed it).
 ARM_MASS_MAX_KG, ARM_LENGTH_MAX_M = 100.0, 10.0
+#: The largest constant torque on a shaft (N m): the heaviest arm held out level (about 9.8 kN m), far past any
+#: servo's stall; more put NaN into the physics (Present Temperature read 0 with no alarm).
+EXTERNAL_TORQUE_MAX_NM = ARM_MASS_MAX_KG * 9.80665 * ARM_LENGTH_MAX_M
 
 
 def parse_arm(text: str) -> tuple[float, float]:

@@ -82,12 +82,17 @@ class _OneLineParser(argparse.ArgumentParser):
     """argparse, its errors one line on stderr (the bad option, not the usage block; ``--help`` shows that)."""
 
     def error(self, message: str):  # type: ignore[override]
-        self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
-def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
-    """The command line (pure: no I/O)."""
-    p = _OneLineParser(prog="python -m firmware_model.diagnose", description=__doc__.splitlines()[0])
+#: What the workflow does, in a line: its ``--help``'s first words.
+DESCRIPTION = ("Find where a measured servo trace and the model disagree, name the missing physical effect and "
+               "write a twin that ax12emu serve --params runs.")
+
+
+def parse_args(argv: list[str] | None = None, prog: str = "python -m firmware_model.diagnose") -> argparse.Namespace:
+    """The command line (pure: no I/O); ``prog``: the command the user typed (``ax12emu diagnose`` from the CLI)."""
+    p = _OneLineParser(prog=prog, description=DESCRIPTION)
     p.add_argument("trace", metavar="MEASURED.csv",
                    help="measured trace: the project's CSV (firmware_model.diagnose.trace) or a Wizard 2 graph export")
     p.add_argument("--out", required=True, metavar="DIR", help="where report.md, plots and params.toml go")
@@ -278,9 +283,9 @@ def _insert_input_section(report: Path, notes: list[str]) -> None:
     report.write_text(text[:at] + section + text[at:] if at >= 0 else text + "\n" + section, encoding="utf-8")
 
 
-def main(argv: list[str] | None = None) -> int:
+def main(argv: list[str] | None = None, prog: str = "python -m firmware_model.diagnose") -> int:
     """Run the workflow; exit 2 on a malformed trace or a bad option for it."""
-    args = parse_args(argv)
+    args = parse_args(argv, prog)
     progress = None if args.quiet else (lambda msg: print(msg, file=sys.stderr, flush=True))
     say = progress or (lambda msg: None)
     try:

@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import errno
 import fcntl
+import logging
 import os
 import pty
 import struct
@@ -54,6 +55,8 @@ from pathlib import Path
 from .base import Transport
 
 __all__ = ["PtyTransport"]
+
+log = logging.getLogger(__name__)
 
 # struct termios2 on Linux: 4 tcflag_t, c_line, 19 cc, then c_ispeed, c_ospeed.
 _TERMIOS2 = struct.Struct("4IB19B2I")
@@ -110,6 +113,9 @@ class PtyTransport(Transport):
         if link is not None:
             path = Path(link)
             if path.is_symlink():
+                if path.exists():  # it leads somewhere: another server's pty, or a pty number a crashed run's freed
+                    log.warning("--link %s pointed at %s, which is there (another server's pty?); it points here now, "
+                                "and the other keeps it only if it started after this one", path, os.readlink(path))
                 path.unlink()  # a stale link from a crashed run
             elif path.exists():
                 self.close()
@@ -222,8 +228,8 @@ class PtyTransport(Transport):
             return
         self._closed = True
         if self.link is not None:
-            try:
-                if self.link.is_symlink():
+            try:  # only our own: a link another server has put there since is its
+                if self.link.is_symlink() and os.readlink(self.link) == self.slave_path:
                     self.link.unlink()
             except OSError:
                 pass

@@ -35,3 +35,21 @@ def test_rates_come_from_each_servos_table_range():
 def test_a_rate_one_servo_cannot_run_names_it():
     with pytest.raises(ValueError, match=r"ID 1 \(AX-18A\) cannot run at 3000000 bps"):
         build_wire("1:ax-18a,2:mx-28", clock=VirtualClock(), baud_bps=3_000_000)
+
+
+def test_a_servo_the_state_directory_kept_starts_at_its_kept_rate_not_at_baud(tmp_path):
+    """A client set an XL430 to 57,600; the next start with --baud 1000000 put it back at 1 Mbps and overwrote the
+    saved Baud Rate, where a real servo keeps it.  A servo with nothing kept starts at --baud."""
+    from ax12emu.bus.state_store import StateStore
+    from ax12emu.bus.wire import build_wire_of, servo_models
+
+    def start(ids):
+        return build_wire_of(servo_models(ids, None), clock=VirtualClock(), baud_bps=1_000_000,
+                             state_store2=StateStore(tmp_path))
+
+    bus = start("1:xl430-w250")
+    bus.servo(1).table.set("baud_rate", 1)  # a client's 57,600
+    bus.close()
+    bus = start("1-2:xl430-w250")
+    assert bus.servo(1).table.get("baud_rate") == 1 and bus.servo(2).table.get("baud_rate") == 3
+    bus.close()

@@ -58,6 +58,48 @@ def test_link_over_a_regular_file_is_refused(tmp_path):
     assert target.read_text() == "keep me"
 
 
+def test_a_second_server_on_a_link_warns_and_the_first_leaves_it_alone(tmp_path, emulator):
+    """Server B took a running server A's --link without a word, and A's exit then removed B's link."""
+    import os
+    import signal
+
+    link = tmp_path / "ax12"
+    first = emulator("--link", str(link))
+    second = emulator("--link", str(link))
+    assert os.readlink(link) == second.port
+    assert first.stop(signal.SIGTERM) == 0
+    assert link.is_symlink() and os.readlink(link) == second.port
+    assert second.stop(signal.SIGTERM) == 0 and not link.is_symlink()
+    said = second.process.stderr.read()
+    assert "pointed at" in (said.decode() if isinstance(said, bytes) else said)
+
+
+def test_a_hangup_stops_the_server_cleanly(tmp_path, emulator):
+    """SIGHUP (the terminal or ssh session closing) killed it at once, leaving its --link at a freed pty number."""
+    import signal
+
+    link = tmp_path / "ax12"
+    served = emulator("--link", str(link))
+    assert served.stop(signal.SIGHUP) == 0
+    assert not link.exists() and not link.is_symlink()
+
+
+def test_a_named_pipe_for_a_state_file_is_refused_not_waited_on(tmp_path):
+    """open() of a FIFO blocked the start (no port printed) until something wrote to it."""
+    import os
+
+    os.mkfifo(tmp_path / "servo-001.json")
+    result = run("serve", "--state-dir", str(tmp_path))
+    assert result.returncode == 2 and "not a regular file" in result.stderr, result.stderr
+
+
+@pytest.mark.parametrize("value", ["1e20", "-1e5"])
+def test_an_external_torque_past_the_heaviest_arm_is_refused(value):
+    """1e20 N m put NaN into the physics: Present Temperature read 0 with no alarm."""
+    result = run("serve", f"--external-torque={value}")
+    assert result.returncode == 2 and "--external-torque: must lie in" in result.stderr, result.stderr
+
+
 def test_a_state_dir_that_is_a_file_and_a_taken_port_name_their_flag(tmp_path):
     """One line each, naming what is wrong: "[Errno 17] File exists" and a bare "Address already in use" (which of
     --tcp and --web?) did not."""
@@ -116,3 +158,16 @@ def test_diagnose_help_is_printed_once():
     """``ax12emu diagnose --help`` reads the command line to find the servo before the workflow prints its help."""
     result = run("diagnose", "--help")
     assert result.returncode == 0 and result.stdout.count("usage:") == 1
+
+
+@pytest.mark.parametrize("flag", [["--web", "127.0.0.1:0"], ["--monitor"]])
+def test_web_and_monitor_without_the_web_extra_are_one_line(flag):
+    """aiohttp and rich load when the live view starts: their absence was an 18-line traceback (exit 1), past the
+    one-line hint meant for it."""
+    code = ("import sys; sys.modules['aiohttp'] = None; sys.modules['rich'] = None; "
+            "from ax12emu.cli.main import main; sys.exit(main(sys.argv[1:]))")
+    result = subprocess.run([sys.executable, "-c", code, "serve", "--tcp", "127.0.0.1:0", *flag],
+                            capture_output=True, text=True, timeout=30)
+    assert result.returncode == 2, result
+    assert result.stderr.strip().count("\n") == 0 and "Traceback" not in result.stderr, result.stderr
+    assert "pip install 'ax12emu[web]'" in result.stderr
