@@ -210,12 +210,13 @@ class Oracle:
         candidate, error = self._judge(shadow.row, address, data)
         if candidate is None:
             if error & StatusError.ANGLE_LIMIT and shadow.row[18] & StatusError.ANGLE_LIMIT:
-                shadow.row[34:36] = 0
+                entry = self.layout.by_name[self.layout.profile.shutdown_clears or "torque_limit"]
+                shadow.row[entry.address:entry.end] = 0  # as the edition's Alarm Shutdown does
             return error
         if address < 24:  # the EEPROM area: the servo writes it after answering, deaf meanwhile
             shadow.eeprom_bytes += min(len(data), 24 - address)
-        if self.options.goal_position_enables_torque and address <= 31 and address + len(data) > 30:
-            candidate[24] = 1  # a write touching Goal Position turns the torque on
+        if self.options.goal_position_enables_torque and address <= 33 and address + len(data) > 30:
+            candidate[24] = 1  # a write touching Goal Position or Moving Speed turns the torque on
         shadow.row[:] = candidate
         return 0
 
@@ -250,6 +251,8 @@ class Oracle:
             row[44] = 0
             return self._write(shadow, address, data), b"", None
         if instruction == Instruction.RESET:
+            if row[47]:  # Lock: the EEPROM area cannot be modified, a RESET refused as a write to it
+                return StatusError.RANGE, b"", None
             present = row[36:38].copy()
             row[:] = self.defaults
             row[36:38] = present

@@ -496,8 +496,8 @@ class Oracle2:
         if instruction == FACTORY_RESET:
             if len(params) != 1 or params[0] not in KEEPS:
                 return RESULT_FAIL, b"", row, None
-            if to_broadcast and params[0] == 0xFF:
-                return 0, b"", row, None  # not executed when broadcast (X series FW42 and later)
+            if to_broadcast and params[0] == 0xFF and rules.spec.broadcast_reset_all == "refused":
+                return 0, b"", row, None  # not executed when broadcast (X series FW42 and later; the model file says)
             image = bytearray(rules.defaults)
             for name in KEEPS[params[0]]:
                 entry = rules.by_name[name]
