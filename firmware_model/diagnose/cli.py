@@ -38,7 +38,7 @@ from .batch import null_knobs
 from .effects import LIBRARY, X_LIBRARY
 from .families import family_of
 from .nuisance import first_movement_onset, first_movement_row, locate_onset
-from .output import verdict_json, verdict_text, write_outputs
+from .output import json_safe, verdict_json, verdict_text, write_outputs
 from .schedule import CONTROL_STEP_S
 from .search import Diagnosis, diagnose
 from .trace import Trace, TraceFormatError, read_trace
@@ -114,7 +114,7 @@ def parse_args(argv: list[str] | None = None, prog: str = "python -m firmware_mo
                    help=f"supply voltage (default: --params' supply_voltage_v, else {DEFAULT_VOLTAGE_V})")
     args = p.parse_args(argv)
     if args.effects:
-        unknown = [e for e in args.effects.split(",") if e not in LIBRARY]
+        unknown = [e for e in args.effects.split(",") if e not in LIBRARY and e not in X_LIBRARY]  # the trace's, in main
         if unknown:
             p.error(f"unknown effect(s): {', '.join(unknown)}")
     for name in ("goal", "initial_goal", "moving_speed"):
@@ -324,9 +324,10 @@ def main(argv: list[str] | None = None, prog: str = "python -m firmware_model.di
     verdict["input"] = data.facts
     verdict["recording"] = {"hold_phase_s": d.nuisance.hold_phase_s, "onsets_fitted": d.nuisance.onsets_fitted,
                             "not_offered": d.not_offered}
-    (Path(args.out) / "verdict.json").write_text(json.dumps(verdict, indent=2), encoding="utf-8")
+    verdict = json_safe(verdict)
+    (Path(args.out) / "verdict.json").write_text(json.dumps(verdict, indent=2, allow_nan=False), encoding="utf-8")
     if args.json:
-        print(json.dumps(verdict))
+        print(json.dumps(verdict, allow_nan=False))
     else:
         print("\n".join(notes[1:] if data.kind == "trace" else notes))
         print(verdict_text(d))

@@ -34,7 +34,7 @@ from .phases import PHASES
 from .search import Diagnosis
 from .trace import Trace
 
-__all__ = ["verdict_text", "verdict_json", "fitted_params", "fitted_effects", "write_outputs", "EFFECT_FIELDS",
+__all__ = ["verdict_text", "verdict_json", "json_safe", "fitted_params", "fitted_effects", "write_outputs", "EFFECT_FIELDS",
            "BASE_FIELD_EFFECTS"]
 
 #: Library effects folded into base ServoParams fields by :func:`fitted_params`.
@@ -109,9 +109,22 @@ def fitted_supply_v(trace: Trace, params: ServoParams) -> tuple[float, list[str]
     return served, notes
 
 
+def json_safe(value):
+    """``value`` with every non-finite float as None: JSON has no NaN or Infinity (an exact fit's dBIC is infinite, a
+    grid-only effect's half-width NaN), and ``json.dumps`` wrote them as tokens strict parsers refuse."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_safe(v) for v in value]
+    return value
+
+
 def verdict_json(d: Diagnosis) -> dict:
-    """One JSON-able object: named effects with identifiers and values, RMS gap per channel before and after."""
-    return {
+    """One JSON-able object: named effects with identifiers and values, RMS gap per channel before and after
+    (a number no JSON can hold, an infinite dBIC or an unknown half-width, as null)."""
+    return json_safe({
         "named": [{"effect": c.effect, "confidence": c.confidence, "values": c.values,
                    "uncertainty_95": {k: v for k, v in c.uncertainty.items() if k in c.values},
                    "delta_bic": c.delta_bic} for c in d.accepted],
@@ -121,7 +134,7 @@ def verdict_json(d: Diagnosis) -> dict:
         "unexplained": d.unexplained,
         "unexplained_detail": d.unexplained_detail,
         "seconds": d.seconds,
-    }
+    })
 
 
 def verdict_text(d: Diagnosis) -> str:
@@ -220,7 +233,7 @@ def write_outputs(trace: Trace, d: Diagnosis, out: str | Path, source: str = "tr
     files = _plots(trace, d, out)
     (out / "report.md").write_text(_report(trace, d, files, source), encoding="utf-8")
     _PARAM_FILES[d.servo][1](d, out, source, params, trace)
-    (out / "verdict.json").write_text(json.dumps(verdict_json(d), indent=2), encoding="utf-8")
+    (out / "verdict.json").write_text(json.dumps(verdict_json(d), indent=2, allow_nan=False), encoding="utf-8")
 
 
 def _write_servo_params(d: Diagnosis, out: Path, source: str, params: ServoParams, trace: Trace) -> None:

@@ -191,7 +191,7 @@ def diagnose(trace: Trace, params: ServoParams | XPhysicsParams | None = None,
         sel.chosen = {k: dict(v) for k, v in win.refitted.items()}
         sel.base = win.base
         for c in accepted[:-1]:
-            c.values = dict(sel.chosen[c.effect])
+            _refitted(c, sel.chosen[c.effect], win, sel.library[c.effect])
         remaining.remove(win.effect)
         sel.fit_nuisance()
         z = sel.residual()
@@ -212,3 +212,14 @@ def diagnose(trace: Trace, params: ServoParams | XPhysicsParams | None = None,
         servo=trace.servo, start=sel.params,
         recording=sel.nuisance.describe(ev.schedule.step_s, ev.schedule.nominal_onsets()),
     )
+
+
+def _refitted(c: Candidate, values: dict[str, float], win: Candidate, effect) -> None:
+    """An effect accepted earlier, re-fitted with a later one: its values, half-widths and null test from that joint
+    fit (the first round's interval beside the later value described another fit: an interval that held the null
+    was shown "null excluded"); NaN where the joint fit gives no half-width (a grid-only winner)."""
+    c.values = dict(values)
+    c.uncertainty = {k: float(win.uncertainty.get(k, float("nan"))) for k in c.values}
+    widths = [c.uncertainty.get(t, float("nan")) for t in effect.tested]
+    if all(np.isfinite(widths)):
+        c.null_excluded = any(abs(c.values[t] - effect.param(t).null) > w for t, w in zip(effect.tested, widths))

@@ -185,6 +185,8 @@ def judge(effect: Effect, fit: Fit, current: Score) -> Candidate:
 def rejections(c: Candidate, current_held: float) -> list[str]:
     """Why ``c`` fails the acceptance rule (empty: it passes); ``current_held`` is the current model's held-out cost."""
     out = []
+    if c.cost_train == 0.0:  # through every reading (a few rows): no spread to judge it by, its dBIC infinite
+        out.append("fits every reading exactly: too few readings to judge it by")
     if not c.share >= MIN_SHARE:
         out.append(f"removes only {100 * c.share:.1f} % of the cost (< {100 * MIN_SHARE:g} %)")
     if not c.delta_bic > BIC_MARGIN:

@@ -53,3 +53,22 @@ def test_an_out_that_is_a_file_is_refused_before_any_work(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err == f"error: --out {tmp_path / 'out'}: exists and is not a folder\n", err
     assert Path(tmp_path / "out").read_text(encoding="utf-8") == "not a folder"
+
+
+def test_an_x_series_effect_is_taken_as_help_offers_it(tmp_path):
+    """--help lists load_friction for X-series traces; --effects refused it against the AX library."""
+    from firmware_model.diagnose.cli import parse_args
+
+    assert parse_args(["t.csv", "--out", str(tmp_path), "--effects", "load_friction"]).effects == "load_friction"
+
+
+def test_the_verdict_json_holds_no_number_json_cannot():
+    """An exact fit's dBIC is infinite and a grid effect's half-width NaN: json.dumps wrote Infinity and NaN, which
+    strict parsers (Python's with parse_constant refusing, JavaScript's JSON.parse) reject."""
+    import json
+
+    from firmware_model.diagnose.output import json_safe
+
+    doc = json_safe({"named": [{"delta_bic": float("inf"), "uncertainty_95": {"x": float("nan")}, "values": {"x": 1.0}}]})
+    assert json.loads(json.dumps(doc, allow_nan=False)) == {
+        "named": [{"delta_bic": None, "uncertainty_95": {"x": None}, "values": {"x": 1.0}}]}

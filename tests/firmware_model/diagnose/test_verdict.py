@@ -49,6 +49,7 @@ def test_a_candidate_passing_every_test_has_no_reasons():
     ({"cost_held": 100.0}, 100.0, "held-out"),  # equal is not a fall
     ({"cost_held": 60.0}, 59.0, "held-out"),
     ({"null_excluded": False}, 100.0, "includes the null"),
+    ({"cost_train": 0.0}, 100.0, "fits every reading exactly"),  # three rows: dBIC infinite, no spread at all
 ])
 def test_each_failed_test_is_one_reason(changes, current_held, word):
     reasons = rejections(_candidate(**changes), current_held)
@@ -221,3 +222,17 @@ def test_a_large_white_residual_on_another_channel_is_unexplained_by_its_size():
 ])
 def test_a_named_effect_is_tentative_only_if_it_explained_little_and_a_residual_remains(share, unexplained, expected):
     assert confidence(share, unexplained) == expected
+
+
+def test_an_effect_refitted_with_a_later_one_shows_that_fits_interval_and_null_test():
+    """Accepted first at 0.0146, re-fitted with a later effect to 0.0053: the report showed 0.0053 with the first
+    fit's interval and "null excluded", where the joint fit's interval held the null."""
+    from firmware_model.diagnose.search import _refitted
+
+    coulomb = LIBRARY["coulomb_friction"]
+    (tested,) = coulomb.tested
+    first = _candidate(effect="coulomb_friction", values={tested: 0.0146}, uncertainty={tested: 0.004})
+    later = _candidate(effect="stribeck_friction", uncertainty={tested: 0.0097})
+    _refitted(first, {tested: 0.0053}, later, coulomb)
+    assert first.values == {tested: 0.0053} and first.uncertainty == {tested: 0.0097}
+    assert first.null_excluded is False
