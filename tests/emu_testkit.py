@@ -219,3 +219,18 @@ class PipeTransport(Transport):
     def close(self) -> None:
         os.close(self.read_fd)
         os.close(self.write_fd)
+
+
+def http_json(url: str, body: bytes = b"", headers: dict[str, str] | None = None, method: str = "POST") -> tuple[int, dict]:
+    """A request to the live view and its JSON answer, error statuses included: (status, answer)."""
+    import json
+    import urllib.error
+    import urllib.request
+
+    request = urllib.request.Request(url, data=body if method == "POST" else None, method=method, headers=headers or {})
+    try:
+        with urllib.request.urlopen(request, timeout=5) as answer:
+            return answer.status, json.loads(answer.read())
+    except urllib.error.HTTPError as error:
+        with error:
+            return error.code, json.loads(error.read())

@@ -20,7 +20,7 @@ import pytest
 aiohttp = pytest.importorskip("aiohttp")
 
 from dynamixel_sdk import COMM_SUCCESS  # noqa: E402
-from emu_testkit import sdk_port  # noqa: E402
+from emu_testkit import http_json, sdk_port  # noqa: E402
 
 from ax12emu import VirtualBus  # noqa: E402
 from ax12emu.live import Sampler  # noqa: E402
@@ -290,14 +290,6 @@ def test_requests_past_the_rate_wait_their_turn_or_get_503(bus, monkeypatch):
 
 
 # -- other web pages in the user's browser -------------------------------------------------------
-def _send(url: str, body: bytes, headers: dict[str, str], method: str = "POST") -> tuple[int, dict]:
-    request = urllib.request.Request(url, data=body if method == "POST" else None, method=method, headers=headers)
-    try:
-        with urllib.request.urlopen(request, timeout=5) as answer:
-            return answer.status, json.loads(answer.read())
-    except urllib.error.HTTPError as error:
-        with error:
-            return error.code, json.loads(error.read())
 
 
 def _faults_of_slot_1(bus) -> list[str]:
@@ -311,18 +303,18 @@ def test_a_control_from_another_origins_page_is_refused_and_logged_in_one_line(b
     url, own = bus.web_url + "api/control", bus.web_url.rstrip("/")
     vanish = b'{"action": "vanish", "slot": 1}'
     with caplog.at_level(logging.INFO, logger="ax12emu.live.web"):
-        status, body = _send(url, vanish, {"Content-Type": "text/plain;charset=UTF-8", "Origin": "http://evil.example"})
+        status, body = http_json(url, vanish, {"Content-Type": "text/plain;charset=UTF-8", "Origin": "http://evil.example"})
         assert status == 403 and "evil.example" in body["error"], body
-        assert _send(url, vanish, {"Content-Type": "application/json", "Origin": "http://evil.example"})[0] == 403
-        assert _send(url, vanish, {"Content-Type": "application/json", "Origin": "null"})[0] == 403  # a sandboxed page
-        assert _send(url, vanish, {"Content-Type": "application/json", "Origin": own.replace("http:", "https:")})[0] == 403
-        status, body = _send(url, vanish, {"Content-Type": "text/plain"})  # no Origin (a form, a script): not JSON
+        assert http_json(url, vanish, {"Content-Type": "application/json", "Origin": "http://evil.example"})[0] == 403
+        assert http_json(url, vanish, {"Content-Type": "application/json", "Origin": "null"})[0] == 403  # a sandboxed page
+        assert http_json(url, vanish, {"Content-Type": "application/json", "Origin": own.replace("http:", "https:")})[0] == 403
+        status, body = http_json(url, vanish, {"Content-Type": "text/plain"})  # no Origin (a form, a script): not JSON
         assert status == 415 and "application/json" in body["error"], body
         assert _faults_of_slot_1(bus) == []
     refusals = [r for r in caplog.records if r.name == "ax12emu.live.web"]
     assert len(refusals) == 5 and all(r.levelno == logging.INFO and r.exc_info is None and "\n" not in r.getMessage()
                                       for r in refusals), [(r.levelname, r.getMessage()) for r in refusals]
-    assert _send(url, vanish, {"Content-Type": "application/json", "Origin": own})[0] == 200  # the page's own
+    assert http_json(url, vanish, {"Content-Type": "application/json", "Origin": own})[0] == 200  # the page's own
     assert _faults_of_slot_1(bus) == ["vanished"]
 
 
@@ -345,14 +337,14 @@ def test_a_request_addressed_to_another_host_is_refused(bus):
     browser sends its own name as Host: only this server's names (with its port) are answered."""
     host, port = host_port(bus.web_url)
     servos = bus.web_url + "api/servos"
-    status, body = _send(servos, b"", {"Host": f"attacker.example:{port}"}, method="GET")
+    status, body = http_json(servos, b"", {"Host": f"attacker.example:{port}"}, method="GET")
     assert status == 403 and "attacker.example" in body["error"], body
-    assert _send(servos, b"", {"Host": f"{host}:{port + 1}"}, method="GET")[0] == 403  # another port: another origin
+    assert http_json(servos, b"", {"Host": f"{host}:{port + 1}"}, method="GET")[0] == 403  # another port: another origin
     for name in (f"{host}:{port}", f"localhost:{port}", f"LOCALHOST:{port}", f"[::1]:{port}"):
-        assert _send(servos, b"", {"Host": name}, method="GET")[0] == 200, name
+        assert http_json(servos, b"", {"Host": name}, method="GET")[0] == 200, name
     vanish = b'{"action": "vanish", "slot": 1}'
     rebound = {"Host": f"attacker.example:{port}", "Origin": f"http://attacker.example:{port}", "Content-Type": "application/json"}
-    assert _send(bus.web_url + "api/control", vanish, rebound)[0] == 403
+    assert http_json(bus.web_url + "api/control", vanish, rebound)[0] == 403
     assert _faults_of_slot_1(bus) == []
 
 

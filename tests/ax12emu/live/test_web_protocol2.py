@@ -17,7 +17,7 @@ import pytest
 aiohttp = pytest.importorskip("aiohttp")
 
 from dynamixel_sdk import COMM_SUCCESS, PacketHandler  # noqa: E402
-from emu_testkit import UrlPortHandler  # noqa: E402
+from emu_testkit import UrlPortHandler, http_json  # noqa: E402
 
 from ax12emu import VirtualBus  # noqa: E402
 from ax12emu.live import ByteTap, LiveView, ServedControls  # noqa: E402
@@ -30,13 +30,7 @@ BAUD = 1_000_000
 
 def post(url: str, body: bytes | dict) -> tuple[int, dict]:
     data = body if isinstance(body, bytes) else json.dumps(body).encode()
-    request = urllib.request.Request(url, data=data, method="POST", headers={"Content-Type": "application/json"})
-    try:
-        with urllib.request.urlopen(request, timeout=5) as answer:
-            return answer.status, json.loads(answer.read())
-    except urllib.error.HTTPError as error:
-        with error:
-            return error.code, json.loads(error.read())
+    return http_json(url, data, {"Content-Type": "application/json"})
 
 
 def get(url: str) -> tuple[int, dict]:
