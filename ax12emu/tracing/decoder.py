@@ -153,23 +153,15 @@ class _BothStream:
         del self.recent[: -self._KEEP]
         out: list[tuple[AnyPacket, bytes]] = []
         lost = 0
-        fed: set[int] = set()
         for framer, other, length in ((self.framer2, self.framer1, _wire2), (self.framer1, self.framer2, _wire1)):
-            if id(framer) in fed:
-                continue
-            fed.add(id(framer))
             for packet in framer.feed(byte, t):
                 size = length(packet)
-                if other.buffered < size:  # the other's partial frame began inside this packet: its bytes were this one's
-                    lost += max(self.unclaimed - size, 0)
-                    other.reset()
-                    fed.add(id(other))
-                else:  # it began before: this packet lies inside it (a 2.0 Write's data holding a whole 1.0 packet),
-                    # the servos of both protocols hear theirs, so the other framer takes this byte too, and the
-                    # bytes before this packet are the other's, not noise
-                    lost += max(self.unclaimed - other.buffered - 1, 0)
+                lost += max(self.unclaimed - size, 0)
                 self.unclaimed = 0
+                other.reset()
                 out.append((packet, bytes(self.recent[-size:])))
+            if out:
+                break  # the other framer was reset: the byte was this packet's
         return out, lost
 
 

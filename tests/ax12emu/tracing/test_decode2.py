@@ -149,14 +149,3 @@ def test_cli_decode_of_a_2_0_trace_and_a_raw_capture(tmp_path):
     result = subprocess.run([*run, str(path)], capture_output=True, text=True, timeout=60)
     assert result.returncode == 2 and "the header's servos must be a text" in result.stderr, result.stderr
     assert "Traceback" not in result.stderr
-
-
-def test_a_2_0_write_whose_data_hold_a_whole_1_0_packet_decodes_as_both():
-    """Both servos of a mixed wire act on such a packet (each frames its own protocol); the 1.0 packet completing
-    first threw the 2.0 framer's partial frame away, so the Write the XL430 executed showed as 10 bytes of noise."""
-    inner = encode_instruction(1, 0x03, bytes((25, 1)))  # 1.0 WRITE LED=1 to the AX-12A
-    outer = encode_instruction2(2, Instruction2.WRITE, bytes((224, 0)) + inner)  # to the XL430's Indirect Data 1
-    decoded = decode([Chunk(0.0, IN, outer)], servos="1:ax-12a,2:xl430-w250")
-    assert [d.kind for d in decoded] == [INSTRUCTION, INSTRUCTION], [d.text for d in decoded]
-    assert decoded[0].text == "WRITE id=1 led=1"
-    assert decoded[1].text.startswith("WRITE id=2 indirect_data_1=")
