@@ -38,7 +38,7 @@ from typing import NamedTuple
 from ax12emu.protocol.control_table import AX12_MODEL, DEFAULT_PROFILE, Layout
 from ax12emu.protocol.describe import describe_instruction, describe_status
 from ax12emu.protocol.describe2 import describe_instruction2, describe_status2
-from ax12emu.protocol.framing import Framer
+from ax12emu.protocol.framing import DEFAULT_SILENCE_TIMEOUT_S, Framer
 from ax12emu.protocol.framing2 import DEFAULT_MAX_LENGTH, Framer2
 from ax12emu.protocol.packets import BROADCAST_ID, Instruction, InstructionPacket, parse_bulk_read
 from ax12emu.protocol.packets2 import HEADER2, Instruction2, InstructionPacket2, StatusPacket2
@@ -175,6 +175,11 @@ def _asked_of(request, servo_id: int):
     return request if request is not None and request.id in (servo_id, BROADCAST_ID) else None
 
 
+#: How long after a Bulk Read (or its last answer) the next listed servo's answer may come: its Return Delay Time
+#: (at most 508 us) and the wire time of a status, well inside a servo's own partial-packet timeout.
+BULK_ANSWER_WINDOW_S = DEFAULT_SILENCE_TIMEOUT_S
+
+
 class _Conversation:
     """The last instruction: it names a READ's data and says who may answer."""
 
@@ -182,12 +187,14 @@ class _Conversation:
         self.request: InstructionPacket | None = None
         self.t: float | None = None
         self.answered = False
-        #: A Bulk Read's listed IDs yet to answer, each with its block's length: they answer in turn.
-        self.bulk_pending: dict[int, int] = {}
+        #: A Bulk Read's listed IDs yet to answer, each with its block's length, in list order (they answer in turn),
+        #: and when the Bulk Read or the last of its answers was seen.
+        self.bulk_pending: list[tuple[int, int]] = []
+        self.bulk_t: float | None = None
         self.request2: InstructionPacket2 | None = None
         self.t2: float | None = None
 
-    def classify(self, packet: InstructionPacket, direction: str | None) -> str:
+    def classify(self, packet: InstructionPacket, direction: str | None, t: float | None = None) -> str:
         last = self.request
         if direction == IN:
             return INSTRUCTION
@@ -202,8 +209,10 @@ class _Conversation:
         if last is not None and (broadcast_ping or (packet.id == last.id and not self.answered)):
             return STATUS
         # After a Bulk Read each listed servo answers with its block's data (its error byte can equal an
-        # instruction code: Input Voltage is PING's).
-        if self.bulk_pending.get(packet.id) == len(packet.params):
+        # instruction code: Input Voltage is PING's), in list order, each right after the one before it: a packet
+        # later than that is the host's (a retry READ to the ID whose answer was lost has the block's length).
+        if self.bulk_pending and (packet.id, len(packet.params)) == self.bulk_pending[0] and (
+                t is None or self.bulk_t is None or t - self.bulk_t <= BULK_ANSWER_WINDOW_S):
             return STATUS
         if packet.instruction not in _INSTRUCTIONS and packet.instruction < 0x80:
             return STATUS
@@ -230,11 +239,13 @@ class _Conversation:
 
     def describe(self, packet: InstructionPacket, chunk: Chunk, profile: str, tables: Mapping[int, Layout]) -> Decoded:
         """A Protocol 1.0 packet, its registers named by its ID's table in ``tables``, else ``profile``'s."""
-        kind = self.classify(packet, chunk.direction)
+        kind = self.classify(packet, chunk.direction, chunk.t)
         if kind == STATUS:
             latency = None if chunk.t is None or self.t is None else chunk.t - self.t
             self.answered = True
-            self.bulk_pending.pop(packet.id, None)
+            if self.bulk_pending and self.bulk_pending[0][0] == packet.id:
+                del self.bulk_pending[0]
+                self.bulk_t = chunk.t
             text = describe_status(packet.id, packet.instruction, packet.params, _asked_of(self.request, packet.id),
                                    tables.get(packet.id, profile), packet.checksum_ok)
             return Decoded(chunk.t, STATUS, packet, text, latency)
@@ -242,7 +253,7 @@ class _Conversation:
             return Decoded(chunk.t, ECHO, packet, "echo of " + describe_instruction(packet, profile, tables))
         self.request, self.t, self.answered = packet, chunk.t, False
         blocks = parse_bulk_read(bytes(packet.params)) if packet.instruction == Instruction.BULK_READ else None
-        self.bulk_pending = {b.servo_id: b.length for b in blocks or ()}
+        self.bulk_pending, self.bulk_t = [(b.servo_id, b.length) for b in blocks or ()], chunk.t
         return Decoded(chunk.t, INSTRUCTION, packet, describe_instruction(packet, profile, tables))
 
 

@@ -108,3 +108,15 @@ def test_a_bulk_read_reply_with_an_alarm_is_still_a_reply_on_a_raw_capture():
     assert [d.kind for d in decoded] == [INSTRUCTION, STATUS, STATUS, INSTRUCTION]
     assert decoded[1].text == "STATUS id=1 INPUT_VOLTAGE present_position=512"
     assert decoded[2].text == "STATUS id=2 INPUT_VOLTAGE present_position=513"
+
+
+def test_a_retry_read_after_a_lost_bulk_read_answer_is_the_hosts():
+    """On a raw capture the host's READ to the ID whose answer was lost, 50 ms later, has the block's length: it was
+    taken for that servo's answer, and the READ vanished from the decode."""
+    bulk = encode_instruction(0xFE, Instruction.BULK_READ, bytes([0x00, 2, 1, PRESENT_POSITION, 2, 2, PRESENT_POSITION]))
+    retry = encode_instruction(2, Instruction.READ, bytes([PRESENT_POSITION, 2]))
+    chunks = [Chunk(0.0, None, bulk), Chunk(0.001, None, encode_status(1, 0, bytes([0, 2]))),
+              Chunk(0.050, None, retry), Chunk(0.051, None, encode_status(2, 0, bytes([16, 2])))]
+    decoded = decode(chunks, servos="1-2:mx-28")
+    assert [d.kind for d in decoded] == [INSTRUCTION, STATUS, INSTRUCTION, STATUS]
+    assert decoded[2].text == "READ id=2 address=36 length=2 (present_position)"
