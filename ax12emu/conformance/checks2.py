@@ -160,6 +160,7 @@ class Context2(Transactions):
     encode_packet = staticmethod(encode_instruction2)
     instructions = Instruction2
     check_ok = ("crc_ok", "CRC")
+    ping_exchange_bytes = 24  # a Ping (10) and its status (14)
 
     link: Link2
     ids: list[int]

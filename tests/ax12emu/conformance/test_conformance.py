@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+import types
 
 import pytest
 from emu_testkit import CONFORMANCE_TIMEOUT_S, EMULATOR_SILENCE_S
@@ -239,8 +240,11 @@ class _LaggyLink:
     """A servo's registers behind a link whose round trips are ``base_s`` whatever Return Delay Time says (an FTDI
     adapter's latency timer holding every short reply back), or that add it (``shows_delay``)."""
 
-    def __init__(self, base_s: float, shows_delay: bool) -> None:
+    ping_exchange_bytes = 24  # Protocol 2.0's
+
+    def __init__(self, base_s: float, shows_delay: bool, baud: int = 1_000_000) -> None:
         self.base_s, self.shows_delay, self.rdt = base_s, shows_delay, 250
+        self.link = types.SimpleNamespace(baud=baud)
 
     def get(self, servo, name):
         return self.rdt
@@ -254,15 +258,16 @@ class _LaggyLink:
         return [self.base_s + (self.rdt * 2e-6 if self.shows_delay else 0.0)] * count
 
 
-@pytest.mark.parametrize(("base_s", "shows_delay", "outcome"), [
-    (0.016, False, "note"),   # behind a 16 ms latency timer: the adapter decides, not the servo
-    (0.0002, False, "fail"),  # a quick link and no delay seen: the servo ignores Return Delay Time
-    (0.016, True, "pass"),
+@pytest.mark.parametrize(("base_s", "shows_delay", "baud", "outcome"), [
+    (0.016, False, 1_000_000, "note"),   # behind a 16 ms latency timer: the adapter decides, not the servo
+    (0.0002, False, 1_000_000, "fail"),  # a quick link and no delay seen: the servo ignores Return Delay Time
+    (0.016, True, 1_000_000, "pass"),
+    (0.0042, False, 57_600, "fail"),     # 4.2 ms is a 2.0 Ping's and its status's time on the wire at 57,600 bps
 ])
-def test_return_delay_is_not_failed_on_a_link_too_coarse_to_see_it(base_s, shows_delay, outcome):
+def test_return_delay_is_not_failed_on_a_link_too_coarse_to_see_it(base_s, shows_delay, baud, outcome):
     from ax12emu.conformance.checks import Failed, Note, return_delay_figure
 
-    link = _LaggyLink(base_s, shows_delay)
+    link = _LaggyLink(base_s, shows_delay, baud)
     try:
         seen = "note" if isinstance(return_delay_figure(link, 1), Note) else "pass"
     except Failed:
