@@ -12,6 +12,7 @@ lives in the bus layer so the command line and the harness above both import it.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Sequence
 
 from ax12emu.protocol.control_table import AX12_MODEL, PROTOCOL1_MODELS
@@ -32,6 +33,8 @@ from .mixed import MixedBus, model_name, model_of
 from .state_store import StateStore
 
 __all__ = ["build_bus2", "build_wire", "build_wire_of", "protocol1_keys", "servo_family", "servo_list", "servo_models"]
+
+log = logging.getLogger(__name__)
 
 
 def protocol1_keys() -> tuple[str, ...]:
@@ -116,7 +119,10 @@ def build_wire_of(models: Sequence[tuple[int, str]], *, clock: WallClock | Virtu
         # A servo whose EEPROM the state directory kept starts at the Baud Rate it kept, as a real one does after a
         # client changed it (``baud_bps`` overwrote it at every start, and the file with it).
         def kept(store: StateStore | None, slot: int) -> bool:
-            return load_state and store is not None and store.path_for(slot).exists()
+            if not (load_state and store is not None and store.path_for(slot).exists()):
+                return False
+            log.info("ID %d starts at the Baud Rate its state file %s keeps, not at --baud", slot, store.path_for(slot))
+            return True
 
         for slot, servo in zip(bus1.slots, bus1.servos) if bus1 is not None else ():
             if not kept(state_store1, slot):
