@@ -116,5 +116,6 @@ def build_plant1x(spec: ServoModel, table: Table2, choice=None) -> Plant1X:
 
     firmware = build_x_firmware(spec, choice if choice is not None else XModelChoice())
     firmware.shutdown_cuts_output = True  # Protocol 1.0's Alarm Shutdown (module docstring)
+    firmware.overload_by_current = False  # Protocol 1.0's Overload: the output at its limit, the load winning
     firmware.single_turn_position = True  # joint mode works within one turn (multi-turn mode is Extended Position)
     return Plant1X(firmware, table, ClassicMap.from_model(spec, step_s=firmware.step_s))

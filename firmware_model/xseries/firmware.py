@@ -181,8 +181,15 @@ class XFirmware:
         position_output_scale: float = 1.0,
         shutdown_cuts_output: bool = False,
         single_turn_position: bool = False,
+        overload_by_current: bool = True,
     ) -> None:
         self.physics = physics
+        #: How Overload is judged: True, the X series' (the winding current accounted over time in every mode,
+        #: :data:`OVERLOAD_CURRENT_SHARE`); False, Protocol 1.0's ("When the current load cannot be controlled by
+        #: the set Torque", e-manual, Protocol 1.0, Status Packet: the output held at its limit while a load, not
+        #: speed, keeps it there): the MX series on Protocol 1.0, for which the current-time evidence (X-series
+        #: servos) says nothing, and which holds a third of its stall torque for minutes.
+        self.overload_by_current = overload_by_current
         #: Position Control Mode on a single-turn count (the MX series' joint mode on Protocol 1.0: Goal and Present
         #: Position 0..4095, "Multi-turn mode allows joint mode control over multiple rotations", which joint mode
         #: therefore does not): a shaft pushed across 0/4095 with the torque on is counted within the turn again,
@@ -522,7 +529,7 @@ class XFirmware:
             physics.step(0.0, step_s, driven=False)
             self._traj_pulses = self._counted_pulses()
             self._traj_velocity_pulses_s = 0.0
-        self._protect(step_s)
+        self._protect(saturated, step_s)
         # A held servo at rest repeats its step exactly: same angle and speed (a creep too slow to move
         # the angle's last bit counts as rest), duty, integrators and trajectory, no profile left to
         # run, nothing saturated, an empty overload account (a current above its threshold, or one
@@ -601,7 +608,7 @@ class XFirmware:
 
     # ------------------------------------------------------------------ protection
 
-    def _protect(self, dt_s: float) -> None:
+    def _protect(self, saturated: bool, dt_s: float) -> None:
         physics = self.physics
         current_a = physics.current_a
         thermal = self.thermal
@@ -612,6 +619,20 @@ class XFirmware:
         detected = 0
         if self._held_readings.get("present_temperature", self.temperature_c) > self._cmd.temperature_limit:
             detected |= HW_ERROR_OVERHEATING
+        if not self.overload_by_current:
+            # Protocol 1.0's Overload: the output held at its limit while the motor draws at least half of what
+            # that duty would draw at stall, i.e. a load, not speed, keeps it at the limit.
+            at_duty_a = abs(self._duty) * physics.supply_v / self.resistance_ohm
+            if saturated and at_duty_a > 0.0 and abs(current_a) >= 0.5 * at_duty_a:
+                self._overload_elapsed_s += dt_s
+                if self._overload_elapsed_s >= self.overload_time_s:
+                    detected |= HW_ERROR_OVERLOAD
+            else:
+                self._overload_elapsed_s = 0.0
+            if detected:
+                self._latch(detected)
+            self._check_readings()
+            return
         # Overload: the current accounted over time, in every mode alike (OVERLOAD_CURRENT_SHARE).
         stall_a = physics.supply_v / self.resistance_ohm
         if stall_a > 0.0 or self._overload_elapsed_s:

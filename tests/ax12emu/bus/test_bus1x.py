@@ -257,6 +257,19 @@ def test_overload_shuts_down_through_torque_limit_and_a_new_torque_limit_restart
     assert read2(bus, 1, PRESENT_POSITION) > 2300  # moving to the goal again
 
 
+def test_an_mx_holding_a_third_of_its_stall_torque_is_not_overloaded():
+    """Protocol 1.0's Overload is "the current load cannot be controlled by the set Torque": a load the output holds
+    at under a third of full duty is not one.  The X series' current-over-time rule, applied here too, cut an MX-64
+    holding 0.3 of its stall torque after 23 s."""
+    bus = mx_bus(["mx-64"])
+    write(bus, 1, TORQUE_ENABLE, 1)
+    run_s(bus, 0.2)
+    bus.servo(1).plant.firmware.set_external_torque(0.3 * model("mx-64").physical.rating_at(12.0).stall_torque_nm)
+    run_s(bus, 60.0, every_s=0.5)
+    reply = bus.receive(encode_instruction(1, Instruction.READ, bytes([TORQUE_LIMIT, 2])))[0].data
+    assert reply[4] & StatusError.OVERLOAD == 0 and reply[5:7] != b"\x00\x00"
+
+
 def test_an_ax12a_and_mx_servos_share_one_wire():
     clock = VirtualClock()
     ax = Bus([1], clock=clock)
