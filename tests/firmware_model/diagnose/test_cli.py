@@ -72,3 +72,14 @@ def test_the_verdict_json_holds_no_number_json_cannot():
     doc = json_safe({"named": [{"delta_bic": float("inf"), "uncertainty_95": {"x": float("nan")}, "values": {"x": 1.0}}]})
     assert json.loads(json.dumps(doc, allow_nan=False)) == {
         "named": [{"delta_bic": None, "uncertainty_95": {"x": None}, "values": {"x": 1.0}}]}
+
+
+def test_a_trace_of_more_rows_than_the_workflow_holds_is_refused_before_any_work():
+    """The span's limit alone let a 300 s log at 1 kHz ask for about 8.5 GB."""
+    import numpy as np
+
+    from firmware_model.diagnose.cli import MAX_ROWS, check_span
+
+    with pytest.raises(ValueError, match=r"rows, more than the 100,000 the workflow holds in memory; keep one row in 2"):
+        check_span(np.arange(MAX_ROWS + 1) * 1e-3, "log.csv")
+    check_span(np.arange(MAX_ROWS) * 1e-3, "log.csv")
