@@ -574,7 +574,7 @@ class Oracle2:
     # -- one packet on the bus ------------------------------------------------------------
     def packet(self, packet: InstructionPacket2, rows: list[bytes], line_bps: float | None
                ) -> tuple[list[Expected] | tuple, list[bytes], dict[int, str]]:
-        """Replies (a list; for a fast read ``("fast", expected frame, bytes sent, servos, its CRC whole)``), tables
+        """Replies (a list; for a fast read ``("fast", expected frame, bytes sent, servos, its CRC whole, their IDs)``), tables
         after, boot slots."""
         after = list(rows)
         boots: dict[int, str] = {}
@@ -693,7 +693,7 @@ class Oracle2:
             if index < len(shares):
                 sent = len(whole)
         # The packet's CRC is the last share's running CRC, unless servos sharing its ID AND-ed theirs.
-        return ("fast", bytes(whole), sent, [k for k, *_ in shares], not twins[-1])
+        return ("fast", bytes(whole), sent, [k for k, *_ in shares], not twins[-1], [servo_id for _, servo_id, *_ in shares])
 
 
 # -- one case ---------------------------------------------------------------------------
@@ -820,11 +820,13 @@ def _check_record(oracle: Oracle2, record: tuple, stream: bytes, where: str) -> 
     what = f"{where}, packet id={packet.id} inst={packet.instruction:#04x} params={bytes(packet.params).hex()}" \
            f"{'' if packet.crc_ok else ' (bad CRC)'}"
     if isinstance(expected, tuple):
-        _, whole, sent, order, crc_whole = expected
+        _, whole, sent, order, crc_whole, share_ids = expected
         joined = b"".join(r.data for r in replies)
-        # One status packet in shares, each named by the servo that sends it, all but the first continuing the first.
+        # One status packet in shares, each named by the servo that sends it (a fault on some IDs reaches the
+        # packet they share in), all but the first continuing the first.
         one_packet = [r.continues for r in replies] == [False] + [True] * (len(replies) - 1)
-        if joined != whole[:sent] or not one_packet or len(replies) != len(order):
+        named = [r.servo_id for r in replies] == share_ids
+        if joined != whole[:sent] or not one_packet or not named or len(replies) != len(order):
             raise FuzzFailure(f"{what}: fast read reply {[r.data.hex() for r in replies]}, expected {whole[:sent].hex()}")
         if sent == len(whole) and crc_whole:
             if crc(joined[:-2]) != joined[-2] | joined[-1] << 8:
