@@ -490,8 +490,10 @@ class Faults2(Faults):
       off, and only REBOOT clears it: an event, not a lasting condition as on the AX-12.
       :meth:`clear_alarm` reboots the servo as the REBOOT instruction does.
     * ``stall``: the shaft is held still while the firmware keeps driving, so Present Velocity
-      reads 0, the current rises to the stall current and the overload protection trips after
-      the firmware's own overload time (Overload, torque off, if Shutdown selects it).
+      reads 0, the current rises as far as the drive's limits let it and the overload protection
+      trips once its current account fills (1 s at the full stall current, never under a quarter
+      of it: ``firmware_model.xseries.firmware.OVERLOAD_CURRENT_SHARE``; Overload, torque off, if
+      Shutdown selects it).
     * ``hold``: a sensed register pinned as a stuck sensor would pin it; a pinned Present
       Temperature or Present Input Voltage outside its limits raises the error as a real reading does.
     * ``duplicate``: as on the AX-12 bus, both servos act on every packet to the ID and answer at
@@ -540,7 +542,7 @@ class Faults2(Faults):
             self._servo2(slot).reboot()
 
     def stall(self, slot: int, *, overload_after_s: float | None = None) -> None:
-        """Block the shaft where it is; the overload follows after the firmware's own overload time."""
+        """Block the shaft where it is; the overload follows as the firmware's current account fills."""
         if overload_after_s is not None:
             raise ValueError("stall: an X-series servo trips on overload after its firmware's overload time "
                              "(XFirmware.overload_time_s), not a time given here")

@@ -102,8 +102,8 @@ PULSES_PER_REV = 4096
 PULSE_RAD = 2.0 * math.pi / PULSES_PER_REV
 #: Moving Status reports In-Position once the profile ended and Present Position is less than this from the goal
 #: (ours: the e-manual's "predefined value" is not given).  Why 20 (1.8 deg): a factory-default servo on a free
-#: shaft must get it, as a real one does, and a proportional-only loop (every X model's factory Position I Gain is
-#: 0) stops wherever its output no longer beats the servo's own friction: at the factory gains that dead band is
+#: shaft must get it, as a real one does, and a proportional-only loop (every X model's factory Position I Gain but
+#: the XL330-M077's 400 is 0) stops wherever its output no longer beats the servo's own friction: at the factory gains that dead band is
 #: up to 12 pulses on the XL330s at 5 V (16.5 at their lowest 3.7 V; 2 to 6 on the XC330, XL430 and XM430), so the
 #: former 10 left most XL330 moves without it.  20 is also the window `ax12emu conformance` holds real servos to.
 IN_POSITION_PULSES = 20
