@@ -198,9 +198,10 @@ class Bus1X(DecodedBus):
             replies = [*replies, *self._bulk_read(packet, line_bps)]
             return faults.on_replies(replies) if faults is not None and replies else replies
         for servo in targets:
+            baud = servo.baud_bps  # the rate the reply goes out at: a Baud Rate write takes effect after it
             outcome = handle1x(servo, packet)
             if outcome.reply is not None:
-                replies.append(Reply(outcome.reply_id, outcome.reply, outcome.delay_s, servo.baud_bps))
+                replies.append(Reply(outcome.reply_id, outcome.reply, outcome.delay_s, baud))
         if targets and packet.checksum_ok and packet.instruction not in (Instruction.PING, Instruction.READ):
             self._after_writes()
         if faults is not None and replies:  # the AX-12As' too: the wire's faults are the wire's

@@ -68,8 +68,6 @@ def build_wire(spec: str, ids: list[int] | None = None, *, clock: WallClock | Vi
     when the text names both (:func:`build_wire_of` builds it).  ``choice1`` and ``options1`` shape the AX
     bus's servos (the AX-12As and AX-18As) and are refused where ``spec`` names none."""
     models = servo_models(spec, ids, mixed=True)
-    if {key for _, key in models} == {AX12_MODEL}:
-        raise ValueError(f"{spec!r} names no servo but AX-12As; AX-12As alone are the default bus (leave out servo=)")
     if (choice1 is not None or options1 is not None) and not any(servo_family(key) == "AX" for _, key in models):
         raise ValueError(f"the AX bus's model and options shape AX-12As and AX-18As; {spec!r} names none")
     if options1 is not None and options1.profile != ServoOptions().profile:

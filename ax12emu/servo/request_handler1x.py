@@ -73,13 +73,20 @@ def _read(servo: Servo1X, packet: InstructionPacket) -> tuple[StatusError, bytes
 
 
 def _after_reply(servo: Servo1X, packet: InstructionPacket) -> tuple[StatusError, bytes]:
-    return StatusError.NONE, b""  # RESET and REBOOT: done after the reply is built (handle1x)
+    return StatusError.NONE, b""  # REBOOT: done after the reply is built (handle1x)
+
+
+def _reset(servo: Servo1X, packet: InstructionPacket) -> tuple[StatusError, bytes]:
+    """Factory Reset, carried out after the reply; refused while Lock is 1, as the AX-12A refuses it (Lock: "EEPROM
+    area cannot be modified", released only by a power cycle; the e-manual does not say what a locked servo answers:
+    the Range Error its refused EEPROM writes get)."""
+    return (StatusError.RANGE, b"") if servo.table.get("lock") else (StatusError.NONE, b"")
 
 
 HANDLERS: dict[int, Handler] = {
     Instruction.PING: ping,
     Instruction.READ: _read,
-    Instruction.RESET: _after_reply,
+    Instruction.RESET: _reset,
     Instruction.REBOOT: _after_reply,
     **write_handlers(Servo1X.write, Servo1X.check_write),
 }
@@ -106,7 +113,7 @@ def handle1x(servo: Servo1X, packet: InstructionPacket) -> Outcome1X:
         if error and packet.instruction == Instruction.READ:
             data = data.ljust(silent_read_length(packet), b"\x00")
     reply = encode_status(reply_id, status_byte(servo, error), data) if talks else None
-    if packet.checksum_ok and packet.instruction == Instruction.RESET and packet.id != BROADCAST_ID:
+    if packet.checksum_ok and packet.instruction == Instruction.RESET and packet.id != BROADCAST_ID and not error:
         # "Broadcast ID(0xFE) cannot be used for Reset instruction. Applied Products: MX-12W(V41), MX-28(V40),
         # MX-64(V40), MX-106(V40)" (e-manual, Protocol 1.0, "Factory Reset"): every ID on the wire back to 1 otherwise.
         servo.reset()

@@ -48,9 +48,10 @@ from ax12emu.bus.bus1x import Bus1X
 from ax12emu.bus.bus2 import Bus2
 from ax12emu.bus.clock import VirtualClock, WallClock
 from ax12emu.bus.mixed import MixedBus
+from ax12emu.bus.wire import servo_family
 from ax12emu.faults.config import FAULT_OPTIONS, FaultConfig
 from ax12emu.harness.inprocess import InProcessLink, LinkBusy, LinkClosed, lookup
-from ax12emu.harness.servos2 import build_wire, servo_list
+from ax12emu.harness.servos2 import build_wire, servo_list, servo_models
 from ax12emu.protocol.ids import parse_ids
 from ax12emu.servo.model_factory import ModelChoice, build_model
 from ax12emu.servo.virtual_servo import ServoOptions
@@ -240,8 +241,12 @@ class Serial(SerialBase):
             except ValueError:
                 raise ValueError(f"baud must be a bit rate, got {baud_text!r}") from None
             faults = FaultConfig.from_options({name: texts for name, texts in options.items() if name in FAULT_OPTIONS})
-            options1 = (_ax_options(dict(options), ServoOptions().eeprom_busy_s_per_byte)  # the pause they have without
-                        if {"goal_torque", "eeprom_busy_ms"} & set(options) else None)
+            # The AX servos' EEPROM pause: none in virtual time, where time stands still and a busy servo would never
+            # answer again (as on the AX-12A bus without servo=); else the one they have without the options.
+            busy_s = 0.0 if virtual == "1" else ServoOptions().eeprom_busy_s_per_byte
+            names_ax = any(servo_family(key) == "AX" for _, key in servo_models(spec, ids, mixed=True))
+            given = bool({"goal_torque", "eeprom_busy_ms"} & set(options))  # refused by build_wire where no AX servo is
+            options1 = _ax_options(dict(options), busy_s) if given or (names_ax and virtual == "1") else None
             params_path = options.get("params", [None])[-1]
             bus = build_wire(spec, ids, clock=VirtualClock() if virtual == "1" else WallClock(), baud_bps=baud_bps,
                              choice1=None if params_path is None else ModelChoice(params_path=params_path), options1=options1)

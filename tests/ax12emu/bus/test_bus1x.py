@@ -361,3 +361,11 @@ def test_a_broadcast_factory_reset_is_not_carried_out_and_reboot_restarts_the_se
     assert read2(bus, 1, 24) & 0xFF == 0 and read2(bus, 1, 25) & 0xFF == 0  # Torque Enable, LED: RAM defaults
     assert read2(bus, 1, 14) == 500 and read2(bus, 1, TORQUE_LIMIT) == 500  # EEPROM kept; Torque Limit loads it
     assert abs(read2(bus, 1, GOAL_POSITION) - 3000) <= 50  # the goal where it stood (the limp shaft settles)
+
+
+def test_the_reply_to_a_baud_rate_write_goes_out_at_the_old_rate():
+    """The status is sent before the new rate takes effect; the MX bus stamped it with the new one (paced so)."""
+    bus = mx_bus(["mx-28"])
+    write(bus, 1, 4, 1)  # 1 Mbps
+    (reply,) = bus.receive(encode_instruction(1, Instruction.WRITE, bytes([4, 3])))  # to 500,000 bps
+    assert reply.baud_bps == pytest.approx(1_000_000)

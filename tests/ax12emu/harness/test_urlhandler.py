@@ -195,3 +195,15 @@ def test_a_held_break_is_heard_as_nothing():
         link.break_condition = False
         link.write(PING)
         assert link.read(6) == encode_status(1, 0)
+
+
+@pytest.mark.parametrize("servo", ["1:mx-28,2:ax-12a", "2:ax-18a", "1:xl430-w250,2:ax-12a"])
+def test_an_ax_servo_on_a_servo_url_in_virtual_time_answers_after_an_eeprom_write(servo):
+    """Its 6 ms-a-byte EEPROM pause ran on a clock that stands still (a URL bus has no step()): after any EEPROM write
+    it never answered again, where the AX-12A bus without servo= takes no pause in virtual time."""
+    with serial.serial_for_url(f"ax12emu://?servo={servo}&baud=1000000&virtual_time=1", baudrate=1_000_000,
+                               timeout=0.1) as link:
+        link.write(encode_instruction(2, 0x03, bytes([5, 0])))  # Return Delay Time 0
+        assert link.read(6) == encode_status(2, 0)
+        link.write(encode_instruction(2, 0x01))
+        assert link.read(6) == encode_status(2, 0)

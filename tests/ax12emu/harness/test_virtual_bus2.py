@@ -122,7 +122,6 @@ def test_served_over_tcp_with_options_of_the_2_0_servos():
     "kwargs, message",
     [
         ({"servo": "xl999"}, "unknown servo model 'xl999'"),
-        ({"servo": "ax-12a"}, "names no servo but AX-12As; AX-12As alone are the default bus"),
         ({"servo": "1:xl430-w250", "ids": [1]}, "give one of them"),
         ({"servo": "xl430-w250", "baud_bps": 12345}, "not 12345"),
         ({"servo": "xl430-w250", "model": "kinematic"}, "shape AX-12As and AX-18As; 'xl430-w250' names none"),

@@ -84,3 +84,12 @@ def test_bulk_read_parameters():
 def test_baud_rates_over_250_are_the_mx_pages():
     assert baud_bps_1x(1) == 1_000_000 and baud_bps_1x(34) == 2_000_000 / 35
     assert (baud_bps_1x(250), baud_bps_1x(251), baud_bps_1x(252)) == (2_250_000, 2_500_000, 3_000_000)
+
+
+def test_a_locked_mx_refuses_factory_reset_as_the_ax12a_does():
+    """It answered OK, rewrote its EEPROM and cleared Lock without a power cycle, where the AX-12A answers Range Error."""
+    servo = mx()
+    handle1x(servo, packet(1, Instruction.WRITE, 5, 10))  # Return Delay Time 10
+    handle1x(servo, packet(1, Instruction.WRITE, 47, 1))  # Lock
+    assert handle1x(servo, packet(1, Instruction.RESET)).error == StatusError.RANGE
+    assert (servo.table.get("lock"), servo.table.get("return_delay_time")) == (1, 10)
