@@ -41,7 +41,7 @@ from .bus import Bus, Interceptor
 from .clock import VirtualClock, WallClock
 from .decoded import DecodedBus
 from .lookup import check_ids
-from .reply import BITS_PER_BYTE, Reply
+from .reply import BITS_PER_BYTE, Reply, collide
 from .state_store import StateStore
 
 __all__ = ["Bus1X", "PlantFactory"]
@@ -224,8 +224,20 @@ class Bus1X(DecodedBus):
             error, data = listed_read(servo, request.address, request.length)
             status = encode_status(servo.id, status_byte(servo, error), data)
             at_s += servo.return_delay_s
-            replies.append(Reply(servo.id, status, at_s, servo.baud_bps))
-            at_s += len(status) * BITS_PER_BYTE / servo.baud_bps
+            reply = Reply(servo.id, status, at_s, servo.baud_bps)
+            # Servos sharing the ID (a fault) each heard the one before and answer in its turn, at once: their
+            # answers collide on the wire (only the first answered, clean, and the other's value was never seen).
+            twins = [twin for twin in found[1:] if self._hears(twin, line_bps) and twin.status_return_level >= 1
+                     and (self.faults is None or self.faults.admit(twin))]
+            if twins:
+                answers = [reply]
+                for twin in twins:
+                    twin_error, twin_data = listed_read(twin, request.address, request.length)
+                    answers.append(Reply(twin.id, encode_status(twin.id, status_byte(twin, twin_error), twin_data),
+                                         at_s - servo.return_delay_s + twin.return_delay_s, twin.baud_bps))
+                reply = collide(answers)
+            replies.append(reply)
+            at_s += len(reply.data) * BITS_PER_BYTE / servo.baud_bps
         return replies
 
     # -- life cycle (save_state, __enter__, __exit__: DecodedBus) -----------------------

@@ -369,3 +369,18 @@ def test_the_reply_to_a_baud_rate_write_goes_out_at_the_old_rate():
     write(bus, 1, 4, 1)  # 1 Mbps
     (reply,) = bus.receive(encode_instruction(1, Instruction.WRITE, bytes([4, 3])))  # to 500,000 bps
     assert reply.baud_bps == pytest.approx(1_000_000)
+
+
+def test_two_servos_sharing_an_id_collide_in_a_bulk_read_as_in_a_read():
+    """Both heard the servo before them and answer in the ID's turn at once; only the first answered, clean, so a
+    client read one twin's value with COMM_SUCCESS and never saw the other's."""
+    from ax12emu.faults.injection import faults_for
+
+    bus = mx_bus(["mx-28", "mx-28", "mx-28"])
+    write(bus, 3, 25, 1)  # the twins differ: LED 1 on ID 3, LED 0 on the servo that will answer as 3
+    faults = faults_for(bus)
+    bus.faults = faults
+    faults.duplicate(1, 3)
+    replies = bus.receive(encode_instruction(BROADCAST_ID, Instruction.BULK_READ, bytes([0, 1, 2, 25, 1, 3, 25])))
+    assert [len(r.data) for r in replies] == [7, 7]
+    assert not Framer().feed(replies[1].data)[0].checksum_ok  # the collided answer
