@@ -120,6 +120,8 @@ class Bus(ServosById[VirtualServo]):
         self.request_lag_s = 0.0
         #: Injected faults (an :class:`Interceptor`, normally ``ax12emu.faults.Faults``); None costs one test per packet.
         self.faults: Interceptor | None = None
+        #: Whether ``-v`` logs every packet this bus hears (False inside an MX wire, whose bus logs those to its servos).
+        self.logs_every_packet = True
         #: Replies to repeated READ / PING packets (see :mod:`ax12emu.bus.reply_cache`).
         self.reply_cache = ReplyCache()
         #: The latest ``busy_until_s`` of any servo: until then a packet may meet a servo that
@@ -228,7 +230,7 @@ class Bus(ServosById[VirtualServo]):
             faults.after_physics()
         targets = self.servos if packet.id == BROADCAST_ID else self._by_id.get(packet.id, ())
         debug = log.isEnabledFor(logging.DEBUG)
-        if debug:
+        if debug and (targets or self.logs_every_packet):  # inside an MX wire: its packets are the MX bus's to log
             log.debug("rx %s -> IDs %s", describe_instruction(packet, self.options.profile), [s.id for s in targets])
         replies: list[Reply] = []
         moved = False

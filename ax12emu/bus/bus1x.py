@@ -31,6 +31,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable, Iterable, Iterator
 
+from ax12emu.protocol.describe import describe_instruction
 from ax12emu.protocol.framing import Framer
 from ax12emu.protocol.packets import BROADCAST_ID, MAX_ID, Instruction, InstructionPacket, encode_status, parse_bulk_read
 from ax12emu.protocol.servo_models import ServoModel
@@ -78,6 +79,8 @@ class Bus1X(DecodedBus):
             raise ValueError("the AX-12 bus and the MX servos of one wire must keep one clock")
         self.clock = ax_bus.clock if ax_bus is not None else (clock if clock is not None else WallClock())
         self.ax_bus = ax_bus
+        if ax_bus is not None:
+            ax_bus.logs_every_packet = False
         self.slots_mx = [servo_id for servo_id, _ in slots]
         self.framer = Framer()
         self.servos_mx: list[Servo1X] = [
@@ -189,8 +192,9 @@ class Bus1X(DecodedBus):
         faults = self.faults
         if faults is not None:  # an unplugged servo hears nothing (ax12emu.faults: wire faults)
             targets = [s for s in targets if faults.admit(s)]
-        if log.isEnabledFor(logging.DEBUG):
-            log.debug("rx id=%d inst=%#04x params=%s -> MX IDs %s", packet.id, packet.instruction, bytes(packet.params).hex(" "),
+        if log.isEnabledFor(logging.DEBUG):  # named by each MX's own table (the AX-12's names were wrong for it)
+            tables = {s.id: s.table.layout for s in self.servos_mx}
+            log.debug("rx %s -> MX IDs %s", describe_instruction(packet, next(iter(tables.values())), tables),
                       [s.id for s in targets])
         for servo in targets:
             servo.heard(now_s)

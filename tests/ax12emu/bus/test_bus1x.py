@@ -384,3 +384,13 @@ def test_two_servos_sharing_an_id_collide_in_a_bulk_read_as_in_a_read():
     replies = bus.receive(encode_instruction(BROADCAST_ID, Instruction.BULK_READ, bytes([0, 1, 2, 25, 1, 3, 25])))
     assert [len(r.data) for r in replies] == [7, 7]
     assert not Framer().feed(replies[1].data)[0].checksum_ok  # the collided answer
+
+
+def test_debug_logging_names_an_mx_packet_by_the_mx_table(caplog):
+    """The AX-12 bus inside the wire logged every packet in AX-12A registers: an MX's Multi Turn Offset as [20]=16."""
+    import logging
+
+    bus = mx_bus(["mx-28"])
+    with caplog.at_level(logging.DEBUG, logger="ax12emu.bus"):
+        bus.receive(encode_instruction(1, Instruction.WRITE, bytes([20, 16, 0])))
+    assert "multi_turn_offset=16" in caplog.text and "[20]=16" not in caplog.text
