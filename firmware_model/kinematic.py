@@ -49,7 +49,7 @@ class KinematicModel:
     ) -> None:
         if n < 1:
             raise ValueError(f"need at least one servo, got n={n}")
-        if step_s <= 0:
+        if not 0 < step_s < float("inf"):  # (NaN passed, to fail at the first step)
             raise ValueError(f"step_s must be positive, got {step_s}")
         self.n = n
         self.step_s = step_s

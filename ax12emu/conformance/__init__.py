@@ -22,7 +22,7 @@ from ax12emu.protocol.control_table import DEFAULT_PROFILE
 
 from .checks import CHECKS, Check, Context, Failed, Note, Skipped, table_differences
 from .checks2 import CHECKS2, Context2, table_differences2
-from .link import Link, Link2, open_port
+from .link import Link, Link2, check_waits, open_port
 
 __all__ = ["run", "run_on_link", "Report", "Result", "PASS", "FAIL", "SKIP", "NOTE", "CHECKS", "CHECKS2", "Check",
            "PROTOCOLS"]
@@ -172,8 +172,10 @@ def run(
     """
     if not ids:
         raise ValueError("conformance needs at least one ID")
+    protocol = {1.0: "1.0", 2.0: "2.0"}.get(protocol, protocol) if isinstance(protocol, float) else protocol  # as VirtualBus's
     if protocol not in PROTOCOLS:
         raise ValueError(f"protocol must be one of {', '.join(PROTOCOLS)}, got {protocol!r}")
+    check_waits(timeout_s, silence_s)  # before the port is opened (a refused value left it open)
     link = (Link2 if protocol == "2.0" else Link)(open_port(port, baud), timeout_s=timeout_s, silence_s=silence_s)
     try:
         return run_on_link(link, ids, destructive=destructive, profile=profile, only=only, port_name=port, motion=motion)

@@ -37,11 +37,19 @@ from ax12emu.protocol.framing2 import Framer2
 from ax12emu.protocol.packets import StatusPacket
 from ax12emu.protocol.packets2 import InstructionPacket2, StatusPacket2
 
-__all__ = ["Link", "Link2", "Response", "Response2", "open_port"]
+__all__ = ["Link", "Link2", "Response", "Response2", "check_waits", "open_port"]
 
 #: How long one blocking read may wait before the deadline is checked again.
 _POLL_S = 0.002
 
+
+
+def check_waits(timeout_s: float, silence_s: float | None) -> None:
+    """ValueError unless the reply timeout and the silence window are positive finite seconds: NaN waited for ever,
+    0 or less listened for nothing (an answering ID passed as silent, a good servo failed as not answering)."""
+    for name, value in (("timeout_s", timeout_s), ("silence_s", timeout_s if silence_s is None else silence_s)):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value < float("inf"):
+            raise ValueError(f"{name} must be a positive finite number of seconds, got {value!r}")
 
 class Response(NamedTuple):
     """A status packet (None: silence until the timeout) and the round trip it took."""
@@ -75,6 +83,7 @@ class Link:
     """One host on one port: transactions, raw writes, the host's baud rate."""
 
     def __init__(self, port: serial.SerialBase, *, timeout_s: float = 0.05, silence_s: float | None = None) -> None:
+        check_waits(timeout_s, silence_s)
         self.port = port
         self.timeout_s = timeout_s
         #: How long a transaction that must get no answer listens (default: the reply timeout; see the module).

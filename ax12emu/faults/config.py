@@ -102,6 +102,15 @@ class FaultConfig:
     stall: tuple[int, ...] = ()
 
     def __post_init__(self) -> None:
+        # Built in Python, one fault given bare (duplicate=(2, 1)) failed deep in install with a TypeError naming nothing.
+        for name, width in (("vanish", 3), ("duplicate", 2), ("alarm", 2)):
+            value = getattr(self, name)
+            if not isinstance(value, tuple) or not all(isinstance(item, tuple) and len(item) == width for item in value):
+                raise ValueError(f"{name} takes a tuple of {width}-tuples, one per servo, got {value!r}")
+        for name in ("stall", "fault_ids"):
+            value = getattr(self, name)
+            if not isinstance(value, tuple) or not all(isinstance(item, int) and not isinstance(item, bool) for item in value):
+                raise ValueError(f"{name} takes a tuple of IDs, got {value!r}")
         if self.fault_ids and not (self.drop or self.corrupt or self.delay):  # it did nothing, without a word
             raise ValueError("fault_ids: names the IDs drop, corrupt and delay act on, and none of them is given")
 

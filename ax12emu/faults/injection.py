@@ -57,6 +57,7 @@ firmware shows them (status-packet alarm bits, Torque Limit 0 until a client wri
 from __future__ import annotations
 
 import logging
+import operator
 import random
 import sys
 from collections.abc import Iterable, Mapping
@@ -181,6 +182,10 @@ class Faults:
             raise ValueError(f"delay_s must lie in 0..{MAX_REPLY_DELAY_S:g} s, got {delay_s}")
         self.drop, self.corrupt, self.delay, self.delay_s = drop, corrupt, delay, delay_s
         self.reply_ids = None if ids is None else frozenset(ids)
+        answering = {servo.id for servo in getattr(self.bus, "servos", ())}
+        if self.reply_ids and answering and not self.reply_ids & answering:  # said, not refused: a client may move one there
+            log.warning("reply faults on IDs %s, which no servo answers as now (IDs %s)", sorted(self.reply_ids),
+                        sorted(answering))
 
     def vanish(self, slot: int, *, every_s: float | None = None, for_s: float | None = None) -> None:
         """Unplug the servo; with ``every_s``/``for_s`` it is absent ``for_s`` of every ``every_s`` (simulated)."""
@@ -194,7 +199,7 @@ class Faults:
 
     def force_alarm(self, slot: int, bits: int | str) -> None:
         """Raise alarm bits (int or names such as "overload,overheating") until :meth:`clear_alarm`."""
-        value = parse_alarm_bits(bits) if isinstance(bits, str) else int(bits)
+        value = parse_alarm_bits(bits) if isinstance(bits, str) else operator.index(bits)  # 1.7 was taken as 0x01
         # The status bits an AX-12's firmware raises on its own (Input Voltage, Overheating, Overload); the others
         # (Angle Limit, Range, Checksum, Instruction) answer one packet, they are not a state to force.
         if not value or value & ~_ALARM_BITS:
@@ -513,7 +518,7 @@ class Faults2(Faults):
 
     def force_alarm(self, slot: int, bits: int | str) -> None:
         """The servo's firmware detects Hardware Error Status ``bits`` (int or names, e.g. "overload,electrical_shock") now."""
-        value = parse_alarm_bits(bits, HW_ERROR_NAMES) if isinstance(bits, str) else int(bits)
+        value = parse_alarm_bits(bits, HW_ERROR_NAMES) if isinstance(bits, str) else operator.index(bits)
         if not value or value & ~_HW_ERROR_BITS:
             raise ValueError(f"Hardware Error Status bits are {', '.join(f'{k} {v:#04x}' for k, v in HW_ERROR_NAMES.items())}; "
                              f"got {value:#04x}")
@@ -685,7 +690,7 @@ class Faults1X(Faults2):
         """
         servo = self._servo2(slot)
         names = dict(servo.plant.classic.units.errors)  # the family's Shutdown/status bits by name, from its model file
-        value = parse_alarm_bits(bits, names) if isinstance(bits, str) else int(bits)
+        value = parse_alarm_bits(bits, names) if isinstance(bits, str) else operator.index(bits)
         if not value or value & ~sum(names.values()):
             raise ValueError(f"{servo.spec.name}'s alarm bits are {', '.join(f'{k} {v:#04x}' for k, v in names.items())}; "
                              f"got {value:#04x}")

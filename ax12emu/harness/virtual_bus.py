@@ -237,6 +237,8 @@ class VirtualBus:
             given_options = True
         self.transport_name = transport
         self.virtual_time = virtual_time
+        if virtual_time and time_scale != 1.0:  # a virtual clock runs only when stepped: the scale was ignored
+            raise ValueError("time_scale applies to the wall clock; with virtual_time=True time moves by step()")
         clock = VirtualClock() if virtual_time else WallClock(time_scale)
         self.bus: AnyBus
         if servo is not None:
@@ -430,6 +432,8 @@ class VirtualBus:
         if self._link is not None:
             return self._link.call(fn, advance=not self.virtual_time)
         if self._thread is not None:
+            if threading.current_thread() is self._thread:  # a call from inside a call (fn using this bus's methods):
+                return fn(self.bus)  # it is between packets already; queued, it waited for itself 5 s
             if self._thread.is_alive():
                 from ax12emu.serve.server import ServerStopped
 
@@ -454,6 +458,7 @@ class VirtualBus:
         """Advance virtual time by ``seconds`` and run the physics; returns the new time."""
         if not self.virtual_time:
             raise RuntimeError("step() needs VirtualBus(virtual_time=True); this bus follows the wall clock")
+        seconds = _finite("seconds", seconds)  # (inf overflowed the serving thread's wait, as an OverflowError)
 
         def _step(bus: Bus) -> float:
             now = bus.clock.advance(seconds)  # type: ignore[union-attr]

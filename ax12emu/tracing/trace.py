@@ -53,6 +53,7 @@ class TraceWriter:
         # was killed (a CI timeout's SIGKILL), holds the traffic up to its last packet, the part a failure is in.
         self._file: IO[str] | None = open(self.path, "w", encoding="utf-8", buffering=1)
         self._start = time.monotonic()
+        self._last_t = float("-inf")
         header = {
             "format": TRACE_FORMAT,
             "started": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
@@ -63,10 +64,15 @@ class TraceWriter:
         self._file.write(json.dumps(header) + "\n")
 
     def record(self, direction: str, data: bytes, now: float | None = None) -> None:
-        """Append one chunk seen at monotonic time ``now`` (default: now)."""
+        """Append one chunk seen at monotonic time ``now`` (default: now); ValueError for a line :func:`read_trace`
+        would refuse (a direction other than ``"in"``/``"out"``, a time not finite or earlier than the last)."""
         if self._file is None or not data:
             return
         t = (time.monotonic() if now is None else now) - self._start
+        if direction not in (IN, OUT) or not math.isfinite(t) or t < self._last_t:
+            raise ValueError(f"a trace chunk goes {IN!r} or {OUT!r} at a finite time not before the last chunk's, "
+                             f"got {direction!r} at {t!r} s")
+        self._last_t = t
         self._file.write(f'{{"t": {t:.6f}, "dir": "{direction}", "data": "{bytes(data).hex(" ")}"}}\n')
 
     def flush(self) -> None:

@@ -274,3 +274,17 @@ def test_return_delay_is_not_failed_on_a_link_too_coarse_to_see_it(base_s, shows
         seen = "fail"
     assert seen == outcome
     assert link.rdt == 250  # put back
+
+
+@pytest.mark.parametrize("waits", [{"timeout_s": float("nan")}, {"timeout_s": -1.0}, {"silence_s": 0.0},
+                                   {"silence_s": float("inf")}])
+def test_a_wait_that_cannot_be_kept_is_refused_before_the_port_opens(waits):
+    """NaN waited for ever; 0 or less listened for nothing, passing an ID that answers as silent."""
+    with pytest.raises(ValueError, match="must be a positive finite number of seconds"):
+        conformance.run("ax12emu://?ids=1", [1], **waits)
+
+
+def test_the_protocol_may_be_given_as_a_number_as_virtualbus_takes_it():
+    report = conformance.run("ax12emu://?servo=xl430-w250", [1], baud=57_600, protocol=2.0, only=["ping"],
+                             timeout_s=CONFORMANCE_TIMEOUT_S, silence_s=EMULATOR_SILENCE_S)
+    assert report.outcome("ping") == PASS

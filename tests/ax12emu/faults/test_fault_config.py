@@ -51,3 +51,15 @@ def test_fault_ids_that_would_do_nothing_are_refused():
     with pytest.raises(ValueError, match="none of them is given"):
         FaultConfig(fault_ids=(1,))
     assert FaultConfig(drop=1.0, fault_ids=(9,), duplicate=((2, 9),)).install(Bus([1, 2])).reply_ids == {9}
+
+
+@pytest.mark.parametrize(("fields", "says"), [
+    ({"duplicate": (2, 1)}, "duplicate takes a tuple of 2-tuples"),
+    ({"alarm": (1, "overload")}, "alarm takes a tuple of 2-tuples"),
+    ({"vanish": (1, None, None)}, "vanish takes a tuple of 3-tuples"),
+    ({"stall": 1}, "stall takes a tuple of IDs"),
+])
+def test_one_fault_given_bare_in_python_is_refused_naming_its_field(fields, says):
+    """It was taken, then failed deep inside install with a TypeError naming nothing."""
+    with pytest.raises(ValueError, match=says):
+        FaultConfig(**fields)

@@ -180,3 +180,27 @@ def test_allow_remote_lets_the_live_page_bind_every_interface():
     pytest.importorskip("aiohttp")
     with VirtualBus([1], transport="inprocess", web="0.0.0.0:0", allow_remote=True) as bus:
         assert bus.web_url is not None
+
+
+def test_a_call_that_uses_the_buss_own_methods_runs_at_once_on_a_pty_too():
+    """Served on a pty, fn ran on the serving thread and its own bus.read queued behind itself: 5 s, then TimeoutError."""
+    import time
+
+    with VirtualBus([1, 2]) as bus:
+        start = time.monotonic()
+        assert bus.call(lambda b: {i: bus.read(i, "present_position") for i in (1, 2)}) == {1: 512, 2: 512}
+        assert time.monotonic() - start < 2.0
+
+
+def test_step_and_the_clock_refuse_what_they_cannot_keep():
+    import math
+
+    from firmware_model import KinematicModel
+
+    with VirtualBus([1], transport="pty", virtual_time=True) as bus:
+        with pytest.raises(ValueError, match="seconds must be a finite number"):
+            bus.step(math.inf)  # overflowed the serving thread's wait
+    with pytest.raises(ValueError, match="time_scale applies to the wall clock"):
+        VirtualBus([1], virtual_time=True, time_scale=50)  # was ignored
+    with pytest.raises(ValueError, match="step_s must be positive"):
+        KinematicModel(1, step_s=math.nan)

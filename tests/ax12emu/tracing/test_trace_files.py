@@ -114,3 +114,18 @@ def test_a_trace_on_disk_keeps_up_with_the_wire(tmp_path):
         assert len(path.read_text().splitlines()) == 2  # header and the chunk, before any flush or close
     finally:
         writer.close()
+
+
+@pytest.mark.parametrize(("direction", "now"), [("host", 1.0), ('in"', 1.0), ("in", float("nan")), ("in", 0.5)])
+def test_the_writer_refuses_a_chunk_its_reader_would(tmp_path, direction, now):
+    """It wrote any direction, unescaped, and any time: `ax12emu decode` then refused the file as "not a trace line"."""
+    from ax12emu.tracing.trace import TraceWriter
+
+    writer = TraceWriter(tmp_path / "t.jsonl")
+    writer.record("in", b"\xff", now=writer._start + 1.0)
+    try:
+        with pytest.raises(ValueError, match="a trace chunk goes 'in' or 'out'"):
+            writer.record(direction, b"\xff", now=writer._start + now)
+    finally:
+        writer.close()
+    assert len(list(read_trace(tmp_path / "t.jsonl"))) == 1
