@@ -116,17 +116,19 @@ def build_wire_of(models: Sequence[tuple[int, str]], *, clock: WallClock | Virtu
     if baud_bps is not None:
         # A servo whose EEPROM the state directory kept starts at the Baud Rate it kept, as a real one does after a
         # client changed it (``baud_bps`` overwrote it at every start, and the file with it).
-        def kept(store: StateStore | None, slot: int) -> bool:
+        def kept(store: StateStore | None, slot: int, servo) -> bool:
             if not (load_state and store is not None and store.path_for(slot).exists()):
                 return False
-            log.info("ID %d starts at the Baud Rate its state file %s keeps, not at --baud", slot, store.path_for(slot))
+            if abs(servo.baud_bps - baud_bps) > BAUD_TOLERANCE * baud_bps:
+                log.info("ID %d starts at the %.0f bps its state file %s keeps, not at --baud's %.0f", slot,
+                         servo.baud_bps, store.path_for(slot), baud_bps)
             return True
 
         for slot, servo in zip(bus1.slots, bus1.servos) if bus1 is not None else ():
-            if not kept(state_store1, slot):
+            if not kept(state_store1, slot, servo):
                 _start_at_baud(servo, baud_bps)
         for slot, servo in zip(bus2.slots, bus2.servos) if bus2 is not None else ():
-            if not kept(state_store2, slot):
+            if not kept(state_store2, slot, servo):
                 servo.start_at_baud(baud_bps)
     if bus1 is not None and bus2 is not None:
         return MixedBus(bus1, bus2)
