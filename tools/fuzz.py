@@ -677,6 +677,9 @@ def _check_mx_record(rules: list[MXRules], record: MXRecord, where: str) -> None
         raise FuzzFailure(f"{what}: {len(replies)} MX replies to a broadcast")
     elif len(replies) > len(reached):
         raise FuzzFailure(f"{what}: {len(replies)} MX replies, {len(reached)} MX servos hold ID {packet.id}")
+    # In a Bulk Read, servos sharing an ID answer in its turn at once: the bus gives that turn's collided bytes.
+    shared = {servo_id for servo_id in ids_before if ids_before.count(servo_id) > 1} if bulk else set()
+    replies = [reply for reply in replies if reply.servo_id not in shared]
     for reply in replies:
         servo_id, error, data = _parse_status(reply.data)
         if servo_id != reply.servo_id or not (servo_id in ids_before or servo_id in ids_after):
@@ -714,6 +717,8 @@ def _check_mx_record(rules: list[MXRules], record: MXRecord, where: str) -> None
                                                                                       Instruction.ACTION):
             free |= r.span("registered")
         writes = _mx_writes(packet, ids_before[k], record.registered[k]) if packet.checksum_ok and k in reached else []
+        if writes == "reset" and r.by_name["lock"].value_in(old):
+            writes = []  # refused while Lock is 1, as the AX-12A refuses it
         if isinstance(writes, str):  # RESET: the factory table; REBOOT: its RAM area (both but for what power-up sets)
             boot = free | r.span("goal_position", "torque_limit")
             kept = range(r.ram_start) if writes == "reboot" else range(0)

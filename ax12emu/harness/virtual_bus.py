@@ -458,7 +458,8 @@ class VirtualBus:
         """Advance virtual time by ``seconds`` and run the physics; returns the new time."""
         if not self.virtual_time:
             raise RuntimeError("step() needs VirtualBus(virtual_time=True); this bus follows the wall clock")
-        seconds = _finite("seconds", seconds)  # (inf overflowed the serving thread's wait, as an OverflowError)
+        if not math.isfinite(float(seconds)):  # (inf overflowed the serving thread's wait, as an OverflowError)
+            raise ValueError(f"time moves by a finite step, got seconds={seconds!r}")
 
         def _step(bus: Bus) -> float:
             now = bus.clock.advance(seconds)  # type: ignore[union-attr]
