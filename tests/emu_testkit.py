@@ -234,3 +234,11 @@ def http_json(url: str, body: bytes = b"", headers: dict[str, str] | None = None
     except urllib.error.HTTPError as error:
         with error:
             return error.code, json.loads(error.read())
+
+
+def post_json(url: str, body: bytes | dict) -> tuple[int, dict]:
+    """A control (a dict, or bytes as they are) posted to the live view as its page posts it: (status, answer)."""
+    import json
+
+    data = body if isinstance(body, bytes) else json.dumps(body).encode()
+    return http_json(url, data, {"Content-Type": "application/json"})

@@ -29,12 +29,7 @@ from ax12emu.live.web import MAX_MESSAGE_BYTES, QUEUE_FRAMES, WebServer  # noqa:
 
 
 def get_json(url: str) -> tuple[int, dict]:
-    try:
-        with urllib.request.urlopen(url, timeout=5) as answer:
-            return answer.status, json.loads(answer.read())
-    except urllib.error.HTTPError as error:
-        with error:
-            return error.code, json.loads(error.read())
+    return http_json(url, method="GET")
 
 
 def host_port(url: str) -> tuple[str, int]:
@@ -217,14 +212,7 @@ BAD_BODIES = [
 
 @pytest.mark.parametrize(("headers", "body", "says"), BAD_BODIES, ids=["deep", "charset", "gzip", "bytes"])
 def test_malformed_control_bodies_get_400_with_the_reason(bus, headers, body, says):
-    request = urllib.request.Request(bus.web_url + "api/control", data=body, method="POST", headers=headers)
-    status, answer = None, None
-    try:
-        with urllib.request.urlopen(request, timeout=5) as reply:
-            status, answer = reply.status, json.loads(reply.read())
-    except urllib.error.HTTPError as error:
-        with error:
-            status, answer = error.code, json.loads(error.read())
+    status, answer = http_json(bus.web_url + "api/control", body, headers)
     assert status == 400 and says in answer["error"], (status, answer)
 
 

@@ -13,28 +13,15 @@ import pytest
 pytest.importorskip("aiohttp")
 
 from dynamixel_sdk import COMM_RX_TIMEOUT, COMM_SUCCESS  # noqa: E402
-from emu_testkit import sdk_port  # noqa: E402
+from emu_testkit import http_json, sdk_port  # noqa: E402
+from emu_testkit import post_json as post  # noqa: E402
 
 from ax12emu import VirtualBus  # noqa: E402
 from ax12emu.live.web import MAX_BODY_BYTES, WebServer  # noqa: E402
 
 
 def get(url: str) -> tuple[int, dict]:
-    try:
-        with urllib.request.urlopen(url, timeout=5) as answer:
-            return answer.status, json.loads(answer.read())
-    except urllib.error.HTTPError as error:
-        return error.code, json.loads(error.read())
-
-
-def post(url: str, body: bytes | dict) -> tuple[int, dict]:
-    data = body if isinstance(body, bytes) else json.dumps(body).encode()
-    request = urllib.request.Request(url, data=data, method="POST", headers={"Content-Type": "application/json"})
-    try:
-        with urllib.request.urlopen(request, timeout=5) as answer:
-            return answer.status, json.loads(answer.read())
-    except urllib.error.HTTPError as error:
-        return error.code, json.loads(error.read())
+    return http_json(url, method="GET")
 
 
 def wait_for(predicate, timeout_s: float = 2.0):

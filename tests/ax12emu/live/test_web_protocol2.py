@@ -17,7 +17,8 @@ import pytest
 aiohttp = pytest.importorskip("aiohttp")
 
 from dynamixel_sdk import COMM_SUCCESS, PacketHandler  # noqa: E402
-from emu_testkit import UrlPortHandler, http_json  # noqa: E402
+from emu_testkit import UrlPortHandler  # noqa: E402
+from emu_testkit import post_json as post  # noqa: E402
 
 from ax12emu import VirtualBus  # noqa: E402
 from ax12emu.live import ByteTap, LiveView, ServedControls  # noqa: E402
@@ -26,11 +27,6 @@ from ax12emu.live.snapshot import take  # noqa: E402
 from ax12emu.live.web import MAX_BODY_BYTES, MAX_MESSAGE_BYTES  # noqa: E402
 
 BAUD = 1_000_000
-
-
-def post(url: str, body: bytes | dict) -> tuple[int, dict]:
-    data = body if isinstance(body, bytes) else json.dumps(body).encode()
-    return http_json(url, data, {"Content-Type": "application/json"})
 
 
 def get(url: str) -> tuple[int, dict]:
