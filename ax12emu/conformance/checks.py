@@ -37,6 +37,7 @@ from ax12emu.protocol.describe import describe_error
 from ax12emu.protocol.packets import BROADCAST_ID, Instruction, StatusError, encode_instruction
 from ax12emu.protocol.registers import Entry, Layout
 from ax12emu.protocol.servo_models import ServoModel, model, model_names
+from ax12emu.servo.servo1x import baud_bps_1x
 
 from .link import Link, Response
 
@@ -88,8 +89,9 @@ def expect(condition: bool, figure: str) -> None:
 
 
 def host_bps(baud_register: int) -> int:
-    """The host rate that talks to a servo whose Baud Rate register is ``baud_register``."""
-    nominal = 2_000_000 / (baud_register + 1)
+    """The host rate that talks to a servo whose Baud Rate register is ``baud_register`` (the servo's own rate,
+    :func:`~ax12emu.servo.servo1x.baud_bps_1x`, taken as the nearest an adapter offers)."""
+    nominal = baud_bps_1x(baud_register)
     nearest = min(_HOST_RATES_BPS, key=lambda rate: abs(rate - nominal))
     return nearest if abs(nearest - nominal) <= 0.03 * nominal else round(nominal)
 
