@@ -17,6 +17,7 @@ import contextlib
 import importlib
 import io
 import os
+import re
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -303,6 +304,29 @@ def on_page_markdown(markdown: str, **_: object) -> str:
         if marker in markdown:
             markdown = markdown.replace(marker, render())
     return markdown
+
+
+#: A Sphinx cross-reference role as mkdocstrings renders it: the role's name left as text before the
+#: code span (``:class:`~ax12emu.VirtualBus``` becomes ``:class:<code>~ax12emu.VirtualBus</code>``).
+SPHINX_ROLE = re.compile(r":(?:py:)?(?:class|func|meth|attr|data|mod|obj|exc|const):<code>([~.]?)([^<]*)</code>")
+
+
+def strip_sphinx_roles(html: str) -> str:
+    """The docstrings name code with Sphinx roles (read by ``help()`` and editors alike); the API page is
+    rendered by mkdocstrings, which leaves the role's name as text. Keep the code span; ``~`` means its last
+    component alone, as Sphinx shows it, and a leading ``.`` (relative to the module) is dropped."""
+
+    def code(match: re.Match[str]) -> str:
+        mark, target = match.groups()
+        shown = target.rsplit(".", 1)[-1] if mark == "~" else target
+        return f"<code>{shown}</code>"
+
+    return SPHINX_ROLE.sub(code, html)
+
+
+def on_page_content(html: str, **_: object) -> str:
+    """Render the docstrings' Sphinx roles as plain code spans."""
+    return strip_sphinx_roles(html)
 
 
 def on_files(files: Files, config: MkDocsConfig, **_: object) -> Files:

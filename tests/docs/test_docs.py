@@ -166,6 +166,17 @@ def test_pages_carry_the_markers_the_hook_fills():
     assert "docs/hooks.py" in (ROOT / "mkdocs.yml").read_text(encoding="utf-8")
 
 
+def test_sphinx_roles_render_as_code():
+    """mkdocstrings leaves a docstring's role name as text before its code span; the hook keeps the span alone."""
+    html = ('see :class:<code>~ax12emu.VirtualBus</code>, :meth:<code>step</code>, :mod:<code>.checks2</code> '
+            'and :py:func:<code>ax12emu.protocol.servo_models.model</code>; <code>plain</code> stays')
+    assert hooks.strip_sphinx_roles(html) == (
+        "see <code>VirtualBus</code>, <code>step</code>, <code>checks2</code> "
+        "and <code>ax12emu.protocol.servo_models.model</code>; <code>plain</code> stays"
+    )
+    assert hooks.on_page_content(":attr:<code>busy_until_s</code>") == "<code>busy_until_s</code>"
+
+
 def _cited_file_exists(page: Path, path: str, published: set[str]) -> bool:
     """A path in backquotes is the repository's; a link is the page's (or a figure the hook publishes)."""
     beside = (page.parent / path).resolve()
