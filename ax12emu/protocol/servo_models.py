@@ -130,7 +130,8 @@ _PROFILE_KEYS = {"source", "overrides", "extra_entries", "lock_writable", "shutd
 _OVERRIDE_KEYS = {"default": "default", "min": "minimum", "max": "maximum"}
 _PHYSICAL_KEYS = {"source", "gear_ratio", "weight_g", "resolution_deg", "position_range_deg", "operating_voltage_v",
                   "recommended_voltage_v", "ratings", "current_unit_ma", "rotor_inertia_at_motor_kg_m2", "motor"}
-#: The e-manual's "Motor" kinds a model file may name (every coreless kind it prints is "coreless" here).
+#: The e-manual's "Motor" kinds a model file may name (every coreless kind it prints is "coreless" here); the same
+#: as firmware_model.xseries.physics.MOTOR_KINDS, which this layer may not import (a test holds them equal).
 MOTOR_KINDS = ("cored", "coreless")
 _RATING_KEYS = {"voltage_v", "stall_torque_nm", "stall_current_a", "no_load_speed_rpm", "note"}
 _CONTROLLER_KEYS = {"source", "position_output_scale"}

@@ -292,3 +292,12 @@ def test_every_model_file_names_its_motor_as_its_e_manual_page_does():
     coreless = {"ax-18a", "mx-28", "mx-64", "mx-106", "xm430-w350", "xc330-m288"}
     assert {key: model(key).physical.motor for key in model_names()} == {
         key: "coreless" if key in coreless else "cored" for key in model_names()}
+
+
+def test_the_motor_kinds_a_model_file_may_name_are_the_kinds_the_physics_builds():
+    """The protocol layer may not import the physics, so the kinds are written in both: a kind added to one
+    alone would be refused at load (or never built) while the other layer takes it."""
+    from ax12emu.protocol.servo_models import MOTOR_KINDS as named
+    from firmware_model.xseries.physics import MOTOR_KINDS as built
+
+    assert named == built
