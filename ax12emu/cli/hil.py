@@ -13,7 +13,7 @@ import sys
 from collections.abc import Callable
 
 from ax12emu.cli import models as cli_models
-from ax12emu.cli.arg_types import positive_float
+from ax12emu.cli.arg_types import positive_float, positive_int
 from ax12emu.faults.config import FAULT_OPTIONS, FaultConfig
 from ax12emu.protocol.control_table import DEFAULT_PROFILE, PROFILES
 from ax12emu.protocol.ids import parse_ids
@@ -90,7 +90,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     check = sub.add_parser("conformance", help="run the Protocol 1.0 (or 2.0) checks against any port (emulator or servo)")
     check.add_argument("port", metavar="PORT", help="device path or pyserial URL (socket://HOST:PORT, ax12emu://...)")
     check.add_argument("--ids", type=_typed(_ids), default=[1], metavar="LIST", help="IDs on the bus to check (default 1)")
-    check.add_argument("--baud", type=int, default=None,
+    check.add_argument("--baud", type=positive_int, default=None,
                        help="host bit rate (default 1000000, the AX series' factory rate: an MX at its factory Baud Rate 34 needs "
                        "57600; with --protocol 2.0, 57600: the X series' factory Baud Rate 1)")
     check.add_argument("--timeout-ms", type=positive_float, default=50.0, metavar="MS", help="reply timeout (default 50)")
@@ -127,7 +127,7 @@ def _decode(args: argparse.Namespace) -> int:
     header = {} if args.raw else trace_header(args.file)
     servos = args.servo if args.servo is not None else header.get("servos")
     profile = args.profile if args.profile is not None else header.get("profile", DEFAULT_PROFILE)
-    if profile not in PROFILES:  # the header is a file's word: checked as the flag is
+    if not isinstance(profile, str) or profile not in PROFILES:  # the header is a file's word: checked as the flag is
         raise ValueError(f"{args.file}: the header's profile {profile!r} is none of {', '.join(sorted(PROFILES))}")
     if servos is not None and not isinstance(servos, str):
         raise ValueError(f"{args.file}: the header's servos must be a text such as \"1-5:xm430-w350\", got {servos!r}")

@@ -14,6 +14,7 @@ import argparse
 import contextlib
 import io
 import logging
+import os
 import signal
 import sys
 from collections.abc import Sequence
@@ -524,10 +525,17 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.command == "serve":
             return _serve(args)
         if args.command in cli_hil.COMMANDS:
-            return cli_hil.COMMANDS[args.command](args)
+            status = cli_hil.COMMANDS[args.command](args)
+            sys.stdout.flush()  # here, where a reader that went away is caught, not at the interpreter's exit
+            return status
     except (StateFileError, FileExistsError, ValueError) as exc:
         print(f"ax12emu: {exc}", file=sys.stderr)
         return 2
+    except BrokenPipeError:
+        # The reader went away (``ax12emu decode big.jsonl | head``): stop quietly. stdout goes to /dev/null so the
+        # interpreter's last flush of the lines still buffered cannot fail again (Python's own recipe, "Note on SIGPIPE").
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 1
     except OSError as exc:
         print(f"ax12emu: {exc}", file=sys.stderr)
         return 1

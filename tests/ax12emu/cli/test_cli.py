@@ -29,6 +29,7 @@ def run(*args: str) -> subprocess.CompletedProcess:
         (["serve", "--link", "/tmp/x", "--tcp", "127.0.0.1:0"], "not allowed with|not to --tcp"),
         (["bogus"], "invalid choice"),
         (["serve", "--params", ""], "names no file"),  # was refused as "Is a directory" (the working folder)
+        (["conformance", "/dev/null", "--baud", "0"], "must be >= 1"),  # a division by the rate, after the checks began
     ],
 )
 def test_bad_flags_exit_2_with_usage(args, message):
@@ -171,3 +172,31 @@ def test_web_and_monitor_without_the_web_extra_are_one_line(flag):
     assert result.returncode == 2, result
     assert result.stderr.strip().count("\n") == 0 and "Traceback" not in result.stderr, result.stderr
     assert "pip install 'ax12emu[web]'" in result.stderr
+
+
+def test_a_header_profile_that_is_not_a_text_is_one_line(tmp_path):
+    """A trace's header is the file's word: a profile given as a list is refused as an unknown one is."""
+    trace = tmp_path / "t.jsonl"
+    trace.write_text('{"format": "ax12emu-trace/1", "profile": ["x"]}\n')
+    result = run("decode", str(trace))
+    assert result.returncode == 2 and "Traceback" not in result.stderr
+    assert "profile ['x'] is none of" in result.stderr and len(result.stderr.strip().splitlines()) == 1
+
+
+def test_decode_into_a_reader_that_goes_away_stops_quietly(tmp_path):
+    """``ax12emu decode big.jsonl | head -1``: the closed pipe ends the command without a word on stderr."""
+    lines = ['{"format": "ax12emu-trace/1"}']
+    lines += [f'{{"t": {k * 0.001:.3f}, "dir": "in", "data": "ff ff 01 02 01 fb"}}' for k in range(20_000)]
+    trace = tmp_path / "big.jsonl"
+    trace.write_text("\n".join(lines) + "\n")
+    reader = subprocess.Popen(["head", "-1"], stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+    try:
+        result = subprocess.run([sys.executable, "-m", "ax12emu", "decode", str(trace)], stdout=reader.stdin,
+                                stderr=subprocess.PIPE, text=True, timeout=60)
+        reader.stdin.close()
+        first = reader.stdout.read().decode()
+    finally:
+        reader.kill()
+        reader.wait()
+    assert "PING id=1" in first
+    assert result.stderr == "" and result.returncode == 1, result.stderr
