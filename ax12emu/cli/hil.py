@@ -51,7 +51,7 @@ def add_serve_flags(serve: argparse.ArgumentParser) -> None:
     group.add_argument("--fault-ids", type=parse["fault_ids"], default=(), metavar="LIST", help="apply --drop/--corrupt/--delay to these IDs only")
     group.add_argument("--fault-seed", type=parse["seed"], default=0, metavar="N", help="seed of the random choices (default 0)")
     group.add_argument("--vanish", type=parse["vanish"], action="append", default=[], metavar="ID[:EVERY_S:FOR_S]", help="servo unplugged (always, or FOR_S of every EVERY_S)")
-    group.add_argument("--duplicate", type=parse["duplicate"], action="append", default=[], metavar="SLOT:ID", help="servo SLOT also answers as ID (colliding replies)")
+    group.add_argument("--duplicate", type=parse["duplicate"], action="append", default=[], metavar="SLOT:ID", help="servo SLOT takes ID, as if renumbered: it stops answering as SLOT and its replies collide with ID's")
     group.add_argument("--alarm", type=parse["alarm"], action="append", default=[], metavar="ID:NAMES", help="force alarms: overload, overheating, input_voltage")
     group.add_argument("--stall", type=parse["stall"], action="append", default=[], metavar="ID", help="block the servo's shaft")
 

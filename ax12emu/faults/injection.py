@@ -21,8 +21,8 @@ What a client sees, fault by fault (dynamixel-sdk's names):
 * ``vanish``: the servo is unplugged: it neither hears nor answers (->
   ``COMM_RX_TIMEOUT``) until it comes back, with its table as it was;
   optionally periodic (absent ``for_s`` out of every ``every_s`` simulated s).
-* ``duplicate``: the servo launched as ``slot`` answers to ``as_id`` too, so
-  two servos share an ID: both act on every packet and both answer at once;
+* ``duplicate``: the servo launched as ``slot`` takes the ID ``as_id``, as if
+  renumbered (it no longer answers as ``slot``), so two servos share an ID: both act on every packet and both answer at once;
   their replies are AND-ed on the wire (``server.merge_replies``), so equal
   replies look clean and different ones (e.g. Present Position) arrive
   garbled -> ``COMM_RX_CORRUPT`` or wrong values.

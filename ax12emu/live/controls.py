@@ -190,12 +190,21 @@ def _number(name: str, low: float, high: float, *, optional: bool = False) -> Ca
 _ALARM_TEXT_MAX = 80
 
 
+_ALARM_FORMS = 'alarm names ("overload,overheating" or ["overload", "overheating"]) or a number 1..255'
+
+
 def _alarm(value: Any) -> int | str:
-    """Alarm names or bits; the servo's faults read the names by its protocol (AX-12 alarms, or Hardware Error Status)."""
+    """Alarm names or bits; the servo's faults read the names by its protocol (AX-12 alarms, or Hardware Error Status).
+
+    The names come as one comma-separated text or, as a JSON client writes a set of them, a list of texts."""
+    if isinstance(value, list) and value and all(isinstance(item, str) for item in value):
+        value = ",".join(value)
     if isinstance(value, str):
         if not 0 < len(value) <= _ALARM_TEXT_MAX:
-            raise ControlError(f"bits must be alarm names (at most {_ALARM_TEXT_MAX} characters) or a number 1..255")
+            raise ControlError(f"bits must be {_ALARM_FORMS}, at most {_ALARM_TEXT_MAX} characters of names")
         return value
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ControlError(f"bits must be {_ALARM_FORMS}, got {_shown(value)}")
     return _int("bits", 1, 255)(value)
 
 

@@ -51,6 +51,9 @@ def test_hardware_errors_stalls_and_vanishing_go_through_faults2(x_bus):
     bus, controls = x_bus
     apply(controls, {"action": "alarm", "slot": 1, "bits": "electrical_shock"})
     assert servo_of(bus, 1)["alarm_names"] == ["electrical_shock"]
+    apply(controls, {"action": "alarm", "slot": 2, "bits": ["overload", "overheating"]})  # a JSON list of names
+    assert sorted(servo_of(bus, 2)["alarm_names"]) == ["overheating", "overload"]
+    apply(controls, {"action": "clear_alarm", "slot": 2})
     assert apply(controls, {"action": "clear_alarm", "slot": 1}) == "servo 1: forced alarms lifted"
     assert servo_of(bus, 1)["alarms"] == 0  # the firmware rebooted, as REBOOT does
     apply(controls, {"action": "stall", "slot": 2})
@@ -68,6 +71,8 @@ def test_hardware_errors_stalls_and_vanishing_go_through_faults2(x_bus):
         ({"action": "alarm", "slot": 1, "bits": "angle_limit"}, "unknown alarm 'angle_limit'"),
         ({"action": "alarm", "slot": 1, "bits": "x" * 200}, "at most 80 characters"),
         ({"action": "alarm", "slot": 1, "bits": 0x02}, "Hardware Error Status bits are"),
+        ({"action": "alarm", "slot": 1, "bits": [1, 2]}, 'alarm names ("overload,overheating" or ["overload"'),
+        ({"action": "alarm", "slot": 1, "bits": []}, "alarm names"),
         ({"action": "vanish", "slot": 9}, "no servo launched as ID 9"),
         ({"action": "temperature", "id": 9, "celsius": 50}, "no servo with ID 9"),
         ({"action": "vanish", "slot": 1, "protocol": 1.0}, "this bus's servos speak Protocol 2"),
