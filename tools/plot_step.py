@@ -37,7 +37,7 @@ from firmware_model.units import RAD_PER_POSITION_UNIT, RAD_S_PER_SPEED_UNIT, si
 def simulate(params: ServoParams, volts: float, degrees: float, moving_speed: int, duration_s: float) -> dict:
     """Run one step from raw 512 and record everything at 1 kHz."""
     n_units = int(round(degrees / 300.0 * 1023))
-    cmds = Commands.power_up(goal_position=512 + n_units, moving_speed=moving_speed)
+    cmds = Commands.power_up(goal_position=START_UNITS + n_units, moving_speed=moving_speed)
     model = PhysicalModel(1, params=params)
     model.set_supply_voltage(volts)
     rec = {k: [] for k in ("t", "pos", "ref", "speed", "held_speed", "load", "drive")}
@@ -55,16 +55,52 @@ def simulate(params: ServoParams, volts: float, degrees: float, moving_speed: in
     return out
 
 
+#: Where the step starts (raw units): the middle of the range.
+START_UNITS = 512
+#: A step plot is of a step: a minute of simulated time at 1 kHz is already 60,000 points a curve.
+MAX_DURATION_S = 60.0
+#: Extensions matplotlib's Agg backend writes (checked before the simulation runs, not after).
+FIGURE_SUFFIXES = (".png", ".pdf", ".svg")
+
+
+def step_degrees(text: str) -> float:
+    """A step whose goal, START_UNITS plus the step, is a Goal Position the servo takes (0..1023: a real AX-12A
+    answers a goal outside it with the Range Error and does not move)."""
+    degrees = finite_float(text)
+    goal = START_UNITS + int(round(degrees / 300.0 * 1023))
+    if not 0 <= goal <= 1023:
+        raise argparse.ArgumentTypeError(f"{text} degrees puts the goal at raw {goal}, outside Goal Position's 0..1023")
+    return degrees
+
+
+def duration_s(text: str) -> float:
+    """Simulated seconds in (0, MAX_DURATION_S]."""
+    seconds = positive_float(text)
+    if seconds > MAX_DURATION_S:
+        raise argparse.ArgumentTypeError(f"must be at most {MAX_DURATION_S:g} s, got {text}")
+    return seconds
+
+
+def figure_file(text: str) -> str:
+    """An output file whose extension names a format the figure can be written in."""
+    name = output_file(text)
+    if Path(name).suffix.lower() not in FIGURE_SUFFIXES:
+        raise argparse.ArgumentTypeError(f"{text}: write a {', '.join(FIGURE_SUFFIXES)} file")
+    return name
+
+
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     """Command line."""
     parser = OneLineParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--out", type=output_file, default="step_response.png",
-                        help="PNG to write (default step_response.png)")
+    parser.add_argument("--out", type=figure_file, default="step_response.png",
+                        help=f"figure to write, by its extension: {', '.join(FIGURE_SUFFIXES)} (default step_response.png)")
     parser.add_argument("--volts", type=positive_float, default=9.6, help="supply voltage (default 9.6)")
-    parser.add_argument("--degrees", type=finite_float, default=60.0, help="step size in degrees (default 60)")
+    parser.add_argument("--degrees", type=step_degrees, default=60.0,
+                        help="step size in degrees from the middle (raw 512); the goal must stay within 0..1023 (default 60)")
     parser.add_argument("--moving-speed", type=int_range(0, 1023), default=0,
                         help="Moving Speed register (default 0 = full)")
-    parser.add_argument("--duration", type=positive_float, default=0.6, help="simulated seconds (default 0.6)")
+    parser.add_argument("--duration", type=duration_s, default=0.6,
+                        help=f"simulated seconds, at most {MAX_DURATION_S:g} (default 0.6)")
     parser.add_argument("--params", type=file_name, help="TOML parameter file (default: built-in)")
     return parser.parse_args(argv)
 

@@ -83,6 +83,9 @@ BAD = {
         ["--volts", "100"],  # positive, but outside the parameters' supply range
         ["--moving-speed", "2000"],
         ["--params", "/nonexistent-ax12emu/params.toml"],  # only fails once read
+        ["--degrees", "200"],  # a goal of raw 1194: a real AX-12A refuses it (Range Error)
+        ["--duration", "1e9"],  # ran until killed
+        ["--out", "x.txt"],  # a traceback after the simulation had run
     ],
     "real_ax12a": [
         ["--goal", "2000"],
