@@ -56,6 +56,15 @@ def _signed(raw: int) -> int:
     return -(raw & 0x3FF) if raw & 0x400 else raw & 0x3FF
 
 
+#: Registers whose write cuts the recorder off from the servo it goes on talking to (``--id`` at ``--baud``, every
+#: write answered): the next write would go unanswered after the servo had already moved.
+UNREACHABLE_AFTER = {
+    "id": "the servo would answer as another ID than --id",
+    "baud_rate": "the servo would listen at another rate than the port's",
+    "status_return_level": "the recorder needs every write answered (Status Return Level 2)",
+}
+
+
 def parse_writes(items: list[str]) -> dict[str, int]:
     """``NAME=VALUE`` strings -> {register name: value}, checked against the control table (ValueError if not)."""
     out = {}
@@ -71,6 +80,8 @@ def parse_writes(items: list[str]) -> dict[str, int]:
             raise ValueError(f"--write {item!r}: {value!r} is not an integer") from None
         if entry.access.value != "RW" or not entry.minimum <= number <= entry.maximum:
             raise ValueError(f"--write {item!r}: {name} takes {entry.minimum}..{entry.maximum} and must be writable")
+        if entry.name in UNREACHABLE_AFTER:
+            raise ValueError(f"--write {item!r}: {UNREACHABLE_AFTER[entry.name]}; set it before recording")
         out[entry.name] = number
     return out
 
