@@ -127,7 +127,7 @@ HOSTILE = [
     (json.dumps({"action": "temperature", "id": 1, "celsius": 1e308}), "celsius must be a number 0..255"),
     (json.dumps({"action": "voltage", "id": 1, "volts": "high"}), "volts must be a number"),
     (json.dumps({"action": "alarm", "slot": 1, "bits": "input_voltage"}), "Shutdown(63)"),
-    (json.dumps({"action": "alarm", "slot": 1, "bits": ["overload"]}), "bits must be an integer"),
+    (json.dumps({"action": "alarm", "slot": 1, "bits": [{"overload": 1}]}), "bits must be alarm names"),
     (json.dumps({"action": "stall", "slot": 1, "protocol": 1.0}), "speak Protocol 2"),
     (json.dumps({"action": "vanish", "slot": 7}), "no servo launched as ID 7"),
     (json.dumps({"action": "external_torque", "id": 300, "nm": 0.1}), "id must be an integer 0..253"),
