@@ -79,9 +79,10 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     decode.add_argument("--raw", action="store_true", help="treat FILE as a raw capture even if it looks like JSON")
     decode.add_argument("--profile", choices=sorted(PROFILES),
                         help=f"the AX-12As' register names by this profile (default: the trace header's, else {DEFAULT_PROFILE})")
-    decode.add_argument("--protocol", choices=("auto", "1.0", "both"), default="auto",
-                        help="frame Protocol 1.0 only, or 1.0 and 2.0 (a wire of X-series servos, alone or beside "
-                        "AX-12s); auto: both when the trace names 2.0 servos or the bytes hold a 2.0 header")
+    decode.add_argument("--protocol", choices=("auto", "1.0", "2.0", "both"), default="auto",
+                        help="frame Protocol 1.0 only, 2.0 only (a wire of X-series servos alone), or both (X-series "
+                        "servos beside AX-12s); auto: 2.0 when the trace's header names 2.0 servos only, both when "
+                        "the servos named include 2.0 ones or the bytes hold a 2.0 header, else 1.0")
     decode.add_argument("--servo", metavar="SPEC",
                         help="name each ID's registers by its model's table (IDS:MODEL,..., as serve --servo: Protocol 2.0 "
                         "models and 1.0 ones such as mx-28); default: the servos the trace's header names, else the "
@@ -134,7 +135,8 @@ def _decode(args: argparse.Namespace) -> int:
     if args.servo is not None and ":" not in args.servo:  # serve's bare MODEL takes its IDs from --ids; decode has none
         raise ValueError(f"--servo {args.servo}: decode needs IDS:MODEL[,IDS:MODEL...] (e.g. 1-5:xm430-w350)")
     protocol = None if args.protocol == "auto" else args.protocol
-    for item in decode(chunks, profile=profile, protocol=protocol, servos=servos):
+    echo = header.get("echo")  # serve records whether the adapter echoed: without, no servo bytes are an echo
+    for item in decode(chunks, profile=profile, protocol=protocol, servos=servos, echo=echo if isinstance(echo, bool) else None):
         print(format_decoded(item))
     return 0
 

@@ -44,8 +44,9 @@ def _registers(address: int, data: bytes, profile: str | Layout) -> str:
         entry = lay.entries[index]
         start = at - entry.address
         chunk = data[offset : offset + entry.size - start]
-        value = int.from_bytes(chunk, "little")
-        suffix = "" if start == 0 and len(chunk) == entry.size else f"(byte{start}+{len(chunk)})"
+        whole = start == 0 and len(chunk) == entry.size
+        value = int.from_bytes(chunk, "little", signed=entry.signed and whole)  # an MX's Multi Turn Offset: signed
+        suffix = "" if whole else f"(byte{start}+{len(chunk)})"
         parts.append(f"{entry.name}{suffix}={value}")
         offset += len(chunk)
     return " ".join(parts)

@@ -26,7 +26,20 @@ from .params2 import (
     parse_ping_reply,
 )
 
-__all__ = ["describe_error2", "describe_instruction2", "describe_status2"]
+__all__ = ["RegisterName", "describe_error2", "describe_instruction2", "describe_status2"]
+
+
+class RegisterName(str):
+    """A register's name in ``names`` that says how its value reads: ``signed`` (two's complement, the X series'
+    Goal Velocity, Present Current ...) when the data is the register's whole ``size``."""
+
+    signed: bool
+    size: int
+
+    def __new__(cls, name: str, *, signed: bool = False, size: int = 0) -> "RegisterName":
+        self = super().__new__(cls, name)
+        self.signed, self.size = signed, size
+        return self
 
 
 def describe_error2(error: int) -> str:
@@ -46,15 +59,18 @@ def _at(address: int, names: Mapping[int, str] | None) -> str:
     return name if name else f"@{address}"
 
 
-def _value(data: bytes) -> str:
-    """Registers are 1, 2 or 4 bytes little-endian; other sizes are shown as bytes."""
+def _value(data: bytes, name: str | None = None) -> str:
+    """Registers are 1, 2 or 4 bytes little-endian (signed where ``name``, a :class:`RegisterName` of that size, says
+    so); other sizes are shown as bytes."""
     if len(data) in (1, 2, 4):
-        return str(int.from_bytes(data, "little"))
+        signed = getattr(name, "signed", False) and getattr(name, "size", 0) == len(data)
+        return str(int.from_bytes(data, "little", signed=signed))
     return data.hex(" ") if data else "(none)"
 
 
 def _write(address: int, data: bytes, names: Mapping[int, str] | None) -> str:
-    return f"{_at(address, names)}={_value(data)} ({len(data)} byte{'' if len(data) == 1 else 's'})"
+    name = names.get(address) if names else None
+    return f"{_at(address, names)}={_value(data, name)} ({len(data)} byte{'' if len(data) == 1 else 's'})"
 
 
 def _name(instruction: int) -> str:
@@ -143,5 +159,5 @@ def describe_status2(
     elif isinstance(parsed, BulkRead):
         address = next((a for i, a, _ in parsed.reads if i == packet.id), None)
     if address is not None:
-        return f"{head} {_at(address, names)}={_value(packet.params)}"
+        return f"{head} {_at(address, names)}={_value(packet.params, names.get(address) if names else None)}"
     return f"{head} params={packet.params.hex(' ')}"

@@ -102,6 +102,11 @@ class BusServer:
             bus.clock.bound_strides()
         #: Records every byte in and out; None (the default) costs one test per chunk.
         self.trace = trace
+        #: The trace file itself (``trace`` may be wrapped later, by the live view's tap): it records the echo
+        #: setting in its header and, paced, each instruction's wire end.
+        self._trace_file = trace if isinstance(trace, TraceWriter) else None
+        if self._trace_file is not None:
+            self._trace_file.note(echo=echo)
         #: Functions to run on the serving thread (see :meth:`call`).
         self._calls: collections.deque[tuple[Callable[[Bus], Any], Future]] = collections.deque()
         self.transport = transport
@@ -224,8 +229,6 @@ class BusServer:
     def _on_bytes(self, data: bytes, now: float) -> None:
         if getattr(self.transport, "connections", None) != self._connections:
             self._new_host()
-        if self.trace is not None:
-            self.trace.record(IN, data, now)
         line_bps = self.transport.line_bps()
         end = now
         if self.pace:
@@ -233,6 +236,11 @@ class BusServer:
             begin = max(now, self._rx_busy_until)
             end = begin + len(data) * byte_s
             self._rx_busy_until = end
+            if self._trace_file is not None and self.trace is not None:  # the decoder measures a reply's latency from the instruction's end
+                self._trace_file.on_wire(end, byte_s)
+        if self.trace is not None:
+            self.trace.record(IN, data, now)
+        if self.pace:
             data = self._collide(data, begin, byte_s)
             if self.echo:
                 self._schedule([(begin + (i + 1) * byte_s, bytes((b,))) for i, b in enumerate(data)], is_reply=False)

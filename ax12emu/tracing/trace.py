@@ -10,6 +10,10 @@ packets.  The format is plain JSON lines so any tool can read it::
 
 A trace of Protocol 2.0 servos adds ``"servos": "1:xl430-w250,2:xl430-w250"`` (the
 ``--servo`` text, launch ID by launch ID) to the header, so the decoder can name their registers.
+A trace ``serve`` recorded says in its header whether the adapter echoed the host's bytes
+(``"echo": false``: no ``out`` bytes are an echo); on a paced wire (``serve --pace``) each ``in``
+line adds when its last byte left the wire and a byte's wire time (``"end"``, ``"byte_s"``), so
+the decoder measures a reply's latency from the instruction's end rather than its arrival.
 
 ``t`` is seconds since the first line (monotonic clock); ``in`` is what
 the host sent (before any collision garbling), ``out`` what the bus put on
@@ -42,6 +46,9 @@ class Chunk(NamedTuple):
     t: float | None
     direction: str | None
     data: bytes
+    #: On a paced wire: when the chunk's last byte left the wire (same clock as ``t``), and a byte's wire time.
+    end: float | None = None
+    byte_s: float | None = None
 
 
 class TraceWriter:
@@ -54,14 +61,33 @@ class TraceWriter:
         self._file: IO[str] | None = open(self.path, "w", encoding="utf-8", buffering=1)
         self._start = time.monotonic()
         self._last_t = float("-inf")
-        header = {
+        #: The wire the next "in" chunk takes (see :meth:`on_wire`).
+        self._wire: tuple[float, float] | None = None
+        self._header: dict = {
             "format": TRACE_FORMAT,
             "started": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
             "profile": profile,
         }
         if servos is not None:  # Protocol 2.0 servos as --servo writes them: the decoder names their registers
-            header["servos"] = servos
-        self._file.write(json.dumps(header) + "\n")
+            self._header["servos"] = servos
+        self._file.write(json.dumps(self._header) + "\n")
+
+    def note(self, *, echo: bool) -> None:
+        """Add what the recorder knows of the wire to the header: ``echo``, whether the adapter echoes the host's
+        bytes (``serve --echo``; without it no ``out`` bytes are an echo).  Only before the first chunk."""
+        if self._file is None:
+            return
+        if self._last_t != float("-inf"):
+            raise ValueError("a trace's header is noted before its first chunk")
+        self._header["echo"] = bool(echo)
+        self._file.seek(0)
+        self._file.truncate()
+        self._file.write(json.dumps(self._header) + "\n")
+
+    def on_wire(self, end: float, byte_s: float) -> None:
+        """The next ``"in"`` chunk recorded is on a paced wire until monotonic time ``end``, ``byte_s`` a byte: its
+        line records both (``"end"``, ``"byte_s"``), so a reply's latency is measured from the instruction's end."""
+        self._wire = (end, byte_s)
 
     def record(self, direction: str, data: bytes, now: float | None = None) -> None:
         """Append one chunk seen at monotonic time ``now`` (default: now); ValueError for a line :func:`read_trace`
@@ -73,7 +99,12 @@ class TraceWriter:
             raise ValueError(f"a trace chunk goes {IN!r} or {OUT!r} at a finite time not before the last chunk's, "
                              f"got {direction!r} at {t!r} s")
         self._last_t = t
-        self._file.write(f'{{"t": {t:.6f}, "dir": "{direction}", "data": "{bytes(data).hex(" ")}"}}\n')
+        wire, self._wire = (self._wire, None) if direction == IN else (None, self._wire)
+        if wire is not None and math.isfinite(wire[0] - self._start) and math.isfinite(wire[1]) and wire[1] > 0:
+            paced = f', "end": {max(t, wire[0] - self._start):.6f}, "byte_s": {wire[1]:.9f}'
+        else:
+            paced = ""
+        self._file.write(f'{{"t": {t:.6f}, "dir": "{direction}", "data": "{bytes(data).hex(" ")}"{paced}}}\n')
 
     def flush(self) -> None:
         """Push buffered lines to the file."""
@@ -105,6 +136,11 @@ def _check_size(path: str | os.PathLike[str]) -> None:
                          f"({'not a regular file' if not Path(path).is_file() else f'{size} bytes'})")
 
 
+def _number(value: object) -> bool:
+    """Whether a JSON value is a finite number (an integer too large for a float raises OverflowError)."""
+    return not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)
+
+
 def read_trace(path: str | os.PathLike[str]) -> Iterator[Chunk]:
     """Chunks of a JSON-lines trace; a bad line raises ValueError naming its number (a time before the last one's
     too: a trace's times are the recorder's monotonic clock)."""
@@ -127,13 +163,21 @@ def read_trace(path: str | os.PathLike[str]) -> Iterator[Chunk]:
                 if direction not in (IN, OUT):
                     raise ValueError(f"dir must be {IN!r} or {OUT!r}")
                 t = record["t"]
-                if isinstance(t, bool) or not isinstance(t, (int, float)) or not math.isfinite(t):
+                if not _number(t):
                     raise ValueError(f"t must be a finite number of seconds, got {t!r}")
                 if t < last_t:
                     raise ValueError(f"t {t} is before the line before's {last_t}")
                 last_t = t
-                yield Chunk(float(t), direction, bytes.fromhex(record["data"]))
-            except (ValueError, KeyError, TypeError, RecursionError) as exc:  # RecursionError: JSON nested too deep
+                end, byte_s = record.get("end"), record.get("byte_s")
+                if (end is None) != (byte_s is None):
+                    raise ValueError("end and byte_s come together")
+                if end is not None:
+                    if not (_number(end) and _number(byte_s) and end >= t and byte_s > 0):
+                        raise ValueError(f"end must be a time not before t and byte_s a positive time, got {end!r}, {byte_s!r}")
+                    end, byte_s = float(end), float(byte_s)
+                yield Chunk(float(t), direction, bytes.fromhex(record["data"]), end, byte_s)
+            # RecursionError: JSON nested too deep; OverflowError: a number too large for a float (a 400-digit "t")
+            except (ValueError, KeyError, TypeError, RecursionError, OverflowError) as exc:
                 reason = "nested too deep" if isinstance(exc, RecursionError) else exc
                 raise ValueError(f"{path}:{number}: not a trace line ({reason})") from None
 
