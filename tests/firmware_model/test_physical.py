@@ -7,7 +7,7 @@ import pytest
 
 from firmware_model.interface import ServoModel
 from firmware_model.params import ServoParams
-from firmware_model.physical import PhysicalModel
+from firmware_model.physical import RAD_S_PER_SPEED_UNIT, PhysicalModel
 
 
 def test_is_a_servo_model():
@@ -280,3 +280,30 @@ def test_moving_in_wheel_mode_is_one_shared_array_while_every_servo_is_driven(co
     assert model.advance(0.06, turning).moving is first
     mixed = commands(3, cw_angle_limit=0, ccw_angle_limit=0, moving_speed=[300, 0, 300], torque_enable=[1, 1, 0])
     assert model.advance(1.5, mixed).moving.tolist() == [1, 0, 0]
+
+
+@pytest.mark.parametrize("n", [1, 2], ids=["one-servo", "numpy-n2"])
+def test_moving_stays_1_while_the_shaft_still_travels_at_moving_speed_0(commands, n):
+    """Moving Speed 0 (no speed control) from 512 to 800: the setpoint reaches the goal ~100 ms before the shaft
+    does.  Moving(46) is "1: Goal position command execution is in progress" (e-manual, AX-12A): it reads 1 at
+    every step the shaft turns faster than one speed unit, and falls to 0 only once the shaft has reached the goal
+    (the first 0 may come at the overshoot's turn, 16 units past it, where the shaft stands still for a step); at
+    rest it reads 0 within a few units of the goal.  n=1 takes the float path, n=2 the numpy one."""
+    model = PhysicalModel(n)
+    cmds = commands(n, goal_position=800, moving_speed=0)
+    first_zero = [None] * n
+    for i in range(1, 1501):
+        sensed = model.advance(i * 1e-3, cmds)
+        for k in range(n):
+            speed = abs(float(model.speed_rad_s[k]))
+            moving, present = int(sensed.moving[k]), int(sensed.present_position[k])
+            if speed > RAD_S_PER_SPEED_UNIT:
+                assert moving == 1, (i, k, present, speed)
+            if moving == 0 and first_zero[k] is None:
+                first_zero[k] = (i, present, speed)
+    for k in range(n):
+        assert first_zero[k] is not None, k
+        _, present, speed = first_zero[k]
+        assert present >= 800 - 3 and speed <= RAD_S_PER_SPEED_UNIT, first_zero[k]
+        assert sensed.moving[k] == 0 and abs(int(sensed.present_position[k]) - 800) <= 3
+        assert model.speed_rad_s[k] == 0.0

@@ -8,7 +8,7 @@ from ax12emu.bus import Bus
 from ax12emu.bus.clock import VirtualClock
 from ax12emu.bus.state_store import StateFileError, StateStore
 from ax12emu.protocol.ids import parse_ids
-from ax12emu.protocol.packets import BROADCAST_ID, encode_instruction, encode_status
+from ax12emu.protocol.packets import BROADCAST_ID, StatusError, encode_instruction, encode_status
 from ax12emu.servo.virtual_servo import ServoOptions
 from firmware_model import KinematicModel
 
@@ -81,6 +81,41 @@ def test_physics_runs_in_virtual_time():
     clock.advance(2.0)
     bus.advance()
     assert table.get("present_position") == 768 and table.get("moving") == 0
+
+
+def write_word(bus, servo_id, address, value):
+    """A WRITE of a 2-byte register; the status packet's error byte."""
+    return bus.receive(encode_instruction(servo_id, 0x03, bytes([address, value & 0xFF, value >> 8])))[0].data[4]
+
+
+def run_s(bus, seconds, every_s=0.001):
+    for _ in range(int(round(seconds / every_s))):
+        bus.clock.advance(every_s)
+        bus.advance()
+
+
+def test_alarm_shutdown_cuts_the_output_only_for_the_alarms_its_value_selects():
+    """AX-12A, Alarm Shutdown(18): an alarm sets Torque Limit to 0 only if its bit is set there (the factory 36:
+    Overheating and Overload).  Max Voltage Limit 9.0 V under the 9.6 V supply: Input Voltage Error in every
+    status packet, the output left on and the goal reached; a blocked shaft then overloads, and that one
+    Shutdown selects: Torque Limit 0."""
+    bus = Bus([1], clock=VirtualClock())  # the physical model, 9.6 V
+    table = bus.servo(1).table
+    assert table.get("shutdown") == 36
+    bus.receive(encode_instruction(1, 0x03, bytes([13, 90])))  # Max Voltage Limit 9.0 V
+    bus.clock.advance(EEPROM_WRITE_S)
+    run_s(bus, 0.05)
+    assert bus.receive(ping(1))[0].data[4] == StatusError.INPUT_VOLTAGE
+    assert bus.receive(encode_instruction(1, 0x03, bytes([24, 1])))[0].data[4] == StatusError.INPUT_VOLTAGE
+    assert write_word(bus, 1, 30, 800) == StatusError.INPUT_VOLTAGE
+    run_s(bus, 1.0)
+    assert table.get("torque_limit") == 1023 and table.get("torque_enable") == 1
+    assert abs(table.get("present_position") - 800) <= 4
+    bus.model.set_blocked(True)
+    assert write_word(bus, 1, 30, 300) == StatusError.INPUT_VOLTAGE
+    run_s(bus, 1.5)
+    assert bus.receive(ping(1))[0].data[4] == StatusError.INPUT_VOLTAGE | StatusError.OVERLOAD
+    assert table.get("torque_limit") == 0
 
 
 def test_state_store_survives_and_rejects_corruption(tmp_path):

@@ -377,6 +377,55 @@ def test_bus_watchdog_in_position_mode_holds_the_shaft_with_its_drive_limits_kep
     assert held.goal_pwm == table.get("pwm_limit") and held.goal_current == table.get("current_limit")
 
 
+def test_bus_watchdog_does_not_trip_with_the_torque_off(xm):
+    """It "monitors the communication interval ... when Torque Enable(64) is '1'" (e-manual, Bus Watchdog(98)):
+    with the torque off no silence trips it, whether the bus steps through it or a packet ends it; the interval
+    is timed from the packet that turns the torque on."""
+    bus, _ = xm
+    table = bus.servo(1).table
+    assert status(bus, 1, Instruction2.WRITE, bytes((98, 0, 5))).error == ErrorNumber.NONE  # 100 ms, torque off
+    bus.clock.advance(10.0)
+    bus.advance()
+    assert table.get("bus_watchdog") == 5
+    assert status(bus, 1, Instruction2.READ, bytes((98, 0, 1, 0))).params == b"\x05"
+    bus.clock.advance(10.0)
+    assert status(bus, 1, Instruction2.WRITE, bytes((64, 0, 1))).error == ErrorNumber.NONE
+    assert table.get("bus_watchdog") == 5 and table.get("torque_enable") == 1
+    bus.clock.advance(0.098)
+    bus.advance()
+    assert table.get("bus_watchdog") == 5
+    bus.clock.advance(0.004)
+    bus.advance()
+    assert table.get("bus_watchdog") == 0xFF
+
+
+@pytest.mark.parametrize("value", [1, 5, 50])
+@pytest.mark.parametrize("ended_by", ["step", "packet"])
+def test_bus_watchdog_trips_after_its_value_times_20_ms(xm, value, ended_by):
+    """Unit 20 ms: silent for 2 ms less than value x 20 ms the watchdog is still armed, 2 ms more and it has
+    tripped (-1, read 255), seen by a step of the bus in the silence or by the packet that ends it."""
+    bus, _ = xm
+    table = bus.servo(1).table
+    send(bus, 1, Instruction2.WRITE, bytes((64, 0, 1)))
+    send(bus, 1, Instruction2.WRITE, bytes((98, 0, value)))
+    interval_s = value * 0.020
+
+    def watchdog_after(silence_s):
+        bus.clock.advance(silence_s)
+        if ended_by == "step":
+            bus.advance()
+            return table.get("bus_watchdog")
+        return status(bus, 1, Instruction2.READ, bytes((98, 0, 1, 0))).params[0]  # (it restarts the interval)
+
+    assert watchdog_after(interval_s - 0.002) == value
+    if ended_by == "step":
+        bus.clock.advance(0.004)
+        bus.advance()
+        assert table.get("bus_watchdog") == 0xFF
+    else:
+        assert watchdog_after(interval_s + 0.002) == 0xFF
+
+
 def test_reboot_restores_the_ram_area_and_keeps_the_eeprom(xm):
     bus, firmware = xm
     send(bus, 1, Instruction2.WRITE, bytes((31, 0, 70)))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import time
 
 import pytest
@@ -12,7 +13,7 @@ from ax12emu import FaultConfig, VirtualBus
 from ax12emu.bus.bus import Bus
 from ax12emu.bus.clock import VirtualClock
 from ax12emu.faults.injection import Faults, parse_alarm_bits
-from ax12emu.protocol.packets import StatusError, encode_instruction
+from ax12emu.protocol.packets import StatusError, encode_instruction, encode_status
 from firmware_model import KinematicModel
 
 PRESENT_POSITION = 36
@@ -205,6 +206,36 @@ def test_same_seed_same_faults():
     assert pattern(5) == pattern(5)
     assert pattern(5) != pattern(6)
     assert None in pattern(5)
+
+
+@pytest.mark.parametrize(
+    "setting",
+    [{"drop": 0.3}, {"corrupt": 0.3}, {"delay": 0.3}, {"drop": 0.2, "corrupt": 0.2, "delay": 0.2}],
+    ids=["drop", "corrupt", "delay", "all-three"],
+)
+def test_reply_faults_hit_their_configured_share_of_the_replies(setting):
+    """FaultConfig(drop=0.3) drops 30 % of the status packets (likewise corrupt, delay, and the three together):
+    over 2000 PINGs with a fixed seed each share lies within 4.5 binomial sigmas of its fraction."""
+    bus = Bus([1], clock=VirtualClock(), model=KinematicModel(1))
+    FaultConfig(**setting, delay_s=0.1, seed=1).install(bus)
+    clean = encode_status(1, 0)
+    n = 2000
+    counts = {"drop": 0, "corrupt": 0, "delay": 0}
+    for _ in range(n):
+        replies = bus.receive(encode_instruction(1, 0x01))
+        if not replies:
+            counts["drop"] += 1
+            continue
+        (reply,) = replies
+        if reply.data != clean:
+            assert reply.data[:-1] == clean[:-1]  # only the checksum is spoiled
+            counts["corrupt"] += 1
+        if reply.delay_s >= 0.1:
+            counts["delay"] += 1
+    for kind, count in counts.items():
+        fraction = setting.get(kind, 0.0)
+        bound = 4.5 * math.sqrt(fraction * (1 - fraction) / n)
+        assert abs(count / n - fraction) <= bound, (kind, count, fraction)
 
 
 def test_serve_fault_flags(emulator):

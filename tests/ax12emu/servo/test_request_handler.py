@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import pytest
+
 from ax12emu.protocol.packets import BROADCAST_ID, InstructionPacket, StatusError, encode_status
 from ax12emu.servo.request_handler import handle
 from ax12emu.servo.virtual_servo import ServoOptions, VirtualServo
@@ -143,3 +145,36 @@ def test_on_the_ax_series_a_moving_speed_write_turns_the_torque_on():
     s = servo(goal_position_enables_torque=False)
     send(s, 0x03, [32, 0, 2])
     assert s.table.get("torque_enable") == 0
+
+
+def write_word(s, address, value):
+    return send(s, 0x03, [address, value & 0xFF, value >> 8])
+
+
+@pytest.mark.parametrize("cw, ccw", [(0, 1023), (100, 900)], ids=["factory", "narrowed"])
+def test_a_goal_exactly_at_an_angle_limit_is_accepted(cw, ccw):
+    """The range CW..CCW Angle Limit includes both ends (e-manual, AX-12A: a Goal Position "out of the range"
+    is the Angle Limit Error): a goal exactly at either limit is written with no error."""
+    s = servo()
+    assert send(s, 0x03, [6, cw & 0xFF, cw >> 8, ccw & 0xFF, ccw >> 8]).error == StatusError.NONE
+    for goal in (ccw, cw):
+        assert write_word(s, 30, goal).error == StatusError.NONE, goal
+        assert s.table.get("goal_position") == goal
+
+
+@pytest.mark.parametrize("cw, ccw", [(100, 900), (1, 1022)])
+def test_a_goal_one_past_an_angle_limit_is_an_angle_limit_error(cw, ccw):
+    """One unit outside CW..CCW Angle Limit: Angle Limit Error, the goal left as it was."""
+    s = servo()
+    assert send(s, 0x03, [6, cw & 0xFF, cw >> 8, ccw & 0xFF, ccw >> 8]).error == StatusError.NONE
+    for goal in (ccw + 1, cw - 1):
+        assert write_word(s, 30, goal).error == StatusError.ANGLE_LIMIT, goal
+        assert s.table.get("goal_position") == 512
+
+
+def test_a_goal_past_the_factory_ccw_limit_is_out_of_goal_positions_range():
+    """At the factory limits 0..1023 no goal lies one past a limit within Goal Position's own range: 1024 is a
+    Range Error, the goal left as it was."""
+    s = servo()
+    assert write_word(s, 30, 1024).error == StatusError.RANGE
+    assert s.table.get("goal_position") == 512

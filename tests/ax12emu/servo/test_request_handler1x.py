@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import pytest
+
 from ax12emu.protocol.packets import BROADCAST_ID, Instruction, InstructionPacket, StatusError, parse_bulk_read
 from ax12emu.protocol.servo_models import model
 from ax12emu.servo.plant1x import build_plant1x
@@ -93,3 +95,29 @@ def test_a_locked_mx_refuses_factory_reset_as_the_ax12a_does():
     handle1x(servo, packet(1, Instruction.WRITE, 47, 1))  # Lock
     assert handle1x(servo, packet(1, Instruction.RESET)).error == StatusError.RANGE
     assert (servo.table.get("lock"), servo.table.get("return_delay_time")) == (1, 10)
+
+
+def write_word(servo: Servo1X, address: int, value: int):
+    return handle1x(servo, packet(1, Instruction.WRITE, address, value & 0xFF, value >> 8))
+
+
+@pytest.mark.parametrize("cw, ccw", [(0, 4095), (1000, 3000)], ids=["factory", "narrowed"])
+def test_a_goal_exactly_at_an_angle_limit_is_accepted(cw, ccw):
+    """The range CW..CCW Angle Limit includes both ends (e-manual, MX-28: a Goal Position out of it is the Angle
+    Limit Error): a goal exactly at either limit is written with no error."""
+    servo = mx()
+    assert write_word(servo, 6, cw).error == 0 and write_word(servo, 8, ccw).error == 0
+    for goal in (ccw, cw):
+        assert write_word(servo, 30, goal).error == 0, goal
+        assert servo.table.get("goal_position") == goal
+
+
+@pytest.mark.parametrize("cw, ccw", [(1000, 3000), (1, 4094)])
+def test_a_goal_one_past_an_angle_limit_is_an_angle_limit_error(cw, ccw):
+    """One unit outside CW..CCW Angle Limit: Angle Limit Error, the goal left as it was."""
+    servo = mx()
+    assert write_word(servo, 6, cw).error == 0 and write_word(servo, 8, ccw).error == 0
+    before = servo.table.get("goal_position")
+    for goal in (ccw + 1, cw - 1):
+        assert write_word(servo, 30, goal).error == StatusError.ANGLE_LIMIT, goal
+        assert servo.table.get("goal_position") == before
