@@ -213,6 +213,8 @@ class VirtualBus:
     ) -> None:
         if transport not in TRANSPORTS:
             raise ValueError(f"unknown transport {transport!r}; choose one of: {', '.join(TRANSPORTS)}")
+        if transport == "inprocess" and (pace or echo):  # the link hands over whole packets: there is no wire to pace or echo
+            raise ValueError("pace and echo act on a wire (transport 'pty' or 'tcp'); the in-process link has none")
         _check_types(options=options, model=model, faults=faults, servo=servo, baud_bps=baud_bps)
         if isinstance(tcp_address, str):  # "HOST:PORT", as web= and serve --tcp take it
             from ax12emu.serve.transports.tcp import parse_host_port
@@ -308,6 +310,8 @@ class VirtualBus:
             if self._trace_path:
                 self._trace = self._open_trace(self._trace_path)
             if self.transport_name == "inprocess":
+                if self._trace is not None:
+                    self._trace.note(echo=False)  # the decoder then never takes a repeated poll for an echo
                 link = InProcessLink(self.bus, trace=self._trace)
                 while True:
                     try:
@@ -361,7 +365,7 @@ class VirtualBus:
             link.trace = tap
             self._live = LiveView(
                 self.call, controls=self, tap=tap, counters=lambda: {"packets_in": link.packets_in}, web=self._web_address,
-                allow_remote=self._allow_remote, **self.call(decoder_options),
+                allow_remote=self._allow_remote, echo=False, **self.call(decoder_options),
             )
         else:
             self._live = LiveView.for_server(self._server, controls=self, web=self._web_address, allow_remote=self._allow_remote)

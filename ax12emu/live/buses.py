@@ -68,9 +68,11 @@ def decoder_options(bus: AnyBus) -> dict[str, Any]:
     every servo of the wire in the ``--servo`` form, so each ID's registers are named by its own model's table
     (an MX's, an AX-18A's on Protocol 1.0 as much as an X series servo's on 2.0), as a trace's header keeps them."""
     on_wire = parts(bus)
-    # The decoder frames 2.0 traffic in its "both" mode (each byte to both protocols' framers), as
-    # ``ax12emu decode`` reads a 2.0 trace: a 2.0 status packet says itself that it is one.
-    options: dict[str, Any] = {"protocol": "1.0" if [p for p, _ in on_wire] == [1.0] else "both"}
+    # A wire of one protocol is framed by that protocol alone, as ``ax12emu decode`` reads a trace whose servos are
+    # all of one: a 1.0 frame that a 2.0 packet's bytes happen to hold is no packet there. A mixed wire takes
+    # "both" (each byte to both protocols' framers).
+    kinds = {p for p, _ in on_wire}
+    options: dict[str, Any] = {"protocol": "1.0" if kinds == {1.0} else "2.0" if kinds == {2.0} else "both"}
     for protocol, sub in on_wire:
         if protocol == 1.0:
             ax = getattr(sub, "ax_bus", sub)  # an MX bus holds its AX-12As on an AX-12 bus of their own

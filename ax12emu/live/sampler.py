@@ -59,6 +59,7 @@ class Sampler:
         profile: str = DEFAULT_PROFILE,
         protocol: str = "1.0",
         servos: str | None = None,
+        echo: bool | None = None,
         log_capacity: int = 500,
         max_chunks: int = 80,
     ) -> None:
@@ -69,8 +70,9 @@ class Sampler:
         self._counters = counters or (lambda: {})
         self.period_s = 1.0 / rate_hz
         #: The decoder's options: the 1.0 profile, the protocol ("1.0", "2.0" or "both" on a mixed
-        #: wire) and the 2.0 servos by launch ID and model file, so it names their registers.
-        self._decoding = {"profile": profile, "protocol": protocol, "servos": servos}
+        #: wire) and the 2.0 servos by launch ID and model file, so it names their registers; ``echo``, whether the
+        #: wire echoes the host's bytes (False: a host's repeated poll is never taken for an echo; None: not known).
+        self._decoding = {"profile": profile, "protocol": protocol, "servos": servos, "echo": echo}
         self._decoder = Decoder(**self._decoding)
         self._max_chunks = max_chunks
         #: The newest log lines, for a page that connects late (bounded).

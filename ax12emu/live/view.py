@@ -45,8 +45,10 @@ class LiveView:
         profile: str = "ax12a",
         protocol: str = "1.0",
         servos: str | None = None,
+        echo: bool | None = None,
     ) -> None:
-        self.sampler = Sampler(call, tap=tap, counters=counters, rate_hz=rate_hz, profile=profile, protocol=protocol, servos=servos)
+        self.sampler = Sampler(call, tap=tap, counters=counters, rate_hz=rate_hz, profile=profile, protocol=protocol, servos=servos,
+                               echo=echo)
         self._web_address = web
         self._allow_remote = allow_remote
         self._controls = controls
@@ -65,7 +67,8 @@ class LiveView:
             controls = ServedControls(lambda fn: server.call(fn, CONTROL_TIMEOUT_S), servos=len(server.bus.servos), seed=seed)
         # A short wait: once the server has stopped, a pending sample must not hold the close up.
         sample = lambda fn: server.call(fn, SAMPLE_TIMEOUT_S)
-        return cls(sample, controls=controls, tap=tap, counters=counters, **{**decoder_options(server.bus), **options})
+        return cls(sample, controls=controls, tap=tap, counters=counters,
+                   **{**decoder_options(server.bus), "echo": server.echo, **options})
 
     @property
     def url(self) -> str | None:

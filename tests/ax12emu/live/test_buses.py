@@ -47,3 +47,53 @@ def test_the_default_ax12_bus_keeps_its_profile():
     with VirtualBus(ids=[1, 2], transport="inprocess", virtual_time=True, options=ServoOptions(profile="ax12-2006")) as bus:
         options = bus.call(decoder_options)
     assert options["protocol"] == "1.0" and options["profile"] == "ax12-2006"
+
+
+def test_a_wire_of_one_protocol_is_framed_by_that_protocol_alone():
+    """A differential drive's Sync Write of Goal Velocity -3/+3 to two XL430s holds ``ff ff ff 02 03 00 00 00``, a
+    1.0 frame's start: framed by both protocols, that false frame completed first and the Sync Write was lost."""
+    with VirtualBus(servo="xl430-w250", ids=[1, 2], transport="inprocess", virtual_time=True) as bus:
+        assert bus.call(decoder_options)["protocol"] == "2.0"
+    with VirtualBus(servo="1:ax-12a,2:xl430-w250", transport="inprocess", virtual_time=True) as bus:
+        assert bus.call(decoder_options)["protocol"] == "both"
+    data = (1).to_bytes(1, "little") + (-3).to_bytes(4, "little", signed=True) + (2).to_bytes(1, "little") + (3).to_bytes(4, "little")
+    sync_write = InstructionPacket2(0xFE, Instruction2.SYNC_WRITE, bytes([104, 0, 4, 0]) + data).encode()
+    lines = host_lines("xl430-w250", sync_write, sync_write)
+    assert len(lines) == 2 and all("goal_velocity=-3" in line and "goal_velocity=3" in line for line in lines), lines
+
+
+def test_a_reply_byte_identical_to_its_ping_is_the_servos_on_a_wire_with_no_echo():
+    """A PING answered with the Input Voltage alarm (error 0x01, where PING's code is) is ``ff ff 01 02 01 fb`` both
+    ways. The live log of an in-process bus (its link echoes nothing) shows the answer as the servo's, where on a
+    wire that may echo it reads as the adapter's echo."""
+    import time
+
+    import serial
+    from emu_testkit import http_json
+
+    ping = InstructionPacket(1, Instruction.PING, b"").encode()
+    with VirtualBus(ids=[1], transport="inprocess", virtual_time=True, web=("127.0.0.1", 0)) as bus:
+        bus.faults.force_alarm(1, "input_voltage")
+        port = serial.serial_for_url(bus.port, baudrate=1_000_000, timeout=0.2)
+        try:
+            port.write(ping)
+            assert port.read(6) == ping
+        finally:
+            port.close()
+        deadline = time.monotonic() + 5.0
+        while True:  # the page samples the bus 25 times a second
+            status, answer = http_json(f"{bus.web_url}api/log?n=50", method="GET")
+            lines = answer["lines"] if isinstance(answer, dict) else answer
+            whos = [line["who"] for line in lines if line["who"] in ("host", "servo", "echo")]
+            if len(whos) >= 2 or time.monotonic() > deadline:
+                break
+            time.sleep(0.05)
+    assert status == 200 and whos == ["host", "servo"], lines
+
+
+def test_pace_and_echo_are_refused_in_process():
+    import pytest
+
+    for flag in ("pace", "echo"):
+        with pytest.raises(ValueError, match="in-process link has none"):
+            VirtualBus(transport="inprocess", **{flag: True})
