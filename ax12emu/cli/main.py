@@ -371,9 +371,15 @@ def _naming(flag: str, address: tuple, exc: OSError) -> OSError:
 
 
 def _claimed(directory: str | Path) -> StateStore:
-    """The state directory of a serving process, taken for it alone (``StateStore.claim``)."""
-    store = StateStore(directory)
-    store.claim()
+    """The state directory of a serving process, taken for it alone (``StateStore.claim``); a folder it cannot
+    make or write is named with the flag (the bare errno named a lock file the user never gave)."""
+    try:
+        store = StateStore(directory)
+        store.claim()
+    except OSError as exc:
+        if isinstance(exc, FileExistsError):  # another server holds it: its own words name the pid
+            raise
+        raise OSError(exc.errno, f"--state-dir {directory}: {exc.strerror or exc}") from None
     return store
 
 
@@ -391,7 +397,13 @@ def _open_transport(args: argparse.Namespace):
         if not is_loopback(host):
             log.warning("serving on %s, reachable from other machines", transport.url)
         return transport
-    return open_transport("pty", link=args.link)
+    try:
+        return open_transport("pty", link=args.link)
+    except OSError as exc:
+        if args.link is None or isinstance(exc, FileExistsError):
+            raise
+        # symlink_to's error names the pty as well as the link ("'/dev/pts/0' -> '/no/dir/ax12'"): as if the pty were missing
+        raise OSError(exc.errno, f"--link {args.link}: {exc.strerror or exc} (its folder must exist and be writable)") from None
 
 
 def _serve(args: argparse.Namespace) -> int:
@@ -451,6 +463,10 @@ STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SI
 
 def _stop_on_signals(server: BusServer) -> None:
     for signum in STOP_SIGNALS:
+        # A signal ignored when the process started stays ignored: ``nohup ax12emu serve &`` asks to outlive the
+        # session, and so does a shell's ``trap '' INT`` for a background job.
+        if signal.getsignal(signum) is signal.SIG_IGN:
+            continue
         signal.signal(signum, lambda signum, frame: server.stop())
 
 

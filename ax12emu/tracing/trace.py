@@ -24,8 +24,10 @@ and servo bytes interleaved in one binary file, no timing) is read by
 
 from __future__ import annotations
 
+import contextlib
 import datetime
 import json
+import logging
 import math
 import os
 import time
@@ -34,6 +36,8 @@ from pathlib import Path
 from typing import IO, NamedTuple
 
 __all__ = ["TraceWriter", "Chunk", "read_trace", "read_raw", "read_capture", "trace_header", "TRACE_FORMAT", "IN", "OUT"]
+
+log = logging.getLogger(__name__)
 
 TRACE_FORMAT = "ax12emu-trace/1"
 #: Directions: host to servos, servos (or the adapter's echo) to host.
@@ -104,17 +108,35 @@ class TraceWriter:
             paced = f', "end": {max(t, wire[0] - self._start):.6f}, "byte_s": {wire[1]:.9f}'
         else:
             paced = ""
-        self._file.write(f'{{"t": {t:.6f}, "dir": "{direction}", "data": "{bytes(data).hex(" ")}"{paced}}}\n')
+        try:
+            self._file.write(f'{{"t": {t:.6f}, "dir": "{direction}", "data": "{bytes(data).hex(" ")}"{paced}}}\n')
+        except OSError as exc:
+            self._give_up(exc)
+
+    def _give_up(self, exc: OSError) -> None:
+        """A trace that cannot be written (the disk full) stops, said once; the bus it records goes on serving, as
+        a state folder that fails mid-session does: the trace is a record of the session, not the session."""
+        log.error("trace %s: %s; tracing stopped (the lines before stay)", self.path, exc.strerror or exc)
+        file, self._file = self._file, None
+        with contextlib.suppress(OSError):
+            file.close()
 
     def flush(self) -> None:
         """Push buffered lines to the file."""
         if self._file is not None:
-            self._file.flush()
+            try:
+                self._file.flush()
+            except OSError as exc:
+                self._give_up(exc)
 
     def close(self) -> None:
         """Flush and close; safe to call more than once."""
         if self._file is not None:
-            self._file.close()
+            try:
+                self._file.close()
+            except OSError as exc:
+                self._file = None
+                log.error("trace %s: %s; its last lines are lost", self.path, exc.strerror or exc)
             self._file = None
 
     def __enter__(self) -> "TraceWriter":

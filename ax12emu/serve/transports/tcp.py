@@ -4,7 +4,7 @@ URL format: ``tcp://HOST:PORT`` (PORT 0 picks a free port).
 
 pyserial's ``socket://HOST:PORT`` is a ready client.  One host at a time, as
 on a real bus with one master: while a client is connected, a second one is
-accepted and closed at once (it sees EOF), so bytes of two hosts never
+accepted and closed at once (it sees EOF, whatever it sent first), so bytes of two hosts never
 interleave, unless the first one turns out to have just hung up (its EOF
 may land up to HANGUP_GRACE_S after the new connection).  A client that
 disconnects, even mid-packet, leaves the bus serving; its partial packet is
@@ -17,6 +17,7 @@ TCP carries no line speed, so every servo hears whatever its baud setting.
 
 from __future__ import annotations
 
+import contextlib
 import ipaddress
 import logging
 import select
@@ -28,6 +29,20 @@ from .base import Transport
 __all__ = ["TcpTransport", "parse_host_port"]
 
 log = logging.getLogger(__name__)
+
+#: TCP keepalive of the connected client: probed after KEEPALIVE_IDLE_S of silence, every KEEPALIVE_INTERVAL_S,
+#: given up after KEEPALIVE_PROBES unanswered. A client whose host vanished (a Wi-Fi drop, a laptop asleep, a
+#: pulled cable) sends no FIN; without probes the server never learns and refuses every later client for good.
+#: A live client's idle connection answers the probes in its kernel and stays.
+KEEPALIVE_IDLE_S, KEEPALIVE_INTERVAL_S, KEEPALIVE_PROBES = 5, 1, 3
+
+
+def _keep_alive(conn: socket.socket) -> None:
+    conn.setsockopt(socket.SOL_SOCKET, socket.SO_KEEPALIVE, 1)
+    for option, value in (("TCP_KEEPIDLE", KEEPALIVE_IDLE_S), ("TCP_KEEPINTVL", KEEPALIVE_INTERVAL_S),
+                          ("TCP_KEEPCNT", KEEPALIVE_PROBES)):
+        if hasattr(socket, option):  # Linux; other systems keep their defaults (hours) and SO_KEEPALIVE alone
+            conn.setsockopt(socket.IPPROTO_TCP, getattr(socket, option), value)
 
 #: How long a new client waits for the connected one's hang-up to land before it is refused: a
 #: client that hangs up and reconnects at once can have its FIN trail the new handshake (on
@@ -167,6 +182,7 @@ class TcpTransport(Transport):
     def _take(self, conn: socket.socket, peer: object) -> None:
         conn.setblocking(False)
         conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        _keep_alive(conn)
         self._client = conn
         self.connections += 1
         log.info("client connected from %s", peer)
@@ -174,6 +190,15 @@ class TcpTransport(Transport):
     def _refuse(self, conn: socket.socket, peer: object) -> None:
         self.refused += 1
         log.warning("refused a second client from %s: one host at a time", peer)
+        # A client sends its first packet as soon as it connects; closed with those bytes unread, the socket
+        # answers with a reset ("connection reset by peer", a network fault to the client). Read them and end the
+        # connection in order, so the client sees EOF.
+        conn.setblocking(False)
+        with contextlib.suppress(OSError):
+            while conn.recv(4096):
+                pass
+        with contextlib.suppress(OSError):
+            conn.shutdown(socket.SHUT_RDWR)
         conn.close()
 
     def _hung_up(self) -> bool:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import socket
 import subprocess
 import sys
+import time
 
 import pytest
 
@@ -83,6 +84,38 @@ def test_a_hangup_stops_the_server_cleanly(tmp_path, emulator):
     served = emulator("--link", str(link))
     assert served.stop(signal.SIGHUP) == 0
     assert not link.exists() and not link.is_symlink()
+
+
+def test_under_nohup_a_hangup_leaves_the_server_serving(emulator):
+    """``nohup ax12emu serve &`` then logging out: a hangup ignored when the server started stays ignored."""
+    import signal
+
+    import serial
+
+    before = signal.signal(signal.SIGHUP, signal.SIG_IGN)  # what nohup does before it runs the command
+    try:
+        served = emulator("--tcp", "127.0.0.1:0")
+    finally:
+        signal.signal(signal.SIGHUP, before)
+    served.process.send_signal(signal.SIGHUP)
+    time.sleep(0.5)
+    assert served.process.poll() is None
+    with serial.serial_for_url(served.port, timeout=2.0) as link:
+        link.write(bytes.fromhex("ffff010201fb"))
+        assert link.read(6) == bytes.fromhex("ffff010200fc")
+    assert served.stop(signal.SIGTERM) == 0
+
+
+@pytest.mark.parametrize(("flag", "under"), [("--link", "ax12"), ("--state-dir", "state")])
+def test_a_path_in_a_missing_folder_is_named_with_its_flag(tmp_path, flag, under):
+    """The bare errno named the pty ("'/dev/pts/0' -> '/no/dir/ax12'": as if the pty were missing) or a lock file."""
+    path = tmp_path / "no-such-folder" / "deeper" / under
+    if flag == "--state-dir":  # a folder it may make; under a file it cannot
+        (tmp_path / "no-such-folder").write_text("a file")
+    result = run("serve", flag, str(path))
+    assert result.returncode != 0 and "Traceback" not in result.stderr
+    assert result.stderr.strip().startswith("ax12emu:") and f"{flag} {path}:" in result.stderr, result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
 
 
 def test_a_named_pipe_for_a_state_file_is_refused_not_waited_on(tmp_path):

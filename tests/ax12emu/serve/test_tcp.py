@@ -44,6 +44,50 @@ def test_second_client_refused_and_reconnect_after_mid_packet_drop(emulator):
         assert link.read(6) == encode_status(1, 0)
 
 
+def test_a_second_client_that_sends_at_once_sees_eof_not_a_reset(emulator):
+    """A real client sends its first packet as it connects; closed with it unread, the socket answered with a reset
+    ("connection reset by peer": a network fault, to the client) where the docs promise EOF."""
+    served = emulator("--tcp", "127.0.0.1:0")
+    host, port = served.port.removeprefix("socket://").rsplit(":", 1)
+    first = socket.create_connection((host, int(port)), timeout=2)
+    try:
+        for _ in range(5):
+            second = socket.create_connection((host, int(port)), timeout=2)
+            try:
+                second.sendall(PING)
+                assert second.recv(10) == b""  # raised ConnectionResetError
+            finally:
+                second.close()
+        first.sendall(PING)
+        assert first.recv(6) == encode_status(1, 0)  # the first host still holds the bus
+    finally:
+        first.close()
+
+
+def test_the_connected_client_is_probed_so_a_vanished_host_lets_go_of_the_bus():
+    """A client whose host vanished sends no FIN: without keepalive probes the bus stayed taken for good."""
+    from ax12emu.serve.transports import tcp
+
+    transport = tcp.TcpTransport("127.0.0.1", 0)
+    try:
+        client = socket.create_connection((transport.host, transport.port), timeout=2)
+        try:
+            deadline = time.monotonic() + 2.0
+            while transport._client is None and time.monotonic() < deadline:
+                transport.on_readable(transport._listener.fileno())
+            conn = transport._client
+            assert conn.getsockopt(socket.SOL_SOCKET, socket.SO_KEEPALIVE) == 1
+            if hasattr(socket, "TCP_KEEPIDLE"):  # a dead peer is given up within idle + interval * probes
+                idle = conn.getsockopt(socket.IPPROTO_TCP, socket.TCP_KEEPIDLE)
+                interval = conn.getsockopt(socket.IPPROTO_TCP, socket.TCP_KEEPINTVL)
+                probes = conn.getsockopt(socket.IPPROTO_TCP, socket.TCP_KEEPCNT)
+                assert idle + interval * probes <= 10
+        finally:
+            client.close()
+    finally:
+        transport.close()
+
+
 def test_dynamixel_sdk_over_tcp_with_url_port_handler(emulator):
     """dynamixel-sdk drives the TCP bus through the README's three-line PortHandler subclass."""
     from dynamixel_sdk import COMM_SUCCESS, PacketHandler

@@ -94,3 +94,39 @@ def test_a_bad_number_is_not_a_trace_line(tmp_path, line):
     path.write_text('{"format": "ax12emu-trace/1", "profile": "ax12a"}\n' + line + "\n")
     with pytest.raises(ValueError, match=r"t\.jsonl:2: not a trace line"):
         list(read_trace(path))
+
+
+def test_a_trace_that_cannot_be_written_stops_and_says_so_once(tmp_path, caplog):
+    """A full disk under a long traced session: the server's loop went down with ENOSPC and the bus with it. The
+    trace stops, said once naming its file, and recording goes on as a no-op; the lines written before stay."""
+    import errno
+    import logging
+
+    class FullDisk:
+        def __init__(self, file):
+            self.file, self.writes = file, 0
+
+        def write(self, text):
+            self.writes += 1
+            raise OSError(errno.ENOSPC, "No space left on device")
+
+        def flush(self):
+            pass
+
+        def close(self):
+            self.file.close()
+
+    path = tmp_path / "t.jsonl"
+    writer = TraceWriter(path)
+    writer.record(IN, b"\xff\xff\x01\x02\x01\xfb", 1.0)
+    full = FullDisk(writer._file)
+    writer._file = full
+    with caplog.at_level(logging.ERROR, logger="ax12emu.tracing.trace"):
+        writer.record(IN, b"\xff\xff\x01\x02\x01\xfb", 1.1)
+        writer.record(IN, b"\xff\xff\x01\x02\x01\xfb", 1.2)
+        writer.flush()
+        writer.close()
+    said = [r.getMessage() for r in caplog.records]
+    assert len(said) == 1 and str(path) in said[0] and "No space left on device" in said[0] and "tracing stopped" in said[0]
+    assert full.writes == 1
+    assert [chunk.data for chunk in read_trace(path)] == [b"\xff\xff\x01\x02\x01\xfb"]
