@@ -29,6 +29,7 @@ from ax12emu.protocol.framing import Framer
 from ax12emu.protocol.packets import BROADCAST_ID, MAX_ID, Instruction, InstructionPacket
 from ax12emu.servo.model_factory import ModelChoice, build_model
 from ax12emu.servo.plant import Plant
+from ax12emu.servo.plant2 import GRID_SLACK_S
 from ax12emu.servo.request_handler import handle
 from ax12emu.servo.virtual_servo import ServoOptions, VirtualServo
 from firmware_model.interface import ServoModel
@@ -183,7 +184,7 @@ class Bus(ServosById[VirtualServo]):
         plant = self.plant
         model, sim_time_s = plant.model, now_s - self.request_lag_s
         # Plant.catch_up's own tests, without the call
-        if sim_time_s >= model.time_s + model.step_s or plant.write_unseen:
+        if sim_time_s + GRID_SLACK_S >= model.time_s + model.step_s or plant.write_unseen:
             plant.catch_up(sim_time_s, now_s)
         return self.reply_cache.lookup(data if type(data) is bytes else bytes(data), line_bps, self._by_id)
 

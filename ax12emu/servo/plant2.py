@@ -131,7 +131,7 @@ class SteppedPlant:
         """Whether a whole step is due by ``sim_time_s``, a client's write is not yet shown, or the step a write
         earned is owed and the clock (``clock_s``, else ``sim_time_s``) has reached the model's time."""
         model = self.firmware
-        if self._write_unseen or sim_time_s >= model.time_s + model.step_s:
+        if self._write_unseen or sim_time_s + GRID_SLACK_S >= model.time_s + model.step_s:
             return True
         return self._step_owed and model.time_s <= (sim_time_s if clock_s is None else clock_s) + GRID_SLACK_S
 
@@ -153,7 +153,7 @@ class SteppedPlant:
             self.catch_up_deferred()
         model = self.firmware
         copy = False
-        if sim_time_s >= model.time_s + model.step_s:
+        if sim_time_s + GRID_SLACK_S >= model.time_s + model.step_s:
             model.step_to(sim_time_s)
             copy, self._step_owed = True, False
         elif self._write_unseen or self._step_owed:
@@ -172,14 +172,16 @@ class SteppedPlant:
         if self._deferred is not None:
             self.catch_up_deferred()
         model = self.firmware
-        if sim_time_s >= model.time_s + model.step_s:
+        if sim_time_s + GRID_SLACK_S >= model.time_s + model.step_s:
             model.step_to(sim_time_s)
         elif (self._write_unseen or self._step_owed) and model.time_s <= sim_time_s + GRID_SLACK_S:
             model.step_to(model.time_s + model.step_s)
         else:
             return
-        yield
+        # Whatever was owed is stepped now. A write between the pieces comes after this step: it stays unseen and
+        # earns a step of its own before the next request is answered (cleared after the yield, it read as taken).
         self._write_unseen = self._step_owed = False
+        yield
         self.write_back()
 
     def show_unstepped(self) -> None:
@@ -352,7 +354,7 @@ class Plant2(SteppedPlant):
         """No step due by ``sim_time_s`` nor owed by ``clock_s``, and a copy of what the firmware senses now would
         leave ``spans`` as they are."""
         model = self.firmware
-        if sim_time_s >= model.time_s + model.step_s or self._step_owed and model.time_s <= clock_s + GRID_SLACK_S:
+        if sim_time_s + GRID_SLACK_S >= model.time_s + model.step_s or self._step_owed and model.time_s <= clock_s + GRID_SLACK_S:
             return False  # a step is due: the read must see it
         if self._written_back_epoch is None or getattr(model, "sensing_epoch", None) != self._written_back_epoch:
             return False

@@ -96,3 +96,63 @@ def test_a_write_while_the_model_is_ahead_is_shown_at_once_and_stepped_when_the_
     assert plant.firmware.time_s == pytest.approx(0.012)
     assert table.get("present_pwm") < 0  # that step drove towards the second goal
     assert not plant.due(0.0111, 0.0111)
+
+
+def _goal_then_read(servo: str, write_between_pieces: bool) -> tuple[int, int]:
+    """Torque on, a tick of the serving loop in its two pieces (step, copy), a Goal Position write (between the
+    pieces, or after the whole tick), then the client's very next read: (Moving, Present PWM or Load)."""
+    import struct
+
+    from ax12emu.harness.virtual_bus import VirtualBus
+    from ax12emu.protocol.packets2 import encode_instruction2
+
+    x_series = servo != "xl-320"
+    torque_at, goal, read = (64, struct.pack("<i", 2548), (122, 4)) if x_series else (24, struct.pack("<H", 700), (37, 13))
+    with VirtualBus(servo=servo, ids=[1], transport="inprocess", virtual_time=True, baud_bps=1_000_000) as vb:
+        bus = vb.bus
+        bus.answer(encode_instruction2(1, 3, struct.pack("<HB", torque_at, 1)))
+        bus.clock.advance(0.2)
+        bus.advance()
+        bus.clock.advance(0.0015)  # the next tick falls due
+        pieces = bus.advance_in_pieces()
+        next(pieces)  # the step
+        goal_packet = encode_instruction2(1, 3, struct.pack("<H", 116 if x_series else 30) + goal)
+        if write_between_pieces:
+            bus.answer(goal_packet)
+        for _ in pieces:  # the copy
+            pass
+        if not write_between_pieces:
+            bus.answer(goal_packet)
+        (reply,) = bus.answer(encode_instruction2(1, 2, struct.pack("<HH", *read)))[0]
+    params = reply.data[9:-2]
+    if x_series:  # Moving(122), Moving Status(123), Present PWM(124)
+        return params[0], int.from_bytes(params[2:4], "little", signed=True)
+    return params[49 - 37], int.from_bytes(params[41 - 37:43 - 37], "little")  # Moving(49), Present Load(41)
+
+
+@pytest.mark.parametrize("servo", ["xm430-w350", "xl-320"])
+def test_a_write_between_a_ticks_pieces_still_earns_its_step(servo):
+    """A serving loop steps the physics in two pieces, answering packets between them. A goal written there was
+    marked seen by the copy that followed, so the next read showed the old goal held (Moving 0, no drive), one
+    write in five over a pty."""
+    after = _goal_then_read(servo, write_between_pieces=False)
+    between = _goal_then_read(servo, write_between_pieces=True)
+    assert after[0] == 1 and after[1] != 0
+    assert between == after
+
+
+@pytest.mark.parametrize("servo", ["xl430-w250", "xm430-w350", "xl-320", "mx-28"])
+def test_each_millisecond_step_of_virtual_time_steps_the_firmware(servo):
+    """The clock sums its own floats and the firmware adds a step each step: after step(0.1) the sums differ by
+    1e-16, and the test for a whole step due skipped every other 1 ms step (reads repeated in pairs)."""
+    from ax12emu.harness.virtual_bus import VirtualBus
+
+    with VirtualBus(servo=servo, ids=[1], transport="inprocess", virtual_time=True, baud_bps=1_000_000) as vb:
+        firmware = vb.bus.servos[0].plant.firmware
+        vb.write(1, "torque_enable", 1)
+        vb.step(0.1)
+        behind = []
+        for _ in range(20):
+            vb.step(0.001)
+            behind.append(firmware.time_s < vb.bus.clock.now_s() - 1e-9)
+    assert not any(behind)
