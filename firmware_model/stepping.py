@@ -91,7 +91,8 @@ def check_step(p: ServoParams, step_s: float) -> None:
             f"with inertia {p.total_inertia_kg_m2:.4g} kg m^2: it must stay below inertia / step = "
             f"{p.total_inertia_kg_m2 / step_s:.4g} N m s/rad (or use a shorter step)"
         )
-    back_emf_per_step = p.gearbox_efficiency * p.torque_constant_nm_a ** 2 / p.winding_resistance_ohm * dt_j
+    # k * k, not k ** 2: a float's power raises OverflowError past 1e308 where a product is inf (refused below)
+    back_emf_per_step = p.gearbox_efficiency * p.torque_constant_nm_a * p.torque_constant_nm_a / p.winding_resistance_ohm * dt_j
     if back_emf_per_step >= 1.0:
         # The back-EMF's braking is taken explicitly as well (the current from the speed at the step's start):
         # past 1 a step would reverse the shaft, and the speed grows without bound (an overflow, not a servo).

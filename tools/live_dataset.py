@@ -38,7 +38,8 @@ import json
 import os
 import sys
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 
@@ -266,6 +267,19 @@ def _prioritise(pid: int, realtime: bool) -> int:
         return 2
 
 
+@contextmanager
+def recording_priority(server_pid: int) -> Iterator[dict[str, str]]:
+    """For a recording's seconds, the server ``server_pid`` and this process (the recorder) scheduled as
+    :data:`RECORDING_PRIORITY` says, this process's niceness restored after; yields what was permitted
+    (``{"server": ..., "recorder": ...}``).  tools/twin_check.py records through it too."""
+    own = os.getpriority(os.PRIO_PROCESS, 0)
+    try:
+        yield {"server": RECORDING_PRIORITY[_prioritise(server_pid, True)],
+               "recorder": RECORDING_PRIORITY[_prioritise(0, False)]}
+    finally:
+        os.setpriority(os.PRIO_PROCESS, 0, own)
+
+
 def _params_toml(setup: Setup, base: dict[str, float], path: Path) -> None:
     lines = ["# hidden by tools/live_dataset.py"]
     lines += [f"{k} = {float(v)!r}" for k, v in {**base, **setup.params}.items()]
@@ -290,13 +304,10 @@ def record_live(knob: str, seed: int, duration_s: float = 10.0, rate_hz: float =
         # Served from this checkout (cwd), so the recording's model is the code the diagnosis runs.
         served = start_served(["--ids", "1", "--params", str(params_path), *setup.serve_args], cwd=ROOT,
                               timeout_s=SERVE_START_S)
-        own = os.getpriority(os.PRIO_PROCESS, 0)
         try:
-            priority = (RECORDING_PRIORITY[_prioritise(served.process.pid, True)],
-                        RECORDING_PRIORITY[_prioritise(0, False)])
-            trace = record(served.port, 1, 1_000_000, duration, rate_hz, setup.breakaway_s, setup.writes)
+            with recording_priority(served.process.pid) as priority:
+                trace = record(served.port, 1, 1_000_000, duration, rate_hz, setup.breakaway_s, setup.writes)
         finally:
-            os.setpriority(os.PRIO_PROCESS, 0, own)
             served.close()
     if setup.shift_s:
         trace = shift_readings(trace, setup.shift_s)
@@ -305,7 +316,7 @@ def record_live(knob: str, seed: int, duration_s: float = 10.0, rate_hz: float =
     trace.comments[:] = [f"live recording through dynamixel-sdk from ax12emu serve, seed {seed}, tools/live_dataset.py"]
     key = {"knob": knob, "effect": spec.effect, "how": spec.how, "truth": setup.truth, "seed": seed,
            "duration_s": duration, "rate_hz": rate_hz, "base": base, "setup": asdict(setup),
-           "priority": {"server": priority[0], "recorder": priority[1]}}
+           "priority": priority}
     return trace, key
 
 
@@ -326,6 +337,8 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     if not args.out or not args.key:
         p.error("OUT.csv and --key are required")
+    if Path(args.key).resolve() == Path(args.out).resolve():  # the key would overwrite the recording
+        p.error("--key must not be the trace file OUT")
     if args.knob not in KNOBS:
         p.error(f"unknown knob {args.knob!r}; known: {', '.join(KNOBS)}")
     if not servable(args.knob):

@@ -48,6 +48,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--breakaway", type=nonnegative_float, default=0.0,
                    help="seconds of breakaway block at the end (default 0)")
     args = p.parse_args(argv)
+    if Path(args.key).resolve() == Path(args.out).resolve():  # the key would overwrite the trace
+        p.error("--key must not be the trace file OUT")
     if "none" in args.effects and args.effects != ["none"]:
         p.error("--effects none stands alone (a clean servo)")
     if round(args.duration * args.rate) < 2:  # a trace of fewer readings is no trace

@@ -187,13 +187,17 @@ def run_loop(record: Recorder, hidden_args: list[str], writes: dict[str, int], o
 def live_recorder(duration_s: float, rate_hz: float, breakaway_s: float) -> Recorder:
     """Serve, record through dynamixel-sdk in real time (tools/record.py), stop; the trace is also written."""
     sys.path.insert(0, str(ROOT / "tools"))
+    from live_dataset import recording_priority
     from record import record as sdk_record
 
     def _record(serve_args: list[str], writes: dict[str, int], path: Path) -> Trace:
         served = start_served(["--ids", "1", *serve_args], cwd=ROOT)
         try:
             try:
-                trace = sdk_record(served.port, 1, 1_000_000, duration_s, rate_hz, breakaway_s, writes)
+                # as tools/live_dataset.py records: a server descheduled for 10 ms makes a command take effect that
+                # late, which the diagnosis rightly names a latency (live_dataset.RECORDING_PRIORITY)
+                with recording_priority(served.process.pid):
+                    trace = sdk_record(served.port, 1, 1_000_000, duration_s, rate_hz, breakaway_s, writes)
             # "cannot open PORT", a port gone (pyserial's SerialException or termios.error), a write unanswered
             except (SystemExit, OSError, termios.error, RuntimeError) as exc:
                 failure = exc

@@ -115,6 +115,8 @@ def parse_args(argv: list[str] | None = None, prog: str = "python -m firmware_mo
     args = p.parse_args(argv)
     if args.effects:
         unknown = [e for e in args.effects.split(",") if e not in LIBRARY and e not in X_LIBRARY]  # the trace's, in main
+        if "" in unknown:
+            p.error(f"--effects {args.effects!r} has an empty entry (a stray comma?)")
         if unknown:
             p.error(f"unknown effect(s): {', '.join(unknown)}")
     for name in ("goal", "initial_goal", "moving_speed"):

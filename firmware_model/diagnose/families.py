@@ -13,6 +13,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from ..params import ServoParams
+from ..units import RAD_PER_POSITION_UNIT
+from ..xseries.firmware import PULSE_RAD
 from .effects import BASE_PARAMS, LIBRARY, X_BASE_PARAMS, X_LIBRARY, Effect, Param
 from .evaluate import Evaluator
 from .trace import Trace
@@ -33,11 +35,13 @@ class Family:
     evaluator: Callable[[Trace, object], Evaluator]
     #: The starting parameters when none are given (None: the evaluator builds them from the trace).
     default_params: Callable[[], object]
+    #: One unit of the trace's ``present_position``, rad.
+    position_unit_rad: float = float(RAD_PER_POSITION_UNIT)
 
 
 FAMILIES = {
     "ax": Family("ax", LIBRARY, BASE_PARAMS, Evaluator, ServoParams),
-    "x": Family("x", X_LIBRARY, X_BASE_PARAMS, XEvaluator, lambda: None),
+    "x": Family("x", X_LIBRARY, X_BASE_PARAMS, XEvaluator, lambda: None, float(PULSE_RAD)),
 }
 
 

@@ -34,7 +34,7 @@ from .phases import PHASES
 from .search import Diagnosis
 from .trace import Trace
 
-__all__ = ["verdict_text", "verdict_json", "json_safe", "fitted_params", "fitted_effects", "write_outputs", "EFFECT_FIELDS",
+__all__ = ["verdict_text", "verdict_json", "json_safe", "fitted_params", "fitted_effects", "fitted_inertia", "write_outputs", "EFFECT_FIELDS",
            "BASE_FIELD_EFFECTS"]
 
 #: Library effects folded into base ServoParams fields by :func:`fitted_params`.
@@ -79,14 +79,36 @@ def fitted_params(d: Diagnosis, params: ServoParams = ServoParams(), supply_v: f
     k = d.knobs
     changes = {"gearbox_efficiency": k["gearbox_efficiency"], "coulomb_friction_nm": max(k["coulomb_friction_nm"], 0.0),
                "static_friction_nm": max(k["static_friction_nm"], k["coulomb_friction_nm"], 0.0),
-               "stribeck_velocity_rad_s": k["stribeck_velocity_rad_s"],
-               "load_inertia_kg_m2": max(params.load_inertia_kg_m2 + k["extra_inertia_kg_m2"], 0.0)}
+               "stribeck_velocity_rad_s": k["stribeck_velocity_rad_s"]}
+    changes.update(fitted_inertia(k["extra_inertia_kg_m2"], params)[0])
     if "sample_hold" in d.named:
         changes["sample_hold_s"] = round(k["hold_s"], 2)
     changes["effects"] = fitted_effects(d.named, k, params.effects)[0]
     if supply_v is not None:
         changes["supply_voltage_v"] = supply_v
     return replace(params, **changes)
+
+
+def fitted_inertia(extra: float, params: ServoParams) -> tuple[dict[str, float], list[str]]:
+    """The inertia fields that serve ``params``' inertia plus a fitted ``extra`` (kg m^2), and a note where the
+    load alone could not take it.
+
+    The model has one inertia, the rotor's (reflected) and the load's together.  A servo lighter than the model
+    (``extra`` below minus the load) once had its load pinned at 0 and was served heavier than fitted (7 units off
+    the fit's own simulation); the rest comes off the rotor's instead, so the total is the fitted one.  Only a
+    total at or below zero, no servo, is pinned (the load at 0, the rotor kept).
+    """
+    load = params.load_inertia_kg_m2 + extra
+    if load >= 0.0:
+        return {"load_inertia_kg_m2": load}, []
+    rotor = params.rotor_inertia_reflected_kg_m2 + load
+    if rotor > 0.0:
+        return ({"load_inertia_kg_m2": 0.0, "rotor_inertia_reflected_kg_m2": rotor},
+                [f"extra_inertia: fitted {extra:.6g} kg m^2 is more than the load's {params.load_inertia_kg_m2:g}; "
+                 f"the rest is taken off the reflected rotor inertia, served as {rotor:.6g}"])
+    return ({"load_inertia_kg_m2": 0.0},
+            [f"extra_inertia: fitted {extra:.6g} kg m^2 leaves no inertia (rotor {params.rotor_inertia_reflected_kg_m2:g}"
+             f" + load {params.load_inertia_kg_m2:g}); served with the load at 0"])
 
 
 def fitted_supply_v(trace: Trace, params: ServoParams) -> tuple[float, list[str]]:
@@ -237,7 +259,7 @@ def write_outputs(trace: Trace, d: Diagnosis, out: str | Path, source: str = "tr
 
 
 def _write_servo_params(d: Diagnosis, out: Path, source: str, params: ServoParams, trace: Trace) -> None:
-    notes = fitted_effects(d.named, d.knobs, params.effects)[1]
+    notes = fitted_effects(d.named, d.knobs, params.effects)[1] + fitted_inertia(d.knobs["extra_inertia_kg_m2"], params)[1]
     supply_v, supply_notes = fitted_supply_v(trace, params)
     header = (f"fitted by firmware_model.diagnose from {source}; named effects: {', '.join(d.named) or 'none'}",
               f"supply_voltage_v: the recording's supply, {supply_v:g} V", *supply_notes, *notes)

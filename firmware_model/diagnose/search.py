@@ -44,6 +44,7 @@ from .selection import Score, Selection, shortlist
 from .trace import Trace
 from .verdict import (
     BIC_MARGIN,
+    POT_NOISE_MAX_RAD,
     STRUCTURE_FLOOR_UNITS,
     STRUCTURE_RATIO,
     TENTATIVE_SHARE,
@@ -198,7 +199,8 @@ def diagnose(trace: Trace, params: ServoParams | XPhysicsParams | None = None,
         say(f"round {round_no}: accepted {win.effect} " + ", ".join(f"{k}={v:.4g}" for k, v in win.values.items()))
     sim_after = ev.measured + z * ev.sd
     as_dict = lambda arr: {ch: np.rint(arr[:, i]).astype(np.int64) for i, ch in enumerate(ev.channels)}  # noqa: E731
-    residual = residual_verdict(z, ev.channels, ev.sd, ev.phases)
+    residual = residual_verdict(z, ev.channels, ev.sd, ev.phases,
+                                pot_noise_max=POT_NOISE_MAX_RAD / sel.family.position_unit_rad)
     for c in accepted:
         c.confidence = confidence(c.share, residual.unexplained)
     return Diagnosis(

@@ -146,6 +146,8 @@ class Selection:
         family = family or family_of(trace)
         #: The effects this trace's servo family can be diagnosed with (:mod:`.families`).
         self.library = family.library
+        #: The trace's servo family (:mod:`.families`).
+        self.family = family
         self.ev = family.evaluator(trace, family.default_params() if params is None else params)
         self.params = self.ev.params
         self.progress = progress

@@ -176,7 +176,7 @@ class TraceFormatError(ValueError):
     """A malformed trace; ``line`` (1-based) and ``column`` (name) say where, when known."""
 
     def __init__(self, message: str, line: int | None = None, column: str | None = None, source: str = "trace") -> None:
-        where = source + (f":{line}" if line is not None else "") + (f": column {column!r}" if column else "")
+        where = source + (f":{line}" if line is not None else "") + (f": column {column!r}" if column is not None else "")
         super().__init__(f"{where}: {message}")
         self.line, self.column = line, column
 
@@ -313,6 +313,8 @@ def parse_trace(text: str, source: str = "trace") -> Trace:
         if header is None:
             header = [c.strip() for c in cells]
             for col in header:
+                if not col:
+                    raise TraceFormatError("an empty column name (a trailing comma?)", line_no, col, source)
                 if col not in fmt.columns:
                     raise TraceFormatError(f"unknown column (known: {', '.join(fmt.columns)})", line_no, col, source)
             dup = {c for c in header if header.count(c) > 1}

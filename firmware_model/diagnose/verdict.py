@@ -38,7 +38,15 @@ explained only a small share are marked tentative (:func:`confidence`).
   out-of-library cogging ripple of 0.15-0.25 N m leaves 2-2.7 units
   (3-4 x ``s_w``).
 * **size** (every channel): the trimmed RMS of the residual, whitened by the
-  channel's noise measured at rest, above :data:`UNEXPLAINED_RMS`.
+  channel's noise measured at rest, above :data:`UNEXPLAINED_RMS`.  For
+  position that noise is taken as at most :data:`POT_NOISE_MAX_RAD`, the most
+  a pot reads at rest: the rows "at rest" are those the model has at rest,
+  and where the servo moved in them (a trace logged a row in 20 with its
+  commands' onsets a sample off) their spread is the model's miss, not noise.
+  Whitened by it, a position residual of 35 units RMS read as 1 sd and the
+  trace was called explained; measured at rest, real AX-12A steps spread
+  0.4-0.9 units, live recordings 0.3 and synthetic traces 0.8-0.9, so the
+  bound never binds on them.
 """
 
 from __future__ import annotations
@@ -55,7 +63,7 @@ from .selection import Fit, Linearisation, Score
 
 __all__ = ["Candidate", "ResidualVerdict", "judge", "rejections", "delta_bic", "wald", "grid_profile", "residual_structure",
            "residual_verdict", "confidence", "BIC_MARGIN", "MIN_SHARE", "UNEXPLAINED_RMS", "STRUCTURE_RATIO",
-           "STRUCTURE_FLOOR_UNITS", "TENTATIVE_SHARE"]
+           "STRUCTURE_FLOOR_UNITS", "TENTATIVE_SHARE", "POT_NOISE_MAX_RAD"]
 
 #: BIC must improve by more than this (the usual "strong evidence" threshold).
 BIC_MARGIN = 10.0
@@ -67,6 +75,9 @@ UNEXPLAINED_RMS = 2.5
 STRUCTURE_RATIO = 1.5
 #: ... and above this many position units RMS (one quantisation step).
 STRUCTURE_FLOOR_UNITS = 1.0
+#: The most a position sensor reads at rest, rad (two AX-12 position units, 0.59 deg): the position noise the size
+#: test whitens by is at most this (module docstring).
+POT_NOISE_MAX_RAD = 0.01
 #: With an unexplained residual, an effect that removed less than this share of the cost is "tentative".
 TENTATIVE_SHARE = 0.8
 #: Confidence level of every interval and test here.
@@ -225,26 +236,40 @@ class ResidualVerdict:
     rms_sd: dict[str, float]
 
 
-def residual_verdict(z: np.ndarray, channels: list[str], sd: np.ndarray, phases: np.ndarray) -> ResidualVerdict:
-    """Judge the final whitened residual ``z`` (n, C; position first) by structure and by size (module docstring)."""
+def residual_verdict(z: np.ndarray, channels: list[str], sd: np.ndarray, phases: np.ndarray,
+                     pot_noise_max: float | None = None) -> ResidualVerdict:
+    """Judge the final whitened residual ``z`` (n, C; position first) by structure and by size (module docstring).
+
+    ``pot_noise_max``: the most the position sensor reads at rest, in position units (:data:`POT_NOISE_MAX_RAD`
+    in the trace's units); the size test whitens position by no more than that.
+    """
     rms = {ch: trimmed_rms(z[:, i]) for i, ch in enumerate(channels)}
-    worst = max(rms, key=rms.get)
+    size = dict(rms)
+    noisy_rest = pot_noise_max is not None and sd[0] > pot_noise_max
+    if noisy_rest:
+        size[channels[0]] = rms[channels[0]] * sd[0] / pot_noise_max
+    worst = max(size, key=size.get)
     structured, white = residual_structure(z[:, 0] * sd[0])  # position, raw units
     by_structure = structured > max(STRUCTURE_RATIO * white, STRUCTURE_FLOOR_UNITS)
-    by_size = rms[worst] > UNEXPLAINED_RMS
+    by_size = size[worst] > UNEXPLAINED_RMS
     unexplained = bool(by_structure or by_size)
     detail = ""
     if unexplained:
         ch = "present_position" if by_structure else worst
         per_phase = {PHASES[p]: trimmed_rms(z[phases == p, channels.index(ch)]) for p in np.unique(phases)}
         where = max(per_phase, key=per_phase.get)
+        scale = sd[0] / pot_noise_max if noisy_rest and ch == channels[0] else 1.0
         if by_structure:
             detail = (f"present_position keeps a time-correlated residual of {structured:.2f} units RMS after the "
                       f"named effects, {structured / max(white, 1e-9):.1f} x the row-to-row noise "
                       f"({white:.2f} units, from the residual itself)")
+        elif scale != 1.0:
+            detail = (f"{ch} residual is {rms[ch] * sd[0]:.1f} units RMS after the named effects, {size[ch]:.1f} x the "
+                      f"most a position sensor reads at rest ({pot_noise_max:.1f} units; the rows the model has at rest "
+                      f"spread {sd[0]:.1f} units: the servo moved where the model rests)")
         else:
             detail = f"{ch} residual is {rms[ch]:.1f} sd after the named effects (noise level is about 1)"
-        detail += (f"; largest while {where.replace('_', ' ')} ({per_phase[where]:.1f} sd): "
+        detail += (f"; largest while {where.replace('_', ' ')} ({per_phase[where] * scale:.1f} sd): "
                    "no library effect explains it")
     return ResidualVerdict(unexplained, detail, rms)
 

@@ -59,6 +59,16 @@ def test_toml_round_trip(tmp_path):
     assert ServoParams.from_toml(path) == p
 
 
+def test_a_file_saved_with_a_byte_order_mark_is_read(tmp_path):
+    """A params.toml saved by a Windows editor starts with a UTF-8 BOM; it was refused "Invalid statement (at line
+    1, column 1)".  Read as the trace reader reads a CSV (utf-8-sig)."""
+    p = dataclasses.replace(ServoParams(), supply_voltage_v=11.5)
+    path = tmp_path / "servo.toml"
+    p.to_toml(path)
+    path.write_bytes(b"\xef\xbb\xbf" + path.read_bytes().replace(b"\n", b"\r\n"))
+    assert ServoParams.from_toml(path) == p
+
+
 def test_a_retired_key_of_an_older_file_is_read_and_ignored(tmp_path):
     """Files written before wheel mode lost its speed loop carry its gain: they still load, the key ignored."""
     path = tmp_path / "old.toml"

@@ -254,6 +254,10 @@ def test_usual_configuration_runs_fused_and_others_the_generic_loop(commands):
     ({"winding_resistance_ohm": 0.1}, "brakes the shaft"),
     ({"rotor_inertia_reflected_kg_m2": 1e-6}, "brakes the shaft"),
     ({"viscous_friction_nm_s_rad": 5.0}, "viscous friction"),
+    ({"torque_constant_nm_a": 1e100}, "brakes the shaft"),
+    # k ** 2 past 1e308: an OverflowError traceback from serve, diagnose, VirtualBus and the URL, not this line
+    ({"torque_constant_nm_a": 1e160}, "brakes the shaft"),
+    ({"torque_constant_nm_a": 1e300}, "brakes the shaft"),
 ])
 def test_parameters_too_stiff_for_the_step_are_refused_by_name(change, words):
     """Losses are taken explicitly per 1 ms step: past one step's worth the shaft would reverse and the speed run away

@@ -69,6 +69,8 @@ BAD = {
     "live_dataset": [
         ["--seed", "-1"],
         ["/nonexistent-ax12emu/out.csv", "--key", "key.json"],
+        ["out.csv", "--key", "out.csv"],  # the key overwrote the recording
+        ["out.csv", "--key", "./out.csv"],  # the same file, spelt otherwise
     ],
     "live_flood": [
         ["--connections", "-1"],
@@ -77,6 +79,7 @@ BAD = {
     "make_dataset": [
         ["out.csv", "--key", "key.json", "--breakaway", "30"],
         ["out.csv", "--key", "key.json", "--effects", "gremlins"],
+        ["out.csv", "--key", "out.csv"],  # the key overwrote the trace
     ],
     "plot_step": [
         ["--volts", "0"],
@@ -135,3 +138,13 @@ def test_a_bad_flag_is_one_line_and_exit_status_2(tool, args):
     assert result.returncode == 2, (result.returncode, result.stderr, result.stdout[-500:])
     assert "Traceback" not in result.stderr, result.stderr
     assert len(err) == 1 and "error:" in err[0], result.stderr
+
+
+@pytest.mark.parametrize("tool", ["live_dataset", "make_dataset"])
+def test_a_key_on_the_trace_file_is_refused_before_any_work(tool, tmp_path):
+    """--key the same file as OUT wrote the key over the recording, silently; now one line, and nothing written."""
+    out = tmp_path / "out.csv"
+    result = subprocess.run([sys.executable, f"tools/{tool}.py", str(out), "--key", str(tmp_path / "." / "out.csv")],
+                            capture_output=True, text=True, timeout=60, cwd=ROOT)
+    assert result.returncode == 2 and "--key must not be the trace file" in result.stderr, result.stderr
+    assert not out.exists()

@@ -83,3 +83,14 @@ def test_a_trace_of_more_rows_than_the_workflow_holds_is_refused_before_any_work
     with pytest.raises(ValueError, match=r"rows, more than the 100,000 the workflow holds in memory; keep one row in 2"):
         check_span(np.arange(MAX_ROWS + 1) * 1e-3, "log.csv")
     check_span(np.arange(MAX_ROWS) * 1e-3, "log.csv")
+
+
+@pytest.mark.parametrize("effects", ["backlash,", ",backlash", "backlash,,delay"])
+def test_an_empty_effect_entry_is_named(tmp_path, capsys, effects):
+    """--effects "backlash," said "unknown effect(s): " and named nothing."""
+    from firmware_model.diagnose.cli import parse_args
+
+    with pytest.raises(SystemExit) as exc:
+        parse_args(["t.csv", "--out", str(tmp_path), "--effects", effects])
+    assert exc.value.code == 2
+    assert "has an empty entry (a stray comma?)" in capsys.readouterr().err

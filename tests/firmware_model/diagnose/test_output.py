@@ -120,3 +120,29 @@ def test_the_served_supply_is_the_recordings_with_a_note_where_it_cannot_be():
     assert volts == 11.0 and "varies (10.0-12.0 V)" in notes[0]
     volts, notes = fitted_supply_v(trace([130] * 5), params)
     assert volts == params.max_supply_voltage_v and "outside the model's" in notes[0]
+
+
+@pytest.mark.parametrize("extra", [0.01, -1e-4, -0.0015])
+def test_a_fitted_extra_inertia_is_served_whole_even_below_the_loads(extra):
+    """A servo lighter than the model by more than the load's 1.35e-4 kg m^2: the load was pinned at 0 and the twin
+    served heavier than fitted (7 position units off the fit's own simulation).  The rest comes off the reflected
+    rotor inertia; the params file's header says so."""
+    from types import SimpleNamespace
+
+    from firmware_model.diagnose.batch import sample, simulate
+    from firmware_model.diagnose.output import fitted_inertia, fitted_params
+    from firmware_model.diagnose.schedule import compile_schedule
+
+    p = ServoParams()
+    knobs = apply_effects(null_knobs(p), {"extra_inertia": {"extra_inertia_kg_m2": extra}})
+    twin = fitted_params(SimpleNamespace(knobs=knobs, named=["extra_inertia"]), p)
+    assert twin.total_inertia_kg_m2 == pytest.approx(p.total_inertia_kg_m2 + extra, rel=1e-12)
+    assert twin.load_inertia_kg_m2 >= 0.0 and twin.rotor_inertia_reflected_kg_m2 > 0.0
+    notes = fitted_inertia(extra, p)[1]
+    assert bool(notes) == (extra < -p.load_inertia_kg_m2) and all("rotor" in n for n in notes)
+    trace, _ = make_trace({}, 3, 4.0, base_spread=False)
+    k1 = {k: np.array([v]) for k, v in knobs.items()}
+    sch = compile_schedule(trace)
+    batch = sample(sch, simulate(sch, p, k1, 1), p, k1)
+    served = replay(trace, twin)
+    assert np.max(np.abs(served["present_position"] - batch["present_position"][:, 0])) <= 1

@@ -81,3 +81,10 @@ def test_a_byte_order_mark_is_read_past(tmp_path):
     path = tmp_path / "from_a_spreadsheet.csv"
     path.write_bytes("\ufeff".encode() + b"t,goal_position,moving_speed,present_position\n0,512,0,512\n0.01,512,0,513\n")
     assert read_trace(path)["present_position"].tolist() == [512, 513]
+
+
+def test_a_trailing_comma_in_the_header_is_named():
+    """A trailing comma makes an empty column name: the error named no column ("unknown column (known: ...)")."""
+    text = "t,goal_position,moving_speed,present_position,\n0.00,512,0,512,\n0.01,512,0,512,\n"
+    with pytest.raises(TraceFormatError, match=r"trace:1: column '': an empty column name \(a trailing comma\?\)"):
+        parse_trace(text)

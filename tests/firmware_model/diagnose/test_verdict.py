@@ -13,6 +13,7 @@ from firmware_model.diagnose.selection import Fit, Linearisation, Score
 from firmware_model.diagnose.verdict import (
     BIC_MARGIN,
     MIN_SHARE,
+    POT_NOISE_MAX_RAD,
     STRUCTURE_FLOOR_UNITS,
     TENTATIVE_SHARE,
     UNEXPLAINED_RMS,
@@ -25,6 +26,7 @@ from firmware_model.diagnose.verdict import (
     residual_verdict,
     wald,
 )
+from firmware_model.units import RAD_PER_POSITION_UNIT
 
 BACKLASH = LIBRARY["backlash"]  # one parameter, null 0
 SAMPLE_HOLD = LIBRARY["sample_hold"]  # grid only, null 0.1 s
@@ -236,3 +238,23 @@ def test_an_effect_refitted_with_a_later_one_shows_that_fits_interval_and_null_t
     _refitted(first, {tested: 0.0053}, later, coulomb)
     assert first.values == {tested: 0.0053} and first.uncertainty == {tested: 0.0097}
     assert first.null_excluded is False
+
+
+def test_a_position_residual_far_above_any_pot_noise_is_unexplained_though_the_rest_rows_spread_as_much():
+    """The size test whitens position by the noise of the rows the model has at rest; where the servo moved in them
+    (a trace logged a row in 20, its onsets a sample off) they spread 30 units, a 35-unit residual read as about
+    1 sd and the trace was called explained.  The pot reads no noisier than POT_NOISE_MAX_RAD at rest."""
+    n = 100
+    rng = np.random.default_rng(5)
+    raw = 35.0 * rng.standard_normal(n)  # rows 200 ms apart: no structure row to row
+    sd = np.array([30.0])
+    pot = POT_NOISE_MAX_RAD / float(RAD_PER_POSITION_UNIT)
+    v = residual_verdict((raw / sd[0])[:, None], ["present_position"], sd, _phases(n), pot_noise_max=pot)
+    assert v.unexplained and "most a position sensor reads at rest" in v.detail, v.detail
+    assert not residual_verdict((raw / sd[0])[:, None], ["present_position"], sd, _phases(n)).unexplained
+    # a residual at the pot's noise stays explained, and where the rest rows spread less than the bound nothing changes
+    assert not residual_verdict((0.5 * raw / 35.0 / sd[0])[:, None], ["present_position"], sd, _phases(n),
+                                pot_noise_max=pot).unexplained
+    z = rng.standard_normal((2000, 1)) * 2.0
+    assert residual_verdict(z, ["present_position"], np.array([0.8]), _phases(2000), pot_noise_max=pot) == \
+        residual_verdict(z, ["present_position"], np.array([0.8]), _phases(2000))
