@@ -17,7 +17,8 @@ After every input (one chunk) the harness checks:
   servo, read-only and unused bytes never change, the firmware-owned
   Present*/Moving bytes change only through physics or RESET, and Alarm
   Shutdown may only zero Torque Limit (Torque Enable in the 2006 profile)
-  while an alarm it selects is raised;
+  while an alarm it selects is raised, and must when an instruction's
+  Range, Checksum or Instruction Error it selects comes;
 * the replies are those predicted (who answers, from which ID, with which
   error bits, READ data), and each parses: header, LENGTH, checksum, bit 7
   of the error byte clear;
@@ -41,7 +42,9 @@ the checks are those any Protocol 1.0 servo keeps, per packet (the wire's ``disp
   registered write: each byte then holds what was written; refused, by its reply's error bits,
   nothing), Registered by REG_WRITE/ACTION, Torque Enable/Torque Limit as a write's side effects,
   RESET to the factory table (Torque Limit at Max Torque), or by the firmware (the sensed
-  registers, Realtime Tick, an Alarm Shutdown clearing Torque Enable or Torque Limit);
+  registers, Realtime Tick, an Alarm Shutdown clearing Torque Enable or Torque Limit); Torque Limit 0 after a
+  packet whose reply carries a Range, Checksum or Instruction Error that Alarm Shutdown selects (a Bulk Read's
+  too), and, where no reply tells, only where Shutdown selects one of them;
 * at the end of a case every MX with an ID of its own answers a PING after a pause.
 
 Protocol 2.0 servos, and a wire shared by 1.0 and 2.0 servos, are fuzzed by
@@ -121,6 +124,11 @@ R = StatusError.RANGE
 SHUTDOWN_CLEARED = frozenset({24, 34, 35})
 #: The error bits the physics raises (the others answer the instruction).
 PHYSICAL_ALARMS = int(StatusError.INPUT_VOLTAGE | StatusError.OVERHEATING | StatusError.OVERLOAD)
+#: An instruction's errors that Alarm Shutdown(18) may select besides Angle Limit (Range, CheckSum, Instruction:
+#: e-manual, control_table_alarm_shutdown.md, "the motor output becomes 0 % by resetting ... Torque Limit(34) to 0"):
+#: where it selects one, that error zeroes Torque Limit (Torque Enable in the 2006 profile); a bad checksum only on
+#: a servo that answers it (``reply_on_checksum_error``: a silent one drops the packet unheard).
+SHUTDOWN_INSTRUCTION_BITS = int(StatusError.RANGE | StatusError.CHECKSUM | StatusError.INSTRUCTION)
 
 
 class FuzzFailure(AssertionError):
@@ -302,6 +310,10 @@ class Oracle:
                 if shadow.eeprom_bytes and self.options.eeprom_busy_s_per_byte:
                     shadow.busy_until_s = now_s + shadow.eeprom_bytes * self.options.eeprom_busy_s_per_byte
                 shadow.eeprom_bytes = 0
+            if int(error) & int(shadow.row[18]) & SHUTDOWN_INSTRUCTION_BITS and (checksum_ok or self.options.reply_on_checksum_error):
+                # Alarm Shutdown selects this instruction's error: output 0, as the edition's Alarm Shutdown makes it
+                entry = self.layout.by_name[self.layout.profile.shutdown_clears or "torque_limit"]
+                shadow.row[entry.address:entry.end] = 0
             if answers:
                 out.append(Predicted(slot, reply_id, int(error), data, read))
         return out
@@ -658,8 +670,9 @@ def _mx_writes(packet: Any, servo_id: int, registered: tuple[int, bytes] | None)
     return []
 
 
-def _check_mx_record(rules: list[MXRules], record: MXRecord, where: str) -> None:
-    """The invariants any Protocol 1.0 servo keeps, for the MX servos' part of one packet (see the docstring)."""
+def _check_mx_record(rules: list[MXRules], record: MXRecord, where: str, reply_on_checksum_error: bool = True) -> None:
+    """The invariants any Protocol 1.0 servo keeps, for the MX servos' part of one packet (see the docstring);
+    ``reply_on_checksum_error``: the servos' option (a silent one drops a bad checksum unheard, no shutdown)."""
     packet = record.packet
     what = f"{where}, packet id={packet.id} inst={packet.instruction:#04x} params={bytes(packet.params).hex()}" \
            f"{'' if packet.checksum_ok else ' (bad checksum)'}"
@@ -708,8 +721,17 @@ def _check_mx_record(rules: list[MXRules], record: MXRecord, where: str) -> None
                         raise FuzzFailure(f"{what}: MX READ byte {a} ({_mx_name(rules[k], a)}) is {byte}, "
                                           f"the table holds {record.before[k][a]}")
     refused = {r.servo_id for r in replies if _parse_status(r.data)[1] & INSTRUCTION_BITS}
+    errors = {r.servo_id: _parse_status(r.data)[1] for r in replies}
+    heard = packet.checksum_ok or reply_on_checksum_error
     for k, r in enumerate(rules):
         old, new = record.before[k], record.after[k]
+        torque_limit = r.by_name["torque_limit"]
+        selected = r.by_name["shutdown"].value_in(old) & SHUTDOWN_INSTRUCTION_BITS if heard else 0
+        sole = sum(ids_before[j] == ids_before[k] for j in range(len(rules))) == 1
+        if sole and errors.get(ids_before[k], 0) & selected and torque_limit.value_in(new) != 0 \
+                and (k in reached or bulk):
+            raise FuzzFailure(f"{what}: MX {k} answered error {errors[ids_before[k]]:#x}, which Alarm Shutdown "
+                              f"{r.by_name['shutdown'].value_in(old):#x} selects, and kept Torque Limit {torque_limit.value_in(new)}")
         if old == new:
             continue
         free = set(r.span(*MX_SENSED))
@@ -738,6 +760,8 @@ def _check_mx_record(rules: list[MXRules], record: MXRecord, where: str) -> None
         for address, data in writes if accepted else ():
             written.update({address + i: byte for i, byte in enumerate(data)})
         side = r.span(*MX_WRITE_SIDE) if writes else frozenset()
+        if selected and (k in reached or bulk) and torque_limit.value_in(new) == 0:
+            side = side | r.span("torque_limit")  # an instruction's error that Alarm Shutdown selects
         for a in range(r.size):
             if old[a] == new[a] or a in free or a in side:
                 continue
@@ -793,7 +817,7 @@ def run_mx_case(case: Case) -> int:
         ax_replies = []
         for k, record in enumerate(records[first:]):
             _mx_between(rules, shadow, record.before, f"{where}, packet {k}")
-            _check_mx_record(rules, record, f"{where}, packet {k}")
+            _check_mx_record(rules, record, f"{where}, packet {k}", case.reply_on_checksum_error)
             shadow = record.after
             ax_replies += record.replies[: record.ax_replies]
         if len(replies) != sum(len(r.replies) for r in records[first:]):

@@ -300,9 +300,20 @@ class ClassicMap:
         return max(1, int(round(raw * unit / X_ACCELERATION_UNIT_DEG_S2)))
 
     def goal_changed(self, before: Mapping[str, int] | None, after: Mapping[str, int]) -> bool:
-        """Whether a classic goal register (Goal Position, Moving Speed) differs between two sets of values."""
+        """Whether a classic goal register (Goal Position, Moving Speed) differs between two sets of values, or the mode
+        (wheel, joint, multi-turn: the angle limits or the mode register) changed.
+
+        Why a change of mode counts as a goal write: the classic firmware's mode is read from the angle limits (the
+        MX on Protocol 1.0 switches with the torque on, as pypot's ``set_wheel_mode`` does), and it then runs on the
+        goal registers it holds: after CW = CCW = 0 the wheel turns at the Moving Speed already set, after a CCW
+        limit back at its maximum the joint goes to the Goal Position already set (the AX-12A beside it on the wire
+        does both).  The X firmware's mode change only holds where the shaft is (Operating Mode is written with the
+        torque off there), so the new mode's goals are handed over as written.
+        """
         if before is None:
             return False
+        if self.is_wheel(before) != self.is_wheel(after) or self.is_multi_turn(before) != self.is_multi_turn(after):
+            return True
         return any(before.get(name) != after.get(name) for name in self.goal_registers)
 
     # -- firmware -> registers ---------------------------------------------------------------

@@ -26,7 +26,10 @@ the 2006 AX-12 User's Manual):
 * a write touching Goal Position turns the torque on, and a write into the
   EEPROM area leaves the servo deaf for a while after its answer (both
   optional, with their sources: :class:`ServoOptions`; the deafness is the
-  bus's to keep, against its clock).
+  bus's to keep, against its clock);
+* an instruction's own error that Alarm Shutdown(18) selects (Range, Checksum,
+  Instruction, besides Angle Limit) takes the output to 0 as every Alarm
+  Shutdown does (:func:`cuts_output`).
 """
 
 from __future__ import annotations
@@ -41,10 +44,30 @@ from ax12emu.protocol.packets import BROADCAST_ID, Instruction, InstructionPacke
 
 from .virtual_servo import VirtualServo
 
-__all__ = ["MAX_READ_BYTES", "Outcome", "answers", "handle", "HANDLERS", "ping", "silent_read_length", "write_handlers"]
+__all__ = ["INSTRUCTION_SHUTDOWN_BITS", "MAX_READ_BYTES", "Outcome", "answers", "cuts_output", "handle", "HANDLERS", "ping",
+           "silent_read_length", "write_handlers"]
 
 #: The largest READ reply that fits in one status packet (LENGTH is one byte).
 MAX_READ_BYTES = 253
+#: An instruction's own error bits that Alarm Shutdown(18) may select, besides Angle Limit (which a refused write
+#: checks itself): "Bit 6 Instruction Error ... Bit 4 CheckSum Error ... Bit 3 Range Error", and "If errors occur,
+#: ... in case of Alarm Shutdown, the motor output becomes 0 % by resetting the value of Torque Limit(34) to 0"
+#: (e-manual, github ROBOTIS-GIT/emanual _includes/en/dxl/control_table_alarm_shutdown.md
+#: @ 24e68fc8978bfd135701b94cf4ead644c40fd20b, the AX-12A's and the MX series' Protocol 1.0 pages alike).
+INSTRUCTION_SHUTDOWN_BITS = StatusError.RANGE | StatusError.CHECKSUM | StatusError.INSTRUCTION
+
+
+def cuts_output(servo, packet: InstructionPacket, error: int) -> bool:
+    """Whether this instruction's ``error`` takes the output to 0: a bit Alarm Shutdown(18) selects among
+    :data:`INSTRUCTION_SHUTDOWN_BITS`.
+
+    A packet with a bad checksum counts when the servo acts on it: the bus hands it to the servo its ID byte names
+    (or every servo, broadcast), and the e-manual's Checksum Error, a status packet bit and an Alarm Shutdown bit,
+    is the firmware saying it took such a packet as its own; a servo set to stay silent on one
+    (``reply_on_checksum_error`` False, "as some firmware is reported to do") is taken as one that drops it unheard.
+    """
+    bits = int(error) & servo.table.get("shutdown") & INSTRUCTION_SHUTDOWN_BITS
+    return bool(bits) and (packet.checksum_ok or servo.options.reply_on_checksum_error)
 
 
 class Outcome(NamedTuple):
@@ -256,6 +279,9 @@ def handle(servo: VirtualServo, packet: InstructionPacket) -> Outcome:
                 reply_id = servo.id
         if error and packet.instruction == Instruction.READ:
             data = data.ljust(silent_read_length(packet), b"\x00")
+    if cuts_output(servo, packet, error):
+        # output 0 as the table's edition makes it (as for Angle Limit Error in _apply_write)
+        servo.table.set(servo.table.profile.shutdown_clears or "torque_limit", 0)
     if not talks:
         return Outcome(None, reply_id, delay_s, error)
     status = (int(error) | servo.alarms) & 0x7F

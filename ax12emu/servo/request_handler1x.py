@@ -21,7 +21,9 @@ Policy, with sources (ROBOTIS e-manual, "Protocol 1.0", https://emanual.robotis.
   answers from ID 0), then the factory table; a broadcast one is not carried out ("Broadcast ID(0xFE)
   cannot be used for Reset instruction", for the MX from firmware V40);
 * REBOOT (0x08, "Reboot", MX from firmware V40): answered, then the servo restarts as at power-up
-  (RAM area back to its defaults, the EEPROM kept).
+  (RAM area back to its defaults, the EEPROM kept);
+* an instruction's Range, Checksum or Instruction Error that Alarm Shutdown(18) selects takes the output to 0
+  (Torque Limit 0: :func:`~.request_handler.cuts_output`, the AX-12's rule), a Bulk Read's listed read too.
 """
 
 from __future__ import annotations
@@ -36,7 +38,7 @@ from ax12emu.protocol.packets import (
     encode_status,
 )
 
-from .request_handler import MAX_READ_BYTES, Outcome, answers, ping, silent_read_length, write_handlers
+from .request_handler import MAX_READ_BYTES, Outcome, answers, cuts_output, ping, silent_read_length, write_handlers
 from .servo1x import Servo1X
 
 __all__ = ["HANDLERS", "Outcome1X", "handle1x", "listed_read", "status_byte"]
@@ -53,11 +55,13 @@ def status_byte(servo: Servo1X, error: int) -> int:
 
 
 def listed_read(servo: Servo1X, address: int, length: int) -> tuple[StatusError, bytes]:
-    """A READ's data, always ``length`` bytes (dynamixel-sdk indexes the data of an erroring reply); past the table Range Error."""
+    """A READ's data, always ``length`` bytes (dynamixel-sdk indexes the data of an erroring reply); past the table Range
+    Error, which cuts the output when Alarm Shutdown selects it (a Bulk Read's, which the bus answers, as a READ's)."""
     table = servo.table
     length = min(length, MAX_READ_BYTES)
     if address + length > table.size:
         inside = bytes(table.row[address:table.size]) if address < table.size else b""
+        servo.instruction_error(StatusError.RANGE)
         return StatusError.RANGE, inside.ljust(length, b"\x00")
     return StatusError.NONE, bytes(table.row[address : address + length])
 
@@ -112,6 +116,8 @@ def handle1x(servo: Servo1X, packet: InstructionPacket) -> Outcome1X:
             error, data = handler(servo, packet)
         if error and packet.instruction == Instruction.READ:
             data = data.ljust(silent_read_length(packet), b"\x00")
+    if cuts_output(servo, packet, error):
+        servo.instruction_error(error)
     reply = encode_status(reply_id, status_byte(servo, error), data) if talks else None
     if packet.checksum_ok and packet.instruction == Instruction.RESET and packet.id != BROADCAST_ID and not error:
         # "Broadcast ID(0xFE) cannot be used for Reset instruction. Applied Products: MX-12W(V41), MX-28(V40),

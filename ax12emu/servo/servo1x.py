@@ -35,6 +35,7 @@ from ax12emu.protocol.registers import Area
 from ax12emu.protocol.servo_models import ServoModel
 
 from .plant1x import Plant1X
+from .request_handler import INSTRUCTION_SHUTDOWN_BITS
 from .table2 import Table2
 from .table_servo import TableServo
 from .virtual_servo import power_on_1
@@ -128,6 +129,15 @@ class Servo1X(TableServo):
         self.table.ram_defaults()
         self.plant.reboot()
         self.power_on()
+
+    def instruction_error(self, error: int) -> None:
+        """An instruction's own error (Range, Checksum, Instruction): with its bit in Alarm Shutdown(18) the output goes
+        to 0 through Torque Limit, as for every Alarm Shutdown ("the motor output becomes 0 % by resetting the value of
+        Torque Limit(34) to 0", control_table_alarm_shutdown.md; :data:`~.request_handler.INSTRUCTION_SHUTDOWN_BITS`)."""
+        table = self.table
+        if int(error) & table.get("shutdown") & INSTRUCTION_SHUTDOWN_BITS and table.get("torque_limit"):
+            table.set("torque_limit", 0)
+            self.plant.command()
 
     def check_write(self, address: int, data: bytes) -> tuple[object | None, StatusError]:
         """Judge a write without applying it: (Table2's accepted check, NONE) or (None, the error bits)."""

@@ -22,7 +22,10 @@ Sources (ROBOTIS e-manual, X-series control tables, https://emanual.robotis.com/
   ours integrates the current error into the duty at half the winding's V/R, settling in a few samples.
 * "Goal PWM(100)": in PWM mode it drives the motor directly; in the other modes it limits the PWM;
   it cannot exceed PWM Limit(36).  A real servo sets Goal PWM to PWM Limit (and Goal Current to
-  Current Limit) at boot: the control table side hands those values in.
+  Current Limit) at boot: the control table side hands those values in.  Both bound the output from
+  the moment they are written, and Torque Enable 0 lets go of it at once (Present PWM and Present
+  Current 0): what follows from the commands alone is not left for the next 1 ms step, which a host
+  writing twice within one period would otherwise read around.
 * "Drive Mode(10)": bit 0 reverse, bit 2 time-based profile, bit 3 torque on by goal update ("If the
   value of Torque Enable(64) is '0' and the command is given, the Torque Enable(64) switches to '1'
   and perform the command"; XL330/XC330 from firmware V46, X430 from V45).  The e-manual says reverse
@@ -337,7 +340,10 @@ class XFirmware:
             if torque_cmd:
                 self._torque_on_now()
                 return
+            if self._torque_on:
+                self._open_bridge()
             self._torque_on = False
+        self._clamp_duty()
         if goal_written:
             if self._torque_on:
                 self._start_profile()
@@ -359,7 +365,35 @@ class XFirmware:
         torque_cmd = 1 if commands.torque_enable else 0
         return not ((commands.drive_mode ^ old.drive_mode) & 0x01 or commands.operating_mode != old.operating_mode
                     or commands.homing_offset != old.homing_offset or torque_cmd != self._last_torque_cmd
-                    or (goal_written and not self._torque_on and commands.drive_mode & 0x08))
+                    or (goal_written and not self._torque_on and commands.drive_mode & 0x08)
+                    or abs(self._duty) * PWM_FULL_SCALE > self._pwm_bound(commands) + 1e-6)
+
+    def _pwm_bound(self, cmd: XCommands) -> float:
+        """The largest |PWM| the commands allow a control step (as :meth:`_step_once` bounds it): PWM Limit, and Goal
+        PWM but in PWM Control Mode (where Goal PWM is the command itself); 0 while an Alarm Shutdown cuts the output."""
+        if self._cut_errors:
+            return 0.0
+        bound = min(cmd.pwm_limit, PWM_FULL_SCALE)
+        if cmd.operating_mode != OperatingMode.PWM:
+            bound = min(abs(cmd.goal_pwm), bound)
+        return float(max(bound, 0))
+
+    def _open_bridge(self) -> None:
+        """Torque off: the output stage lets go now, not at the next control step, so Present PWM and Present
+        Current (Present Load) read 0 beside Torque Enable 0 even for a host that reads within the same 1 ms (the
+        winding's current dies within microseconds with the bridge open; a step with the torque off gives the same)."""
+        self._duty = 0.0
+        physics = self.physics
+        physics.current_a = 0.0
+        physics.motor_torque_nm = 0.0
+        physics.bus_voltage_v = physics.supply_v
+
+    def _clamp_duty(self) -> None:
+        """A lowered PWM bound (Goal PWM, PWM Limit; on the MX, Torque Limit) bounds the output at once: Present PWM
+        (the MX's Present Load) never reads above the bound just written; the next control step recomputes it anyway."""
+        bound = self._pwm_bound(self._cmd)
+        if abs(self._duty) * PWM_FULL_SCALE > bound + 1e-6:  # (a step's own duty, pwm / 885, is within it but for rounding)
+            self._duty = math.copysign(bound / PWM_FULL_SCALE, self._duty)
 
     def _torque_on_now(self) -> None:
         if self._hw_error:

@@ -136,3 +136,44 @@ def test_the_mx_checks_catch_a_planted_bug(monkeypatch, plant):
         fuzz.run_case(case)
     monkeypatch.undo()
     fuzz.run_case(case)
+
+
+def _packet(servo_id: int, instruction: int, params: bytes, *, bad_checksum: bool = False) -> bytes:
+    from ax12emu.protocol.packets import encode_instruction
+
+    data = bytearray(encode_instruction(servo_id, instruction, params))
+    if bad_checksum:
+        data[-1] ^= 0xFF
+    return bytes(data)
+
+
+def _shutdown_case(wire: str, *, reply_on_checksum_error: bool = True):
+    """Alarm Shutdown 0x7F on ID 1, then a Range, an Instruction and a Checksum Error sent to it, Torque Limit
+    written back to 1023 before each (the oracles must expect Torque Limit 0 after each)."""
+    restore = _packet(1, 0x03, bytes([34, 0xFF, 0x03]))
+    inputs = [_packet(1, 0x03, bytes([18, 0x7F])), _packet(1, 0x03, bytes([36, 1])), restore, _packet(1, 0x07, b""),
+              restore, _packet(1, 0x03, bytes([25, 1]), bad_checksum=True)]
+    return fuzz.Case(wire=wire, reply_on_checksum_error=reply_on_checksum_error,
+                     inputs=[(data, 0.03, 0.0) for data in inputs])
+
+
+@pytest.mark.parametrize("wire", ["ax12", "mx"])
+@pytest.mark.parametrize("reply_on_checksum_error", [True, False])
+def test_the_oracles_expect_alarm_shutdown_of_an_instruction_error(monkeypatch, wire, reply_on_checksum_error):
+    """Range, Checksum and Instruction Error, each selected by Alarm Shutdown, zero Torque Limit on the AX-12A and the
+    MX (e-manual, control_table_alarm_shutdown.md); a servo silent on a bad checksum drops it, output kept.  A servo
+    that ignores those bits fails the oracle."""
+    from ax12emu.servo import request_handler, request_handler1x
+
+    case = _shutdown_case(wire, reply_on_checksum_error=reply_on_checksum_error)
+    fuzz.run_case(case)
+    monkeypatch.setattr(request_handler, "cuts_output", lambda servo, packet, error: False)
+    monkeypatch.setattr(request_handler1x, "cuts_output", lambda servo, packet, error: False)
+    with pytest.raises(fuzz.FuzzFailure, match="Torque Limit|byte 34|is 255"):
+        fuzz.run_case(case)
+    if not reply_on_checksum_error:  # and one that cuts on a checksum it does not answer fails it too
+        monkeypatch.setattr(request_handler, "cuts_output", lambda servo, packet, error: bool(error & servo.table.get("shutdown") & 0x58))
+        monkeypatch.setattr(request_handler1x, "cuts_output", lambda servo, packet, error: bool(error & servo.table.get("shutdown") & 0x58))
+        fuzz.run_case(_shutdown_case(wire, reply_on_checksum_error=True))
+        with pytest.raises(fuzz.FuzzFailure):
+            fuzz.run_case(case)

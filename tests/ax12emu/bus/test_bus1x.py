@@ -394,3 +394,56 @@ def test_debug_logging_names_an_mx_packet_by_the_mx_table(caplog):
     with caplog.at_level(logging.DEBUG, logger="ax12emu.bus"):
         bus.receive(encode_instruction(1, Instruction.WRITE, bytes([20, 16, 0])))
     assert "multi_turn_offset=16" in caplog.text and "[20]=16" not in caplog.text
+
+
+@pytest.mark.parametrize("key", ("mx-28", "mx-64"))
+def test_a_mode_change_by_the_angle_limits_with_the_torque_on_runs_the_goals_already_set(key):
+    """CW = CCW = 0 with the torque on and Moving Speed set (pypot's ``set_wheel_mode``): the wheel turns at that speed
+    without Moving Speed being written again; CCW back at 4095: the joint goes to the Goal Position it holds (the
+    AX-12A does both on the same packets)."""
+    bus = mx_bus([key])
+    assert write(bus, 1, TORQUE_ENABLE, 1) == 0 and write2(bus, 1, MOVING_SPEED, 300) == 0
+    run_s(bus, 0.5, every_s=0.01)
+    assert write(bus, 1, CW_LIMIT, 0, 0, 0, 0) == 0  # both angle limits 0 in one write: wheel mode
+    run_s(bus, 1.0, every_s=0.01)
+    assert directional(read2(bus, 1, PRESENT_SPEED)) == pytest.approx(300, rel=0.05)
+    assert write2(bus, 1, CCW_LIMIT, 4095) == 0  # joint mode again
+    run_s(bus, 3.0, every_s=0.01)
+    assert abs(read2(bus, 1, PRESENT_POSITION) - read2(bus, 1, GOAL_POSITION)) <= 8
+    assert directional(read2(bus, 1, PRESENT_SPEED)) == 0
+
+
+def test_joint_to_multi_turn_with_the_torque_on_goes_to_the_goal_position():
+    bus = mx_bus(["mx-28"])
+    assert write(bus, 1, TORQUE_ENABLE, 1) == 0 and write2(bus, 1, MOVING_SPEED, 200) == 0
+    write2(bus, 1, CW_LIMIT, 0)
+    write2(bus, 1, CCW_LIMIT, 0)  # wheel mode: it turns and leaves the goal behind
+    run_s(bus, 0.7, every_s=0.01)
+    assert abs(read2(bus, 1, PRESENT_POSITION) - 2048) > 200
+    write(bus, 1, CW_LIMIT, 0xFF, 0x0F, 0xFF, 0x0F)  # multi-turn mode: Goal Position 2048 in the turn the count stands
+    run_s(bus, 3.0, every_s=0.01)
+    assert directional(read2(bus, 1, PRESENT_SPEED)) == 0
+    assert abs(read2(bus, 1, PRESENT_POSITION) - 2048) <= 8
+
+
+def test_a_bulk_reads_range_error_cuts_the_output_where_shutdown_selects_range():
+    bus = mx_bus(["mx-28", "mx-64"])
+    assert write(bus, 2, 18, 36 | StatusError.RANGE) == 0
+    params = bytes([0x00, 10, 1, 70, 10, 2, 70])  # 10 bytes from 70 on each: past both tables
+    replies = bus.receive(encode_instruction(BROADCAST_ID, Instruction.BULK_READ, params))
+    assert [r.data[4] & StatusError.RANGE for r in replies] == [StatusError.RANGE] * 2
+    assert read2(bus, 1, TORQUE_LIMIT) == 1023 and read2(bus, 2, TORQUE_LIMIT) == 0
+
+
+def test_torque_limit_0_reads_as_no_load_at_once():
+    """Torque Limit 0 written mid-move within the control period of the write before it (a host faster than 1 kHz):
+    Present Load, the output's share, already reads 0 beside it."""
+    bus = mx_bus(["mx-28"])
+    write(bus, 1, TORQUE_ENABLE, 1)
+    run_s(bus, 0.1)
+    write2(bus, 1, GOAL_POSITION, 2548)
+    run_s(bus, 0.05)
+    write2(bus, 1, GOAL_POSITION, 2558)  # earns a step: the model is now one ahead of the clock
+    assert directional(read2(bus, 1, PRESENT_LOAD)) > 500
+    assert write2(bus, 1, TORQUE_LIMIT, 0) == 0  # no step of its own
+    assert (read2(bus, 1, TORQUE_LIMIT), read2(bus, 1, PRESENT_LOAD)) == (0, 0)

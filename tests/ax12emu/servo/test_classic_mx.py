@@ -110,3 +110,14 @@ def test_the_mx_position_loop_puts_out_what_bam_measured_on_real_mx_servos(key):
     firmware.step_to(0.02)
     duty = firmware.sense().present_pwm / 885
     assert duty == pytest.approx(0.158 * 32 * 40 * 2 * math.pi / 4096, rel=0.03)
+
+
+def test_a_change_of_mode_by_the_angle_limits_is_a_goal_write(mx64):
+    """The classic firmware runs the new mode on the goals it holds (wheel: Moving Speed, joint: Goal Position); the X
+    firmware's mode change holds where it is unless told a goal came."""
+    wheel = {**JOINT, "cw_angle_limit": 0, "ccw_angle_limit": 0}
+    multi = {**JOINT, "cw_angle_limit": 4095, "ccw_angle_limit": 4095}
+    assert mx64.goal_changed(JOINT, wheel) and mx64.goal_changed(wheel, JOINT)
+    assert mx64.goal_changed(JOINT, multi) and mx64.goal_changed(multi, wheel)
+    assert not mx64.goal_changed(JOINT, {**JOINT, "cw_angle_limit": 100})  # joint mode still: the goal stays
+    assert not mx64.goal_changed(None, wheel)

@@ -178,3 +178,31 @@ def test_a_goal_past_the_factory_ccw_limit_is_out_of_goal_positions_range():
     s = servo()
     assert write_word(s, 30, 1024).error == StatusError.RANGE
     assert s.table.get("goal_position") == 512
+
+
+@pytest.mark.parametrize(("bit", "instruction", "params", "checksum_ok"), [
+    (StatusError.RANGE, 0x03, [36, 1], True),  # Present Position is read-only
+    (StatusError.CHECKSUM, 0x03, [25, 1], False),
+    (StatusError.INSTRUCTION, 0x07, [], True),
+])
+def test_range_checksum_and_instruction_errors_take_the_output_to_zero_where_shutdown_selects_them(
+        bit, instruction, params, checksum_ok):
+    """Alarm Shutdown(18) bits 3 (Range), 4 (CheckSum), 6 (Instruction): "in case of Alarm Shutdown, the motor output
+    becomes 0 % by resetting the value of Torque Limit(34) to 0" (e-manual, control_table_alarm_shutdown.md)."""
+    s = servo()
+    outcome = send(s, instruction, params, checksum_ok=checksum_ok)
+    assert outcome.error == bit and s.table.get("torque_limit") == 1023  # the factory Shutdown (36) selects neither
+    assert send(s, 0x03, [18, 36 | bit]).error == StatusError.NONE
+    assert send(s, instruction, params, checksum_ok=checksum_ok).error == bit
+    assert s.table.get("torque_limit") == 0
+
+
+def test_a_checksum_error_a_silent_servo_drops_does_not_shut_it_down_and_the_2006_profile_turns_the_torque_off():
+    s = servo(reply_on_checksum_error=False)
+    send(s, 0x03, [18, 0x7F])
+    assert send(s, 0x03, [25, 1], checksum_ok=False).reply is None and s.table.get("torque_limit") == 1023
+    old = servo(profile="ax12-2006")
+    send(old, 0x03, [18, 36 | StatusError.INSTRUCTION])
+    send(old, 0x03, [24, 1])
+    assert send(old, 0x07).error == StatusError.INSTRUCTION
+    assert (old.table.get("torque_enable"), old.table.get("torque_limit")) == (0, 1023)

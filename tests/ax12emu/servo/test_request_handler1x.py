@@ -121,3 +121,30 @@ def test_a_goal_one_past_an_angle_limit_is_an_angle_limit_error(cw, ccw):
     for goal in (ccw + 1, cw - 1):
         assert write_word(servo, 30, goal).error == StatusError.ANGLE_LIMIT, goal
         assert servo.table.get("goal_position") == before
+
+
+@pytest.mark.parametrize(("bit", "sent"), [
+    (StatusError.RANGE, packet(1, Instruction.WRITE, 28, 255)),  # P Gain 0..254
+    (StatusError.RANGE, packet(1, Instruction.READ, 70, 10)),  # past the table
+    (StatusError.CHECKSUM, packet(1, Instruction.WRITE, 25, 1, checksum_ok=False)),
+    (StatusError.INSTRUCTION, packet(1, 0x07)),
+])
+def test_range_checksum_and_instruction_errors_cut_the_output_where_shutdown_selects_them(bit, sent):
+    """Alarm Shutdown(18) bits 3, 4, 6 as the e-manual lists them (control_table_alarm_shutdown.md, the MX pages'):
+    Torque Limit 0 and the firmware without output; not with the factory Shutdown (36), which selects none of them."""
+    servo = mx()
+    handle1x(servo, packet(1, Instruction.WRITE, 24, 1))
+    assert handle1x(servo, sent).error == bit and servo.table.get("torque_limit") == 1023
+    handle1x(servo, packet(1, Instruction.WRITE, 18, 36 | bit))
+    assert handle1x(servo, sent).error == bit
+    assert servo.table.get("torque_limit") == 0
+    assert servo.plant.classic.commands(servo.plant.values()).goal_pwm == 0  # the firmware was told
+    handle1x(servo, packet(1, Instruction.WRITE, 34, 0xFF, 0x03))  # Torque Limit non-zero: the motor runs again
+    assert servo.table.get("torque_limit") == 1023
+
+
+def test_a_checksum_error_a_silent_mx_drops_leaves_its_output():
+    servo = mx(reply_on_checksum_error=False)
+    handle1x(servo, packet(1, Instruction.WRITE, 18, 0x7F))
+    assert handle1x(servo, packet(1, Instruction.WRITE, 25, 1, checksum_ok=False)).reply is None
+    assert servo.table.get("torque_limit") == 1023

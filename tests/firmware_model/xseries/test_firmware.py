@@ -616,6 +616,38 @@ def test_xl330_position_output_scale_matches_the_real_servos_present_pwm(log_nam
     assert model == pytest.approx(real, abs=0.02)
 
 
+@pytest.mark.parametrize("model", ["XM430-W350", "XL430-W250"])
+def test_torque_off_lets_go_of_the_output_at_once(model):
+    """Torque Enable 0 written mid-move and read before the next control step (a host faster than 1 kHz): Present
+    PWM and Present Current (the XL430's Present Load) read 0 beside it, not the drive of the step before."""
+    servo, cmd = make(model, torque_enable=1)
+    write(servo, cmd, goal_position=servo.sense().present_position + 1000)
+    run(servo, 0.03)
+    moving = servo.sense()
+    assert abs(moving.present_pwm) > 100 and moving.present_current != 0
+    write(servo, cmd, torque_enable=0)
+    now = servo.sense()
+    assert (now.torque_enable, now.present_pwm, now.present_current) == (0, 0, 0)
+    assert now.present_velocity == moving.present_velocity  # the shaft has not yet slowed: no time passed
+
+
+@pytest.mark.parametrize(("register", "mode"), [("goal_pwm", OperatingMode.POSITION), ("pwm_limit", OperatingMode.POSITION),
+                                                ("pwm_limit", OperatingMode.VELOCITY), ("pwm_limit", OperatingMode.PWM)])
+def test_a_lowered_pwm_bound_bounds_the_output_at_once(register, mode):
+    """Goal PWM (outside PWM Control Mode) and PWM Limit bound the duty; lowered between two control steps, Present PWM
+    already reads within them (how the MX's Torque Limit 0 shows as Present Load 0 at once)."""
+    servo, cmd = make("XM430-W350", torque_enable=1, operating_mode=mode)
+    goals = {OperatingMode.POSITION: {"goal_position": servo.sense().present_position + 1000},
+             OperatingMode.VELOCITY: {"goal_velocity": 200}, OperatingMode.PWM: {"goal_pwm": 800}}[mode]
+    write(servo, cmd, **goals)
+    run(servo, 0.02)
+    assert servo.sense().present_pwm > 200
+    write(servo, cmd, **{register: 150})
+    assert servo.sense().present_pwm == 150
+    write(servo, cmd, **{register: 0})
+    assert servo.sense().present_pwm == 0
+
+
 # ---------------------------------------------------------------------------- sensing_epoch
 
 #: Commands a client's writes give, drawn at random: goals, profile, gains, and now and then the frame or the torque.
@@ -627,6 +659,8 @@ _COMMAND_DRAWS = {
     "position_p_gain": lambda rng: rng.choice((400, 800)),
     "moving_threshold": lambda rng: rng.choice((5, 10, 40)),
     "max_position_limit": lambda rng: rng.choice((4095, 3000)),
+    "goal_pwm": lambda rng: rng.choice((885, 885, 300, 0)),
+    "pwm_limit": lambda rng: rng.choice((885, 885, 400)),
     "torque_enable": lambda rng: rng.choice((0, 1, 1, 1)),
     "operating_mode": lambda rng: rng.choice((OperatingMode.POSITION, OperatingMode.POSITION, OperatingMode.VELOCITY,
                                               OperatingMode.EXTENDED_POSITION)),
