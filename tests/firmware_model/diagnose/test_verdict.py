@@ -127,6 +127,26 @@ def test_wald_excludes_the_null_only_beyond_the_95_percent_region(estimate_sd, e
     assert unc["backlash_rad"] == pytest.approx(1.96 * sd, rel=0.05)
 
 
+@pytest.mark.parametrize("estimate_sd, excluded", [(2.1, True), (1.6, False)])
+def test_wald_tests_a_two_parameter_effect_jointly(estimate_sd, excluded):
+    """sensor_offset_gain tests two parameters: its null is excluded beyond the joint 95 % region, chi-squared with
+    two degrees of freedom (5.99). Both estimates 1.6 sd off (a statistic of about 5.1) lie inside it, though
+    each alone, or a one-degree test (3.84), would exclude the null."""
+    effect = LIBRARY["sensor_offset_gain"]
+    assert len(effect.tested) == 2
+    n = 2000
+    rng = np.random.default_rng(3)
+    r0 = rng.standard_normal(n)
+    r0 /= r0.std()
+    rows = np.arange(n)
+    jac = np.stack([(rows % 2 == 0).astype(float), (rows % 2 == 1).astype(float), np.linspace(-1.0, 1.0, n)], axis=1)
+    names = [*effect.tested, "gearbox_efficiency"]
+    sd = 1.0 / np.sqrt(n / 2)  # each tested column covers half the rows
+    values = {name: effect.param(name).null + estimate_sd * sd for name in effect.tested}
+    _, out = wald(effect, {**values, "gearbox_efficiency": 0.76}, Linearisation(names, r0, jac), n_eff=float(n))
+    assert out is excluded
+
+
 def test_wald_widens_the_interval_for_autocorrelated_residuals():
     # 2000 rows worth 20 independent ones: the same estimate is no longer told from the null
     values, linear, _ = _linear(4.0, n_eff=2000.0)
