@@ -278,7 +278,17 @@ class TableRules:
 
     def target(self, row: bytes, address: int) -> int:
         holder = self.indirect.get(address)
-        return address if holder is None else row[holder] | row[holder + 1] << 8
+        if holder is None:
+            return address
+        # The chain is followed where an Indirect Address names Indirect Data ("inherits features and properties
+        # of the Data from the specific Address", e-manual, Indirect Address), to the byte where it closes.
+        seen = {address}
+        target = row[holder] | row[holder + 1] << 8
+        while target in self.indirect and target not in seen:
+            seen.add(target)
+            holder = self.indirect[target]
+            target = row[holder] | row[holder + 1] << 8
+        return target
 
     def read(self, row: bytes, address: int, length: int) -> tuple[int, bytes]:
         """A read's error and data: past the table Access Error with zeros (up to the table's size)."""
@@ -473,7 +483,8 @@ class Oracle2:
             if instruction == WRITE:
                 error, after = rules.write(row, address, data, ram_only=ram_only, watchdog_error=wd)
                 return error, b"", after, None
-            error, _ = rules.write(row, address, data, watchdog_error=False)
+            # Through a Secondary ID the EEPROM is out of reach for a Reg Write as for a Write (judged when registered)
+            error, _ = rules.write(row, address, data, ram_only=ram_only, watchdog_error=False)
             if error:
                 return error, b"", row, None
             shadow.registered = (address, bytes(data))

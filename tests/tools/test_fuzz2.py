@@ -153,3 +153,23 @@ def test_the_xl320_with_its_classic_table_is_fuzzed_beside_the_x_series():
     fuzz2._compare(oracle, 0, image, bytes(booted), mark, "test")
     with pytest.raises(fuzz2.FuzzFailure, match="torque_limit"):
         fuzz2._compare(oracle, 0, image, image, mark, "test")
+
+
+def test_a_reg_write_through_a_secondary_id_leaves_the_eeprom_out_of_reach():
+    """Found by ``--seed 60417``: a broadcast Write of Secondary ID(12) = 1, then a Reg Write of Homing Offset(20)
+    to ID 1. The servo refuses it (the EEPROM is out of reach through a Secondary ID, for a Reg Write as for a
+    Write); the oracle registered it."""
+    case = fuzz2.Case2(bus="2.0", reply_on_crc_error=False, line_bps=1_000_000.0, inputs=[
+        (bytes.fromhex("fffffd00fe0600030c0001d813"), 0.0, 0.0),
+        (bytes.fromhex("fffffd00010900041400a698f4ff2a47"), 0.0, 0.0)])
+    assert fuzz2.run_case(case) == 3  # the inputs, and the full read after them
+
+
+def test_an_indirect_address_naming_indirect_data_is_followed_on():
+    """Found by ``--seed 60417`` next: Indirect Address 21 names Indirect Data 1, whose Indirect Address 1 then
+    names Present Input Voltage's neighbour (117): the byte stands for where the chain ends, as the servo reads
+    it; the oracle stopped after one step."""
+    case = fuzz2.Case2(bus="mixed", reply_on_crc_error=True, inputs=[
+        (bytes.fromhex("fffffd00fe070003d000e00051af"), 0.03, 0.0),
+        (bytes.fromhex("fffffd00fe070003a80075004fb1"), 0.0001, 0.0)])
+    assert fuzz2.run_case(case) == 3  # the inputs, and the full read after them
