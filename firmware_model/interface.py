@@ -71,6 +71,10 @@ class Commands:
     #: Min / Max Voltage Limit (12, 13), units of 0.1 V.
     min_voltage_limit: np.ndarray
     max_voltage_limit: np.ndarray
+    #: Alarm Shutdown (18): the alarm bits (ALARM_* below) that cut the output at the control step they are found
+    #: (e-manual, Alarm Shutdown: "the motor output becomes 0 % by resetting the value of Torque Limit(34) to 0");
+    #: the model then reports the cut (:attr:`Sensed.output_cut`) for the bus to write into the table.
+    shutdown: np.ndarray
 
     @classmethod
     def field_names(cls) -> tuple[str, ...]:
@@ -85,7 +89,10 @@ class Commands:
         Why here: a step at full speed with the e-manual's default compliance is what the data sheet, the 2008
         report and the real recordings describe, and the tools, the diagnosis's synthetic recordings and the tests
         step it alike.  The values are the e-manual's initial ones (``ax12emu/protocol/models/ax-12a.toml``, which
-        this layer does not read), over the full joint range, with Torque Enable 1 and Goal Position 512.
+        this layer does not read), over the full joint range, with Torque Enable 1 and Goal Position 512, but for
+        Alarm Shutdown 0 (the e-manual's is 36: Overload and Overheating): stepped alone, as the tools and the
+        data-sheet tests step it, the model shows the physics of a stall or a hot motor rather than the firmware
+        cutting it short; the bus hands over its tables' Alarm Shutdown.
         """
         values = {**POWER_UP, **overrides}
         return cls(**{k: np.broadcast_to(np.asarray(v, dtype=np.int64), (n,)).copy() for k, v in values.items()})
@@ -95,7 +102,7 @@ class Commands:
 POWER_UP = dict(
     torque_enable=1, goal_position=512, moving_speed=0, torque_limit=1023, cw_angle_limit=0, ccw_angle_limit=1023,
     cw_compliance_margin=1, ccw_compliance_margin=1, cw_compliance_slope=32, ccw_compliance_slope=32, punch=32,
-    temperature_limit=70, min_voltage_limit=60, max_voltage_limit=140,
+    temperature_limit=70, min_voltage_limit=60, max_voltage_limit=140, shutdown=0,
 )
 
 
@@ -117,6 +124,11 @@ class Sensed:
     moving: np.ndarray
     #: Present alarm bits (ALARM_* above), 0 when all is well.
     alarms: np.ndarray
+    #: Not a register: 1 where the model cut the output for Alarm Shutdown (:attr:`Commands.shutdown`) at a control
+    #: step and the commands do not show it yet (Torque Limit and Torque Enable as they were then), else 0; the bus
+    #: writes 0 into the register its edition's Alarm Shutdown clears, even if the alarm has gone again since.
+    #: None from a model that leaves Alarm Shutdown to the bus (which applies it to the alarms it is shown).
+    output_cut: np.ndarray | None = None
 
     @classmethod
     def field_names(cls) -> tuple[str, ...]:

@@ -9,8 +9,20 @@ wires the one-job modules together; each step is
     ->  controller drive (joint) or Moving Speed's output (wheel)
     ->  motor current and torque  ->  friction, stick-slip: the shaft's new speed
 
-and every thermal period (10 ms) heating and the overload timer, every
-sample period (``sample_hold_s``) the held Present Speed and Load.
+and every thermal period (10 ms) heating, the overload timer and Alarm
+Shutdown, every sample period (``sample_hold_s``) the held Present Speed and
+Load.
+
+Alarm Shutdown (``Commands.shutdown``) acts at the thermal event an alarm it
+selects is found, as the firmware's does at its control step (e-manual:
+"the motor output becomes 0 % by resetting the value of Torque Limit(34) to
+0"): the drive limit of that servo drops to 0 from the next step on, however
+long the ``advance`` asked for, and ``Sensed.output_cut`` reports it until the
+commands change (the bus writes the 0 it reports into them at once); a
+selected alarm still there then cuts again at the next thermal event, as the
+firmware cuts again a Torque Limit written while the alarm lasts.  The cut
+is Torque Limit's (the bridge stays closed); the 2006 manual's edition turns
+torque off instead, which the bus writes when it is shown the cut.
 
 Integration is a fixed step (1 kHz by default), so results depend only on
 the commands and the simulated times asked for, never on wall-clock speed.
@@ -48,7 +60,7 @@ import numpy as np
 
 from .backend import NUMPY, SCALAR
 from .controller import PidGains, compliance_plan
-from .interface import Commands, Sensed
+from .interface import ALARM_INPUT_VOLTAGE, ALARM_OVERHEATING, ALARM_OVERLOAD, Commands, Sensed
 from .motor import GRAVITY_M_S2
 from .params import ServoParams
 from .protection import alarm_bits, overload_timer_step, thermal_step
@@ -76,6 +88,8 @@ _TWO_PI = 2.0 * math.pi
 _COMMAND_FIELDS = Commands.field_names()
 _RANGE_RAD, _UNIT_RAD = float(POSITION_RANGE_RAD), float(RAD_PER_POSITION_UNIT)
 _STATE = tuple(f.name for f in fields(ModelState))
+#: The alarm bits the model raises, the ones Alarm Shutdown can act on here.
+_MODEL_ALARMS = ALARM_INPUT_VOLTAGE | ALARM_OVERHEATING | ALARM_OVERLOAD
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -104,8 +118,12 @@ class _Plan:
     step: StepPlan
     kernel: Kernel
     sensing: _Sensing
-    #: Drive above which the overload timer runs (the Torque Limit register; infinite with torque off).
+    #: Drive at which the overload timer runs (the Torque Limit register, 0 where Alarm Shutdown cut it;
+    #: infinite with torque off).
     overload_limit: PerServo
+    #: Per servo, the alarm bits that cut its output now (Alarm Shutdown's, where torque is on, Torque Limit
+    #: above 0 and not cut yet); None where no servo has any (nothing to check at the events).
+    shutdown_bits: np.ndarray | None
 
 
 def _per_servo(values, n: int) -> np.ndarray:
@@ -190,6 +208,16 @@ class PhysicalModel:
         #: Rounded temperatures and overload flags at the last thermal event (see _thermal_event).
         self._thermal_key: tuple[bytes, bytes] | None = None
         self._sensing: _Sensing | None = None
+        #: The commands the present plan was decoded from (an Alarm Shutdown decodes them again).
+        self._plan_source: Commands | None = None
+        #: Servos whose output Alarm Shutdown cut, and the commands' key then: the cut holds until the
+        #: commands change (see the module docstring).
+        self._cut = np.zeros(n, dtype=bool)
+        self._cut_key: bytes | None = None
+        #: The overload timer's limit in the present plan (see _plan).
+        self._overload_limit = np.full(n, np.inf)
+        #: The plan whose alarms were last checked against Alarm Shutdown.
+        self._shutdown_checked: _Plan | None = None
 
     def _init_effects(self, fx, angle: np.ndarray) -> None:
         """Constants and state of the effects in ``params.effects`` (None where absent: the plain model)."""
@@ -425,6 +453,7 @@ class PhysicalModel:
             regs["alarms"] = alarm_bits(regs["present_temperature"], c.temperature_limit, self._array("overload_timer"),
                                         self.params.overload_delay_s, self.supply_voltage_v,
                                         c.min_voltage_limit, c.max_voltage_limit)
+        regs["output_cut"] = self._cut.astype(np.int64)
         for array in regs.values():
             array.flags.writeable = False  # handed to every sense() caller until the next event
         return regs
@@ -448,22 +477,41 @@ class PhysicalModel:
             return self._plan_cache[1]  # the bus hands over the same object until a register changes
         key = self._commands_key(commands)
         if self._plan_cache is None or self._plan_cache[0] != key:
+            if self._cut_key is not None and key != self._cut_key:  # new commands: they say what Torque Limit is
+                self._cut, self._cut_key = np.zeros(self.n, dtype=bool), None
+            self._plan_source = commands
             self._plan_cache = (key, self._plan(commands))
             self._sensing, self._slow = self._plan_cache[1].sensing, None
         self._plan_commands = commands
         return self._plan_cache[1]
 
     def _plan(self, c: Commands) -> _Plan:
-        """Decode the command registers into per-servo constants for the step loop."""
+        """Decode the command registers into per-servo constants for the step loop (and restart references)."""
+        plan = self._decode(c)
+        self._restart_reference(plan)
+        # A Torque Limit raised (written again after an Alarm Shutdown, say) is judged afresh: the overload
+        # timer restarts, so the firmware drives for the overload delay before it finds the overload again.
+        limit = np.broadcast_to(np.asarray(plan.overload_limit, dtype=float), (self.n,))
+        raised = limit > self._overload_limit
+        if raised.any():
+            self._s.overload_timer = self._to_backend(np.where(raised, 0.0, self._array("overload_timer")))
+        self._overload_limit = limit
+        return plan
+
+    def _decode(self, c: Commands) -> _Plan:
+        """The command registers as per-servo constants for the step loop, under any Alarm Shutdown's cut."""
         p, n = self.params, self.n
         raw = {name: _per_servo(getattr(c, name), n) for name in _COMMAND_FIELDS}
         enabled = raw["torque_enable"] != 0
+        cut = self._cut
         wheel = (raw["cw_angle_limit"] == 0) & (raw["ccw_angle_limit"] == 0)
         speed_raw = raw["moving_speed"].astype(np.int64)
         magnitude = (speed_raw & 0x3FF) * RAD_S_PER_SPEED_UNIT
         goal_raw = np.clip(raw["goal_position"], raw["cw_angle_limit"], np.maximum(raw["ccw_angle_limit"], raw["cw_angle_limit"]))
         comp = compliance_plan(raw["cw_compliance_margin"], raw["ccw_compliance_margin"], raw["cw_compliance_slope"],
                                raw["ccw_compliance_slope"], raw["punch"], raw["torque_limit"])
+        if cut.any():  # Alarm Shutdown has set Torque Limit to 0 (the commands may not show it yet)
+            comp.limit = np.where(cut, 0.0, comp.limit)
         register_limit = comp.limit  # the firmware's overload check compares with the register
         if self._extra_margin_units:  # a dead band wider than the registers say
             comp.cw_margin = comp.cw_margin + self._extra_margin_units
@@ -508,8 +556,18 @@ class PhysicalModel:
             half_play_rad=self._half_play_rad, history=self._delay_line,
         )
         overload_limit = np.where(enabled, register_limit, np.inf)  # torque off cannot overload
-        plan = _Plan(step=step_plan, kernel=step_kernel(self._xp, step_plan, self._k, self._s, self.fused),
-                     sensing=sensing, overload_limit=self._to_backend(overload_limit.astype(float)))
+        # Alarm Shutdown can cut a driven output not cut already (where Torque Limit is 0 there is nothing to cut).
+        can_cut = enabled & (register_limit > 0.0)
+        shutdown_bits = np.where(can_cut, raw["shutdown"].astype(np.int64) & _MODEL_ALARMS, 0)
+        return _Plan(step=step_plan, kernel=step_kernel(self._xp, step_plan, self._k, self._s, self.fused),
+                     sensing=sensing, overload_limit=self._to_backend(overload_limit.astype(float)),
+                     shutdown_bits=shutdown_bits if shutdown_bits.any() else None)
+
+    def _restart_reference(self, plan: _Plan) -> None:
+        """Where a new plan leaves wheel mode or torque off, the reference restarts at the shaft; a goal within
+        ``setpoint_eps_rad`` of a resting reference is taken as reached."""
+        n, p = self.n, self.params
+        wheel, goal_rad = plan.sensing.wheel, plan.sensing.goal_rad
         # In wheel mode the reference is unused; entering or leaving it restarts the reference at the shaft.
         was_wheel = self._sensing.wheel if self._sensing is not None else np.zeros(n, dtype=bool)
         restart = wheel | was_wheel
@@ -521,9 +579,8 @@ class PhysicalModel:
         # nothing moving).  With torque on the reference is the setpoint's, and is left where it is.
         was_off = ~self._sensing.enabled if self._sensing is not None else np.zeros(n, dtype=bool)
         ref = np.where(restart | was_off, np.rint(ref / _UNIT_RAD) * _UNIT_RAD, ref)
-        self._s.ref = self._to_backend(apply_dead_zone(ref, ref_vel, per_servo["goal_rad"], p.setpoint_eps_rad))
+        self._s.ref = self._to_backend(apply_dead_zone(ref, ref_vel, goal_rad, p.setpoint_eps_rad))
         self._s.ref_vel = self._to_backend(ref_vel)
-        return plan
 
     def _run(self, plan: _Plan, first: int, last: int) -> None:
         """Steps ``first + 1 .. last``: the plan's kernel between events, the periodic events at their steps."""
@@ -535,6 +592,8 @@ class PhysicalModel:
             step = stop
             if step % thermal_steps == 0:
                 slow_changed = self._thermal_event(plan)
+                if plan.shutdown_bits is not None and (slow_changed or plan is not self._shutdown_checked):
+                    plan = self._shutdown_event(plan)  # an alarm found now cuts the drive from the next step
                 if step % hold_steps == 0:
                     self._sample_event(step)
                     slow_changed = True
@@ -555,7 +614,7 @@ class PhysicalModel:
             s.current_sq_sum = 0.0
         else:  # in place: the fused kernel owns this array and need not copy a new one in
             s.current_sq_sum.fill(0.0)
-        s.overload_timer = overload_timer_step(xp, s.overload_timer, s.demand, plan.overload_limit, s.speed,
+        s.overload_timer = overload_timer_step(xp, s.overload_timer, s.demand, plan.overload_limit, s.drive, s.speed,
                                                p.stall_speed_rad_s, period)
         # Only wheel mode turns endlessly; a joint-mode shaft keeps a continuous angle, so an
         # overshoot below 0 reads as a small negative error, not as a jump to the far end.
@@ -570,6 +629,28 @@ class PhysicalModel:
         changed = key != self._thermal_key
         self._thermal_key = key
         return changed
+
+    def _shutdown_event(self, plan: _Plan) -> _Plan:
+        """Alarm Shutdown at a thermal event: the plan to run on, with the drive limit cut to 0 where an alarm it
+        selects is present now (the alarms ``sense`` would report at this step)."""
+        self._shutdown_checked = plan
+        c, s = plan.sensing, self._s
+        present_c = np.clip(np.rint(np.asarray(s.temperature, dtype=float)), 0, 255)  # as sensors.registers
+        bits = alarm_bits(present_c, c.temperature_limit, np.asarray(s.overload_timer, dtype=float),
+                          self.params.overload_delay_s, self.supply_voltage_v, c.min_voltage_limit, c.max_voltage_limit)
+        trips = (bits & plan.shutdown_bits) != 0
+        if not trips.any():
+            return plan
+        source, cache = self._plan_source, self._plan_cache
+        assert source is not None and cache is not None  # the plan running was decoded from them
+        self._cut = self._cut | trips
+        self._cut_key = cache[0]
+        plan = self._decode(source)  # the same commands under the cut; the reference goes on as it was
+        self._plan_cache = (cache[0], plan)
+        self._overload_limit = np.broadcast_to(np.asarray(plan.overload_limit, dtype=float), (self.n,))
+        self._sensing, self._slow = plan.sensing, None
+        self._shutdown_checked = plan
+        return plan
 
     def _sample_event(self, step: int) -> None:
         """Latch Present Speed and Present Load, once per sample period (``step``: the step it is taken at)."""

@@ -13,11 +13,21 @@ Shutdown masks and turns torque off, as the hardware does.
   degrees) is above Temperature Limit, as the e-manual words it.
 * Overload (precise definition): raised once, for at least
   ``ServoParams.overload_delay_s`` without a break, torque was on, the
-  controller *asked* for more drive than Torque Limit allows (its unclipped
-  demand above the limit) and the shaft was stalled (speed below
-  ``ServoParams.stall_speed_rad_s``).  It clears as soon as that stops.  The
-  delay keeps every start of a move (full demand, zero speed for a few
-  milliseconds) from counting; the e-manual gives no figure.
+  controller's drive was at its limit (its unclipped demand, above zero, at
+  or above Torque Limit: the e-manual's "the current load cannot be
+  controlled with the set maximum torque") and the load won: the shaft
+  stalled (speed below ``ServoParams.stall_speed_rad_s``) or turned against
+  the drive.  At or above, not above: a wheel at full output asks for
+  exactly Torque Limit 1023 and no more, and a blocked one must still trip;
+  against the drive: a load the servo cannot hold turns the shaft back at
+  full drive.  It clears as soon as that stops.  The delay keeps every start
+  of a move (full demand, zero speed for a few milliseconds) and every
+  reversal (full drive while the shaft still turns the old way) from
+  counting; the e-manual gives no figure.
+* Alarm Shutdown acts at the control step an alarm it selects is found
+  (:class:`~firmware_model.physical.PhysicalModel` cuts its own drive limit
+  there and reports the cut, ``Sensed.output_cut``); the bus writes it into
+  the table.
 * Input voltage: raised while the supply is outside [Min, Max Voltage Limit].
 """
 
@@ -40,14 +50,18 @@ def thermal_step(xp, temperature_c, steady_rise_k, ambient_c: float, decay: floa
     return steady + (temperature_c - steady) * decay
 
 
-def overload_timer_step(xp, timer_s, demand, limit_when_on, speed_rad_s, stall_speed_rad_s: float, period_s: float):
+def overload_timer_step(xp, timer_s, demand, limit_when_on, drive, speed_rad_s, stall_speed_rad_s: float,
+                        period_s: float):
     """Time the overload condition has held without a break, seconds.
 
     ``limit_when_on`` is Torque Limit as a drive fraction, infinite for a servo
-    with torque off (it cannot overload).
+    with torque off (it cannot overload); ``drive`` the signed output (its sign
+    says which way the motor pushes).
     """
-    overloaded = (demand > limit_when_on) & (xp.abs(speed_rad_s) < stall_speed_rad_s)
-    return xp.where(overloaded, timer_s + period_s, 0.0)
+    saturated = (demand >= limit_when_on) & (demand > 0.0)
+    # The load wins: the shaft stalls, or turns against the drive, or no drive is allowed at all (Torque Limit 0).
+    beaten = (xp.abs(speed_rad_s) < stall_speed_rad_s) | (speed_rad_s * drive < 0.0) | (limit_when_on <= 0.0)
+    return xp.where(saturated & beaten, timer_s + period_s, 0.0)
 
 
 def alarm_bits(present_temperature, temperature_limit, overload_timer_s, overload_delay_s: float,

@@ -373,7 +373,9 @@ class Faults:
         table = servo.table
         if not bits & table.get("shutdown"):
             return
-        table.set(table.profile.shutdown_clears or "torque_limit", 0)  # the register this edition's Shutdown clears
+        register = table.profile.shutdown_clears or "torque_limit"  # the register this edition's Shutdown clears
+        if table.get(register):  # (at every step while a pinned reading's alarm lasts: no news once it is 0)
+            table.set(register, 0)
 
     def on_replies(self, replies: "list[Reply]") -> "list[Reply]":
         """Drop, corrupt or delay status packets by the configured fractions."""
@@ -406,17 +408,23 @@ class Faults:
         return out
 
     def after_physics(self) -> None:
-        """Hold stalled shafts and forced alarms after the model has stepped (its step wrote its own alarms: a forced
-        one showed only from the next packet, and a Torque Limit written meanwhile drove the shaft until then)."""
+        """Hold stalled shafts, forced alarms and pinned readings after the model has stepped (its step wrote its own
+        alarms: a forced one showed only from the next packet, and a Torque Limit written meanwhile drove the shaft
+        until then); a pinned reading's alarm (Overheating, Input Voltage) and its Alarm Shutdown act here too, at
+        the step, as the firmware judges its readings, not when a packet comes."""
         if not (self._stalls or self._held or self._alarms):
             return
         bus = self.bus
         for index, bits in self._alarms.items():
             self._raise_forced(bus.servos[index], bits)
         for index, held in self._held.items():
-            table = bus.servos[index].table
+            servo = bus.servos[index]
+            table = servo.table
             for name, value in held.items():
                 table.set(name, value)
+            bits = _held_alarms(servo)  # the firmware judges the pinned readings at its step, not at a packet
+            if bits:
+                self._raise_forced(servo, bits)
         now_s = bus.clock.now_s()
         # A model that cannot block its shaft (else the stall would be there) is held at the stall's angle.
         model = bus.model

@@ -7,7 +7,12 @@ from the bus's shared ``(N, 50)`` byte array.
 
 It also applies the firmware's reaction to alarms: Alarm Shutdown (address
 18) acts on the bits it selects, as the table's profile says (e-manual:
-Torque Limit set to 0; 2006 manual: torque off).
+Torque Limit set to 0; 2006 manual: torque off).  The model acts on it at
+the control step it finds an alarm (Alarm Shutdown is one of its commands),
+however long the step it was asked for, and reports the cut
+(``Sensed.output_cut``), which is written here even if the alarm has gone
+again since; alarms the model is not shown (a forced one, a held reading)
+are applied here and by the faults.
 """
 
 from __future__ import annotations
@@ -41,7 +46,7 @@ class Plant:
         lay = servos[0].table.layout
         self._profile = lay.profile
         self._commands = _columns(lay, Commands.field_names())
-        self._sensed = _columns(lay, [n for n in Sensed.field_names() if n != "alarms"])
+        self._sensed = _columns(lay, [n for n in Sensed.field_names() if n not in ("alarms", "output_cut")])
         self._torque_limit = lay.by_name["torque_limit"].address
         self._torque_enable = lay.by_name["torque_enable"].address
         self._shutdown = lay.by_name["shutdown"].address
@@ -49,6 +54,8 @@ class Plant:
         #: Whether the model can step without sensing (checked once: a protocol test is slow per step).
         self._steps_to = isinstance(model, SteppableTo)
         self._any_alarm = True
+        #: Whether the model reported an Alarm Shutdown cut at the last write-back.
+        self._any_cut = True
         #: The arrays last written, by register: a model may hand over the same read-only
         #: array until the value changes (see ServoModel.sense), which then needs no copying.
         #: A register set by name (``ControlTable.set``, as faults and harnesses do) drops this
@@ -201,20 +208,40 @@ class Plant:
                 rows[:, address] = value
         if not alarms:
             return
-        if written.get("alarms") is sensed.alarms and not (self._any_alarm or sensed.alarms.flags.writeable):
-            return  # no alarm then, the same read-only bits now
+        # The servos the model's own Alarm Shutdown cut at a control step (the alarm may have gone since).
+        cut = sensed.output_cut
+        if cut is None:  # a model that leaves Alarm Shutdown to the alarms shown here
+            self._any_cut = False
+        elif (self._any_cut or written.get("output_cut") is not cut or cut.flags.writeable):
+            written["output_cut"] = cut
+            cut = np.asarray(cut) != 0
+            self._any_cut = bool(cut.any())
+        if not self._any_cut:
+            cut = None
+            if written.get("alarms") is sensed.alarms and not (self._any_alarm or sensed.alarms.flags.writeable):
+                return  # no alarm then, the same read-only bits now
         written["alarms"] = sensed.alarms
         alarms = np.asarray(sensed.alarms, dtype=np.int64) & 0x7F
         any_alarm = bool(alarms.any())
-        if not (any_alarm or self._any_alarm):
-            return  # no alarm now nor at the last step: nothing to clear or trip
+        if not (any_alarm or self._any_alarm or cut is not None):
+            return  # no alarm now nor at the last step, no cut: nothing to clear or trip
         self._any_alarm = any_alarm
         for servo, bits in zip(self.servos, alarms.tolist()):
             servo.alarms = bits
         tripped = (alarms & rows[:, self._shutdown]) != 0
+        if cut is not None:
+            tripped |= cut
         if tripped.any():
             self._cached_commands = None
             if self._profile.shutdown_clears == "torque_enable":
                 rows[tripped, self._torque_enable] = 0
             else:
                 words[tripped, self._torque_limit // 2] = 0
+        if cut is not None:
+            # Hand the model the registers its cut wrote at once, with no time passing: it then holds the cut
+            # no longer, and a Torque Limit a client writes before the next step is a new value, as on the servo.
+            model = self.model
+            if self._steps_to:
+                model.step_to(model.time_s, self.commands())  # type: ignore[attr-defined]
+            else:
+                model.advance(model.time_s, self.commands())

@@ -284,6 +284,26 @@ def test_a_held_reading_the_register_cannot_show_is_refused():
     assert bus.servos[0].table.get("present_temperature") == 90
 
 
+@pytest.mark.parametrize("reading, value, alarm", [("present_temperature", 80, StatusError.OVERHEATING),
+                                                    ("present_voltage", 150, StatusError.INPUT_VOLTAGE)])
+def test_a_pinned_reading_raises_its_alarm_and_shutdown_without_a_packet(reading, value, alarm):
+    """A pinned temperature above Temperature Limit (a voltage outside the limits) raised its alarm, and Alarm
+    Shutdown cut the output, only when a packet reached the servo: stepped 5 s with no packet, the status bits, the
+    live view and Torque Limit showed nothing and the stalled motor kept full drive."""
+    with VirtualBus(ids=[1], transport="inprocess", virtual_time=True) as bus:
+        bus.write(1, "shutdown", int(alarm))  # the pinned reading's alarm alone (not the stall's Overload)
+        bus.write(1, "torque_enable", 1)
+        bus.step(0.2)
+        bus.faults.stall(1)
+        bus.write(1, "goal_position", 800)
+        bus.faults.hold(1, reading, value)
+        bus.step(5.0)
+        assert bus.call(lambda b: b.servos[0].alarms) & alarm
+        assert bus.read(1, "torque_limit") == 0
+        assert bus.call(lambda b: float(b.model.drive[0])) == 0.0
+        assert bus.call(lambda b: float(b.model.temperature_c[0])) < 31.0
+
+
 def test_a_forced_alarm_acts_at_once_and_holds_between_packets():
     """The bits showed, and Alarm Shutdown cut the output, only when a packet reached the servo: a live view of an idle
     bus showed no alarm, and a Torque Limit written meanwhile drove the shaft until the next packet."""

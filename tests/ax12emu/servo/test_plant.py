@@ -8,7 +8,7 @@ from ax12emu.servo.model_factory import ModelChoice, build_model
 from firmware_model.interface import Sensed
 from firmware_model.units import RAD_PER_POSITION_UNIT
 
-SENSED = [name for name in Sensed.field_names() if name != "alarms"]
+SENSED = [name for name in Sensed.field_names() if name not in ("alarms", "output_cut")]
 
 
 def _step(bus: Bus, steps: int = 1) -> None:
@@ -159,3 +159,87 @@ def test_each_millisecond_step_of_virtual_time_steps_the_ax_model():
             data = vb.bus.answer(encode_instruction(1, 2, bytes([36, 2])))[0][0].data[5:-1]
             positions.append(data[0] | data[1] << 8)
     assert all(b > a for a, b in zip(positions, positions[1:])), positions  # at full speed: 1-2 units a millisecond
+
+
+def _stalled_bus(profile: str | None = None) -> Bus:
+    """One servo, torque on, its shaft held while the goal is 288 units away: Overload after the model's delay."""
+    from ax12emu.servo.virtual_servo import ServoOptions
+
+    options = ServoOptions() if profile is None else ServoOptions(profile=profile)
+    bus = Bus([1], options=options, clock=VirtualClock())
+    table = bus.servos[0].table
+    table.set("shutdown", 0x20)  # Overload (the 2006 edition's default selects Overheating alone)
+    table.set("torque_enable", 1)
+    table.set("goal_position", 800)
+    bus.model.set_blocked([True])
+    bus.plant.tables_changed()
+    return bus
+
+
+@pytest.mark.parametrize("pieces", [1, 6, 600], ids=["60 s at once", "10 s pieces", "0.1 s pieces"])
+def test_alarm_shutdown_cuts_the_output_at_the_control_step_however_the_bus_is_stepped(pieces):
+    """A stalled servo stepped 60 s at once ran at full drive the whole minute (83 C, Overheating) while the same
+    minute in 0.1 s pieces ended at 30 C: Alarm Shutdown acted only when readings were copied back to the table
+    (e-manual, Alarm Shutdown: "the motor output becomes 0 % by resetting the value of Torque Limit(34) to 0")."""
+    bus = _stalled_bus()
+    for _ in range(pieces):
+        bus.clock.advance(60.0 / pieces)
+        bus.advance()
+    table = bus.servos[0].table
+    assert table.get("torque_limit") == 0
+    assert bus.model.temperature_c[0] < 31.0  # half a second of stall current, then nothing
+    assert table.get("present_temperature") == 30 and bus.servos[0].alarms == 0x20
+    assert bus.model.drive[0] == 0.0
+
+
+def test_alarm_shutdown_of_the_2006_edition_turns_torque_off_at_the_control_step():
+    """The 2006 manual's edition clears Torque Enable; the output is cut at the step the alarm is found."""
+    bus = _stalled_bus("ax12-2006")
+    bus.clock.advance(60.0)
+    bus.advance()
+    table = bus.servos[0].table
+    assert table.get("torque_enable") == 0 and table.get("torque_limit") == 1023
+    assert bus.model.temperature_c[0] < 31.0
+
+
+def test_a_torque_limit_written_after_the_cut_drives_the_servo_again():
+    """The cut is the table's from the step it is written: a client restoring Torque Limit before the next step
+    drives again (for the overload delay, judged afresh, before the alarm cuts it once more), however long the
+    step that cut it."""
+    bus = _stalled_bus()
+    bus.clock.advance(10.0)
+    bus.advance()
+    table = bus.servos[0].table
+    assert table.get("torque_limit") == 0
+    table.set("torque_limit", 1023)
+    bus.clock.advance(0.3)
+    bus.advance()
+    assert table.get("torque_limit") == 1023 and bus.model.drive[0] == 1.0 and bus.servos[0].alarms == 0
+    bus.clock.advance(0.3)
+    bus.advance()
+    assert table.get("torque_limit") == 0 and bus.servos[0].alarms == 0x20
+
+
+def test_alarm_shutdown_acts_at_the_control_step_on_a_wire_of_several_models():
+    """AX-12A beside AX-18A (one physical model per group, joined): each stalled servo's cut is the step's."""
+    from ax12emu.protocol.servo_models import model
+    from ax12emu.servo.model_factory import build_protocol1_model
+    from firmware_model.grouped import GroupedModel
+
+    keys = ["ax-12a", "ax-18a"]
+    layouts = [None if key == "ax-12a" else model(key).layout() for key in keys]
+    bus = Bus([1, 2], clock=VirtualClock(), model=build_protocol1_model(keys), table_layout=layouts)
+    assert isinstance(bus.model, GroupedModel)
+    for servo in bus.servos:
+        servo.table.set("torque_enable", 1)
+        servo.table.set("goal_position", 800)
+    bus.model.set_blocked([True, True])
+    bus.plant.tables_changed()
+    bus.clock.advance(60.0)
+    bus.advance()
+    assert [servo.table.get("torque_limit") for servo in bus.servos] == [0, 0]
+    assert all(bus.model.sense().present_temperature <= 31)
+    bus.servos[0].table.set("torque_limit", 1023)  # written before the next step: the client's, not the cut's
+    bus.clock.advance(0.2)
+    bus.advance()
+    assert [servo.table.get("torque_limit") for servo in bus.servos] == [1023, 0]
