@@ -221,6 +221,9 @@ class SoakResult:
     #: The last starved loss, listed or not: shown before a problem the machine does not explain,
     #: since late answers may trail it by several requests.
     _last_starved: str | None = field(default=None, repr=False)
+    #: Of ``wrong``, the replies whose status carried an error (the servo's alarm or Alert bit, not a wrong value):
+    #: a servo the soak drove into an alarm (an X series' Overload under goals flipped every 0.2 s) answers so.
+    alarmed: int = 0
     moving_seen: int = 0
     moving_checks: int = 0
     #: Of those, the Protocol 1.0 servos' (AX-12A): their Moving follows the firmware's reference, so it reads 1
@@ -260,8 +263,25 @@ class SoakResult:
     def ok(self) -> bool:
         """No lost or wrong reply the machine does not explain, memory flat, the servos moved, and an AX-12A's Moving
         read 1 right after a goal."""
-        return (not self.lost_by_emulator and not self.wrong_by_emulator and abs(self.rss_growth_kb) <= RSS_LIMIT_KB
-                and not self.still and (self.moving_checks_1 == 0 or self.moving_seen_1 > 0))
+        return not self.reasons
+
+    @property
+    def reasons(self) -> list[str]:
+        """Why the run failed (empty: it passed), each as the verdict line names it."""
+        out = []
+        if self.lost_by_emulator:
+            out.append(f"{self.lost_by_emulator} replies lost")
+        if self.wrong_by_emulator:
+            alarm = (f", {self.alarmed} carrying the servo's alarm (an alarm the servo raised, such as Overload from "
+                     f"goals flipped every {self.goal_period_s:g} s: its physics, not the bus)") if self.alarmed else ""
+            out.append(f"{self.wrong_by_emulator} replies wrong{alarm}")
+        if abs(self.rss_growth_kb) > RSS_LIMIT_KB:
+            out.append(f"memory {self.rss_growth_kb / 1024:+.1f} MB")
+        if self.still:
+            out.append("servos that never moved: " + ", ".join(self.still))
+        if self.moving_checks_1 and not self.moving_seen_1:
+            out.append("an AX-12A's Moving never read 1 right after a goal")
+        return out
 
     def count(self, what: str, at_s: float, comm: int, error: int, bad: bool,
               off_cpu: tuple[OffCpu, OffCpu] | None = None) -> None:
@@ -286,6 +306,7 @@ class SoakResult:
             return
         if error or bad:
             self.wrong += 1
+            self.alarmed += bool(error)
             self.wrong_after_lost += previous is not None
             self.wrong_after_starved += previous == "starved"
             line = f"wrong at {at_s:.1f} s{', after a starved loss' if previous == 'starved' else ''}: {what} (error {error:#x})"
@@ -506,8 +527,8 @@ def report(result: SoakResult, servos: int, protocol: str = "1.0") -> str:
     lines.append(f"emulator RSS: {result.rss_start_kb / 1024:.1f} MB after warm-up, {result.rss_end_kb / 1024:.1f} MB "
                  f"at the end ({result.rss_growth_kb / 1024:+.2f} MB; limit +/-{RSS_LIMIT_KB / 1024:.0f} MB)")
     lines.extend(result.problems)
-    starved = f" ({result.lost_starved} lost while starved of a CPU)" if result.lost_starved else ""
-    lines.append(("PASS" if result.ok else "FAIL") + starved)
+    starved = f" ({result.lost_starved} lost while starved of a CPU, which does not count)" if result.lost_starved else ""
+    lines.append(("PASS" + starved) if result.ok else ("FAIL: " + "; ".join(result.reasons) + starved))
     return "\n".join(lines)
 
 

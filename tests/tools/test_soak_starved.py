@@ -121,7 +121,7 @@ def test_the_verdict_line_says_how_many_losses_were_starved():
     result.requests = 10
     result.slices = [soak.Slice(latencies_s=[0.001])]
     result.count("READ", 1.0, LOST, 0, False, (held_off(1.0), ON_CPU))
-    assert soak.report(result, 1).splitlines()[-1] == "PASS (1 lost while starved of a CPU)"
+    assert soak.report(result, 1).splitlines()[-1] == "PASS (1 lost while starved of a CPU, which does not count)"
 
 
 def test_a_problem_of_its_own_is_listed_after_the_last_starved_loss():
@@ -191,3 +191,16 @@ def test_an_ax12a_whose_moving_never_read_1_after_a_goal_fails_the_soak_an_x_ser
     assert not result.ok
     result.moving_seen_1 = 20
     assert result.ok
+
+
+def test_a_failed_run_names_why_and_an_alarm_the_servo_raised_apart():
+    """A run that failed on wrong replies said "FAIL (67 lost while starved of a CPU)": the losses that do not
+    count, not the replies that did. Replies carrying the servo's alarm are named as such (the physics' alarm,
+    an X series' Overload under goals flipped every 0.2 s, not a bus fault)."""
+    result = soak.SoakResult(seconds=10.0, goal_period_s=0.2)
+    result.count("READ Present Position of ID 2", 7.5, soak.COMM_SUCCESS, 0x80, False)
+    result.count("READ Present Position of ID 1", 7.6, soak.COMM_SUCCESS, 0, True)
+    result.slices = [soak.Slice(latencies_s=[0.001])]
+    assert not result.ok
+    last = soak.report(result, 1).splitlines()[-1]
+    assert last.startswith("FAIL: 2 replies wrong, 1 carrying the servo's alarm") and "every 0.2 s" in last, last
