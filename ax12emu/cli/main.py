@@ -463,9 +463,10 @@ STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SI
 
 def _stop_on_signals(server: BusServer) -> None:
     for signum in STOP_SIGNALS:
-        # A signal ignored when the process started stays ignored: ``nohup ax12emu serve &`` asks to outlive the
-        # session, and so does a shell's ``trap '' INT`` for a background job.
-        if signal.getsignal(signum) is signal.SIG_IGN:
+        # A hangup ignored when the process started stays ignored: ``nohup ax12emu serve &`` asks to outlive the
+        # session. (SIGINT is taken whatever it was: a script's background job starts with it ignored, and the
+        # harness and users stop a server they started with it.)
+        if signum == getattr(signal, "SIGHUP", None) and signal.getsignal(signum) is signal.SIG_IGN:
             continue
         signal.signal(signum, lambda signum, frame: server.stop())
 

@@ -81,7 +81,11 @@ def test_a_hangup_stops_the_server_cleanly(tmp_path, emulator):
     import signal
 
     link = tmp_path / "ax12"
-    served = emulator("--link", str(link))
+    before = signal.signal(signal.SIGHUP, signal.SIG_DFL)  # a run under nohup would start it ignoring hangups
+    try:
+        served = emulator("--link", str(link))
+    finally:
+        signal.signal(signal.SIGHUP, before)
     assert served.stop(signal.SIGHUP) == 0
     assert not link.exists() and not link.is_symlink()
 

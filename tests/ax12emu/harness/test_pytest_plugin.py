@@ -98,11 +98,17 @@ def test_ax12_web_shows_a_bus_of_ax12_servo_models(tmp_path):
             ax12_bus.write(1, "goal_position", 600, protocol=1.0)
         """
     ))
-    process = subprocess.Popen(
-        [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "--ax12-web", "test_watch.py"],
-        cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-        env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)},
-    )
+    # Ctrl-C ends the wait: a run started from a script's background job has SIGINT ignored, and a child
+    # started so would ignore it too (no KeyboardInterrupt); with a handler here it starts with the default.
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        process = subprocess.Popen(
+            [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "--ax12-web", "test_watch.py"],
+            cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+            env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)},
+        )
+    finally:
+        signal.signal(signal.SIGINT, previous)
     try:
         lines: list[str] = []
         while not any("press Ctrl-C" in line for line in lines):

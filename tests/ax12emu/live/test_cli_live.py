@@ -108,14 +108,20 @@ def test_pytest_ax12_web_keeps_the_page_up_until_ctrl_c(tmp_path):
             """
         )
     )
-    process = subprocess.Popen(
-        [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "--ax12-web", "test_watch.py"],
-        cwd=tmp_path,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-        env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)},
-    )
+    # Ctrl-C ends the wait: a run started from a script's background job has SIGINT ignored, and a child
+    # started so would ignore it too (no KeyboardInterrupt); with a handler here it starts with the default.
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        process = subprocess.Popen(
+            [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "--ax12-web", "test_watch.py"],
+            cwd=tmp_path,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+            env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)},
+        )
+    finally:
+        signal.signal(signal.SIGINT, previous)
     try:
         lines = []
         while not any("press Ctrl-C" in line for line in lines):
