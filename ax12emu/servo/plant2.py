@@ -153,8 +153,9 @@ class SteppedPlant:
             self.catch_up_deferred()
         model = self.firmware
         copy = False
-        if sim_time_s + GRID_SLACK_S >= model.time_s + model.step_s:
-            model.step_to(sim_time_s)
+        # A step judged due by the grid's slack that the model did not take (its own slack narrower) must not pass
+        # for one: the write it was owed to would be marked seen with nothing run.
+        if sim_time_s + GRID_SLACK_S >= model.time_s + model.step_s and self._stepped(model, sim_time_s):
             copy, self._step_owed = True, False
         elif self._write_unseen or self._step_owed:
             if model.time_s <= (sim_time_s if clock_s is None else clock_s) + GRID_SLACK_S:
@@ -172,17 +173,22 @@ class SteppedPlant:
         if self._deferred is not None:
             self.catch_up_deferred()
         model = self.firmware
-        if sim_time_s + GRID_SLACK_S >= model.time_s + model.step_s:
-            model.step_to(sim_time_s)
+        if sim_time_s + GRID_SLACK_S >= model.time_s + model.step_s and self._stepped(model, sim_time_s):
+            pass
         elif (self._write_unseen or self._step_owed) and model.time_s <= sim_time_s + GRID_SLACK_S:
             model.step_to(model.time_s + model.step_s)
         else:
             return
-        # Whatever was owed is stepped now. A write between the pieces comes after this step: it stays unseen and
-        # earns a step of its own before the next request is answered (cleared after the yield, it read as taken).
-        self._write_unseen = self._step_owed = False
         yield
+        self._write_unseen = self._step_owed = False
         self.write_back()
+
+    @staticmethod
+    def _stepped(model: XServoModel, to_time_s: float) -> bool:
+        """Step ``model`` to ``to_time_s``; whether it moved."""
+        before = model.time_s
+        model.step_to(to_time_s)
+        return model.time_s > before
 
     def show_unstepped(self) -> None:
         """What :meth:`catch_up` does after a client's write while the model is ahead of the clock: the commands

@@ -103,6 +103,8 @@ PWM_FULL_SCALE = 885
 #: Encoder pulses per output turn (e-manual: 0.088 deg per unit, 0..4095 per turn).
 PULSES_PER_REV = 4096
 PULSE_RAD = 2.0 * math.pi / PULSES_PER_REV
+#: Fraction of a control step within which a step counts as due (a millionth: 1 ns at 1 kHz; see ``XFirmware.step_to``).
+STEP_SLACK = 1e-6
 #: Moving Status reports In-Position once the profile ended and Present Position is less than this from the goal
 #: (ours: the e-manual's "predefined value" is not given).  Why 20 (1.8 deg): a factory-default servo on a free
 #: shaft must get it, as a real one does, and a proportional-only loop (every X model's factory Position I Gain but
@@ -204,7 +206,8 @@ class XFirmware:
         self.shutdown_cuts_output = shutdown_cuts_output
         self.position_output_scale = position_output_scale
         self.step_s = step_s
-        self.time_s = 0.0
+        #: Control steps run since power-up: ``time_s`` is their count times ``step_s``, never a running sum.
+        self._steps = 0
         self.resistance_ohm = physics.params.resistance_ohm
         self.current_unit_a = current_unit_a
         self.load_full_scale_a = load_full_scale_a
@@ -470,10 +473,19 @@ class XFirmware:
 
     # ------------------------------------------------------------------ stepping
 
+    @property
+    def time_s(self) -> float:
+        """The model's time: its steps times ``step_s`` (a product, so it never drifts from the clock's grid)."""
+        return self._steps * self.step_s
+
     def step_to(self, to_time_s: float) -> None:
         """Run whole control steps up to ``to_time_s``; a servo provably at rest skips its physics steps."""
         step_s = self.step_s
-        n = int((to_time_s - self.time_s) / step_s + 1e-9)
+        # A step due within STEP_SLACK (a millionth of a step, 1 ns at 1 kHz) is taken: the caller's clock sums its
+        # own floats, so after a long run it parts from the grid by more than a float's last digit; a caller that
+        # finds a step due by the same slack then gets it (else a write's earned step was dropped: the caller judged
+        # it due, and nothing ran).
+        n = int((to_time_s - self.time_s) / step_s + STEP_SLACK)
         if n <= 0:
             return
         self.sensing_epoch += 1
@@ -484,7 +496,7 @@ class XFirmware:
             settles_c = self.thermal.ambient_c + power_w * self.thermal.thermal_resistance_k_w
             if settles_c <= self._cmd.temperature_limit or not self._cmd.shutdown & HW_ERROR_OVERHEATING:
                 self._relax_temperature(settles_c, n * step_s)
-                self.time_s += n * step_s
+                self._steps += n
                 self._check_readings()
                 return
         for _ in range(n):
@@ -526,7 +538,7 @@ class XFirmware:
         physics = self.physics
         step_s = self.step_s
         before = self._state()
-        self.time_s += step_s
+        self._steps += 1
         saturated = False
         if self._torque_on:
             sign = self._sign()
