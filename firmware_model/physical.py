@@ -17,12 +17,16 @@ Alarm Shutdown (``Commands.shutdown``) acts at the thermal event an alarm it
 selects is found, as the firmware's does at its control step (e-manual:
 "the motor output becomes 0 % by resetting the value of Torque Limit(34) to
 0"): the drive limit of that servo drops to 0 from the next step on, however
-long the ``advance`` asked for, and ``Sensed.output_cut`` reports it until the
-commands change (the bus writes the 0 it reports into them at once); a
-selected alarm still there then cuts again at the next thermal event, as the
-firmware cuts again a Torque Limit written while the alarm lasts.  The cut
-is Torque Limit's (the bridge stays closed); the 2006 manual's edition turns
-torque off instead, which the bus writes when it is shown the cut.
+long the ``advance`` asked for, and ``Sensed.output_cut`` reports it until
+that servo's Torque Limit, Torque Enable or Alarm Shutdown changes in the
+commands (the bus writes the 0 it reports into them at once; a write to any
+other register, or to another servo, leaves the cut as it is); a selected
+alarm still there then cuts again at the next thermal event, as the firmware
+cuts again a Torque Limit written while the alarm lasts.  The cut is Torque
+Limit's (the bridge stays closed, and the overload timer runs on as it does
+at a Torque Limit of 0); the 2006 manual's edition turns torque off instead
+(``shutdown_clears = "torque_enable"``: the cut servo is driven as with
+torque off), which the bus writes when it is shown the cut.
 
 Integration is a fixed step (1 kHz by default), so results depend only on
 the commands and the simulated times asked for, never on wall-clock speed.
@@ -76,7 +80,7 @@ from .units import (
     position_rad_to_raw,
 )
 
-__all__ = ["PhysicalModel", "CONTROLLERS"]
+__all__ = ["PhysicalModel", "CONTROLLERS", "SHUTDOWN_CLEARS"]
 
 #: Selectable position controllers.
 CONTROLLERS = ("compliance", "pid")
@@ -90,6 +94,10 @@ _RANGE_RAD, _UNIT_RAD = float(POSITION_RANGE_RAD), float(RAD_PER_POSITION_UNIT)
 _STATE = tuple(f.name for f in fields(ModelState))
 #: The alarm bits the model raises, the ones Alarm Shutdown can act on here.
 _MODEL_ALARMS = ALARM_INPUT_VOLTAGE | ALARM_OVERHEATING | ALARM_OVERLOAD
+#: The registers whose change ends a servo's Alarm Shutdown cut (module docstring).
+_CUT_REGISTERS = ("torque_limit", "torque_enable", "shutdown")
+#: What Alarm Shutdown's cut clears (PhysicalModel.shutdown_clears).
+SHUTDOWN_CLEARS = ("torque_limit", "torque_enable")
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -121,6 +129,8 @@ class _Plan:
     #: Drive at which the overload timer runs (the Torque Limit register, 0 where Alarm Shutdown cut it;
     #: infinite with torque off).
     overload_limit: PerServo
+    #: The same from the registers alone, before any cut (a raised Torque Limit is judged against it; see _plan).
+    register_limit: np.ndarray
     #: Per servo, the alarm bits that cut its output now (Alarm Shutdown's, where torque is on, Torque Limit
     #: above 0 and not cut yet); None where no servo has any (nothing to check at the events).
     shutdown_bits: np.ndarray | None
@@ -163,6 +173,7 @@ class PhysicalModel:
         pid_gains: PidGains = PidGains(),
         backend: str = "auto",
         fused: bool = True,
+        shutdown_clears: str = "torque_limit",
     ) -> None:
         if n < 1:
             raise ValueError(f"need at least one servo, got n={n}")
@@ -172,6 +183,12 @@ class PhysicalModel:
             raise ValueError(f"controller must be one of {CONTROLLERS}, got {controller!r}")
         if backend not in ("auto", "numpy", "scalar") or (backend == "scalar" and n != 1):
             raise ValueError(f"backend must be 'auto', 'numpy' or (for n=1) 'scalar', got {backend!r}")
+        if shutdown_clears not in SHUTDOWN_CLEARS:
+            raise ValueError(f"shutdown_clears must be one of {SHUTDOWN_CLEARS}, got {shutdown_clears!r}")
+        #: What Alarm Shutdown's cut is, as the table's edition says (module docstring): "torque_limit" (the
+        #: e-manual: Torque Limit 0, torque stays on) or "torque_enable" (the 2006 manual: torque off).  Set it
+        #: before stepping; the bus writes the same register when it is shown the cut.
+        self.shutdown_clears = shutdown_clears
         self.n = n
         self.params = params
         self.step_s = step_s
@@ -210,11 +227,11 @@ class PhysicalModel:
         self._sensing: _Sensing | None = None
         #: The commands the present plan was decoded from (an Alarm Shutdown decodes them again).
         self._plan_source: Commands | None = None
-        #: Servos whose output Alarm Shutdown cut, and the commands' key then: the cut holds until the
-        #: commands change (see the module docstring).
+        #: Servos whose output Alarm Shutdown cut, and their Torque Limit, Torque Enable and Alarm Shutdown
+        #: then (rows, _CUT_REGISTERS): a cut holds until one of its servo's changes (module docstring).
         self._cut = np.zeros(n, dtype=bool)
-        self._cut_key: bytes | None = None
-        #: The overload timer's limit in the present plan (see _plan).
+        self._cut_registers = np.zeros((n, len(_CUT_REGISTERS)), dtype=np.int64)
+        #: The overload timer's limit from the present plan's registers, before any cut (see _plan).
         self._overload_limit = np.full(n, np.inf)
         #: The plan whose alarms were last checked against Alarm Shutdown.
         self._shutdown_checked: _Plan | None = None
@@ -477,8 +494,9 @@ class PhysicalModel:
             return self._plan_cache[1]  # the bus hands over the same object until a register changes
         key = self._commands_key(commands)
         if self._plan_cache is None or self._plan_cache[0] != key:
-            if self._cut_key is not None and key != self._cut_key:  # new commands: they say what Torque Limit is
-                self._cut, self._cut_key = np.zeros(self.n, dtype=bool), None
+            if self._cut.any():  # a cut servo's own registers, written since, say what its output is
+                held = (self._cut_registers_of(commands) == self._cut_registers).all(axis=1)
+                self._cut = self._cut & held
             self._plan_source = commands
             self._plan_cache = (key, self._plan(commands))
             self._sensing, self._slow = self._plan_cache[1].sensing, None
@@ -491,12 +509,17 @@ class PhysicalModel:
         self._restart_reference(plan)
         # A Torque Limit raised (written again after an Alarm Shutdown, say) is judged afresh: the overload
         # timer restarts, so the firmware drives for the overload delay before it finds the overload again.
-        limit = np.broadcast_to(np.asarray(plan.overload_limit, dtype=float), (self.n,))
+        # Raised against the register's previous value, not against a cut's 0: a cut is no register write.
+        limit = plan.register_limit
         raised = limit > self._overload_limit
         if raised.any():
             self._s.overload_timer = self._to_backend(np.where(raised, 0.0, self._array("overload_timer")))
         self._overload_limit = limit
         return plan
+
+    def _cut_registers_of(self, c: Commands) -> np.ndarray:
+        """Per servo, the registers whose change ends its cut (rows, _CUT_REGISTERS)."""
+        return np.stack([_per_servo(getattr(c, name), self.n).astype(np.int64) for name in _CUT_REGISTERS], axis=1)
 
     def _decode(self, c: Commands) -> _Plan:
         """The command registers as per-servo constants for the step loop, under any Alarm Shutdown's cut."""
@@ -504,12 +527,16 @@ class PhysicalModel:
         raw = {name: _per_servo(getattr(c, name), n) for name in _COMMAND_FIELDS}
         enabled = raw["torque_enable"] != 0
         cut = self._cut
+        on_register = enabled  # Torque Enable as written (the overload limit a raise is judged against)
+        if self.shutdown_clears == "torque_enable" and cut.any():  # the 2006 edition's cut: torque off
+            enabled, cut = enabled & ~cut, np.zeros(n, dtype=bool)
         wheel = (raw["cw_angle_limit"] == 0) & (raw["ccw_angle_limit"] == 0)
         speed_raw = raw["moving_speed"].astype(np.int64)
         magnitude = (speed_raw & 0x3FF) * RAD_S_PER_SPEED_UNIT
         goal_raw = np.clip(raw["goal_position"], raw["cw_angle_limit"], np.maximum(raw["ccw_angle_limit"], raw["cw_angle_limit"]))
         comp = compliance_plan(raw["cw_compliance_margin"], raw["ccw_compliance_margin"], raw["cw_compliance_slope"],
                                raw["ccw_compliance_slope"], raw["punch"], raw["torque_limit"])
+        uncut_limit = np.where(on_register, comp.limit, np.inf)
         if cut.any():  # Alarm Shutdown has set Torque Limit to 0 (the commands may not show it yet)
             comp.limit = np.where(cut, 0.0, comp.limit)
         register_limit = comp.limit  # the firmware's overload check compares with the register
@@ -561,7 +588,7 @@ class PhysicalModel:
         shutdown_bits = np.where(can_cut, raw["shutdown"].astype(np.int64) & _MODEL_ALARMS, 0)
         return _Plan(step=step_plan, kernel=step_kernel(self._xp, step_plan, self._k, self._s, self.fused),
                      sensing=sensing, overload_limit=self._to_backend(overload_limit.astype(float)),
-                     shutdown_bits=shutdown_bits if shutdown_bits.any() else None)
+                     register_limit=uncut_limit.astype(float), shutdown_bits=shutdown_bits if shutdown_bits.any() else None)
 
     def _restart_reference(self, plan: _Plan) -> None:
         """Where a new plan leaves wheel mode or torque off, the reference restarts at the shaft; a goal within
@@ -644,10 +671,9 @@ class PhysicalModel:
         source, cache = self._plan_source, self._plan_cache
         assert source is not None and cache is not None  # the plan running was decoded from them
         self._cut = self._cut | trips
-        self._cut_key = cache[0]
+        self._cut_registers[trips] = self._cut_registers_of(source)[trips]
         plan = self._decode(source)  # the same commands under the cut; the reference goes on as it was
         self._plan_cache = (cache[0], plan)
-        self._overload_limit = np.broadcast_to(np.asarray(plan.overload_limit, dtype=float), (self.n,))
         self._sensing, self._slow = plan.sensing, None
         self._shutdown_checked = plan
         return plan

@@ -50,6 +50,10 @@ class Plant:
         self._torque_limit = lay.by_name["torque_limit"].address
         self._torque_enable = lay.by_name["torque_enable"].address
         self._shutdown = lay.by_name["shutdown"].address
+        if self._profile.shutdown_clears == "torque_enable":  # the model's own cut is then torque off, as written here
+            for part in getattr(model, "models", None) or [model]:
+                if hasattr(part, "shutdown_clears"):
+                    part.shutdown_clears = "torque_enable"
         self._cached_commands: Commands | None = None
         #: Whether the model can step without sensing (checked once: a protocol test is slow per step).
         self._steps_to = isinstance(model, SteppableTo)

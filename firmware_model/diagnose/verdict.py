@@ -258,7 +258,8 @@ def residual_verdict(z: np.ndarray, channels: list[str], sd: np.ndarray, phases:
         ch = "present_position" if by_structure else worst
         per_phase = {PHASES[p]: trimmed_rms(z[phases == p, channels.index(ch)]) for p in np.unique(phases)}
         where = max(per_phase, key=per_phase.get)
-        scale = sd[0] / pot_noise_max if noisy_rest and ch == channels[0] else 1.0
+        # The size message's figures are whitened by the capped pot noise; the structure message's stay in sd.
+        scale = sd[0] / pot_noise_max if noisy_rest and ch == channels[0] and not by_structure else 1.0
         if by_structure:
             detail = (f"present_position keeps a time-correlated residual of {structured:.2f} units RMS after the "
                       f"named effects, {structured / max(white, 1e-9):.1f} x the row-to-row noise "

@@ -54,7 +54,7 @@ def test_alarm_shutdown_cuts_the_drive_at_the_thermal_event_the_alarm_is_found(b
     """Alarm Shutdown (a command) acts inside ``advance``: a blocked servo stepped 60 s at once heated at full
     drive for the whole minute (to 83 C) where 0.1 s pieces, each written back, ended at 30 C.  Now the drive
     limit drops to 0 at the thermal event Overload is found, however long the step, and the cut is reported
-    (``output_cut``) until the commands change."""
+    (``output_cut``) until its Torque Limit, Torque Enable or Alarm Shutdown changes."""
     model = PhysicalModel(1, backend=backend)
     model.set_blocked(True)
     cmds = commands(goal_position=800, shutdown=ALARM_OVERLOAD)
@@ -80,6 +80,55 @@ def test_the_cut_holds_until_the_commands_change_and_a_new_torque_limit_is_judge
     again = commands(goal_position=800, shutdown=ALARM_OVERLOAD)
     assert not model.advance(2.4, again).alarms[0] & ALARM_OVERLOAD and model.drive[0] == 1.0
     assert model.advance(2.6, again).output_cut.tolist() == [1] and model.drive[0] == 0.0
+
+
+@pytest.mark.parametrize("backend", ["scalar", "numpy"])
+def test_a_cut_holds_until_its_own_servos_torque_registers_change(backend, commands):
+    """A cut ended at any change to the commands: a goal written (to that servo or another) before the bus wrote
+    the cut's 0 dropped it, and Torque Limit, judged 'raised' from the cut's 0 to the register's unchanged 1023,
+    restarted the overload timer, so the blocked servo drove at full power for another overload delay."""
+    n = 1 if backend == "scalar" else 2
+    model = PhysicalModel(n, backend=backend)
+    model.set_blocked([True] + [False] * (n - 1))
+    cmds = commands(n, goal_position=800, shutdown=ALARM_OVERLOAD)
+    assert model.advance(0.6, cmds).output_cut.tolist() == [1] + [0] * (n - 1)
+    goals = [[801] + [800] * (n - 1)] + ([[800, 300]] if n == 2 else [])
+    for k, goal in enumerate(goals):  # its own goal, then another servo's: the cut holds, the timer runs on
+        sensed = model.advance(0.6 + 0.3 * k, commands(n, goal_position=goal, shutdown=ALARM_OVERLOAD))
+        assert sensed.output_cut[0] == 1 and sensed.alarms[0] & ALARM_OVERLOAD and model.drive[0] == 0.0
+    # a lower Torque Limit written is no raise: the cut ends (the register says what the output is) and the alarm,
+    # still there, cuts again at the next thermal event
+    sensed = model.advance(1.3, commands(n, goal_position=goals[-1], shutdown=ALARM_OVERLOAD, torque_limit=800))
+    assert sensed.output_cut[0] == 1 and sensed.alarms[0] & ALARM_OVERLOAD and model.drive[0] == 0.0
+    for change in (dict(torque_limit=0), dict(torque_enable=0), dict(shutdown=0)):  # each of its own ends the cut
+        fresh = PhysicalModel(n, backend=backend)
+        fresh.set_blocked([True] + [False] * (n - 1))
+        fresh.advance(0.6, cmds)
+        assert fresh.advance(0.6, commands(n, goal_position=800, **{"shutdown": ALARM_OVERLOAD, **change})
+                             ).output_cut.tolist() == [0] * n, change
+
+
+@pytest.mark.parametrize("clears", ["torque_limit", "torque_enable"])
+def test_alarm_bits_after_a_cut_do_not_depend_on_how_the_model_was_stepped(clears, commands):
+    """The 2006 edition's cut is torque off.  Stepped 120 s at once, the cut (Torque Limit 0, torque on) counted as
+    an overload against a limit of 0, and the servo read Overload where 1 s pieces, the bus writing Torque Enable 0
+    at the first cut, did not.  A model told its edition's cut (``shutdown_clears``) reports the alarms the
+    written register gives; the e-manual's Torque Limit 0 overloads (no drive is allowed) both ways."""
+    def run(pieces):
+        model = PhysicalModel(1, shutdown_clears=clears)
+        model.set_blocked(True)
+        cmds = commands(goal_position=900, shutdown=ALARM_OVERHEATING)
+        for k in range(1, pieces + 1):
+            sensed = model.advance(120.0 * k / pieces, cmds)
+            if sensed.output_cut[0]:  # what the bus writes when shown the cut
+                cmds = commands(goal_position=900, shutdown=ALARM_OVERHEATING, **{clears: 0})
+        return int(sensed.alarms[0]), sensed.output_cut.tolist()
+
+    at_once, in_pieces = run(1), run(120)
+    assert at_once[1] == [1]
+    assert at_once[0] == in_pieces[0] == (ALARM_OVERLOAD if clears == "torque_limit" else 0)
+    with pytest.raises(ValueError, match="shutdown_clears"):
+        PhysicalModel(1, shutdown_clears="torque")
 
 
 def test_alarm_shutdown_0_leaves_the_drive_on(commands):

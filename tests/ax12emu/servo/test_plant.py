@@ -220,6 +220,43 @@ def test_a_torque_limit_written_after_the_cut_drives_the_servo_again():
     assert table.get("torque_limit") == 0 and bus.servos[0].alarms == 0x20
 
 
+@pytest.mark.parametrize("writer", [1, 2], ids=["its own goal", "another servo's goal"])
+def test_a_goal_written_between_a_ticks_pieces_leaves_the_cut_in_place(writer):
+    """Served in pieces (step, sense, write back), a control loop's Goal Position write and read landing after the
+    step that cut the output dropped the cut: any change to the commands ended it, and Torque Limit, 'raised' from
+    the cut's 0 back to 1023, restarted the overload timer.  The client read Torque Limit 1023 and error 0x00, and
+    the blocked servo drove on at full power for another overload delay.  Only its own Torque Limit, Torque Enable
+    or Alarm Shutdown ends a servo's cut."""
+    from ax12emu.protocol.packets import encode_instruction
+    from ax12emu.servo.virtual_servo import ServoOptions
+
+    bus = Bus([1, 2], clock=VirtualClock(), options=ServoOptions(eeprom_busy_s_per_byte=0.0))
+    for servo in bus.servos:
+        servo.table.set("shutdown", 0x20)
+        servo.table.set("torque_enable", 1)
+        servo.table.set("goal_position", 900)
+    bus.model.set_blocked([True, False])
+    bus.plant.tables_changed()
+    for _ in range(2000):
+        bus.clock.advance(0.001)
+        pieces = bus.advance_in_pieces()
+        next(pieces, None)  # the control step
+        if bus.model.sense().output_cut[0]:
+            break
+        for _ in pieces:
+            pass
+    else:
+        raise AssertionError("never cut")
+    bus.receive(encode_instruction(writer, 3, bytes([30, 0x85, 0x03])))  # Goal Position 901
+    status = bus.receive(encode_instruction(1, 2, bytes([34, 2])))[0].data  # read Torque Limit
+    assert (status[4], status[5] | status[6] << 8) == (0x20, 0)
+    for _ in pieces:
+        pass
+    assert bus.servos[0].table.get("torque_limit") == 0 and bus.model.drive[0] == 0.0
+    _step(bus, 100)
+    assert bus.servos[0].table.get("torque_limit") == 0 and bus.servos[0].alarms == 0x20 and bus.model.drive[0] == 0.0
+
+
 def test_alarm_shutdown_acts_at_the_control_step_on_a_wire_of_several_models():
     """AX-12A beside AX-18A (one physical model per group, joined): each stalled servo's cut is the step's."""
     from ax12emu.protocol.servo_models import model
@@ -243,3 +280,25 @@ def test_alarm_shutdown_acts_at_the_control_step_on_a_wire_of_several_models():
     bus.clock.advance(0.2)
     bus.advance()
     assert [servo.table.get("torque_limit") for servo in bus.servos] == [1023, 0]
+
+
+
+
+@pytest.mark.parametrize("pieces", [1, 120], ids=["120 s at once", "1 s pieces"])
+def test_the_2006_editions_cut_is_torque_off_inside_a_long_step_too(pieces):
+    """2006 profile (Alarm Shutdown turns torque off), Overheating selected, a blocked servo at full drive: stepped
+    in one 120 s piece the model's cut was Torque Limit 0 with torque on, which the overload rule counts, and the
+    servo read Overload (0x20) that 1 s pieces (Torque Enable 0 written at the cut) did not."""
+    from ax12emu.servo.virtual_servo import ServoOptions
+
+    bus = Bus([1], options=ServoOptions(profile="ax12-2006"), clock=VirtualClock())
+    table = bus.servos[0].table
+    table.set("shutdown", 0x04)
+    table.set("torque_enable", 1)
+    table.set("goal_position", 900)
+    bus.model.set_blocked([True])
+    bus.plant.tables_changed()
+    for _ in range(pieces):
+        bus.clock.advance(120.0 / pieces)
+        bus.advance()
+    assert table.get("torque_enable") == 0 and bus.servos[0].alarms == 0

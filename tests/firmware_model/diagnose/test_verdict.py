@@ -278,3 +278,18 @@ def test_a_position_residual_far_above_any_pot_noise_is_unexplained_though_the_r
     z = rng.standard_normal((2000, 1)) * 2.0
     assert residual_verdict(z, ["present_position"], np.array([0.8]), _phases(2000), pot_noise_max=pot) == \
         residual_verdict(z, ["present_position"], np.array([0.8]), _phases(2000))
+
+
+def test_the_structure_message_s_figures_stay_in_sd_where_the_pot_noise_bound_binds():
+    """The bound on the pot's noise whitens the size test only: the structure message (chosen when position keeps
+    a time-correlated residual) reported its per-phase figure rescaled by sd / pot_noise_max, a different "sd" for
+    the same residual with and without the bound."""
+    n = 400
+    rng = np.random.default_rng(0)
+    raw = 1.6 * np.sin(np.arange(n) / 15.0) + rng.normal(0.0, 0.3, n)  # structured, small by size
+    sd = np.array([3.0, 1.0])
+    z = np.stack([raw / sd[0], rng.normal(0.0, 1.0, n)], axis=1)
+    plain = residual_verdict(z, ["present_position", "present_speed"], sd, _phases(n))
+    bound = residual_verdict(z, ["present_position", "present_speed"], sd, _phases(n), pot_noise_max=1.96)
+    assert plain.detail.startswith("present_position keeps a time-correlated residual"), plain.detail
+    assert bound.detail == plain.detail
