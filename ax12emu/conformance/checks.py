@@ -32,7 +32,7 @@ from enum import IntEnum
 from typing import Any, ClassVar, NamedTuple
 
 from ax12emu.bus.wire import servo_family
-from ax12emu.protocol.control_table import AX12_MODEL, EEPROM_END, Access, Area, layout
+from ax12emu.protocol.control_table import AX12_MODEL, EEPROM_END, Access, layout
 from ax12emu.protocol.describe import describe_error
 from ax12emu.protocol.packets import BROADCAST_ID, Instruction, StatusError, encode_instruction
 from ax12emu.protocol.registers import Entry, Layout
@@ -86,6 +86,18 @@ def expect(condition: bool, figure: str) -> None:
     """Fail with ``figure`` unless ``condition``."""
     if not condition:
         raise Failed(figure)
+
+
+def put_all(ctx: Any, puts: "list[tuple[Any, ...]]") -> None:
+    """``ctx.put(*args)`` for each of ``puts``, every one tried though one fails (a restore in ``finally`` that stopped
+    at the first unanswered put left the other servos changed); :class:`Failed` naming those that failed."""
+    failed = []
+    for args in puts:
+        try:
+            ctx.put(*args)
+        except (Failed, OSError) as exc:
+            failed.append(f"{exc}")
+    expect(not failed, "could not put back: " + "; ".join(failed))
 
 
 def host_bps(baud_register: int) -> int:
@@ -166,6 +178,59 @@ class Transactions:
         expect(status.id == servo_id, f"reply to {name} id={servo_id} came from id={status.id}")
         return status
 
+    def refusal(self, check: "Check") -> str | None:
+        """Why ``check`` must not run on this bus (None: it may); Protocol 2.0's Secondary IDs give reasons."""
+        return None
+
+    def put_back_levels(self) -> str:
+        """Put back every Status Return Level :meth:`raise_levels` raised; the figure says which (Failed if one stays)."""
+        raised: dict[int, int] = getattr(self, "raised", {})
+        wrong = []
+        for servo_id, level in raised.items():
+            try:
+                entry = self.entry(servo_id, "status_return_level")
+                # at the level put back (below 2) the WRITE gets no answer: listened to for the silence window
+                self.transact(self.encode_packet(servo_id, self.instructions["WRITE"], self.address_bytes(entry.address)
+                                                 + bytes((level,))), timeout_s=self.link.silence_s)
+                now = self.get(servo_id, "status_return_level")
+            except (Failed, OSError) as exc:
+                wrong.append(f"ID {servo_id}: {exc}")
+                continue
+            if now != level:
+                wrong.append(f"ID {servo_id} reads {now}, not {level}")
+        expect(not wrong, "Status Return Level not put back: " + "; ".join(wrong))
+        return ", ".join(f"ID {i}: {level} -> 2 for the run (the checks need every instruction answered), put back to {level}"
+                         for i, level in raised.items())
+
+    def raise_levels(self) -> None:
+        """Raise every ID's Status Return Level below 2 to 2 for the run, keeping the old level in ``raised``.
+
+        A servo at level 1 (e-manual: PING and READ answered only, a legitimate setting) failed every check that
+        writes with "no reply to WRITE", and the restores in ``finally`` stopped at the first unanswered one,
+        leaving tables changed.  Level 0 answers no READ: :meth:`identify` cannot read the table, and says so.
+        """
+        raised: dict[int, int] = self.raised  # type: ignore[attr-defined]
+        for servo_id in self.ids:
+            if servo_id in raised or servo_id in self.shadowed_ids():
+                continue
+            entry = self.entry(servo_id, "status_return_level")
+            level = self.get(servo_id, "status_return_level")
+            if level >= 2:
+                continue
+            raised[servo_id] = level
+            self.transact(self.encode_packet(servo_id, self.instructions["WRITE"], self.address_bytes(entry.address) + b"\x02"),
+                          timeout_s=self.link.silence_s)
+            now = self.get(servo_id, "status_return_level")
+            expect(now == 2, f"ID {servo_id}: Status Return Level {level}, and a WRITE of 2 left it at {now}")
+
+    def shadowed_ids(self) -> dict[int, list[int]]:
+        """IDs under test that other servos answer to silently (Protocol 2.0's Secondary ID): none on Protocol 1.0."""
+        return {}
+
+    def address_bytes(self, address: int) -> bytes:
+        """A register address as the protocol's READ and WRITE carry it (1 byte on Protocol 1.0)."""
+        return bytes((address,))
+
     def ping_rtts(self, servo_id: int, count: int) -> list[float]:
         """Round trips of ``count`` PINGs."""
         packet = self.encode_packet(servo_id, self.instructions["PING"])
@@ -190,6 +255,10 @@ class Context(Transactions):
     models: dict[int, ServoModel | None] = field(default_factory=dict)
     #: Table image of each ID read before the first check.
     before: dict[int, bytes] = field(default_factory=dict)
+    #: Status Return Level of each ID that had it below 2, raised to 2 for the run (:meth:`raise_levels`).
+    raised: dict[int, int] = field(default_factory=dict)
+    #: Registers of each ID a check knowingly left as they were not (:func:`_write_back`), with why; not compared.
+    left: dict[int, tuple[frozenset[str], str]] = field(default_factory=dict)
 
     @property
     def target(self) -> int:
@@ -212,8 +281,15 @@ class Context(Transactions):
         RESET) skip.
         """
         for servo_id in self.ids:
-            number = int.from_bytes(self.read(servo_id, MODEL_NUMBER_AT.address, MODEL_NUMBER_AT.size), "little")
-            self.models[servo_id] = model_for_number1(number)
+            try:
+                data = self.read(servo_id, MODEL_NUMBER_AT.address, MODEL_NUMBER_AT.size)
+            except Failed as exc:
+                if self.link.transact(encode_instruction(servo_id, Instruction.PING)).status is None:
+                    raise
+                raise Failed(f"{exc}, yet it answers PING: Status Return Level 0? (the suite reads every table; "
+                             "set it to 1 or 2)") from None
+            self.models[servo_id] = model_for_number1(int.from_bytes(data, "little"))
+        self.raise_levels()
 
     def spec(self, servo_id: int) -> ServoModel | None:
         """``servo_id``'s model file: None if its model number names none, the AX-12A's if it was never looked up."""
@@ -307,6 +383,8 @@ class Check:
     run: Callable[[Context], "str | Note"]
     destructive: bool = False
     motion: bool = False
+    #: The check only reads, pings and listens: it writes nothing to any servo (see ``Transactions.refusal``).
+    reads_only: bool = False
 
 
 def _ms(seconds: float) -> str:
@@ -355,8 +433,14 @@ def _reply_past_echoes(ctx: Context, sent: tuple[bytes, ...], *, start: float | 
             return response
 
 
-def check_back_to_back(ctx: Context) -> str:
-    """Two packets in one write get two replies, in order."""
+def check_back_to_back(ctx: Context) -> "str | Note":
+    """Two packets in one write get two replies, in order.
+
+    Only where the line leaves room for it: the first reply comes the target's Return Delay Time (2 us a unit) after
+    the first packet, while the host is still sending the second if that one's wire time is longer (8 bytes at
+    57,600 bps are 1.39 ms, the factory delay 0.5 ms); on a half-duplex line the two then collide, so a real servo
+    cannot pass.  There a failure is a note saying so (a larger Return Delay Time or a faster rate judges it).
+    """
     second = ctx.ids[-1]
     first = encode_instruction(ctx.target, Instruction.PING)
     then = encode_instruction(second, Instruction.READ, bytes((0, 2)))
@@ -365,8 +449,21 @@ def check_back_to_back(ctx: Context) -> str:
     ctx.link.write_raw(first + then)
     a = _reply_past_echoes(ctx, (first, then))
     b = _reply_past_echoes(ctx, (first, then))
-    expect(a.status is not None and a.status.id == ctx.target, "first packet unanswered")
-    expect(b.status is not None and b.status.id == second and len(b.status.params) == 2, "second packet unanswered")
+    try:
+        expect(a.status is not None and a.status.id == ctx.target, "first packet unanswered")
+        expect(b.status is not None and b.status.id == second and len(b.status.params) == 2, "second packet unanswered")
+    except Failed as exc:
+        before = ctx.before.get(ctx.target)
+        if before is None:
+            raise
+        wire_s = len(then) * 10 / ctx.link.baud
+        delay_s = ctx.entry(ctx.target, "return_delay_time").value_in(before) * 2e-6
+        if wire_s <= delay_s:
+            raise
+        ctx.link.drain(0.01)  # what is left of colliding replies
+        return Note(f"{exc}: the second packet's {len(then)} bytes take {_ms(wire_s)} at {ctx.link.baud} bps, longer than "
+                    f"ID {ctx.target}'s Return Delay Time ({delay_s * 1e6:.0f} us), so its reply starts while the host still "
+                    "sends: on a half-duplex line they collide (raise Return Delay Time or the rate to judge this)")
     return f"replies from {ctx.target} then {second}"
 
 
@@ -448,8 +545,7 @@ def check_write(ctx: Context) -> str:
         ctx.must_put(ctx.target, "punch", new_punch)
         expect(ctx.get(ctx.target, "punch") == new_punch, "Punch did not change")
     finally:
-        ctx.put(ctx.target, "led", led)
-        ctx.put(ctx.target, "punch", punch)
+        put_all(ctx, [(ctx.target, "led", led), (ctx.target, "punch", punch)])
     return f"led {led}->{1 - led}, punch {punch}->{new_punch}"
 
 
@@ -576,8 +672,7 @@ def check_broadcast_write(ctx: Context) -> str:
         # The broadcast also lit the LED of any servo on the bus that is not under test: put every LED back to its
         # factory 0 the same way, then those under test to what they were.
         ctx.silent(encode_instruction(BROADCAST_ID, Instruction.WRITE, bytes((ctx.address("led"), 0))))  # (its echo too)
-        for servo_id, led in leds.items():
-            ctx.put(servo_id, "led", led)
+        put_all(ctx, [(servo_id, "led", led) for servo_id, led in leds.items()])
     return "all written, silent"
 
 
@@ -771,23 +866,39 @@ def check_reset(ctx: Context) -> str:
     return figure + "; table at defaults; restored"
 
 
+#: Registers whose write turns the torque on, on the AX series and (Goal Position) the MX: users report it
+#: (``ax12emu.servo.virtual_servo.ServoOptions.goal_position_enables_torque`` gives the sources).
+TORQUE_ON_WRITES = frozenset({"goal_position", "moving_speed"})
+
+
 def _write_back(ctx: Context, image: bytes, lay: Layout) -> None:
     """Write a saved table (of layout ``lay``) back to the reset servo (now ID 1 at its factory rate): ID and baud last.
 
-    Registers the firmware sets (:data:`DYNAMIC`; the MX's Current(68) is writable) are left to it."""
+    Registers the firmware sets (:data:`DYNAMIC`; the MX's Current(68) is writable) are left to it.  Where the saved
+    Torque Enable is 0, Goal Position and Moving Speed are not written: on an AX (Goal Position on an MX too) such a
+    write turns the torque on, and the shaft, turned by hand since the goal was set, was driven back to the stale goal
+    until Torque Enable 0 came (45 degrees behind a 16 ms adapter latency); they are left out of "table unchanged"
+    (``ctx.left``), the figure saying why.  Every write is tried though one fails, so ID and baud are put back."""
     last = ("id", "baud_rate")
+    by_name = lay.by_name
+    torque = by_name["torque_enable"].value_in(image)
+    skipped = frozenset() if torque else TORQUE_ON_WRITES & set(by_name)
+    puts: list[tuple[Any, ...]] = []
     for entry in lay.entries:
         if entry.access is not Access.RW or entry.name in last or entry.name == "lock" or entry.name in DYNAMIC:
             continue
-        value = int.from_bytes(image[entry.address : entry.end], "little")
-        if entry.area is Area.RAM and entry.name == "torque_enable":
+        if entry.name == "torque_enable" or entry.name in skipped:
             continue
-        ctx.put(1, entry.name, value, lay)
-    by_name = lay.by_name
-    ctx.put(1, "torque_enable", by_name["torque_enable"].value_in(image), lay)
+        puts.append((1, entry.name, int.from_bytes(image[entry.address : entry.end], "little"), lay))
+    puts.append((1, "torque_enable", torque, lay))
     servo_id = by_name["id"].value_in(image)
-    ctx.put(1, "id", servo_id, lay)
-    ctx.put(servo_id, "baud_rate", by_name["baud_rate"].value_in(image), lay)
+    try:
+        put_all(ctx, puts)
+    finally:
+        if skipped:
+            ctx.left[servo_id] = (skipped, "not written back after RESET with the torque off: on AX/MX servos such a "
+                                           "write turns the torque on")
+        put_all(ctx, [(1, "id", servo_id, lay), (servo_id, "baud_rate", by_name["baud_rate"].value_in(image), lay)])
 
 
 CHECKS: tuple[Check, ...] = (

@@ -79,7 +79,7 @@ from ax12emu.protocol.params2 import BACKUP_KEY
 from ax12emu.protocol.registers import Access, Area, Entry, Layout
 from ax12emu.protocol.servo_models import ServoModel, model, model_names
 
-from .checks import Check, Failed, Note, Skipped, Transactions, expect, return_delay_figure
+from .checks import Check, Failed, Note, Skipped, Transactions, expect, put_all, return_delay_figure
 from .link import Link2
 
 __all__ = ["CHECKS2", "Context2", "model_for_number", "table_differences2"]
@@ -169,6 +169,12 @@ class Context2(Transactions):
     models: dict[int, ServoModel] = field(default_factory=dict)
     #: Table image of each ID read before the first check.
     before: dict[int, bytes] = field(default_factory=dict)
+    #: Status Return Level of each ID that had it below 2, raised to 2 for the run (``raise_levels``).
+    raised: dict[int, int] = field(default_factory=dict)
+    #: IDs that answered the broadcast Ping :meth:`identify` sends (servos under test or not).
+    bus_ids: list[int] = field(default_factory=list)
+    #: Each servo on the bus whose Secondary ID(12) is active (0 ~ 252; 255, the factory value, is none): that ID.
+    secondary: dict[int, int] = field(default_factory=dict)
 
     @property
     def target(self) -> int:
@@ -176,8 +182,34 @@ class Context2(Transactions):
         return self.ids[0]
 
     def free_id(self) -> int:
-        """An ID no servo under test has (counting down from 252)."""
-        return next(i for i in range(MAX_ID2, -1, -1) if i not in self.ids)
+        """An ID nobody answers to (counting down from 252): no servo under test or found on the bus has it as its ID or
+        as its Secondary ID (a packet to that ID would reach the servo, silently)."""
+        taken = {*self.ids, *self.bus_ids, *self.secondary.values()}
+        return next(i for i in range(MAX_ID2, -1, -1) if i not in taken)
+
+    def shadowed_ids(self) -> dict[int, list[int]]:
+        """Each ID under test that other servos on the bus have as their Secondary ID: those servos."""
+        shadows = {i: [s for s, second in self.secondary.items() if second == i and s != i] for i in self.ids}
+        return {i: found for i, found in shadows.items() if found}
+
+    def refusal(self, check: Check) -> str | None:
+        """A check that writes is skipped where another servo shadows an ID under test by its Secondary ID(12).
+
+        [CT] Secondary ID(12): an Instruction Packet to a Secondary ID reaches every servo that has it, which executes
+        it (the RAM area only) and sends no Status Packet.  A check's writes to that ID (torque on and a Goal
+        Position to hold, LED, Indirect Address ...) would reach that servo too, unseen: it moved and kept a stale goal.
+        """
+        shadows = self.shadowed_ids()
+        if check.reads_only or not shadows:
+            return None
+        said = "; ".join(f"ID {i} is the Secondary ID(12) of servo{'s' if len(by) > 1 else ''} {', '.join(map(str, by))}"
+                         for i, by in shadows.items())
+        return (f"{said}: this check writes, and a write to that ID reaches {'them' if sum(map(len, shadows.values())) > 1 else 'it'} "
+                "too, executed silently (e-manual, Secondary ID); set it to 255 there, or test other IDs")
+
+    def address_bytes(self, address: int) -> bytes:
+        """A register address as Protocol 2.0's READ and WRITE carry it (2 bytes, little-endian)."""
+        return _u16(address)
 
     def layout(self, servo_id: int) -> Layout:
         """The control table of ``servo_id``'s model."""
@@ -192,7 +224,11 @@ class Context2(Transactions):
 
     # -- setup -----------------------------------------------------------------------------
     def identify(self) -> None:
-        """Ping every ID and load the model file its model number names; :class:`Failed` if none fits."""
+        """Ping every ID and load the model file its model number names (:class:`Failed` if none fits); find the
+        servos on the bus and their Secondary IDs (:meth:`scan_bus`); raise a Status Return Level below 2 for the run.
+
+        A servo that answers Ping but not READ is at Status Return Level 0: the suite cannot read its table.
+        """
         for servo_id in self.ids:
             status = self.status(servo_id, Instruction2.PING)
             expect(len(status.params) == 3, f"Ping id={servo_id} carried {len(status.params)} parameter bytes, not 3")
@@ -201,6 +237,45 @@ class Context2(Transactions):
             expect(found is not None, f"ID {servo_id}: model number {number} has no Protocol 2.0 model file")
             assert found is not None
             self.models[servo_id] = found
+        for servo_id in self.ids:
+            entry = self.entry(servo_id, "status_return_level")
+            if self.transact(encode_instruction2(servo_id, Instruction2.READ, _u16(entry.address) + _u16(1))).status is None:
+                raise Failed(f"ID {servo_id} answers Ping but not READ: Status Return Level 0? (the suite reads every "
+                             "table; set it to 1 or 2)")
+        self.scan_bus()
+        self.raise_levels()
+
+    def scan_bus(self) -> None:
+        """Broadcast Ping: every servo on the bus answers, under test or not ([P2] "Ping"); then read the Secondary
+        ID(12) of each one whose model file has it (a servo that does not answer the READ is taken to have none).
+
+        Listened to for dynamixel-sdk's budget for a full bus (a 14-byte status and 3 ms for each of 253 IDs, the
+        adapter's 16 ms) plus the reply timeout: a servo with a high ID answers late.
+        """
+        byte_s = 10.0 / self.link.baud
+        ping = encode_instruction2(BROADCAST_ID, Instruction2.PING)
+        wait_s = (len(ping) * byte_s + (MAX_ID2 + 1) * (SDK_PING_STATUS_BYTES * byte_s + SDK_PING_SLOT_S)
+                  + SDK_PING_LATENCY_S + self.link.timeout_s)
+        start = time.perf_counter()
+        self.link.send(ping)
+        found: dict[int, int] = {}
+        while True:
+            status = self.link.receive(wait_s, start=start).status
+            if status is None:
+                break
+            if status.crc_ok and len(status.params) == 3:
+                found.setdefault(status.id, int.from_bytes(status.params[:2], "little"))
+        self.bus_ids = sorted(found)
+        for servo_id, number in found.items():
+            spec = model_for_number(number)
+            entry = None if spec is None else spec.layout().by_name.get("secondary_id")
+            if entry is None:
+                continue
+            reply = self.transact(encode_instruction2(servo_id, Instruction2.READ, _u16(entry.address) + _u16(entry.size))).status
+            if reply is None or not reply.crc_ok or reply.id != servo_id or reply.error & ERROR_NUMBER_MASK or len(reply.params) != 1:
+                continue
+            if reply.params[0] <= MAX_ID2:
+                self.secondary[servo_id] = reply.params[0]
 
     def table(self, servo_id: int) -> bytes:
         """The whole control table, read register run by register run (undefined addresses left 0)."""
@@ -435,8 +510,7 @@ def check_write_sizes(ctx: Context2) -> str:
             figure = exact(ctx.write(servo, entry.address, entry.to_bytes(value)), servo, ErrorNumber.NONE)
             expect(ctx.get(servo, name) == value, f"{name} reads {ctx.get(servo, name)} after writing {value}")
     finally:
-        for name, value in saved.items():
-            ctx.put(servo, name, value)
+        put_all(ctx, [(servo, name, value) for name, value in saved.items()])
     return f"{', '.join(chosen)} written and read back; status {figure}"
 
 
@@ -529,8 +603,7 @@ def _torque_held(ctx: Context2, servo: int) -> Iterator[bool]:
         yield was_on
     finally:
         if not was_on and goal is not None:
-            ctx.put(servo, "torque_enable", 0)
-            ctx.put(servo, "goal_position", goal)
+            put_all(ctx, [(servo, "torque_enable", 0), (servo, "goal_position", goal)])
 
 
 def check_eeprom_locked(ctx: Context2) -> str:
@@ -702,21 +775,29 @@ def check_sync_write(ctx: Context2) -> str:
         for servo_id in same:
             expect(ctx.get(servo_id, "led") == 1 - leds[servo_id], f"ID {servo_id} not written")
     finally:
-        for servo_id, led in leds.items():
-            ctx.put(servo_id, "led", led)
+        put_all(ctx, [(servo_id, "led", led) for servo_id, led in leds.items()])
     return f"{len(same)} servo(s) written, silent" + _left_out(other)
 
 
 _BULK_REGISTERS = ("id", "model_number", "max_position_limit")
 
 
+def _bulk_register(ctx: Context2, servo_id: int, turn: int) -> Entry:
+    """The ``turn``-th of :data:`_BULK_REGISTERS` (cyclically), or the next one ``servo_id``'s table has: a mixed bus
+    (an XL-320 has no Max Position Limit) is read in the registers each table has, whatever the IDs' order."""
+    by_name = ctx.layout(servo_id).by_name
+    names = [_BULK_REGISTERS[(turn + k) % len(_BULK_REGISTERS)] for k in range(len(_BULK_REGISTERS))]
+    return next(by_name[name] for name in names if name in by_name)
+
+
 def check_bulk_read(ctx: Context2) -> str:
     """[P2] "Bulk Read" (0x92, ID 0xFE): different address and length per device, each answers with its
     own status packet; the page's later revisions say "[Status Packet] will be returned in order,
     according to input ID in the [Instruction Packet]" (https://emanual.robotis.com/docs/en/dxl/protocol2/#bulk-read-0x92).  ID(7, 1 byte), Model
-    Number(0, 2) and Max Position Limit(48, 4) in turn, IDs listed in reverse."""
+    Number(0, 2) and Max Position Limit(48, 4) in turn, IDs listed in reverse; a table without the register of its
+    turn (the XL-320 has no Max Position Limit) is read in the next one it has."""
     order = list(reversed(ctx.ids))
-    asked = {i: ctx.entry(i, _BULK_REGISTERS[n % len(_BULK_REGISTERS)]) for n, i in enumerate(order)}
+    asked = {i: _bulk_register(ctx, i, n) for n, i in enumerate(order)}
     expected = {i: ctx.read(i, e.address, e.size) for i, e in asked.items()}
     body = b"".join(bytes((i,)) + _u16(e.address) + _u16(e.size) for i, e in asked.items())
     ctx.link.send(encode_instruction2(BROADCAST_ID, Instruction2.BULK_READ, body))
@@ -747,9 +828,16 @@ def check_bulk_write(ctx: Context2) -> str:
         for servo_id, (name, _, new) in plan.items():
             expect(ctx.get(servo_id, name) == new, f"ID {servo_id}: {name} not written")
     finally:
-        for servo_id, (name, old, _) in plan.items():
-            ctx.put(servo_id, name, old)
+        put_all(ctx, [(servo_id, name, old) for servo_id, (name, old, _) in plan.items()])
     return ", ".join(f"{i}: {name}" for i, (name, _, _) in plan.items()) + ", silent"
+
+
+def _expect_unique(seen: list[int]) -> None:
+    """Fail naming every ID that answered one broadcast Ping more than once: two servos share it ([P2] "Packet ID":
+    each device has its own ID), and every packet to it reaches both."""
+    shared = sorted({i for i in seen if seen.count(i) > 1})
+    expect(not shared, f"ID{'s' if len(shared) > 1 else ''} {', '.join(map(str, shared))} answered more than once "
+                       f"(answers from {seen}): two servos share {'each' if len(shared) > 1 else 'it'}")
 
 
 def check_broadcast_ping(ctx: Context2) -> str:
@@ -769,6 +857,7 @@ def check_broadcast_ping(ctx: Context2) -> str:
         replies.append(response.status)
         last_s = time.perf_counter() - start
     seen = [r.id for r in replies]
+    _expect_unique(seen)
     expect(set(ctx.ids) <= set(seen), f"answers from {seen}, expected {sorted(ctx.ids)}")
     expect(seen == sorted(seen), f"answers in the order {seen}, not ascending")
     for reply in replies:
@@ -815,6 +904,7 @@ def check_broadcast_ping_timing(ctx: Context2) -> str:
             break
         arrivals.append((response.status.id, response.rtt_s))
     seen = [i for i, _ in arrivals]
+    _expect_unique(seen)  # (and a line through the answers needs distinct IDs)
     expect(set(ctx.ids) <= set(seen) and seen == sorted(seen), f"answers from {seen}, expected {sorted(ctx.ids)} in order")
     late = [f"ID {i} at {_ms(t)} (budget {_ms(budget[i])})" for i, t in arrivals if i in budget and t > budget[i]]
     figure = ", ".join(f"{i}: {_ms(t)}" for i, t in arrivals)
@@ -849,8 +939,7 @@ def check_broadcast_read_write(ctx: Context2) -> str:
             changed = table_differences2(image, ctx.table(servo_id), ctx.layout(servo_id))
             expect(not changed, f"ID {servo_id} (another table): the broadcast WRITE changed {', '.join(changed)}")
     finally:
-        for servo_id, led in leds.items():
-            ctx.put(servo_id, "led", led)
+        put_all(ctx, [(servo_id, "led", led) for servo_id, led in leds.items()])
     expect(ctx.silent(encode_instruction2(BROADCAST_ID, Instruction2.READ, _u16(entry.address) + _u16(1))),
            "broadcast READ answered")
     return "WRITE executed by all, silent; READ silent" + ("" if not other else f" (IDs {','.join(map(str, other))}: another table, unchanged)")
@@ -942,10 +1031,13 @@ def _write_back(ctx: Context2, servo_id: int, image: bytes) -> list[str]:
     order = [e for e in layout.entries if e.access is Access.RW and e.name not in ("id", "baud_rate", "torque_enable")]
     order += [layout.by_name["torque_enable"]]
     refused = []
-    for entry in order:
+    for entry in order:  # every register tried: one unanswered write does not leave the rest unwritten
         value = entry.value_in(image)
-        if entry.value_in(now) != value and ctx.put(servo_id, entry.name, value):
-            refused.append(entry.name)
+        try:
+            if entry.value_in(now) != value and ctx.put(servo_id, entry.name, value):
+                refused.append(entry.name)
+        except (Failed, OSError) as exc:
+            refused.append(f"{entry.name} ({exc})")
     return refused
 
 
@@ -1001,6 +1093,9 @@ def check_id_change(ctx: Context2) -> str:
     if ctx.torque_on(old):
         raise Skipped("torque is on: ID is in the EEPROM area")
     entry = ctx.entry(old, "id")
+    # A servo already at the new ID (one not under test) would answer for the moved one and be written back to the
+    # old ID with it: two servos renumbered, one ID for both.
+    expect(ctx.silent(encode_instruction2(new, Instruction2.PING)), f"ID {new}, the free ID this check moves to, answers")
     response = ctx.transact(encode_instruction2(old, Instruction2.WRITE, _u16(entry.address) + bytes((new,))))
     try:
         ctx.status(new, Instruction2.PING)
@@ -1172,10 +1267,16 @@ def _in_motion(ctx: Context2, servos: list[int], setup: dict[str, int], body) ->
                 ctx.must_put(servo, name, value)
             figures.append(f"{servo} {ctx.models[servo].name}: " + body(servo))
         finally:
-            ctx.put(servo, "torque_enable", 0)
-            for name in names:
-                if ctx.get(servo, name) != saved[name] and ctx.put(servo, name, saved[name]):
-                    refused.append(name)
+            try:
+                ctx.put(servo, "torque_enable", 0)
+            except (Failed, OSError) as exc:
+                refused.append(f"torque_enable 0 ({exc})")
+            for name in names:  # each tried, though one fails
+                try:
+                    if ctx.get(servo, name) != saved[name] and ctx.put(servo, name, saved[name]):
+                        refused.append(name)
+                except (Failed, OSError) as exc:
+                    refused.append(f"{name} ({exc})")
         expect(not refused, f"ID {servo}: could not put back " + ", ".join(refused))
     return figures
 
@@ -1422,34 +1523,34 @@ def check_time_profile(ctx: Context2) -> str:
 
 
 CHECKS2: tuple[Check, ...] = (
-    Check("ping", check_ping),
-    Check("absent ID is silent", check_absent_id),
-    Check("defaults", check_defaults),
-    Check("packet split into bytes", check_split_packet),
-    Check("resync after garbage", check_resync),
+    Check("ping", check_ping, reads_only=True),
+    Check("absent ID is silent", check_absent_id, reads_only=True),
+    Check("defaults", check_defaults, reads_only=True),
+    Check("packet split into bytes", check_split_packet, reads_only=True),
+    Check("resync after garbage", check_resync, reads_only=True),
     Check("byte stuffing", check_byte_stuffing),
     Check("bad CRC not executed", check_crc),
-    Check("read 1, 2 and 4 bytes", check_read_sizes),
+    Check("read 1, 2 and 4 bytes", check_read_sizes, reads_only=True),
     Check("write 1, 2 and 4 bytes", check_write_sizes),
     Check("data length error", check_data_length),
     Check("data range error", check_data_range),
     Check("access error", check_access),
-    Check("read of an undefined address", check_read_undefined),
+    Check("read of an undefined address", check_read_undefined, reads_only=True),
     Check("EEPROM locked by torque", check_eeprom_locked),
     Check("data limit error", check_data_limit),
     Check("result fail", check_result_fail),
     Check("instruction error", check_instruction_error),
     Check("REG_WRITE + ACTION", check_reg_write_action),
-    Check("SYNC_READ", check_sync_read),
+    Check("SYNC_READ", check_sync_read, reads_only=True),
     Check("SYNC_WRITE", check_sync_write),
-    Check("BULK_READ", check_bulk_read),
+    Check("BULK_READ", check_bulk_read, reads_only=True),
     Check("BULK_WRITE", check_bulk_write),
-    Check("broadcast PING", check_broadcast_ping),
-    Check("broadcast PING timing", check_broadcast_ping_timing),
+    Check("broadcast PING", check_broadcast_ping, reads_only=True),
+    Check("broadcast PING timing", check_broadcast_ping_timing, reads_only=True),
     Check("broadcast READ/WRITE", check_broadcast_read_write),
     Check("status return levels", check_status_return_level),
     Check("return delay", check_return_delay),
-    Check("alert bit", check_alert),
+    Check("alert bit", check_alert, reads_only=True),
     Check("velocity mode", check_velocity_mode, motion=True),
     Check("current mode", check_current_mode, motion=True),
     Check("velocity-based profile", check_velocity_profile, motion=True),

@@ -220,3 +220,96 @@ def test_sync_instructions_leave_out_servos_of_another_table():
     assert "2 servo(s) written" in figures["SYNC_WRITE"] and "IDs 3 left out" in figures["SYNC_WRITE"]
     assert "IDs 3: another table, unchanged" in figures["broadcast READ/WRITE"]
     assert "3: led" in figures["BULK_WRITE"]
+
+
+# -- the bus beyond the IDs under test: a servo at the free ID, Secondary IDs, duplicates; Status Return Level 1 ----------
+
+def _run2(bus, ids, **kwargs):
+    return conformance.run(bus.port, ids, protocol="2.0", baud=57_600, timeout_s=SERVED_TIMEOUT_S,
+                           silence_s=EMULATOR_SILENCE_S, **kwargs)
+
+
+def _ids_answering_a_broadcast_ping(bus) -> list[int]:
+    return bus.call(lambda b: sorted(s.id for s in b.servos))
+
+
+@pytest.mark.wallclock
+def test_id_change_never_moves_a_servo_onto_one_already_there(monkeypatch):
+    """A servo not under test at ID 252, the free ID the check took: both ended at the tested ID. The free ID is now
+    one nobody on the bus answers to; and were it taken (forced here), the check fails before writing anything."""
+    from ax12emu import VirtualBus
+    from ax12emu.conformance.checks2 import Context2
+
+    with VirtualBus([1, 252], servo="xl430-w250", transport="inprocess") as bus:
+        report = _run2(bus, [1], destructive=True, only=["ID change", "absent ID is silent"])
+        assert report.passed and "1->251->1" in report.table(), report.table()
+        assert _ids_answering_a_broadcast_ping(bus) == [1, 252]
+        monkeypatch.setattr(Context2, "free_id", lambda self: 252)
+        forced = _run2(bus, [1], destructive=True, only=["ID change"])
+        assert forced.outcome("ID change") == conformance.FAIL, forced.table()
+        assert "ID 252, the free ID this check moves to, answers" in forced.table()
+        assert _ids_answering_a_broadcast_ping(bus) == [1, 252]
+
+
+@pytest.mark.wallclock
+def test_a_target_another_servo_shadows_by_its_secondary_id_is_not_written():
+    """The e-manual's own Secondary ID example: servo 1's Secondary ID(12) is 5, the ID under test. The EEPROM-lock
+    check's torque-on and Goal Position writes to ID 5 reached servo 1 too, silently: it turned its torque on and
+    took servo 5's goal. Checks that write skip, saying why; those that only read run; the free ID avoids 5."""
+    from ax12emu import VirtualBus
+
+    with VirtualBus([1, 5], servo="xl430-w250", transport="inprocess") as bus:
+        bus.write(1, "secondary_id", 5)
+        goal = bus.read(1, "goal_position")
+        report = _run2(bus, [5], only=["EEPROM locked by torque", "write 1, 2 and 4 bytes", "ping", "SYNC_READ"])
+        figures = {r.name: (r.outcome, r.figure) for r in report.results}
+        for name in ("EEPROM locked by torque", "write 1, 2 and 4 bytes"):
+            assert figures[name][0] == conformance.SKIP and "ID 5 is the Secondary ID(12) of servo 1" in figures[name][1], report.table()
+        assert figures["ping"][0] == figures["SYNC_READ"][0] == conformance.PASS, report.table()
+        assert (bus.read(1, "torque_enable"), bus.read(1, "goal_position"), bus.read(1, "led")) == (0, goal, 0)
+        bus.write(1, "secondary_id", 252)  # the free ID the suite took: a packet to it reaches servo 1
+        report = _run2(bus, [5], only=["absent ID is silent"])
+        assert "ID 251 silent" in report.table(), report.table()
+
+
+@pytest.mark.wallclock
+def test_broadcast_ping_fails_naming_an_id_two_servos_share():
+    """Two servos at ID 1 (one renumbered): broadcast Ping passed with answers [1, 1], and its timing check died
+    in statistics ("x is constant")."""
+    from ax12emu import VirtualBus
+    from ax12emu.faults.config import FaultConfig
+
+    with VirtualBus([1, 2], servo="xl430-w250", transport="inprocess", faults=FaultConfig(duplicate=((2, 1),))) as bus:
+        report = _run2(bus, [1], only=["broadcast PING", "broadcast PING timing"])
+    for name in ("broadcast PING", "broadcast PING timing"):
+        result = next(r for r in report.results if r.name == name)
+        assert result.outcome == conformance.FAIL and result.figure.startswith("ID 1 answered more than once"), report.table()
+
+
+@pytest.mark.wallclock
+def test_a_servo_at_status_return_level_1_is_raised_for_the_run_and_put_back():
+    """Level 1 answers Ping and Read only: 16 checks failed with "no reply to WRITE", and the restores stopped at
+    the first unanswered write (another servo's LED and Indirect Address left changed). Raised to 2 for the run,
+    the suite passes and puts it back; the last row says so."""
+    from ax12emu import VirtualBus
+
+    with VirtualBus([1, 2], servo="xl430-w250", transport="inprocess") as bus:
+        bus.write(1, "status_return_level", 1)
+        before = {i: bus.table(i) for i in (1, 2)}
+        report = _run2(bus, [1, 2])
+        assert report.passed, report.table()
+        assert report.results[-1].name == "Status Return Level put back" and report.results[-1].outcome == conformance.NOTE
+        assert "ID 1: 1 -> 2 for the run" in report.results[-1].figure
+        after = {i: bus.table(i) for i in (1, 2)}
+        changed = {i: {k: (v, after[i][k]) for k, v in before[i].items() if after[i][k] != v and not k.startswith(("present_", "realtime"))}
+                   for i in (1, 2)}
+        assert bus.read(1, "status_return_level") == 1 and changed == {1: {}, 2: {}}, changed
+
+
+def test_bulk_read_on_a_mixed_bus_reads_a_register_each_table_has():
+    """An XL-320 (no Max Position Limit) in the turn of that register skipped Bulk Read, the one instruction made for
+    different tables; it is read in the next register its table has."""
+    report = conformance.run("ax12emu://?servo=1:xl-320,2:xl430-w250,3:xc330-m288&baud=1000000", [1, 2, 3], protocol="2.0",
+                             baud=1_000_000, timeout_s=SERVED_TIMEOUT_S, silence_s=EMULATOR_SILENCE_S, only=["BULK_READ"])
+    assert report.outcome("BULK_READ") == conformance.PASS, report.table()
+    assert "3: id, 2: model_number, 1: id" in report.table()

@@ -288,3 +288,76 @@ def test_the_protocol_may_be_given_as_a_number_as_virtualbus_takes_it():
     report = conformance.run("ax12emu://?servo=xl430-w250", [1], baud=57_600, protocol=2.0, only=["ping"],
                              timeout_s=CONFORMANCE_TIMEOUT_S, silence_s=EMULATOR_SILENCE_S)
     assert report.outcome("ping") == PASS
+
+
+def test_a_servo_at_status_return_level_1_is_raised_for_the_run_and_put_back():
+    """Level 1 answers PING and READ only (a legitimate setting): 9 checks failed with "no reply to WRITE", and the run
+    left a REG_WRITE registered. Raised to 2 for the run, the suite passes, every table ends as it began, and the
+    last row says the level was put back."""
+    with VirtualBus(IDS, transport="inprocess", model="kinematic") as bus:
+        bus.write(1, "status_return_level", 1)
+        before = {i: bus.table(i) for i in IDS}
+        report = conformance.run(bus.port, IDS, timeout_s=CONFORMANCE_TIMEOUT_S, silence_s=EMULATOR_SILENCE_S)
+        after = {i: bus.table(i) for i in IDS}
+    assert report.passed, report.table()
+    assert report.results[-1].name == "Status Return Level put back" and report.results[-1].outcome == "note"
+    assert "ID 1: 1 -> 2 for the run" in report.results[-1].figure
+    sensed = {"present_position", "present_speed", "present_load", "present_voltage", "present_temperature", "moving"}
+    assert {i: {k for k in before[i] if before[i][k] != after[i][k]} - sensed for i in IDS} == {1: set(), 2: set()}
+    assert after[1]["status_return_level"] == 1 and after[1]["registered"] == 0
+
+
+def test_a_restore_tries_every_servo_though_one_put_fails():
+    """The restores in ``finally`` stopped at the first unanswered put, leaving the servos after it changed."""
+    from ax12emu.conformance.checks import Failed, put_all
+
+    tried = []
+
+    class _Ctx:
+        def put(self, servo, name, value):
+            tried.append(servo)
+            if servo == 1:
+                raise Failed("no reply to WRITE id=1")
+            return 0
+
+    with pytest.raises(Failed, match="could not put back: no reply to WRITE id=1"):
+        put_all(_Ctx(), [(1, "led", 0), (2, "led", 0), (3, "led", 0)])
+    assert tried == [1, 2, 3]
+
+
+def test_reset_write_back_leaves_the_torque_off_and_the_shaft_where_it_is(monkeypatch):
+    """The RESET write-back wrote Goal Position and Moving Speed before Torque Enable: on an AX either turns the torque
+    on, and a shaft turned by hand with the torque off was driven back to its stale goal. With the saved torque off
+    they are not written (nor compared after, the figure saying why): the torque stays off throughout."""
+    from ax12emu.conformance import checks
+
+    with VirtualBus([1], transport="inprocess", model="kinematic") as bus:
+        bus.set_angle_deg(1, 60.0)  # turned by hand, torque off: Present Position far from Goal Position
+        torque_seen = []
+        put = checks.Context.put
+
+        def watching(self, *args, **kwargs):
+            error = put(self, *args, **kwargs)
+            torque_seen.append(bus.read(1, "torque_enable") if 1 in bus.bus.ids else 0)
+            return error
+
+        monkeypatch.setattr(checks.Context, "put", watching)
+        position = bus.read(1, "present_position")
+        report = conformance.run(bus.port, [1], destructive=True, only=["RESET"], timeout_s=CONFORMANCE_TIMEOUT_S,
+                                 silence_s=EMULATOR_SILENCE_S)
+        assert report.passed, report.table()
+        assert torque_seen and not any(torque_seen), torque_seen
+        assert abs(bus.read(1, "present_position") - position) <= 1 and bus.read(1, "torque_enable") == 0
+    assert "goal_position, moving_speed (not written back after RESET with the torque off" in report.table()
+
+
+def test_two_packets_in_one_write_is_a_note_where_the_line_cannot_carry_both_replies(emulator):
+    """At 57,600 bps the second packet's 8 bytes take 1.39 ms, longer than the first reply's Return Delay Time (0.5 ms):
+    on a half-duplex line the reply overlaps the host's bytes (serve --pace keeps that wire time), so a real bus
+    cannot pass; it failed. A note saying why."""
+    served = emulator("--ids", "1", "--servo", "mx-28", "--pace", "--tcp", "127.0.0.1:0")
+    report = conformance.run(served.port, [1], baud=57_600, only=["two packets in one write"],
+                             timeout_s=CONFORMANCE_TIMEOUT_S, silence_s=EMULATOR_SILENCE_S)
+    result = report.results[0]
+    assert result.outcome == "note", report.table()
+    assert "take 1.39 ms at 57600 bps, longer than ID 1's Return Delay Time (500 us)" in result.figure
