@@ -306,7 +306,7 @@ class SoakResult:
             return
         if error or bad:
             self.wrong += 1
-            self.alarmed += bool(error)
+            self.alarmed += bool(error) and previous != "starved"  # of the wrong ones that count, as the verdict says
             self.wrong_after_lost += previous is not None
             self.wrong_after_starved += previous == "starved"
             line = f"wrong at {at_s:.1f} s{', after a starved loss' if previous == 'starved' else ''}: {what} (error {error:#x})"

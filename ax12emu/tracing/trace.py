@@ -74,19 +74,24 @@ class TraceWriter:
         }
         if servos is not None:  # Protocol 2.0 servos as --servo writes them: the decoder names their registers
             self._header["servos"] = servos
-        self._file.write(json.dumps(self._header) + "\n")
+        #: Whether the header line is out. It goes at the first :meth:`note`, chunk, flush or close, not at once: a
+        #: recorder notes the wire first, and a trace may go to a pipe or FIFO, where nothing written can be redone.
+        self._header_out = False
+
+    def _write_header(self) -> None:
+        if not self._header_out and self._file is not None:
+            self._header_out = True
+            self._write(json.dumps(self._header) + "\n")
 
     def note(self, *, echo: bool) -> None:
-        """Add what the recorder knows of the wire to the header: ``echo``, whether the adapter echoes the host's
-        bytes (``serve --echo``; without it no ``out`` bytes are an echo).  Only before the first chunk."""
+        """Add what the recorder knows of the wire to the header and write it: ``echo``, whether the adapter echoes
+        the host's bytes (``serve --echo``; without it no ``out`` bytes are an echo).  Only before anything else."""
         if self._file is None:
             return
-        if self._last_t != float("-inf"):
+        if self._header_out:
             raise ValueError("a trace's header is noted before its first chunk")
         self._header["echo"] = bool(echo)
-        self._file.seek(0)
-        self._file.truncate()
-        self._file.write(json.dumps(self._header) + "\n")
+        self._write_header()
 
     def on_wire(self, end: float, byte_s: float) -> None:
         """The next ``"in"`` chunk recorded is on a paced wire until monotonic time ``end``, ``byte_s`` a byte: its
@@ -108,8 +113,14 @@ class TraceWriter:
             paced = f', "end": {max(t, wire[0] - self._start):.6f}, "byte_s": {wire[1]:.9f}'
         else:
             paced = ""
+        self._write_header()
+        self._write(f'{{"t": {t:.6f}, "dir": "{direction}", "data": "{bytes(data).hex(" ")}"{paced}}}\n')
+
+    def _write(self, line: str) -> None:
+        if self._file is None:
+            return
         try:
-            self._file.write(f'{{"t": {t:.6f}, "dir": "{direction}", "data": "{bytes(data).hex(" ")}"{paced}}}\n')
+            self._file.write(line)
         except OSError as exc:
             self._give_up(exc)
 
@@ -123,6 +134,7 @@ class TraceWriter:
 
     def flush(self) -> None:
         """Push buffered lines to the file."""
+        self._write_header()
         if self._file is not None:
             try:
                 self._file.flush()
@@ -131,6 +143,7 @@ class TraceWriter:
 
     def close(self) -> None:
         """Flush and close; safe to call more than once."""
+        self._write_header()
         if self._file is not None:
             try:
                 self._file.close()

@@ -204,3 +204,11 @@ def test_a_failed_run_names_why_and_an_alarm_the_servo_raised_apart():
     assert not result.ok
     last = soak.report(result, 1).splitlines()[-1]
     assert last.startswith("FAIL: 2 replies wrong, 1 carrying the servo's alarm") and "every 0.2 s" in last, last
+
+
+def test_the_alarm_count_counts_the_wrong_replies_the_verdict_counts():
+    """Late answers after a starved loss do not count as wrong; those carrying an alarm bit do not count as alarmed."""
+    result = soak.SoakResult(seconds=10.0, goal_period_s=0.5)
+    result._previous = "starved"
+    result.count("READ Present Position of ID 1", 1.0, soak.COMM_SUCCESS, 0x80, False)
+    assert (result.wrong, result.wrong_by_emulator, result.alarmed) == (1, 0, 0)

@@ -95,7 +95,9 @@ def _trace_writer(path: str | None, **header: str) -> TraceWriter | None:
     if not path:
         return None
     try:
-        return TraceWriter(path, **header)
+        writer = TraceWriter(path, **header)
+        writer.note(echo=False)  # the in-process link echoes nothing: the decoder never takes a reply for an echo
+        return writer
     except OSError as exc:
         raise UrlError(f"{EXPECTED}: trace={path}: {exc.strerror or exc}") from None
 

@@ -35,12 +35,16 @@ log = logging.getLogger(__name__)
 #: pulled cable) sends no FIN; without probes the server never learns and refuses every later client for good.
 #: A live client's idle connection answers the probes in its kernel and stays.
 KEEPALIVE_IDLE_S, KEEPALIVE_INTERVAL_S, KEEPALIVE_PROBES = 5, 1, 3
+#: How long a reply may stay unacknowledged before the connection is given up (ms): as long as the probes take.
+UNACKNOWLEDGED_LIMIT_MS = 1000 * (KEEPALIVE_IDLE_S + KEEPALIVE_INTERVAL_S * KEEPALIVE_PROBES)
 
 
 def _keep_alive(conn: socket.socket) -> None:
     conn.setsockopt(socket.SOL_SOCKET, socket.SO_KEEPALIVE, 1)
+    # Keepalive probes only an idle connection: with a reply unacknowledged, retransmission rules instead, for up
+    # to 15 minutes (Linux's tcp_retries2). TCP_USER_TIMEOUT (RFC 5482) bounds that wait the same way.
     for option, value in (("TCP_KEEPIDLE", KEEPALIVE_IDLE_S), ("TCP_KEEPINTVL", KEEPALIVE_INTERVAL_S),
-                          ("TCP_KEEPCNT", KEEPALIVE_PROBES)):
+                          ("TCP_KEEPCNT", KEEPALIVE_PROBES), ("TCP_USER_TIMEOUT", UNACKNOWLEDGED_LIMIT_MS)):
         if hasattr(socket, option):  # Linux; other systems keep their defaults (hours) and SO_KEEPALIVE alone
             conn.setsockopt(socket.IPPROTO_TCP, getattr(socket, option), value)
 

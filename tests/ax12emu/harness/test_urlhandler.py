@@ -207,3 +207,24 @@ def test_an_ax_servo_on_a_servo_url_in_virtual_time_answers_after_an_eeprom_writ
         assert link.read(6) == encode_status(2, 0)
         link.write(encode_instruction(2, 0x01))
         assert link.read(6) == encode_status(2, 0)
+
+
+def test_a_url_trace_says_the_link_has_no_echo(tmp_path):
+    """A PING answered with the Input Voltage alarm is byte for byte the PING: in a trace whose header does not say
+    the wire has no echo, ``ax12emu decode`` took the answer for the adapter's echo."""
+    import serial
+
+    from ax12emu.tracing.decoder import ECHO, STATUS, decode
+    from ax12emu.tracing.trace import read_capture, trace_header
+
+    path = tmp_path / "bus.jsonl"
+    port = serial.serial_for_url(f"ax12emu://?ids=1&alarm=1:input_voltage&trace={path}", baudrate=1_000_000, timeout=0.5)
+    try:
+        port.write(bytes.fromhex("ffff010201fb"))
+        assert port.read(6) == bytes.fromhex("ffff010201fb")
+    finally:
+        port.close()
+    header = trace_header(path)
+    assert header["echo"] is False
+    kinds = [item.kind for item in decode(read_capture(path), echo=header["echo"])]
+    assert STATUS in kinds and ECHO not in kinds

@@ -82,6 +82,8 @@ def test_the_connected_client_is_probed_so_a_vanished_host_lets_go_of_the_bus():
                 interval = conn.getsockopt(socket.IPPROTO_TCP, socket.TCP_KEEPINTVL)
                 probes = conn.getsockopt(socket.IPPROTO_TCP, socket.TCP_KEEPCNT)
                 assert idle + interval * probes <= 10
+            if hasattr(socket, "TCP_USER_TIMEOUT"):  # and with a reply unacknowledged, where probes are not sent
+                assert 0 < conn.getsockopt(socket.IPPROTO_TCP, socket.TCP_USER_TIMEOUT) <= 10_000
         finally:
             client.close()
     finally:

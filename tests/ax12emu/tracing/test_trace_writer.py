@@ -130,3 +130,22 @@ def test_a_trace_that_cannot_be_written_stops_and_says_so_once(tmp_path, caplog)
     assert len(said) == 1 and str(path) in said[0] and "No space left on device" in said[0] and "tracing stopped" in said[0]
     assert full.writes == 1
     assert [chunk.data for chunk in read_trace(path)] == [b"\xff\xff\x01\x02\x01\xfb"]
+
+
+def test_a_trace_goes_to_a_fifo_as_to_a_file(tmp_path):
+    """``serve --trace FIFO`` (or ``>(gzip > t.gz)``): the header noted with the wire's echo setting was written
+    by rewinding the file, which a pipe cannot do ("underlying stream is not seekable"): the server did not start."""
+    import threading
+
+    fifo = tmp_path / "trace.fifo"
+    os.mkfifo(fifo)
+    got: list[str] = []
+    reader = threading.Thread(target=lambda: got.append(fifo.read_text()))
+    reader.start()
+    writer = TraceWriter(fifo)  # opening a FIFO for writing waits for its reader
+    writer.note(echo=False)
+    writer.record(IN, PING, 1.0)
+    writer.close()
+    reader.join(timeout=10)
+    lines = [json.loads(line) for line in got[0].splitlines()]
+    assert lines[0]["echo"] is False and lines[1]["data"] == PING.hex(" ")
