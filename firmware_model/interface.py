@@ -35,7 +35,13 @@ __all__ = [
     "SteppableTo",
     "Blockable",
     "AngleSettable",
+    "STEP_SLACK",
 ]
+
+#: Fraction of a control step within which a model takes a step as due (a millionth: 1 ns at 1 kHz). A bus's clock
+#: sums its own floats; a bus that finds a step due by this slack must get it from ``step_to``, or a client's write
+#: is marked shown with no step run.
+STEP_SLACK = 1e-6
 
 #: Status-byte bits a model may raise (e-manual Protocol 1.0, error field).
 ALARM_INPUT_VOLTAGE = 0x01

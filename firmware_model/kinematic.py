@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .interface import Commands, Sensed
+from .interface import STEP_SLACK, Commands, Sensed
 from .units import (
     DIRECTION_BIT,
     RAD_PER_POSITION_UNIT,
@@ -90,7 +90,7 @@ class KinematicModel:
 
     def step_to(self, to_time_s: float, commands: Commands) -> None:
         """:meth:`advance` without reading the sensors."""
-        target_steps = int(np.floor(to_time_s / self.step_s + 1e-9))
+        target_steps = int(np.floor(to_time_s / self.step_s + STEP_SLACK))  # as PhysicalModel.step_to
         count = target_steps - self._steps
         if count <= 0:
             self._take_commands(commands)

@@ -64,7 +64,7 @@ import numpy as np
 
 from .backend import NUMPY, SCALAR
 from .controller import PidGains, compliance_plan
-from .interface import ALARM_INPUT_VOLTAGE, ALARM_OVERHEATING, ALARM_OVERLOAD, Commands, Sensed
+from .interface import ALARM_INPUT_VOLTAGE, ALARM_OVERHEATING, ALARM_OVERLOAD, STEP_SLACK, Commands, Sensed
 from .motor import GRAVITY_M_S2
 from .params import ServoParams
 from .protection import alarm_bits, overload_timer_step, thermal_step
@@ -349,7 +349,9 @@ class PhysicalModel:
 
     def step_to(self, to_time_s: float, commands: Commands) -> None:
         """:meth:`advance` without reading the sensors."""
-        target = int(math.floor(to_time_s / self.step_s + 1e-9))
+        # A step due within a millionth of a step (1 ns at 1 kHz) is taken: a caller's clock sums its own floats, and
+        # one that finds a step due by that slack (the bus's grid) must get it, or a write's earned step is lost.
+        target = int(math.floor(to_time_s / self.step_s + STEP_SLACK))
         if self._command_delay_steps:
             self._step_delayed(target, commands)
             return

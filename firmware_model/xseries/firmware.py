@@ -68,6 +68,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from ..interface import STEP_SLACK
 from .interface import (
     HW_ERROR_INPUT_VOLTAGE,
     HW_ERROR_OVERHEATING,
@@ -103,8 +104,6 @@ PWM_FULL_SCALE = 885
 #: Encoder pulses per output turn (e-manual: 0.088 deg per unit, 0..4095 per turn).
 PULSES_PER_REV = 4096
 PULSE_RAD = 2.0 * math.pi / PULSES_PER_REV
-#: Fraction of a control step within which a step counts as due (a millionth: 1 ns at 1 kHz; see ``XFirmware.step_to``).
-STEP_SLACK = 1e-6
 #: Moving Status reports In-Position once the profile ended and Present Position is less than this from the goal
 #: (ours: the e-manual's "predefined value" is not given).  Why 20 (1.8 deg): a factory-default servo on a free
 #: shaft must get it, as a real one does, and a proportional-only loop (every X model's factory Position I Gain but
