@@ -74,7 +74,7 @@ class Plant1X(SteppedPlant):
         self._values = values
         self._commands = self.classic.commands(values)
         self.firmware.command(self._commands, goal_written=goal_written)
-        self._write_unseen = True
+        self._wrote()
 
     # -- time: due, catch_up, tick (SteppedPlant); firmware -> table ------------------------
     def write_back(self) -> None:

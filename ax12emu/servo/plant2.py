@@ -120,12 +120,19 @@ class SteppedPlant:
 
     firmware: XServoModel
     _write_unseen: bool
+    #: Writes handed to the model so far (see :meth:`tick`: one between its pieces stays unseen).
+    _writes: int = 0
     #: A client's write came while the model was ahead of the clock: its commands were read back at once and
     #: the step it earns is taken as soon as the clock reaches the model's time (see :meth:`catch_up`).
     _step_owed: bool = False
     #: The (sim_time_s, clock_s) of a catch-up left for after a reply it could not change (see
     #: :meth:`Plant2.defer_catch_up`), taken before anything else reaches the model; None: none.
     _deferred: tuple[float, float | None] | None = None
+
+    def _wrote(self) -> None:
+        """A client's write was handed to the model: the next request sees a step taken after it."""
+        self._write_unseen = True
+        self._writes += 1
 
     def due(self, sim_time_s: float, clock_s: float | None = None) -> bool:
         """Whether a whole step is due by ``sim_time_s``, a client's write is not yet shown, or the step a write
@@ -179,8 +186,14 @@ class SteppedPlant:
             model.step_to(model.time_s + model.step_s)
         else:
             return
+        writes = self._writes
         yield
-        self._write_unseen = self._step_owed = False
+        # The table shows the step from the copy on. A write handed over between the pieces came after the step:
+        # it stays unseen, and earns a step of its own before the next request is answered (marked seen here, the
+        # next read showed the old goal held). Cleared before the pause instead, a read between the pieces found
+        # nothing due and was answered from the table the copy had not reached.
+        self._step_owed = False
+        self._write_unseen = self._writes != writes
         self.write_back()
 
     @staticmethod
@@ -276,7 +289,7 @@ class Plant2(SteppedPlant):
             self._commanded_values = values if self._held is None else None
             self._commanded = self.commands()
         self.firmware.command(self._commanded, goal_written=goal_written)
-        self._write_unseen = True
+        self._wrote()
 
     def hold(self) -> None:
         """Stop where the shaft is (Bus Watchdog): goal = present position, zero velocity, and zero PWM or current in the modes that take them as goals.
@@ -456,7 +469,7 @@ class ClassicPlant2(Plant2):
             commands = dataclasses.replace(commands, **self._held)
         self._last_commands = commands
         self.firmware.command(commands, goal_written=goal_written)
-        self._write_unseen = True
+        self._wrote()
 
     def hold(self) -> None:
         """Stop where the shaft is: the firmware's own position (pulses) as the goal, and zero output in wheel mode."""

@@ -130,11 +130,6 @@ def _goal_then_read(servo: str, write_between_pieces: bool) -> tuple[int, int]:
     return params[49 - 37], int.from_bytes(params[41 - 37:43 - 37], "little")  # Moving(49), Present Load(41)
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "a write taken between a served tick's pieces is marked seen by the copy that follows, so the next read shows "
-    "the old goal held; leaving it unseen (the flag cleared before the pause) made a served XL330-M288's "
-    "velocity-based profile read Profile Ongoing past its end in about half the conformance motion runs "
-    "(tests/ax12emu/conformance/test_checks2.py), cause not found"))
 @pytest.mark.parametrize("servo", ["xm430-w350", "xl-320"])
 def test_a_write_between_a_ticks_pieces_still_earns_its_step(servo):
     """A serving loop steps the physics in two pieces, answering packets between them. A goal written there was
