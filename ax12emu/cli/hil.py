@@ -136,8 +136,12 @@ def _decode(args: argparse.Namespace) -> int:
         raise ValueError(f"--servo {args.servo}: decode needs IDS:MODEL[,IDS:MODEL...] (e.g. 1-5:xm430-w350)")
     protocol = None if args.protocol == "auto" else args.protocol
     echo = header.get("echo")  # serve records whether the adapter echoed: without, no servo bytes are an echo
+    shown = 0
     for item in decode(chunks, profile=profile, protocol=protocol, servos=servos, echo=echo if isinstance(echo, bool) else None):
         print(format_decoded(item))
+        shown += 1
+    if not shown:  # a server stopped before any packet, or an empty capture: say so rather than print nothing
+        print(f"{args.file}: no bytes to decode (a trace of a session with no packets, or an empty capture)", file=sys.stderr)
     return 0
 
 

@@ -257,8 +257,6 @@ class Context(Transactions):
     before: dict[int, bytes] = field(default_factory=dict)
     #: Status Return Level of each ID that had it below 2, raised to 2 for the run (:meth:`raise_levels`).
     raised: dict[int, int] = field(default_factory=dict)
-    #: Registers of each ID a check knowingly left as they were not (:func:`_write_back`), with why; not compared.
-    left: dict[int, tuple[frozenset[str], str]] = field(default_factory=dict)
 
     @property
     def target(self) -> int:
@@ -875,29 +873,29 @@ def _write_back(ctx: Context, image: bytes, lay: Layout) -> None:
     """Write a saved table (of layout ``lay``) back to the reset servo (now ID 1 at its factory rate): ID and baud last.
 
     Registers the firmware sets (:data:`DYNAMIC`; the MX's Current(68) is writable) are left to it.  Where the saved
-    Torque Enable is 0, Goal Position and Moving Speed are not written: on an AX (Goal Position on an MX too) such a
-    write turns the torque on, and the shaft, turned by hand since the goal was set, was driven back to the stale goal
-    until Torque Enable 0 came (45 degrees behind a 16 ms adapter latency); they are left out of "table unchanged"
-    (``ctx.left``), the figure saying why.  Every write is tried though one fails, so ID and baud are put back."""
+    Torque Enable is 0, Goal Position and Moving Speed are written with Torque Limit at 0, then Torque Enable 0, then
+    Torque Limit: on an AX (Goal Position on an MX too) such a write turns the torque on, and the shaft, turned by
+    hand since the goal was set, was driven back to the stale goal until Torque Enable 0 came (45 degrees behind a
+    16 ms adapter latency); with no torque to give it stays where it is.  Every write is tried though one fails, so
+    ID and baud are put back."""
     last = ("id", "baud_rate")
     by_name = lay.by_name
     torque = by_name["torque_enable"].value_in(image)
-    skipped = frozenset() if torque else TORQUE_ON_WRITES & set(by_name)
-    puts: list[tuple[Any, ...]] = []
+    limp = not torque and "torque_limit" in by_name and TORQUE_ON_WRITES & set(by_name)
+    puts: list[tuple[Any, ...]] = [(1, "torque_limit", 0, lay)] if limp else []
     for entry in lay.entries:
         if entry.access is not Access.RW or entry.name in last or entry.name == "lock" or entry.name in DYNAMIC:
             continue
-        if entry.name == "torque_enable" or entry.name in skipped:
+        if entry.name == "torque_enable" or (limp and entry.name == "torque_limit"):
             continue
         puts.append((1, entry.name, int.from_bytes(image[entry.address : entry.end], "little"), lay))
     puts.append((1, "torque_enable", torque, lay))
+    if limp:
+        puts.append((1, "torque_limit", by_name["torque_limit"].value_in(image), lay))
     servo_id = by_name["id"].value_in(image)
     try:
         put_all(ctx, puts)
     finally:
-        if skipped:
-            ctx.left[servo_id] = (skipped, "not written back after RESET with the torque off: on AX/MX servos such a "
-                                           "write turns the torque on")
         put_all(ctx, [(1, "id", servo_id, lay), (servo_id, "baud_rate", by_name["baud_rate"].value_in(image), lay)])
 
 

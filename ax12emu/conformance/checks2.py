@@ -185,7 +185,10 @@ class Context2(Transactions):
         """An ID nobody answers to (counting down from 252): no servo under test or found on the bus has it as its ID or
         as its Secondary ID (a packet to that ID would reach the servo, silently)."""
         taken = {*self.ids, *self.bus_ids, *self.secondary.values()}
-        return next(i for i in range(MAX_ID2, -1, -1) if i not in taken)
+        free = next((i for i in range(MAX_ID2, -1, -1) if i not in taken), None)
+        if free is None:
+            raise Skipped(f"no free ID: every ID 0..{MAX_ID2} answers (as its ID or a Secondary ID)")
+        return free
 
     def shadowed_ids(self) -> dict[int, list[int]]:
         """Each ID under test that other servos on the bus have as their Secondary ID: those servos."""

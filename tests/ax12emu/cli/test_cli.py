@@ -237,3 +237,11 @@ def test_decode_into_a_reader_that_goes_away_stops_quietly(tmp_path):
         reader.wait()
     assert "PING id=1" in first
     assert result.stderr == "" and result.returncode == 1, result.stderr
+
+
+def test_decoding_a_trace_with_no_packets_says_so(tmp_path):
+    """A server stopped before any packet leaves the header alone: decode printed nothing at all."""
+    trace = tmp_path / "t.jsonl"
+    trace.write_text('{"format": "ax12emu-trace/1", "profile": "ax12a", "echo": false}\n')
+    result = run("decode", str(trace))
+    assert result.returncode == 0 and result.stdout == "" and "no bytes to decode" in result.stderr

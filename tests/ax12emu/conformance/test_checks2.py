@@ -313,3 +313,16 @@ def test_bulk_read_on_a_mixed_bus_reads_a_register_each_table_has():
                              baud=1_000_000, timeout_s=SERVED_TIMEOUT_S, silence_s=EMULATOR_SILENCE_S, only=["BULK_READ"])
     assert report.outcome("BULK_READ") == conformance.PASS, report.table()
     assert "3: id, 2: model_number, 1: id" in report.table()
+
+
+def test_a_bus_with_no_free_id_skips_the_checks_that_need_one():
+    """Every ID 0..252 answers: the checks that move a servo to a free ID, or ask one to stay silent, skip saying
+    so; a bare StopIteration took the whole report with it."""
+    from ax12emu import VirtualBus
+
+    with VirtualBus(range(0, 253), servo="xl430-w250", transport="inprocess") as bus:
+        report = conformance.run(bus.port, [1], protocol="2.0", baud=57_600, timeout_s=0.05, silence_s=0.02,
+                                 only=["ping", "absent ID is silent"])
+    outcomes = {r.name: (r.outcome, r.figure) for r in report.results}
+    assert outcomes["ping"][0] == conformance.PASS
+    assert outcomes["absent ID is silent"][0] == conformance.SKIP and "no free ID" in outcomes["absent ID is silent"][1]
