@@ -252,6 +252,18 @@ class BusServer:
                 self.packets_in += 1
                 self._answer(cached, now, end)
                 return
+        if self.pace and data.count(b"\xff\xff") > 1:
+            # Several packets in one host write: on the wire each ends at its own last byte, and each servo answers
+            # its Return Delay Time after that (two packets to two servos at 1 Mbps: replies some 80 us apart, not
+            # merged). Fed a byte at a time, each packet completes at its end.
+            scheduled = self._seq
+            for i in range(len(data)):
+                for replies in self.bus.answer(data[i : i + 1], now, line_bps=line_bps, cache=False, looked_up=False):
+                    self.packets_in += 1
+                    self._answer(replies, now, begin + (i + 1) * byte_s)
+                    self._unsettled = self._settle is not None
+            self._collide_with_own_write(data, scheduled, begin, end, byte_s)
+            return
         for replies in self.bus.answer(data, now, line_bps=line_bps, cache=not self.pace, looked_up=not self.pace):
             self.packets_in += 1
             self._answer(replies, now, end)
@@ -278,6 +290,22 @@ class BusServer:
         self._schedule(chunks)
         if not self.pace and replies[0].delay_s == 0.0:
             self._flush(now)
+
+    def _collide_with_own_write(self, data: bytes, scheduled: int, begin: float, end: float, byte_s: float) -> None:
+        """Reply bytes put on the wire while the host is still sending the rest of its write (a reply's Return Delay
+        Time shorter than the packets after the one it answers: 8 bytes at 57,600 bps take 1.39 ms): the host's byte
+        on the wire then and the reply's become their AND, as :meth:`_collide` does for a write into a reply."""
+        collided = False
+        for release_s, seq, byte, is_reply in self._queue:
+            start = release_s - byte_s
+            if seq > scheduled and is_reply and start < end:
+                k = int((start - begin) / byte_s)
+                if 0 <= k < len(data):
+                    byte[0] &= data[k]
+                    collided = True
+        if collided:
+            self.collisions += 1
+            log.debug("collision: a reply began while the host was still sending its write")
 
     def _collide(self, data: bytes, begin: float, byte_s: float) -> bytes:
         """Host bytes overlapping reply bytes still on the wire: both become their AND."""

@@ -73,6 +73,20 @@ def test_pace_takes_wire_time(emulator):
     assert elapsed >= 12 * 10 / 57142 + 0.0005 - 1e-4, elapsed
 
 
+def test_pace_times_each_packet_of_one_write_from_its_own_last_byte(emulator):
+    """--pace at 1 Mbps: a PING to ID 1 and a READ to ID 2 in one host write end 60 and 140 us into it, and each
+    servo answers its Return Delay Time after its own packet: replies some 80 us apart, both whole. Timed from the
+    write's end, both went out at once and collided."""
+    served = emulator("--pace", "--ids", "1,2")
+    read2 = encode_instruction(2, 0x02, bytes([0, 2]))
+    with _open(served.port) as link:
+        for _ in range(3):
+            link.reset_input_buffer()
+            link.write(PING + read2)
+            assert link.read(14) == encode_status(1, 0) + encode_status(2, 0, (12).to_bytes(2, "little"))
+            time.sleep(0.05)
+
+
 def test_pace_collision_garbles_both(emulator):
     """--pace: a host packet sent while a slow reply is on the wire garbles it, as on a half-duplex bus.
     An attempt counts only if the host really sent its bytes inside the reply's time on the wire
