@@ -183,7 +183,7 @@ class Bus(ServosById[VirtualServo]):
             return None
         plant = self.plant
         model, sim_time_s = plant.model, now_s - self.request_lag_s
-        # Plant.catch_up's own tests, without the call
+        # Plant.catch_up's own tests (step_due, GRID_SLACK_S), without the calls: this is the repeated READ's short way
         if sim_time_s + GRID_SLACK_S >= model.time_s + model.step_s or plant.write_unseen:
             plant.catch_up(sim_time_s, now_s)
         return self.reply_cache.lookup(data if type(data) is bytes else bytes(data), line_bps, self._by_id)

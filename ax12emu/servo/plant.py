@@ -24,7 +24,7 @@ import numpy as np
 from ax12emu.protocol.control_table import Layout
 from firmware_model.interface import Commands, Sensed, ServoModel, SteppableTo
 
-from .plant2 import GRID_SLACK_S
+from .plant2 import GRID_SLACK_S, step_due
 from .virtual_servo import VirtualServo
 
 __all__ = ["Plant"]
@@ -136,7 +136,7 @@ class Plant:
         such as Moving) with no time passing; the physics waits for the clock.
         """
         model = self.model
-        if sim_time_s + GRID_SLACK_S >= model.time_s + model.step_s:
+        if step_due(model, sim_time_s):
             self.advance(sim_time_s)
         if self._writes != self._writes_shown:
             writes = self._writes
@@ -152,7 +152,7 @@ class Plant:
     def advance(self, sim_time_s: float) -> bool:
         """Advance the model to ``sim_time_s`` if a whole step is due; True if it moved."""
         model = self.model
-        if sim_time_s + GRID_SLACK_S < model.time_s + model.step_s:
+        if not step_due(model, sim_time_s):
             return False
         writes = self._writes
         self._write_back(model.advance(sim_time_s, self.commands()))
@@ -170,7 +170,7 @@ class Plant:
         show the previous step (see ``Bus.request_lag_s``).
         """
         model = self.model
-        if not self._steps_to or sim_time_s + GRID_SLACK_S < model.time_s + model.step_s:
+        if not self._steps_to or not step_due(model, sim_time_s):
             self.advance(sim_time_s)  # without step_to (it is optional), the whole step at once
             return
         writes = self._writes

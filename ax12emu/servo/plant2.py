@@ -27,7 +27,7 @@ from firmware_model.xseries.interface import TRAJECTORY_SENSED, OperatingMode, X
 from .classic import ClassicMap
 from .table2 import Table2
 
-__all__ = ["ClassicPlant2", "GRID_SLACK_S", "Plant2", "SENSED_REGISTERS", "SteppedPlant", "plant_for"]
+__all__ = ["ClassicPlant2", "GRID_SLACK_S", "Plant2", "SENSED_REGISTERS", "SteppedPlant", "plant_for", "step_due"]
 
 #: Where each sensed value goes: the first of these registers the table has (the XL430's
 #: register 126 is Present Load, the current-sensing models' Present Current).
@@ -109,6 +109,12 @@ def _writer(entries: list[Entry]) -> Callable[[bytearray, tuple[int, ...]], None
     return by_runs
 
 
+def step_due(model, sim_time_s: float) -> bool:
+    """Whether a whole control step of ``model`` falls due by ``sim_time_s``: within :data:`GRID_SLACK_S`, the
+    slack every model's ``step_to`` takes a step by (``firmware_model.interface.STEP_SLACK`` of a step)."""
+    return sim_time_s + GRID_SLACK_S >= model.time_s + model.step_s
+
+
 class SteppedPlant:
     """A firmware model brought to the bus's time: the steps due by then, one past a client's write, then the copy.
 
@@ -138,7 +144,7 @@ class SteppedPlant:
         """Whether a whole step is due by ``sim_time_s``, a client's write is not yet shown, or the step a write
         earned is owed and the clock (``clock_s``, else ``sim_time_s``) has reached the model's time."""
         model = self.firmware
-        if self._write_unseen or sim_time_s + GRID_SLACK_S >= model.time_s + model.step_s:
+        if self._write_unseen or step_due(model, sim_time_s):
             return True
         return self._step_owed and model.time_s <= (sim_time_s if clock_s is None else clock_s) + GRID_SLACK_S
 
@@ -162,7 +168,7 @@ class SteppedPlant:
         copy = False
         # A step judged due by the grid's slack that the model did not take (its own slack narrower) must not pass
         # for one: the write it was owed to would be marked seen with nothing run.
-        if sim_time_s + GRID_SLACK_S >= model.time_s + model.step_s and self._stepped(model, sim_time_s):
+        if step_due(model, sim_time_s) and self._stepped(model, sim_time_s):
             copy, self._step_owed = True, False
         elif self._write_unseen or self._step_owed:
             if model.time_s <= (sim_time_s if clock_s is None else clock_s) + GRID_SLACK_S:
@@ -180,12 +186,10 @@ class SteppedPlant:
         if self._deferred is not None:
             self.catch_up_deferred()
         model = self.firmware
-        if sim_time_s + GRID_SLACK_S >= model.time_s + model.step_s and self._stepped(model, sim_time_s):
-            pass
-        elif (self._write_unseen or self._step_owed) and model.time_s <= sim_time_s + GRID_SLACK_S:
+        if not (step_due(model, sim_time_s) and self._stepped(model, sim_time_s)):
+            if not ((self._write_unseen or self._step_owed) and model.time_s <= sim_time_s + GRID_SLACK_S):
+                return
             model.step_to(model.time_s + model.step_s)
-        else:
-            return
         writes = self._writes
         yield
         # The table shows the step from the copy on. A write handed over between the pieces came after the step:
@@ -373,7 +377,7 @@ class Plant2(SteppedPlant):
         """No step due by ``sim_time_s`` nor owed by ``clock_s``, and a copy of what the firmware senses now would
         leave ``spans`` as they are."""
         model = self.firmware
-        if sim_time_s + GRID_SLACK_S >= model.time_s + model.step_s or self._step_owed and model.time_s <= clock_s + GRID_SLACK_S:
+        if step_due(model, sim_time_s) or self._step_owed and model.time_s <= clock_s + GRID_SLACK_S:
             return False  # a step is due: the read must see it
         if self._written_back_epoch is None or getattr(model, "sensing_epoch", None) != self._written_back_epoch:
             return False
