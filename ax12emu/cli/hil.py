@@ -13,7 +13,7 @@ import sys
 from collections.abc import Callable
 
 from ax12emu.cli import models as cli_models
-from ax12emu.cli.arg_types import positive_float, positive_int
+from ax12emu.cli.arg_types import file_name, positive_float, positive_int
 from ax12emu.faults.config import FAULT_OPTIONS, FaultConfig
 from ax12emu.protocol.control_table import DEFAULT_PROFILE, PROFILES
 from ax12emu.protocol.ids import parse_ids
@@ -38,7 +38,8 @@ def _ids(text: str) -> list[int]:
 
 def add_serve_flags(serve: argparse.ArgumentParser) -> None:
     """``serve --trace FILE`` and the fault-injection flags (see :mod:`ax12emu.faults.injection`)."""
-    serve.add_argument("--trace", metavar="FILE", help="record every byte in and out as JSON lines (ax12emu decode FILE)")
+    # An empty FILE is refused: serve takes a false --trace as none, and would run untraced without a word.
+    serve.add_argument("--trace", metavar="FILE", type=file_name, help="record every byte in and out as JSON lines (ax12emu decode FILE)")
     group = serve.add_argument_group(
         "fault injection",
         "what a client sees is listed in the docs of ax12emu.faults.injection; servos are named by their --ids slot",
@@ -121,10 +122,10 @@ FACTORY_BAUD_BPS = {"1.0": 1_000_000, "2.0": 57_600}
 
 
 def _decode(args: argparse.Namespace) -> int:
-    from ax12emu.tracing.decoder import decode, format_decoded
+    from ax12emu.tracing.decoder import choose_protocol, format_decoded, iter_decode
     from ax12emu.tracing.trace import read_capture, read_raw, trace_header
 
-    chunks = read_raw(args.file) if args.raw else read_capture(args.file)
+    read = read_raw if args.raw else read_capture
     header = {} if args.raw else trace_header(args.file)
     servos = args.servo if args.servo is not None else header.get("servos")
     profile = args.profile if args.profile is not None else header.get("profile", DEFAULT_PROFILE)
@@ -134,10 +135,13 @@ def _decode(args: argparse.Namespace) -> int:
         raise ValueError(f"{args.file}: the header's servos must be a text such as \"1-5:xm430-w350\", got {servos!r}")
     if args.servo is not None and ":" not in args.servo:  # serve's bare MODEL takes its IDs from --ids; decode has none
         raise ValueError(f"--servo {args.servo}: decode needs IDS:MODEL[,IDS:MODEL...] (e.g. 1-5:xm430-w350)")
-    protocol = None if args.protocol == "auto" else args.protocol
+    # auto: a first reading of the file only chooses (it needs every byte), so the second prints each line as it is
+    # decoded, in memory flat in the trace's length
+    protocol = choose_protocol(read(args.file), servos) if args.protocol == "auto" else args.protocol
     echo = header.get("echo")  # serve records whether the adapter echoed: without, no servo bytes are an echo
     shown = 0
-    for item in decode(chunks, profile=profile, protocol=protocol, servos=servos, echo=echo if isinstance(echo, bool) else None):
+    for item in iter_decode(read(args.file), profile=profile, protocol=protocol, servos=servos,
+                            echo=echo if isinstance(echo, bool) else None):
         print(format_decoded(item))
         shown += 1
     if not shown:  # a server stopped before any packet, or an empty capture: say so rather than print nothing

@@ -11,12 +11,21 @@ import argparse
 
 from ax12emu.protocol.servo_models import ServoModel, model, model_names
 
-__all__ = ["add_command", "run", "models_table"]
+__all__ = ["COLUMNS", "add_command", "run", "models_table"]
+
+
+#: The listing's columns, one line per model (per rated voltage with ``--all-ratings``); the help names them.
+COLUMNS = ("key", "name", "protocol", "model number", "firmware", "stall torque", "no-load speed", "firmware model")
 
 
 def add_command(sub: argparse._SubParsersAction) -> None:
     """The ``models`` subcommand."""
-    models = sub.add_parser("models", help="list the servo models (control tables and data-sheet figures) the emulator knows")
+    # The help names what is printed: the model files' figures, not their control tables.
+    summary = "list the servo models the emulator knows, with their data-sheet figures and the firmware model serving each"
+    models = sub.add_parser("models", help=summary,
+                            description=f"{summary[0].upper()}{summary[1:]}: one line per model with its "
+                                        f"{', '.join(COLUMNS)} (the figures at the recommended supply; "
+                                        "--all-ratings: a line per rated voltage).")
     models.add_argument("--all-ratings", action="store_true", help="one line per rated voltage (default: the recommended one)")
 
 
@@ -40,7 +49,7 @@ def _rows(servo: ServoModel, all_ratings: bool) -> list[list[str]]:
 
 def models_table(all_ratings: bool = False) -> str:
     """The listing as aligned text columns."""
-    header = ["key", "name", "protocol", "model number", "firmware", "stall torque", "no-load speed", "firmware model"]
+    header = list(COLUMNS)
     rows = [header] + [row for key in model_names() for row in _rows(model(key), all_ratings)]
     widths = [max(len(row[i]) for row in rows) for i in range(len(header))]
     return "\n".join("  ".join(cell.ljust(width) for cell, width in zip(row, widths)).rstrip() for row in rows)

@@ -49,7 +49,7 @@ MX's), by that model file's table, so an MX's Goal Acceleration(73) is not an un
 from __future__ import annotations
 
 import collections
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Iterator, Mapping
 from typing import NamedTuple
 
 from ax12emu.protocol.control_table import AX12_MODEL, DEFAULT_PROFILE, Layout
@@ -64,8 +64,8 @@ from ax12emu.protocol.servo_spec import parse_servo_spec
 
 from .trace import IN, OUT, Chunk
 
-__all__ = ["Decoded", "Decoder", "decode", "format_decoded", "register_names", "tables_by_protocol", "INSTRUCTION", "STATUS",
-           "ECHO", "GARBAGE", "PROTOCOLS"]
+__all__ = ["Decoded", "Decoder", "choose_protocol", "decode", "iter_decode", "format_decoded", "register_names",
+           "tables_by_protocol", "INSTRUCTION", "STATUS", "ECHO", "GARBAGE", "PROTOCOLS"]
 
 INSTRUCTION, STATUS, ECHO, GARBAGE = "instruction", "status", "echo", "garbage"
 _INSTRUCTIONS = frozenset(int(code) for code in Instruction)
@@ -438,31 +438,86 @@ class Decoder:
         return out
 
 
-def decode(chunks: Iterable[Chunk], *, profile: str = DEFAULT_PROFILE, protocol: str | None = None,
-           servos: str | None = None, echo: bool | None = None) -> list[Decoded]:
-    """Decode chunks (a trace or a raw capture) into packets in line order.
-
-    ``protocol``: ``"1.0"``, ``"2.0"``, ``"both"``, or None to choose: ``"2.0"`` for a trace (every chunk has its
+def choose_protocol(chunks: Iterable[Chunk], servos: str | None = None) -> str:
+    """The protocol :func:`decode` frames ``chunks`` by when not told: ``"2.0"`` for a trace (every chunk has its
     direction) whose ``servos`` (its header's: every servo on the wire) are Protocol 2.0 servos only, else
     ``"both"`` when ``servos`` names 2.0 servos or the bytes of one direction hold a 2.0 header, else ``"1.0"``
     (a raw capture's ``servos`` name the registers of the servos one wants named, not every servo on its wire).
+
+    One pass, in memory flat in the length of ``chunks``: each direction's last bytes are kept only to find a
+    header split across its chunks, and the pass stops as soon as the answer is known.
+    """
+    tables = tables_by_protocol(servos) if servos else {"1.0": {}, "2.0": {}}
+    if tables["2.0"] and tables["1.0"]:
+        return "both"
+    if tables["2.0"]:  # 2.0 servos named only: a chunk of no direction (a raw capture) may hold 1.0 packets too
+        return "both" if any(chunk.direction is None for chunk in chunks) else "2.0"
+    keep = len(HEADER2) - 1
+    tails: dict[str | None, bytes] = {}
+    for chunk in chunks:
+        tail = tails.get(chunk.direction, b"")
+        if HEADER2 in chunk.data or HEADER2 in tail + chunk.data[:keep]:
+            return "both"
+        tails[chunk.direction] = (tail + chunk.data[-keep:])[-keep:]
+    return "1.0"
+
+
+#: The most bytes of one chunk fed at a time (a raw capture is one chunk of the whole file): the lines they decode
+#: to are handed on before the next piece is fed.
+_PIECE_BYTES = 4096
+
+
+def _pieces(chunk: Chunk) -> Iterator[Chunk]:
+    """``chunk`` cut into pieces of at most :data:`_PIECE_BYTES`, each with its time, direction and wire end: the
+    decoder takes bytes one at a time, so the pieces decode as the whole chunk does."""
+    if len(chunk.data) <= _PIECE_BYTES:
+        yield chunk
+        return
+    for start in range(0, len(chunk.data), _PIECE_BYTES):
+        yield chunk._replace(data=chunk.data[start : start + _PIECE_BYTES])
+
+
+def iter_decode(chunks: Iterable[Chunk], *, profile: str = DEFAULT_PROFILE, protocol: str | None = None,
+                servos: str | None = None, echo: bool | None = None) -> Iterator[Decoded]:
+    """:func:`decode`'s lines as they are decoded: each line comes once its packet is complete, and the memory
+    held is a packet's, however long the trace.  ``ax12emu decode`` prints through it.
+
+    ``protocol`` None (choose, :func:`choose_protocol`) reads ``chunks`` twice, so it must be a collection, not
+    an iterator: the choice needs every byte (a 2.0 servo that first speaks late in a trace makes it ``"both"``,
+    which a prefix would miss and decode that servo's packets as noise).  To decode a file as it is read, choose
+    from a first reading of it and decode a second: ``iter_decode(read_capture(path),
+    protocol=choose_protocol(read_capture(path), servos), ...)``.
+    """
+    if protocol is None:
+        if iter(chunks) is chunks:
+            raise TypeError("iter_decode chooses the protocol from every chunk: give a collection, or the protocol "
+                            "(choose_protocol over a first reading)")
+        protocol = choose_protocol(chunks, servos)
+    decoder = Decoder(profile=profile, protocol=protocol, servos=servos, echo=echo)
+    held: list[Decoded] = []
+    for chunk in chunks:
+        for piece in _pieces(chunk):
+            decoder.feed(piece, held)
+            # Discarded bytes at one time are one line (Decoder.feed adds to its last): a run the next piece may
+            # go on is held back until a packet ends it.
+            ready = len(held) - (1 if held and held[-1].kind == GARBAGE else 0)
+            yield from held[:ready]
+            del held[:ready]
+    yield from decoder.finish(held)
+
+
+def decode(chunks: Iterable[Chunk], *, profile: str = DEFAULT_PROFILE, protocol: str | None = None,
+           servos: str | None = None, echo: bool | None = None) -> list[Decoded]:
+    """Decode chunks (a trace or a raw capture) into packets in line order (:func:`iter_decode`, as one list).
+
+    ``protocol``: ``"1.0"``, ``"2.0"``, ``"both"``, or None to choose (:func:`choose_protocol`: the chunks are
+    then read into a list first).
     ``echo``: whether the wire echoed the host's bytes (a trace header's ``"echo"``; None: not known).
     """
     if protocol is None:
         chunks = list(chunks)
-        tables = tables_by_protocol(servos) if servos else {"1.0": {}, "2.0": {}}
-        by_direction: dict[str | None, bytearray] = {}
-        for chunk in chunks:
-            by_direction.setdefault(chunk.direction, bytearray()).extend(chunk.data)
-        if tables["2.0"] and not tables["1.0"] and None not in by_direction:
-            protocol = "2.0"
-        else:
-            protocol = "both" if tables["2.0"] or any(HEADER2 in data for data in by_direction.values()) else "1.0"
-    decoder = Decoder(profile=profile, protocol=protocol, servos=servos, echo=echo)
-    out: list[Decoded] = []
-    for chunk in chunks:
-        decoder.feed(chunk, out)
-    return decoder.finish(out)
+        protocol = choose_protocol(chunks, servos)
+    return list(iter_decode(chunks, profile=profile, protocol=protocol, servos=servos, echo=echo))
 
 
 #: Column shown for each kind.

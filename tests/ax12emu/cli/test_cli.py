@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import socket
 import subprocess
 import sys
@@ -245,3 +246,42 @@ def test_decoding_a_trace_with_no_packets_says_so(tmp_path):
     trace.write_text('{"format": "ax12emu-trace/1", "profile": "ax12a", "echo": false}\n')
     result = run("decode", str(trace))
     assert result.returncode == 0 and result.stdout == "" and "no bytes to decode" in result.stderr
+
+
+def test_an_empty_trace_path_is_a_flag_error(capsys):
+    """``serve --trace ""`` served untraced without a word."""
+    with pytest.raises(SystemExit) as stop:
+        parse_args(["serve", "--trace", ""])
+    assert stop.value.code == 2
+    assert "argument --trace: names no file" in capsys.readouterr().err
+
+
+def test_decode_prints_each_line_before_the_trace_is_read_through(tmp_path, monkeypatch):
+    """``ax12emu decode`` held every line of a trace before printing the first (a 20 MB trace: 11.6 s, 217 MB)."""
+    from ax12emu.cli import hil
+    from ax12emu.protocol.packets import encode_instruction, encode_status
+    from ax12emu.tracing import trace as trace_module
+    from ax12emu.tracing.decoder import decode, format_decoded
+
+    path = tmp_path / "t.jsonl"
+    with trace_module.TraceWriter(path) as trace:
+        for k in range(50):
+            trace.record(trace_module.IN, encode_instruction(1, 1), trace._start + k * 1e-3)
+            trace.record(trace_module.OUT, encode_status(1, 0), trace._start + k * 1e-3 + 5e-4)
+    out = io.StringIO()
+    readings: list[list[int]] = []  # per reading of the file: the lines printed before each chunk was handed on
+    read = trace_module.read_capture
+
+    def reading(name):
+        printed: list[int] = []
+        readings.append(printed)
+        for chunk in read(name):
+            printed.append(out.getvalue().count("\n"))
+            yield chunk
+
+    monkeypatch.setattr(trace_module, "read_capture", reading)
+    monkeypatch.setattr(sys, "stdout", out)
+    assert hil.COMMANDS["decode"](parse_args(["decode", str(path)])) == 0
+    decoding = readings[-1]
+    assert len(decoding) == 100 and decoding[2] >= 2  # the PING and its answer printed before the next PING is read
+    assert out.getvalue().splitlines() == [format_decoded(d) for d in decode(trace_module.read_trace(path))]

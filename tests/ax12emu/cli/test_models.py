@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
+
+import pytest
 
 from ax12emu.cli.main import build_parser
 from ax12emu.cli.models import models_table
@@ -30,3 +33,20 @@ def test_the_subcommand_runs_from_the_command_line():
     assert build_parser().parse_args(["models"]).command == "models"
     out = subprocess.run([sys.executable, "-m", "ax12emu", "models"], capture_output=True, text=True, timeout=60, check=True)
     assert out.stdout.strip() == models_table()
+
+
+def test_the_help_names_what_the_listing_prints(monkeypatch, capsys):
+    """``models --help`` said "control tables"; the listing holds none: it says the columns it prints."""
+    monkeypatch.setenv("COLUMNS", "1000")  # one line per paragraph: no column name cut at a hyphen
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["models", "--help"])
+    text = capsys.readouterr().out
+    columns = re.split(r"\s{2,}", models_table().splitlines()[0])
+    assert all(column in text for column in columns), (columns, text)
+    assert "control table" not in text and "control table" not in _listed_help("models")
+
+
+def _listed_help(command: str) -> str:
+    """The line ``ax12emu --help`` gives a subcommand."""
+    (sub,) = [action for action in build_parser()._actions if action.dest == "command"]
+    return next(choice.help for choice in sub._choices_actions if choice.dest == command)
