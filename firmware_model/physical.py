@@ -185,10 +185,7 @@ class PhysicalModel:
             raise ValueError(f"backend must be 'auto', 'numpy' or (for n=1) 'scalar', got {backend!r}")
         if shutdown_clears not in SHUTDOWN_CLEARS:
             raise ValueError(f"shutdown_clears must be one of {SHUTDOWN_CLEARS}, got {shutdown_clears!r}")
-        #: What Alarm Shutdown's cut is, as the table's edition says (module docstring): "torque_limit" (the
-        #: e-manual: Torque Limit 0, torque stays on) or "torque_enable" (the 2006 manual: torque off).  Set it
-        #: before stepping; the bus writes the same register when it is shown the cut.
-        self.shutdown_clears = shutdown_clears
+        self._shutdown_clears = shutdown_clears
         self.n = n
         self.params = params
         self.step_s = step_s
@@ -261,6 +258,13 @@ class PhysicalModel:
         #: Whether sense() reads anything but the plain registers at the present step.
         self._effect_sense = (self._half_play_rad is not None or self._delay_line is not None
                               or self._position_map is not None)
+
+    @property
+    def shutdown_clears(self) -> str:
+        """What Alarm Shutdown's cut is, as the table's edition says (module docstring): "torque_limit" (the
+        e-manual: Torque Limit 0, torque stays on) or "torque_enable" (the 2006 manual: torque off).  Fixed when the
+        model is built: a cut decoded under one edition and held under another would be neither's."""
+        return self._shutdown_clears
 
     # ------------------------------------------------------------------ run-time inputs
     def set_supply_voltage(self, volts: float) -> None:
@@ -530,7 +534,7 @@ class PhysicalModel:
         enabled = raw["torque_enable"] != 0
         cut = self._cut
         on_register = enabled  # Torque Enable as written (the overload limit a raise is judged against)
-        if self.shutdown_clears == "torque_enable" and cut.any():  # the 2006 edition's cut: torque off
+        if self._shutdown_clears == "torque_enable" and cut.any():  # the 2006 edition's cut: torque off
             enabled, cut = enabled & ~cut, np.zeros(n, dtype=bool)
         wheel = (raw["cw_angle_limit"] == 0) & (raw["ccw_angle_limit"] == 0)
         speed_raw = raw["moving_speed"].astype(np.int64)

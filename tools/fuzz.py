@@ -400,7 +400,7 @@ def run_case(case: Case) -> int:
         return run_mx_case(case)
     options = _options(case)
     clock = VirtualClock()
-    bus = Bus(list(SLOTS), options=options, clock=clock, model=build_model(ModelChoice(name=case.model), len(SLOTS)))
+    bus = Bus(list(SLOTS), options=options, clock=clock, model=build_model(ModelChoice(name=case.model, profile=case.profile), len(SLOTS)))
     oracle = Oracle(bus.rows, options, case.line_bps)
     shadow_framer = Framer()
     shutdown_register = layout(case.profile).profile.shutdown_clears
@@ -596,7 +596,7 @@ def build_mx_wire(case: Case) -> tuple[Bus1X, Bus]:
     """The MX wire of ``case``: the MX servos on a ``Bus1X`` holding an AX-12 bus with the AX-12A."""
     clock = VirtualClock()
     options = _options(case)
-    ax = Bus(list(MX_AX_IDS), options=options, clock=clock, model=build_model(ModelChoice(name=case.model), len(MX_AX_IDS)))
+    ax = Bus(list(MX_AX_IDS), options=options, clock=clock, model=build_model(ModelChoice(name=case.model, profile=case.profile), len(MX_AX_IDS)))
     mx_options = Servo1XOptions(reply_on_checksum_error=case.reply_on_checksum_error,
                                 reply_to_broadcast_ping=case.reply_to_broadcast_ping,
                                 goal_position_enables_torque=case.goal_position_enables_torque)

@@ -109,7 +109,7 @@ class Bus(ServosById[VirtualServo]):
         if state_store is not None:
             for slot, servo in zip(slots, self.servos):
                 state_store.load(slot, servo.table)
-        self.model = model if model is not None else build_model(ModelChoice(), len(slots))
+        self.model = model if model is not None else build_model(ModelChoice(profile=options.profile), len(slots))
         self.plant = Plant(self.model, self.rows, self.servos)
         for servo in self.servos:
             servo.power_on()

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Sequence
+from dataclasses import replace
 
 from ax12emu.protocol.control_table import AX12_MODEL, PROTOCOL1_MODELS
 from ax12emu.protocol.servo_models import model, model_names
@@ -98,8 +99,8 @@ def build_wire_of(models: Sequence[tuple[int, str]], *, clock: WallClock | Virtu
     bus1: Bus | Bus1X | None = None
     if ax:
         keys1 = [key for _, key in ax]
-        physics = build_protocol1_model(keys1, choice1 if choice1 is not None else ModelChoice(
-            voltage_v=choice.voltage_v, external_torque_nm=choice.external_torque_nm))
+        physics = build_protocol1_model(keys1, replace(choice1, profile=options1.profile) if choice1 is not None else ModelChoice(
+            voltage_v=choice.voltage_v, external_torque_nm=choice.external_torque_nm, profile=options1.profile))
         bus1 = Bus([servo_id for servo_id, _ in ax], clock=clock, model=physics, options=options1,
                    state_store=state_store1 if load_state else None,
                    table_layout=[None if key == AX12_MODEL else model(key).layout() for key in keys1])

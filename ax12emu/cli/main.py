@@ -269,7 +269,7 @@ def _ax_options(args: argparse.Namespace) -> ServoOptions:
 def _ax_choice(args: argparse.Namespace) -> ModelChoice:
     """The AX bus's physics as the serve flags choose it."""
     return ModelChoice(name=args.model, params_path=args.params, voltage_v=args.voltage, controller=args.controller,
-                       external_torque_nm=args.external_torque, arm=args.arm)
+                       external_torque_nm=args.external_torque, arm=args.arm, profile=args.profile)
 
 
 def build_serve_wire(args: argparse.Namespace, clock):

@@ -155,6 +155,20 @@ class Faults:
         self.dropped = 0
         self.corrupted = 0
         self.delayed = 0
+        self._before_steps(bus)
+
+    def _before_steps(self, bus: "Bus") -> None:
+        """Have the bus's plant apply the installed faults' Alarm Shutdown before each step (:meth:`before_step`).
+
+        The plant asks the bus's faults, whichever are installed when it steps, not this object: faults built for
+        the bus but never installed act on nothing, as the bus calls only its own.
+        """
+        def before_step() -> None:
+            faults = bus.faults
+            if isinstance(faults, Faults):
+                faults.before_step()
+
+        bus.plant.before_step = before_step
 
     # -- configuration -------------------------------------------------------------
     def _index(self, slot: int) -> int:
@@ -407,6 +421,22 @@ class Faults:
             out.extend(parts)
         return out
 
+    def before_step(self) -> None:
+        """Alarm Shutdown of the forced alarms and the pinned readings' on the registers the next step runs on.
+
+        Why: held only after each step, a Torque Limit (2006 edition: Torque Enable) set by name while such an
+        alarm lasted (a harness's write, a test's) drove the shaft for the whole next step, however long, and
+        with a command delay the model acted on it later still; the firmware's Alarm Shutdown finds the alarm at
+        every control step, so no step drives with the register written back.
+        """
+        for index, bits in self._alarms.items():
+            self._raise_forced(self.bus.servos[index], bits)
+        for index in self._held:
+            servo = self.bus.servos[index]
+            bits = _held_alarms(servo)
+            if bits:
+                self._raise_forced(servo, bits)
+
     def after_physics(self) -> None:
         """Hold stalled shafts, forced alarms and pinned readings after the model has stepped (its step wrote its own
         alarms: a forced one showed only from the next packet, and a Torque Limit written meanwhile drove the shaft
@@ -514,6 +544,12 @@ class Faults2(Faults):
       (``reply.collide``), so equal answers look clean and different ones fail the CRC.  In a Sync
       or Bulk Read both answer in the ID's turn; in a Fast Sync/Bulk Read only the first does.
     """
+
+    def _before_steps(self, bus) -> None:
+        """Nothing: each servo's firmware acts out its own faults at its own steps."""
+
+    def before_step(self) -> None:
+        """Nothing: as :meth:`_before_steps`."""
 
     def _servo2(self, slot: int) -> "Servo2":
         return self.bus.servos[self._index(slot)]  # type: ignore[return-value]

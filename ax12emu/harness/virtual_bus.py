@@ -268,9 +268,9 @@ class VirtualBus:
                 if model is not None and not isinstance(model, str):
                     raise ValueError("params= builds the physical model; it cannot go with a model object")
                 given = {"params": params} if isinstance(params, ServoParams) else {"params_path": params}
-                model = build_model(ModelChoice(name=model or "physical", **given), len(slots))
+                model = build_model(ModelChoice(name=model or "physical", profile=options.profile, **given), len(slots))
             elif isinstance(model, str):
-                model = build_model(ModelChoice(name=model), len(slots))
+                model = build_model(ModelChoice(name=model, profile=options.profile), len(slots))
             self.bus = Bus(slots, options=options, model=model, clock=clock)
         self.seed = seed
         if faults is not None and faults.active:

@@ -12,7 +12,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from os import PathLike
 
-from ax12emu.protocol.control_table import AX12_MODEL, PROTOCOL1_MODELS
+from ax12emu.protocol.control_table import AX12_MODEL, DEFAULT_PROFILE, PROTOCOL1_MODELS, Layout, layout
 from ax12emu.protocol.servo_models import ServoModel as ServoModelFile
 from ax12emu.protocol.servo_models import model as model_file
 from firmware_model import KinematicModel, PhysicalModel, ServoParams
@@ -20,7 +20,7 @@ from firmware_model.grouped import GroupedModel
 from firmware_model.interface import ServoModel
 
 __all__ = ["ModelChoice", "MODELS", "ax_bus_model", "build_model", "build_protocol1_model", "datasheet_params",
-           "parse_arm"]
+           "parse_arm", "shutdown_clears"]
 
 #: Model names accepted by ``--model``.
 MODELS = ("physical", "kinematic")
@@ -46,6 +46,9 @@ class ModelChoice:
     external_torque_nm: float = 0.0
     #: An arm on every shaft: (mass kg, length m), gravity acting on it.
     arm: tuple[float, float] | None = None
+    #: The AX-12A's control-table profile (``ServoOptions.profile``), the firmware edition whose Alarm Shutdown
+    #: the physical model acts out inside a step: "ax12a" (e-manual: Torque Limit 0) or "ax12-2006" (torque off).
+    profile: str = DEFAULT_PROFILE
 
 
 #: The largest arm ``--arm`` takes: far beyond what any of these servos holds (an AX-12A's stall torque is about
@@ -70,8 +73,19 @@ def parse_arm(text: str) -> tuple[float, float]:
     return mass_kg, length_m
 
 
+def shutdown_clears(table: Layout) -> str:
+    """The register Alarm Shutdown clears in the firmware edition of ``table`` (its profile's; Torque Limit unless
+    it says otherwise), as the physical model takes it (``PhysicalModel(shutdown_clears=)``)."""
+    return table.profile.shutdown_clears or "torque_limit"
+
+
 def build_model(choice: ModelChoice, n: int) -> ServoModel:
-    """The model for ``n`` servos, configured as ``choice`` says."""
+    """The model for ``n`` AX-12As, configured as ``choice`` says."""
+    return _build(choice, n, shutdown_clears(layout(choice.profile)))  # an unknown profile: ValueError
+
+
+def _build(choice: ModelChoice, n: int, clears: str) -> ServoModel:
+    """:func:`build_model` for servos whose Alarm Shutdown clears the register ``clears``."""
     if choice.name not in MODELS:
         raise ValueError(f"unknown model {choice.name!r}; choose one of: {', '.join(MODELS)}")
     if choice.name == "kinematic":
@@ -88,7 +102,7 @@ def build_model(choice: ModelChoice, n: int) -> ServoModel:
     if choice.arm is not None and params.effects.arm_weight_moment_nm:
         raise ValueError(f"--arm and the parameters' arm (arm_weight_moment_nm = {params.effects.arm_weight_moment_nm:g} "
                          "N m under [effects]) are two arms: give one")
-    model = PhysicalModel(n, params, controller=choice.controller)
+    model = PhysicalModel(n, params, controller=choice.controller, shutdown_clears=clears)
     if choice.voltage_v is not None:
         model.set_supply_voltage(choice.voltage_v)
     if choice.external_torque_nm:
@@ -130,7 +144,8 @@ def build_protocol1_model(keys: Sequence[str], choice: ModelChoice = ModelChoice
 
     The AX-12A runs ``choice`` as :func:`build_model` does; another model runs its data sheet's
     parameters (:func:`datasheet_params`) with ``choice``'s supply, torque and arm, or, on a wire of that
-    model alone, ``choice``'s parameters (a twin the diagnosis fitted to one of its recordings).  Where the
+    model alone, ``choice``'s parameters (a twin the diagnosis fitted to one of its recordings), and its own
+    table's Alarm Shutdown (its model file's, as the bus serves it; ``choice.profile`` is the AX-12A's).  Where the
     models differ each group gets its own model, joined by :class:`GroupedModel`; parameters given for such
     a wire are refused, as they do not say whose they are.
     """
@@ -151,7 +166,8 @@ def build_protocol1_model(keys: Sequence[str], choice: ModelChoice = ModelChoice
                              "AX-12A only")
         spec = model_file(key)
         try:
-            return build_model(choice if given else replace(choice, params=datasheet_params(spec)), n)
+            return _build(choice if given else replace(choice, params=datasheet_params(spec)), n,
+                          shutdown_clears(spec.layout()))
         except ValueError as exc:
             raise ValueError(f"{spec.name}: {exc}") from None
 

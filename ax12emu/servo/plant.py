@@ -17,12 +17,14 @@ are applied here and by the faults.
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 
 import numpy as np
 
 from ax12emu.protocol.control_table import Layout
+from firmware_model.grouped import GroupedModel
 from firmware_model.interface import Commands, Sensed, ServoModel, SteppableTo
+from firmware_model.physical import PhysicalModel
 
 from .plant2 import GRID_SLACK_S, step_due
 from .virtual_servo import VirtualServo
@@ -32,6 +34,19 @@ __all__ = ["Plant"]
 
 def _columns(lay: Layout, names: Sequence[str]) -> dict[str, tuple[int, int]]:
     return {name: (lay.by_name[name].address, lay.by_name[name].size) for name in names}
+
+
+def _check_edition(model: ServoModel, clears: str) -> None:
+    """ValueError where a part of ``model`` acts out another edition's Alarm Shutdown than the tables' (``clears``).
+
+    Why: the model cuts inside a step, however long, and the tables then show the cut it reports; a model built for
+    one edition behind another's tables drove a cut servo as neither edition does (2006 tables, e-manual model:
+    Torque Limit 0 with torque on inside the step, torque off written after it).
+    """
+    for part in model.models if isinstance(model, GroupedModel) else [model]:
+        if isinstance(part, PhysicalModel) and part.shutdown_clears != clears:
+            raise ValueError(f"the model's Alarm Shutdown clears {part.shutdown_clears}, these servos' clears {clears}: "
+                             f"build it for their profile (ModelChoice(profile=...), PhysicalModel(shutdown_clears={clears!r}))")
 
 
 class Plant:
@@ -50,11 +65,11 @@ class Plant:
         self._torque_limit = lay.by_name["torque_limit"].address
         self._torque_enable = lay.by_name["torque_enable"].address
         self._shutdown = lay.by_name["shutdown"].address
-        if self._profile.shutdown_clears == "torque_enable":  # the model's own cut is then torque off, as written here
-            for part in getattr(model, "models", None) or [model]:
-                if hasattr(part, "shutdown_clears"):
-                    part.shutdown_clears = "torque_enable"
+        _check_edition(model, self._profile.shutdown_clears or "torque_limit")
         self._cached_commands: Commands | None = None
+        #: Called before the model steps on tables changed since its last step (see :meth:`_step_commands`):
+        #: the Alarm Shutdown of alarms the model is not shown (the faults' forced ones) acts on them first.
+        self.before_step: Callable[[], None] | None = None
         #: Whether the model can step without sensing (checked once: a protocol test is slow per step).
         self._steps_to = isinstance(model, SteppableTo)
         self._any_alarm = True
@@ -91,6 +106,18 @@ class Plant:
                 }
             )
         return self._cached_commands
+
+    def _step_commands(self) -> Commands:
+        """:meth:`commands` for a step, after ``before_step`` where the tables changed since the last.
+
+        Why: an alarm the model is not shown lasts between steps, and the firmware's Alarm Shutdown
+        acts on the registers every control step finds, so a Torque Limit (Torque Enable in the
+        2006 edition) written while it lasts is cut before a step can drive with it, whoever wrote
+        it: a packet (after which the bus applies the faults at once) or a register set by name.
+        """
+        if self._cached_commands is None and self.before_step is not None:
+            self.before_step()
+        return self.commands()
 
     def _on_set(self, name: str) -> None:
         self.tables_changed()
@@ -143,9 +170,9 @@ class Plant:
             if model.time_s > self._write_time_s:
                 sensed = model.sense()
             elif model.time_s <= (sim_time_s if clock_s is None else clock_s) + GRID_SLACK_S:
-                sensed = model.advance(model.time_s + model.step_s, self.commands())
+                sensed = model.advance(model.time_s + model.step_s, self._step_commands())
             else:
-                sensed = model.advance(model.time_s, self.commands())
+                sensed = model.advance(model.time_s, self._step_commands())
             self._write_back(sensed)
             self._writes_shown = writes
 
@@ -155,7 +182,7 @@ class Plant:
         if not step_due(model, sim_time_s):
             return False
         writes = self._writes
-        self._write_back(model.advance(sim_time_s, self.commands()))
+        self._write_back(model.advance(sim_time_s, self._step_commands()))
         self._writes_shown = writes
         return True
 
@@ -174,7 +201,7 @@ class Plant:
             self.advance(sim_time_s)  # without step_to (it is optional), the whole step at once
             return
         writes = self._writes
-        model.step_to(sim_time_s, self.commands())  # type: ignore[attr-defined]
+        model.step_to(sim_time_s, self._step_commands())  # type: ignore[attr-defined]
         stepped_to_s = model.time_s
         yield
         sensed = model.sense()

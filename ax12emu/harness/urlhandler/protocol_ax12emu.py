@@ -213,7 +213,7 @@ class Serial(SerialBase):
             servo_options = _ax_options(options, 0.0 if virtual == "1" else ServoOptions().eeprom_busy_s_per_byte, profile)
             trace_path = options.pop("trace", [None])[-1]
             params_path = options.pop("params", [None])[-1]
-            model = build_model(ModelChoice(params_path=params_path), len(ids)) if params_path else None
+            model = build_model(ModelChoice(params_path=params_path, profile=profile), len(ids)) if params_path else None
             faults = FaultConfig.from_options(options)
             bus = Bus(ids, model=model, options=servo_options, clock=VirtualClock() if virtual == "1" else WallClock())
             if faults.active:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import replace
 
 import pytest
 from dynamixel_sdk import COMM_RX_CORRUPT, COMM_RX_TIMEOUT, COMM_SUCCESS
@@ -14,7 +15,8 @@ from ax12emu.bus.bus import Bus
 from ax12emu.bus.clock import VirtualClock
 from ax12emu.faults.injection import Faults, parse_alarm_bits
 from ax12emu.protocol.packets import StatusError, encode_instruction, encode_status
-from firmware_model import KinematicModel
+from ax12emu.servo.virtual_servo import ServoOptions
+from firmware_model import KinematicModel, ServoParams
 
 PRESENT_POSITION = 36
 
@@ -302,6 +304,33 @@ def test_a_pinned_reading_raises_its_alarm_and_shutdown_without_a_packet(reading
         assert bus.read(1, "torque_limit") == 0
         assert bus.call(lambda b: float(b.model.drive[0])) == 0.0
         assert bus.call(lambda b: float(b.model.temperature_c[0])) < 31.0
+
+
+@pytest.mark.parametrize("alarm", [lambda faults: faults.force_alarm(1, "overheating"),
+                                   lambda faults: faults.hold(1, "present_temperature", 90)], ids=["forced", "pinned"])
+@pytest.mark.parametrize("command_delay_s", [0.0, 0.005], ids=["at once", "5 ms command delay"])
+@pytest.mark.parametrize("profile, register, on", [("ax12a", "torque_limit", 1023), ("ax12-2006", "torque_enable", 1)])
+def test_a_register_set_while_a_forced_or_pinned_alarm_lasts_drives_no_step(profile, register, on, command_delay_s, alarm):
+    """Forced alarms (and a pinned reading's) were held after each step, not before: Torque Limit (the 2006
+    edition: Torque Enable) set by name while Overheating lasted drove the shaft for the whole next step (full drive
+    toward the goal, however long the step), with a command delay that much later, and only then went back to 0
+    (90 C is above both editions' factory Temperature Limit, 70 and 85 C)."""
+    params = replace(ServoParams(), effects=replace(ServoParams().effects, command_delay_s=command_delay_s))
+    options = ServoOptions(profile=profile, eeprom_busy_s_per_byte=0.0)
+    with VirtualBus([1], transport="inprocess", virtual_time=True, options=options, params=params) as bus:
+        bus.write(1, "torque_enable", 1)
+        bus.step(0.05)
+        alarm(bus.faults)  # Overheating: both editions' factory Alarm Shutdown selects it
+        bus.write(1, "goal_position", 900)
+        bus.step(0.05)
+        start_deg = bus.angle_deg(1)
+        bus.write(1, register, on)
+        drives = []
+        for _ in range(50):
+            bus.step(0.001)
+            drives.append(bus.call(lambda b: float(b.model.drive[0])))
+        assert bus.read(1, register) == 0
+        assert drives == [0.0] * 50 and bus.angle_deg(1) == start_deg
 
 
 def test_a_forced_alarm_acts_at_once_and_holds_between_packets():

@@ -302,3 +302,17 @@ def test_the_2006_editions_cut_is_torque_off_inside_a_long_step_too(pieces):
         bus.clock.advance(120.0 / pieces)
         bus.advance()
     assert table.get("torque_enable") == 0 and bus.servos[0].alarms == 0
+
+
+def test_a_model_built_for_another_edition_than_the_tables_is_refused():
+    """The bus set the 2006 edition's cut into a model built for the e-manual's, after building it; now the model is
+    built for the tables' profile by every route, and one built for another edition is a ValueError naming the fix."""
+    from ax12emu.servo.virtual_servo import ServoOptions
+    from firmware_model import PhysicalModel
+
+    options = ServoOptions(profile="ax12-2006")
+    with pytest.raises(ValueError, match=r"clears torque_limit, these servos' clears torque_enable"):
+        Bus([1], options=options, model=PhysicalModel(1))
+    assert Bus([1], options=options).model.shutdown_clears == "torque_enable"
+    with pytest.raises(AttributeError):
+        PhysicalModel(1).shutdown_clears = "torque_enable"  # fixed when built
