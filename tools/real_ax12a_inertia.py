@@ -55,9 +55,17 @@ numbers that tell them apart, per AX-12A recording:
    workflow finds there and misses on the real step is the model's to explain, not beyond the
    workflow's reach.
 
+7. With ``--split``: where the diagnosis's own fit finds the bar, row by row.  From the closed twin, each
+   loaded step's cost over :data:`SPLIT_GRID_KG_M2` of extra inertia, the shared base parameters (the
+   gearbox efficiency, the goal write's time) re-fitted at each value by the search's least squares
+   (:meth:`~firmware_model.diagnose.selection.Selection.fit`, the inertia held), on the training rows
+   and on the held-out rows apart, and the training cost of the rows at rest (where a Wizard export's
+   settled readings sit).  The workflow fits on the first and judges on the second: where the two
+   have their minima far apart, one inertia does not fit the whole step.
+
 Usage::
 
-    python tools/real_ax12a_inertia.py [--data DIR] [--goal 500] [--joint] [--synthetic]
+    python tools/real_ax12a_inertia.py [--data DIR] [--goal 500] [--joint] [--synthetic] [--split]
 
 Exit status 2 with a message if the data folder is missing.
 """
@@ -78,10 +86,11 @@ import real_ax12a  # noqa: E402
 
 from ax12emu.cli.arg_types import OneLineParser, int_range  # noqa: E402
 from firmware_model.diagnose.cli import load_input, parse_args  # noqa: E402
+from firmware_model.diagnose.evaluate import Lockstep  # noqa: E402
 from firmware_model.diagnose.metrics import effective_count, robust_cost  # noqa: E402
 from firmware_model.diagnose.nuisance import fit_onsets  # noqa: E402
 from firmware_model.diagnose.search import diagnose  # noqa: E402
-from firmware_model.diagnose.selection import Selection  # noqa: E402
+from firmware_model.diagnose.selection import BASE_ONLY, Selection  # noqa: E402
 from firmware_model.diagnose.verdict import BIC_MARGIN, delta_bic  # noqa: E402
 from firmware_model.diagnose.wizard import read_wizard  # noqa: E402
 from firmware_model.params import ServoEffects, ServoParams  # noqa: E402
@@ -211,6 +220,47 @@ def profile(params: ServoParams, path: Path, goal: int) -> dict:
             "move_dbic": float(delta_bic(1, move_cost[none], move_cost[b], moving[b][1]))}
 
 
+#: Extra inertia of the ``--split`` profile (kg m**2): the bars are 0.73e-3 and 1.02e-3, the fits 2.6-2.8e-3.
+SPLIT_GRID_KG_M2 = (0.0, 0.25e-3, 0.5e-3, 0.75e-3, 1.0e-3, 1.25e-3, 1.5e-3, 2.0e-3, 2.5e-3, 3.0e-3)
+
+
+def split_profile(params: ServoParams, path: Path, goal: int) -> list[dict]:
+    """Per :data:`SPLIT_GRID_KG_M2` value: the training, held-out and resting-rows training cost with the base
+    re-fitted (see the module docstring, 7), and the re-fitted base."""
+    sel = Selection(_trace(params, path, goal), params, lambda msg: None)
+    sel.fit_nuisance()
+    ev = sel.ev
+    resting_train = ev.train & ev.resting
+    start = dict(sel.base)
+    out = []
+    for extra in SPLIT_GRID_KG_M2:
+        sel.chosen, sel.base = {"extra_inertia": {"extra_inertia_kg_m2": float(extra)}}, dict(start)
+        lock = Lockstep(ev.run)
+        fit = lock.map([lambda lock=lock: sel.fit(BASE_ONLY, {}, lock, hold_chosen=True)])[0]
+        rest = float(robust_cost(ev.weigh(fit.z))[resting_train].sum())
+        out.append({"extra_kg_m2": float(extra), "train": fit.score.cost_train, "held": fit.score.cost_held,
+                    "rest": rest, "base": fit.base})
+    return out
+
+
+def run_split(data: Path, goal: int) -> None:
+    twin, _, _, _ = real_ax12a.fit_twin(ServoParams(), real_ax12a.load(data / real_ax12a.FIT_ON), goal)
+    closed, _ = real_ax12a.close_twin(twin, data / real_ax12a.FIT_ON, goal)
+    print("\ncost over extra inertia from the closed twin, the base re-fitted at each value (training / held-out rows):")
+    for r in real_ax12a.read_recordings(data):
+        path = data / r.file
+        if r.servo != "AX-12A" or r.load_kg_m2 <= 0 or not path.exists():
+            continue
+        rows = split_profile(closed, path, goal)
+        print(f"  {r.file} (bar {1e3 * r.load_kg_m2:.3f}e-3 kg m^2)")
+        for row in rows:
+            base = ", ".join(f"{k} {v:.4g}" for k, v in row["base"].items())
+            print(f"    {1e3 * row['extra_kg_m2']:5.2f}e-3: training {row['train']:7.1f} (at rest {row['rest']:5.1f}), "
+                  f"held out {row['held']:7.1f}; {base}")
+        best = {k: 1e3 * min(rows, key=lambda row: row[k])["extra_kg_m2"] for k in ("train", "held")}
+        print(f"    lowest: training at {best['train']:.2f}e-3, held out at {best['held']:.2f}e-3")
+
+
 def synthetic_trace(params: ServoParams, path: Path, goal: int, extra_kg_m2: float, sigma_units: float, seed: int):
     """The recording at ``path`` with its Present Position replaced by what ``params`` with ``extra_kg_m2`` more
     inertia reads at the same rows (the diagnosis's evaluator, the goal write fitted), plus Gaussian noise of
@@ -271,7 +321,7 @@ def run_joint(data: Path, goal: int) -> None:
               f"{d.gaps_after['present_position']['rms']:.2f} units RMS; twin + bar {with_bar:.2f}")
 
 
-def run(data: Path, goal: int, joint: bool = False, synthetic: bool = False) -> int:
+def run(data: Path, goal: int, joint: bool = False, synthetic: bool = False, split: bool = False) -> int:
     fit_on = data / real_ax12a.FIT_ON
     if not fit_on.exists():
         print(f"real_ax12a_inertia: {fit_on} not found (the recordings live in ../shared/reference/real-ax12a)",
@@ -317,6 +367,8 @@ def run(data: Path, goal: int, joint: bool = False, synthetic: bool = False) -> 
         run_joint(data, goal)
     if synthetic:
         run_synthetic(data, goal)
+    if split:
+        run_split(data, goal)
     return 0
 
 
@@ -329,8 +381,10 @@ def main(argv: list[str] | None = None) -> int:
                                                          "unloaded step and diagnose every step from that twin")
     ap.add_argument("--synthetic", action="store_true", help="also diagnose each loaded step as the closed twin with "
                                                              "the bar would have recorded it (can the workflow see it?)")
+    ap.add_argument("--split", action="store_true", help="also profile each loaded step's cost over extra inertia "
+                                                         "on the training and the held-out rows apart, the base re-fitted")
     args = ap.parse_args(argv)
-    return run(args.data, args.goal, args.joint, args.synthetic)
+    return run(args.data, args.goal, args.joint, args.synthetic, args.split)
 
 
 if __name__ == "__main__":

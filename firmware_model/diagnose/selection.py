@@ -54,7 +54,7 @@ from .metrics import F_SCALE, effective_count
 from .nuisance import PROFILERS, Nuisance, fit_onsets, profile_hold_phase
 from .trace import Trace
 
-__all__ = ["Selection", "Score", "Screened", "Fit", "Linearisation", "shortlist", "FIT_TOP", "MAX_NFEV", "WRITE_SHIFT",
+__all__ = ["Selection", "Score", "Screened", "Fit", "Linearisation", "shortlist", "BASE_ONLY", "FIT_TOP", "MAX_NFEV", "WRITE_SHIFT",
            "WRITE_SHIFT_KNOB", "WRITE_SHIFT_GRID_S"]
 
 #: Candidates fitted per round.
@@ -70,8 +70,9 @@ WRITE_SHIFT_KNOB = "delay_s"
 #: Shifts profiled at each screened grid point (s).
 WRITE_SHIFT_GRID_S = tuple(round(0.002 * i, 3) for i in range(-10, 11))
 
-#: A pseudo-effect with no parameters: fitting it re-fits only the shared base parameters.
-_BASE_ONLY = Effect("base", "", "", (), lambda v, k: {}, ())
+#: A pseudo-effect with no parameters: fitting it re-fits only the shared base parameters (and the smooth chosen
+#: effects, unless held: :meth:`Selection.fit`).
+BASE_ONLY = Effect("base", "", "", (), lambda v, k: {}, ())
 
 
 @dataclass(frozen=True)
@@ -249,7 +250,7 @@ class Selection:
                                           screened[n].shift.get(tuple(v.values())))
                 for n, v in starts]
         if with_base:  # the shared base parameters alone, in the same batches
-            jobs.append(lambda: self.fit(_BASE_ONLY, {}, lock))
+            jobs.append(lambda: self.fit(BASE_ONLY, {}, lock))
         all_fits: list[Fit] = lock.map(jobs)
         base_fit = all_fits.pop() if with_base else None
         fits = []
@@ -271,7 +272,7 @@ class Selection:
         return Fit(screened.effect, values, base, refitted, score, screened.best_z, grid=screened.table)
 
     def fit(self, effect: Effect, start: dict[str, float], lock: Lockstep,
-            nuisance: dict[str, float] | None = None, shift_s: float | None = None) -> Fit:
+            nuisance: dict[str, float] | None = None, shift_s: float | None = None, hold_chosen: bool = False) -> Fit:
         """Fit ``effect`` plus the base and the smooth accepted effects, from ``start``.
 
         ``nuisance``: the recording's traits as re-fitted at ``start`` (for an
@@ -280,10 +281,12 @@ class Selection:
 
         The accepted effects are re-fitted too (their columns cost little in a
         batched simulation), so a new effect is not accepted merely to patch an
-        earlier fit.
+        earlier fit; ``hold_chosen`` holds them where :attr:`chosen` puts them (a
+        profile over an effect's value, the base re-fitted at each: ``tools/real_ax12a_inertia.py --split``).
         """
         owners = [(effect.name, p) for p in effect.params]
-        owners += [(name, p) for name in self.chosen if self.library[name].smooth for p in self.library[name].params]
+        owners += [(name, p) for name in self.chosen if self.library[name].smooth and not hold_chosen
+                   for p in self.library[name].params]
         owners += [("base", p) for p in self.base_params]
         names = [p.name for _, p in owners]
         lo = np.array([p.low for _, p in owners])

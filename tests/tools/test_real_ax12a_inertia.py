@@ -123,3 +123,20 @@ def test_the_workflow_names_a_bar_on_a_step_the_twin_recorded_with_it(closed, na
         found.append(first is not None and abs(first.values["extra_inertia_kg_m2"] - rec.load_kg_m2)
                      <= first.uncertainty["extra_inertia_kg_m2"])
     assert sum(found) >= 2, found
+
+
+@pytest.mark.parametrize("name", RETURN_QUOTED)
+def test_the_held_out_rows_find_the_bar_where_the_training_rows_find_more_than_twice_it(closed, name):
+    """From the closed twin, the base re-fitted at each extra inertia (tool.split_profile): the held-out rows of the
+    step (its peak and the return from it) cost least within a grid step of the bar (measured 0.75e-3 for 0.727e-3,
+    1.25e-3 for 1.019e-3), the training rows (the start, the approach, the rest) at 2.5-3e-3, the gearbox efficiency
+    and the goal write's time traded for it.  Why the workflow fits 2.6-2.8e-3 and the held-out rows reject it:
+    the model's start, approach and rest want more inertia than its peak does (docs/diagnosis.md)."""
+    rec = next(r for r in real.RECORDINGS if r.file == name)
+    if not (DATA / rec.file).exists():
+        pytest.skip(f"{rec.file} not found in {DATA}")
+    rows = tool.split_profile(closed, DATA / rec.file, 500)
+    held = min(rows, key=lambda row: row["held"])["extra_kg_m2"]
+    train = min(rows, key=lambda row: row["train"])["extra_kg_m2"]
+    assert abs(held - rec.load_kg_m2) <= 0.25e-3 + 1e-9, (held, rec.load_kg_m2)
+    assert train >= 2.0 * rec.load_kg_m2, (train, rec.load_kg_m2)

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from firmware_model.diagnose.cli import load_input, parse_args
-from firmware_model.diagnose.evaluate import REST_COUNTS_S, Evaluator, rest_weights
+from firmware_model.diagnose.evaluate import REST_COUNTS_S, Evaluator, Lockstep, rest_weights
 from firmware_model.diagnose.search import _ranking_bic, diagnose
-from firmware_model.diagnose.selection import WRITE_SHIFT, Selection
+from firmware_model.diagnose.selection import BASE_ONLY, WRITE_SHIFT, Selection
 from firmware_model.diagnose.synthetic import make_trace, wizard_step_export
 from firmware_model.diagnose.trace import rest_level
 from firmware_model.diagnose.verdict import Candidate
@@ -124,3 +124,17 @@ def test_passing_candidates_are_ranked_on_one_sample_count():
 
     inertia, play = cand("extra_inertia", 243.0, 13.0), cand("backlash", 461.0, 47.0)
     assert _ranking_bic(_Sel, inertia, 1350.0, 20.0) > _ranking_bic(_Sel, play, 1350.0, 20.0)
+
+
+def test_a_base_fit_holding_the_chosen_effects_leaves_them_where_they_are(tmp_path, start):
+    """``fit(BASE_ONLY, ..., hold_chosen=True)`` re-fits only the base (the profile over a value in
+    tools/real_ax12a_inertia.py --split); without it, the chosen inertia moves to what the step says."""
+    servo = dataclasses.replace(start, load_inertia_kg_m2=start.load_inertia_kg_m2 + 3e-3)
+    sel = Selection(_trace(_wizard_export(tmp_path / "w.csv", servo, 600.0, 1200.0), start), start, print)
+    sel.fit_nuisance()
+    sel.chosen = {"extra_inertia": {"extra_inertia_kg_m2": 1e-3}}
+    lock = Lockstep(sel.ev.run)
+    held, free = lock.map([lambda: sel.fit(BASE_ONLY, {}, lock, hold_chosen=True), lambda: sel.fit(BASE_ONLY, {}, lock)])
+    assert held.refitted["extra_inertia"]["extra_inertia_kg_m2"] == 1e-3
+    assert [n for n in held.linear.names] == [p.name for p in sel.base_params]
+    assert free.refitted["extra_inertia"]["extra_inertia_kg_m2"] > 1.5e-3
