@@ -25,8 +25,8 @@ alarm still there then cuts again at the next thermal event, as the firmware
 cuts again a Torque Limit written while the alarm lasts.  The cut is Torque
 Limit's (the bridge stays closed, and the overload timer runs on as it does
 at a Torque Limit of 0); the 2006 manual's edition turns torque off instead
-(``shutdown_clears = "torque_enable"``: the cut servo is driven as with
-torque off), which the bus writes when it is shown the cut.
+(built with ``shutdown_clears="torque_enable"``: the cut servo is driven as
+with torque off), which the bus writes when it is shown the cut.
 
 Integration is a fixed step (1 kHz by default), so results depend only on
 the commands and the simulated times asked for, never on wall-clock speed.

@@ -109,7 +109,9 @@ class Bus(ServosById[VirtualServo]):
         if state_store is not None:
             for slot, servo in zip(slots, self.servos):
                 state_store.load(slot, servo.table)
-        self.model = model if model is not None else build_model(ModelChoice(profile=options.profile), len(slots))
+        # The default model cuts as these tables do (an AX-18A's table is its model file's, whatever the profile).
+        clears = self.servos[0].table.profile.shutdown_clears or "torque_limit"
+        self.model = model if model is not None else build_model(ModelChoice(profile=options.profile), len(slots), clears)
         self.plant = Plant(self.model, self.rows, self.servos)
         for servo in self.servos:
             servo.power_on()

@@ -121,6 +121,16 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
 FACTORY_BAUD_BPS = {"1.0": 1_000_000, "2.0": 57_600}
 
 
+def _until_unreadable(chunks):
+    """``chunks`` up to a line that cannot be read (a killed server's torn last line): the protocol is chosen from
+    what comes before it, so the decoding pass prints every line up to it and then stops with its error, as it
+    does with ``--protocol`` given."""
+    try:
+        yield from chunks
+    except ValueError:
+        return
+
+
 def _decode(args: argparse.Namespace) -> int:
     from ax12emu.tracing.decoder import choose_protocol, format_decoded, iter_decode
     from ax12emu.tracing.trace import read_capture, read_raw, trace_header
@@ -137,7 +147,7 @@ def _decode(args: argparse.Namespace) -> int:
         raise ValueError(f"--servo {args.servo}: decode needs IDS:MODEL[,IDS:MODEL...] (e.g. 1-5:xm430-w350)")
     # auto: a first reading of the file only chooses (it needs every byte), so the second prints each line as it is
     # decoded, in memory flat in the trace's length
-    protocol = choose_protocol(read(args.file), servos) if args.protocol == "auto" else args.protocol
+    protocol = choose_protocol(_until_unreadable(read(args.file)), servos) if args.protocol == "auto" else args.protocol
     echo = header.get("echo")  # serve records whether the adapter echoed: without, no servo bytes are an echo
     shown = 0
     for item in iter_decode(read(args.file), profile=profile, protocol=protocol, servos=servos,

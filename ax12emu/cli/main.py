@@ -107,7 +107,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="serve a live page of the servos on HOST:PORT (loopback; PORT 0: pick one); its URL is the second stdout line",
     )
     live.add_argument("--monitor", action="store_true", help="draw a live table of the servos on stderr")
-    serve.add_argument("--state-dir", metavar="DIR", help="persist each servo's EEPROM area in DIR")
+    serve.add_argument("--state-dir", metavar="DIR", type=file_name, help="persist each servo's EEPROM area in DIR")
     serve.add_argument(
         "--factory-reset", action="store_true", help="ignore saved state and start from factory defaults"
     )

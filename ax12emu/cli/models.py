@@ -24,7 +24,8 @@ def add_command(sub: argparse._SubParsersAction) -> None:
     summary = "list the servo models the emulator knows, with their data-sheet figures and the firmware model serving each"
     models = sub.add_parser("models", help=summary,
                             description=f"{summary[0].upper()}{summary[1:]}: one line per model with its "
-                                        f"{', '.join(COLUMNS)} (the figures at the recommended supply; "
+                                        f"{', '.join(COLUMNS)} (the figures at the recommended supply where the data sheet rates them there, "
+                                        "else at its first rating; "
                                         "--all-ratings: a line per rated voltage).")
     models.add_argument("--all-ratings", action="store_true", help="one line per rated voltage (default: the recommended one)")
 

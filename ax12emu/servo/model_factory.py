@@ -79,9 +79,10 @@ def shutdown_clears(table: Layout) -> str:
     return table.profile.shutdown_clears or "torque_limit"
 
 
-def build_model(choice: ModelChoice, n: int) -> ServoModel:
-    """The model for ``n`` AX-12As, configured as ``choice`` says."""
-    return _build(choice, n, shutdown_clears(layout(choice.profile)))  # an unknown profile: ValueError
+def build_model(choice: ModelChoice, n: int, clears: str | None = None) -> ServoModel:
+    """The model for ``n`` AX-12As, configured as ``choice`` says; ``clears``: the register the servos' Alarm
+    Shutdown clears where their tables say it (a bus of AX-18A tables), else ``choice.profile``'s."""
+    return _build(choice, n, clears or shutdown_clears(layout(choice.profile)))  # an unknown profile: ValueError
 
 
 def _build(choice: ModelChoice, n: int, clears: str) -> ServoModel:

@@ -248,12 +248,13 @@ def test_decoding_a_trace_with_no_packets_says_so(tmp_path):
     assert result.returncode == 0 and result.stdout == "" and "no bytes to decode" in result.stderr
 
 
-def test_an_empty_trace_path_is_a_flag_error(capsys):
-    """``serve --trace ""`` served untraced without a word."""
+@pytest.mark.parametrize("flag", ["--trace", "--state-dir"])
+def test_an_empty_path_is_a_flag_error(capsys, flag):
+    """``serve --trace ""`` served untraced, ``--state-dir ""`` kept nothing (an unset ``$DIR``), without a word."""
     with pytest.raises(SystemExit) as stop:
-        parse_args(["serve", "--trace", ""])
+        parse_args(["serve", flag, ""])
     assert stop.value.code == 2
-    assert "argument --trace: names no file" in capsys.readouterr().err
+    assert f"argument {flag}: names no file" in capsys.readouterr().err
 
 
 def test_decode_prints_each_line_before_the_trace_is_read_through(tmp_path, monkeypatch):
@@ -285,3 +286,18 @@ def test_decode_prints_each_line_before_the_trace_is_read_through(tmp_path, monk
     decoding = readings[-1]
     assert len(decoding) == 100 and decoding[2] >= 2  # the PING and its answer printed before the next PING is read
     assert out.getvalue().splitlines() == [format_decoded(d) for d in decode(trace_module.read_trace(path))]
+
+
+@pytest.mark.parametrize("protocol", ["auto", "1.0"])
+def test_decode_prints_every_line_before_an_unreadable_one_whatever_the_protocol_choice(tmp_path, protocol):
+    """A killed server's trace with a bad line: with the protocol chosen from the file, the first reading stopped at
+    the bad line and nothing was printed, where ``--protocol 1.0`` printed the packets before it."""
+    good = ['{"format": "ax12emu-trace/1", "profile": "ax12a", "echo": false}',
+            '{"t": 0.001, "dir": "in", "data": "ff ff 01 02 01 fb"}',
+            '{"t": 0.002, "dir": "out", "data": "ff ff 01 02 00 fc"}',
+            '{"t": 0.003, "dir": "in", "data": "ff ff 01 02 01 fb"}']
+    trace = tmp_path / "t.jsonl"
+    trace.write_text("\n".join([*good, '{"t": 0.0005, "dir": "out", "data": "ff ff 01 02 00 fc"}']) + "\n")
+    result = run("decode", str(trace), "--protocol", protocol)
+    assert result.returncode == 2 and "t.jsonl:5: not a trace line" in result.stderr, result
+    assert [line.split()[1] for line in result.stdout.splitlines()] == ["host", "servo", "host"], result.stdout

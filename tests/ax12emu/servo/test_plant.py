@@ -316,3 +316,13 @@ def test_a_model_built_for_another_edition_than_the_tables_is_refused():
     assert Bus([1], options=options).model.shutdown_clears == "torque_enable"
     with pytest.raises(AttributeError):
         PhysicalModel(1).shutdown_clears = "torque_enable"  # fixed when built
+
+
+def test_the_default_model_cuts_as_the_bus_tables_do_whatever_the_profile():
+    """A bus of AX-18A tables under the 2006 profile: the AX-18A's table is its model file's (Torque Limit 0), and
+    the bus built its default model for the profile (torque off), then refused its own model."""
+    from ax12emu.protocol.servo_models import model
+    from ax12emu.servo.virtual_servo import ServoOptions
+
+    bus = Bus([1], options=ServoOptions(profile="ax12-2006"), table_layout=model("ax-18a").layout())
+    assert bus.model.shutdown_clears == "torque_limit"
