@@ -33,7 +33,8 @@ from .clock import VirtualClock, WallClock
 from .mixed import MixedBus, model_name, model_of
 from .state_store import StateStore
 
-__all__ = ["build_bus2", "build_wire", "build_wire_of", "protocol1_keys", "servo_family", "servo_list", "servo_models"]
+__all__ = ["build_bus2", "build_wire", "build_wire_of", "protocol1_keys", "servo_family", "servo_list", "servo_models",
+           "start_at_baud"]
 
 log = logging.getLogger(__name__)
 
@@ -127,7 +128,7 @@ def build_wire_of(models: Sequence[tuple[int, str]], *, clock: WallClock | Virtu
 
         for slot, servo in zip(bus1.slots, bus1.servos) if bus1 is not None else ():
             if not kept(state_store1, slot, servo):
-                _start_at_baud(servo, baud_bps)
+                start_at_baud(servo, baud_bps)
         for slot, servo in zip(bus2.slots, bus2.servos) if bus2 is not None else ():
             if not kept(state_store2, slot, servo):
                 servo.start_at_baud(baud_bps)
@@ -136,7 +137,7 @@ def build_wire_of(models: Sequence[tuple[int, str]], *, clock: WallClock | Virtu
     return bus1 if bus1 is not None else bus2  # type: ignore[return-value]
 
 
-def _start_at_baud(servo, bps: float) -> None:
+def start_at_baud(servo, bps: float) -> None:
     """Set a Protocol 1.0 servo's Baud Rate to the value whose rate is nearest ``bps``, as the servo itself says each
     value's rate (an MX's 250..252 are 2.25..3 Mbps, an AX-12A's are not); ValueError if none is within a UART's 3 %."""
     rates = servo.baud_rates_bps

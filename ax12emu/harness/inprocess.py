@@ -8,7 +8,8 @@ like a real port.  Replies of several servos are laid on the line as the
 server does (:func:`ax12emu.serve.server.merge_replies`), so duplicate IDs
 collide the same way; a Protocol 2.0 bus's replies, timed one after another
 (broadcast Ping slots, Sync Read answers in list order), are released each at its own time.  The host's baud rate is passed to the bus, so a
-servo at another baud is deaf, as on a pty.
+servo at another baud is deaf, as on a pty.  A trace records each reply at its due time,
+before the host's next bytes and at close, read or not, as a pty's trace has it.
 
 Not modelled: wire time of the bytes (replies arrive whole), the
 adapter's echo.  Physics advances when a packet arrives (the bus brings the
@@ -90,8 +91,9 @@ class InProcessLink:
             self._rx.clear()
 
     def detach(self) -> None:
-        """Release the link (the port closed); bytes in flight are lost."""
+        """Release the link (the port closed); bytes in flight are lost, those already on the line are traced."""
         with self._cond:
+            self._release(time.monotonic())
             self._attached = False
             self._cancel_read = False
             self._rx.clear()
@@ -99,8 +101,13 @@ class InProcessLink:
             self._cond.notify_all()
 
     def close(self) -> None:
-        """The bus is closed: a host still attached finds its port gone at its next read or write."""
+        """The bus is closed: a host still attached finds its port gone at its next read or write.
+
+        Replies already due are traced first: they were on the line, read or not, as a pty's trace has them.
+        """
         with self._cond:
+            if not self.closed:
+                self._release(time.monotonic())
             self.closed = True
             self._pending.clear()
             self._cond.notify_all()
@@ -120,6 +127,9 @@ class InProcessLink:
         with self._cond:
             self._check_open()
             now = time.monotonic()
+            # Replies due by now went out before these bytes came in, read or not: traced (and received) first,
+            # so the trace keeps time order as a pty's does.
+            self._release(now)
             if self.trace is not None:
                 self.trace.record(IN, data, now)
             for replies in self.bus.answer(data, now, line_bps=line_bps):  # with the reply cache, as the server
@@ -132,6 +142,7 @@ class InProcessLink:
         return len(data)
 
     def _release(self, now: float) -> None:
+        """Move the replies due by ``now`` to the host's input, tracing each at its due time (in time order)."""
         pending = self._pending
         while pending and pending[0][0] <= now:
             release_s, _, chunk = heapq.heappop(pending)

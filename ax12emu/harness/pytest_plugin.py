@@ -21,20 +21,23 @@ IDs come from the ``ax12_ids`` marker, or from indirect parametrization
 wins over a module's or class's marker); the default is ID 1.  The
 ``ax12_bus_options`` marker passes keyword arguments to
 :class:`~ax12emu.VirtualBus` (``transport="inprocess"``,
-``virtual_time=True``, ``faults=FaultConfig(...)``, ...).  IDs and servos
-given twice (``ax12_ids`` and ``ids=``, ``ax12_servo`` and ``servo=``, IDs
+``virtual_time=True``, ``faults=FaultConfig(...)``, ...); markers on the
+module, the class and the test add up, and a keyword two of them give with
+different values is a usage error.  IDs and servos given twice (``ax12_ids`` and ``ids=``, ``ax12_servo`` and ``servo=``, IDs
 beside a per-ID servo text) are a usage error, not a silent choice.
 
 Other models (the X series on Protocol 2.0, the MX series on Protocol 1.0): the ``ax12_servo``
 marker takes the servo text of ``ax12emu serve --servo`` (``@pytest.mark.ax12_servo("xl430-w250")``
 or ``("mx-28")`` with ``ax12_ids``, or ``@pytest.mark.ax12_servo("1-5:xm430-w350,6:mx-64")`` alone);
 ``pytest --ax12-servo SPEC`` gives every ax12_bus without the marker those servos, so a suite
-written for one model runs against another.  Protocol 1.0 models in the text share the wire with
+written for one model runs against another; each model starts at its factory rate, so such a suite
+pins its own with ``ax12_bus_options(baud_bps=...)``, which the AX-12A bus takes too.  Protocol 1.0 models in the text share the wire with
 the 2.0 ones (``"1:ax-12a,1:xl430-w250"``; ``protocol=`` names an ID both protocols have).
 
 ``pytest --ax12-web`` serves a live page of each bus (see the live-view docs)
 and keeps it up after the test, pass or fail, until Ctrl-C, so a failing
-test can be watched and its last state inspected.
+test can be watched and its last state inspected; not under pytest-xdist,
+whose workers can neither show the URL nor get the Ctrl-C.
 """
 
 from __future__ import annotations
@@ -56,7 +59,7 @@ def pytest_addoption(parser: pytest.Parser) -> None:
     group.addoption(
         "--ax12-web",
         action="store_true",
-        help="serve a live view of each ax12_bus and keep it up after the test until Ctrl-C",
+        help="serve a live view of each ax12_bus and keep it up after the test until Ctrl-C (not under pytest-xdist)",
     )
     group.addoption(
         "--ax12-servo",
@@ -94,8 +97,23 @@ def _linger(config: pytest.Config, url: str) -> None:
         _say(config, "ax12emu live view closed")
 
 
+def _distributed(config: pytest.Config) -> bool:
+    """Whether pytest-xdist runs the tests in worker processes: this is its controller, or one of its workers.
+
+    A worker is told by ``config.workerinput``, not by PYTEST_XDIST_WORKER: a pytest started from inside a worker's
+    test inherits that variable and is no worker."""
+    if hasattr(config, "workerinput"):
+        return True
+    return getattr(config.option, "dist", "no") != "no" and bool(getattr(config.option, "tx", None))
+
+
 def pytest_configure(config: pytest.Config) -> None:
-    """Register the markers so ``--strict-markers`` accepts them."""
+    """Register the markers so ``--strict-markers`` accepts them; refuse ``--ax12-web`` where it cannot work."""
+    if config.getoption("--ax12-web", False) and _distributed(config):
+        # A worker's output never reaches the terminal (no URL is shown) and its linger waits for a Ctrl-C that
+        # only the controller gets, so the run hangs; the workers would also share one --ax12-web-at address.
+        raise pytest.UsageError("--ax12-web cannot run under pytest-xdist: its workers' live-view URLs never reach "
+                                "this terminal and each waits for a Ctrl-C it never gets; run without -n (or -n 0)")
     config.addinivalue_line("markers", "ax12_ids(*ids): servo IDs of the ax12_bus fixture (default 1)")
     config.addinivalue_line("markers", "ax12_bus_options(**kwargs): keyword arguments for ax12emu.VirtualBus")
     config.addinivalue_line("markers", "ax12_servo(spec): the ax12_bus fixture's servo models (X series, MX, ...), as serve --servo takes them")
@@ -122,6 +140,42 @@ def _id_values(values: Any, where: str, example: str) -> list[int]:
     return [_marker_id(value, where, example) for value in items]
 
 
+def _same(a: Any, b: Any) -> bool:
+    """Whether two option values are equal (a value that cannot say, such as a numpy array, is not)."""
+    try:
+        return a is b or bool(a == b)
+    except Exception:  # noqa: BLE001 - any comparison that cannot give one answer counts as different
+        return False
+
+
+def _bus_options(node: Any) -> dict[str, Any]:
+    """The keywords of every ``ax12_bus_options`` marker on the test (its own, its class's, its module's, ...),
+    merged: a key two of them give with different values is a UsageError naming it, as IDs given twice are, where
+    taking the closest marker alone would drop the others' keys without a word."""
+    given: dict[str, Any] = {}
+    for marker in node.iter_markers("ax12_bus_options"):
+        _marker_takes(marker, "ax12_bus_options(virtual_time=True)", args=False)
+        for key, value in marker.kwargs.items():
+            if key in given and not _same(given[key], value):
+                raise pytest.UsageError(f"two ax12_bus_options markers give {key}= ({given[key]!r} and {value!r}); "
+                                        "give it once")
+            given.setdefault(key, value)
+    return given
+
+
+def _started(bus: Any, web_at: str | None) -> Any:
+    """``bus`` started; the live view's bind error at ``--ax12-web-at`` (a port in use) a UsageError naming the
+    option and the address, which a bare "Address already in use" leaves to guess.  ``web_at``: the address the
+    command line gave the live view, None where it gave none."""
+    try:
+        return bus.start()
+    except OSError as exc:
+        if web_at is None or not bus.port:  # no live view of the command line's, or the bus's own port failed
+            raise
+        raise pytest.UsageError(f"--ax12-web-at {web_at}: the live view cannot serve there ({exc.strerror or exc}); "
+                                "give another HOST:PORT, or leave the option out for a free port") from exc
+
+
 def _default_transport() -> str:
     return "pty" if importlib.util.find_spec("pty") is not None and importlib.util.find_spec("termios") is not None else "inprocess"
 
@@ -143,11 +197,7 @@ def ax12_bus(request: pytest.FixtureRequest) -> Iterator[Any]:
                          'parametrize("ax12_bus", [1, [2, 3], range(4, 7)], indirect=True)')
         ids_from = "the indirect ax12_bus parameter"
     options: dict[str, Any] = {"transport": _default_transport()}
-    options_marker = request.node.get_closest_marker("ax12_bus_options")
-    given: dict[str, Any] = {}
-    if options_marker is not None:
-        _marker_takes(options_marker, "ax12_bus_options(virtual_time=True)", args=False)
-        given = dict(options_marker.kwargs)
+    given = _bus_options(request.node)
     if "ids" in given:
         if ids is not None:
             raise pytest.UsageError(f"ax12_bus_options(ids=...) and {ids_from} both give the IDs; give them once")
@@ -171,9 +221,10 @@ def ax12_bus(request: pytest.FixtureRequest) -> Iterator[Any]:
         options["servo"] = servo
     options.update(given)
     web = request.config.getoption("--ax12-web", False)
-    if web:
-        options.setdefault("web", request.config.getoption("--ax12-web-at"))
-    with VirtualBus(ids, **options) as bus:
+    web_at = request.config.getoption("--ax12-web-at") if web and "web" not in options else None
+    if web_at is not None:
+        options["web"] = web_at
+    with _started(VirtualBus(ids, **options), web_at) as bus:
         if bus.web_url is not None:
             _say(request.config, f"ax12emu live view of {request.node.nodeid}: {bus.web_url}")
         yield bus

@@ -38,6 +38,7 @@ wire's, and alarm, stall, hold and pinned temperature or voltage acted out by ea
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import numbers
@@ -52,6 +53,7 @@ from ax12emu.bus.bus1x import Bus1X
 from ax12emu.bus.bus2 import Bus2
 from ax12emu.bus.clock import VirtualClock, WallClock
 from ax12emu.bus.mixed import MixedBus, model_name
+from ax12emu.bus.wire import start_at_baud
 from ax12emu.faults.config import FaultConfig
 from ax12emu.faults.injection import Faults
 from ax12emu.live.controls import ServedControls
@@ -112,6 +114,22 @@ def _check_types(*, options: Any, model: Any, faults: Any, servo: Any, baud_bps:
         raise TypeError(f"servo must be a text such as '1-2:xl430-w250', got {type(servo).__name__}")
     if baud_bps is not None and (isinstance(baud_bps, bool) or not isinstance(baud_bps, numbers.Real)):
         raise TypeError(f"baud_bps must be a bit rate, got {type(baud_bps).__name__}")
+    if baud_bps is not None and not math.isfinite(baud_bps):  # NaN matched no rate and set the first Baud Rate value
+        raise ValueError(f"baud_bps must be a finite bit rate, got {baud_bps!r}")
+
+
+def _fault_seed(seed: int | None, faults: FaultConfig | None) -> int:
+    """The one seed of the bus's faults, those ``faults=`` starts with and those added later through ``bus.faults``:
+    ``seed=``, or the FaultConfig's own where ``seed=`` is left out; a FaultConfig at its default seed (0) takes
+    ``seed=``.  Both given and different is a ValueError: either choice would silently drop the other."""
+    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, numbers.Integral)):
+        raise TypeError(f"seed must be an integer, got {type(seed).__name__}")
+    own = 0 if faults is None else faults.seed
+    if seed is None:
+        return own
+    if own not in (0, seed):
+        raise ValueError(f"seed={seed} and faults=FaultConfig(seed={own}) give two seeds for one bus's faults; give one")
+    return int(seed)
 
 
 def _web_address(web: str | tuple[str, int] | bool | None) -> tuple[str, int] | None:
@@ -187,6 +205,10 @@ class VirtualBus:
     ``allow_remote=True``: ``tcp_address`` and ``web`` may bind beyond loopback (as ``serve --allow-remote``).
     ``name``: the in-process port is ``ax12emu://NAME``, so a name holding "/", "?", "#" or brackets, or a
     blank one, is refused; without one a free name ``busN`` is taken.
+    ``seed``: the one seed of the faults, those of ``faults=`` and those added through :attr:`faults`; left out,
+    the FaultConfig's own (a FaultConfig at its default seed 0 takes ``seed=``; two different seeds are a
+    ValueError).  ``baud_bps``: every servo starts at that rate, its Baud Rate set to the value its model gives
+    for it, on the AX-12A bus as with ``servo=``.
     """
 
     def __init__(
@@ -200,7 +222,7 @@ class VirtualBus:
         model: ServoModel | str | None = None,
         params: str | os.PathLike[str] | ServoParams | None = None,
         faults: FaultConfig | None = None,
-        seed: int = 0,
+        seed: int | None = None,
         trace: str | None = None,
         pace: bool = False,
         echo: bool = False,
@@ -261,8 +283,6 @@ class VirtualBus:
         else:
             if isinstance(options, Servo2Options):
                 raise ValueError("Servo2Options apply with servo= (Protocol 2.0 servos); the AX-12A bus takes ServoOptions")
-            if baud_bps is not None:
-                raise ValueError("baud_bps applies with servo= (the AX-12A bus starts at its factory 1,000,000 bps)")
             slots = [1] if ids is None else _id_list(ids)
             if params is not None:  # a parameter file (e.g. a fitted twin's params.toml, effects included) or object
                 if model is not None and not isinstance(model, str):
@@ -272,6 +292,11 @@ class VirtualBus:
             elif isinstance(model, str):
                 model = build_model(ModelChoice(name=model, profile=options.profile), len(slots))
             self.bus = Bus(slots, options=options, model=model, clock=clock)
+            if baud_bps is not None:  # each servo's Baud Rate, as servo="ax-12a" sets it, so a suite pins its rate
+                for each in self.bus.servos:  # whatever model pytest --ax12-servo serves instead
+                    start_at_baud(each, baud_bps)
+        seed = _fault_seed(seed, faults)
+        faults = faults if faults is None or faults.seed == seed else dataclasses.replace(faults, seed=seed)
         self.seed = seed
         if faults is not None and faults.active:
             faults.install(self.bus)

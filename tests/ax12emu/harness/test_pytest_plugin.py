@@ -206,3 +206,128 @@ def test_without_a_pty_the_example_suite_opens_its_port(tmp_path):
                             capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-2000:]
     assert "5 passed" in result.stdout
+
+
+def test_stacked_options_markers_add_up(pytester):
+    """``ax12_bus_options`` on the module, the class and the test: each keyword reaches the bus (only the closest
+    marker's did, the others' dropped without a word); one given twice alike is fine."""
+    pytester.makepyfile(
+        """
+        import pytest
+        from ax12emu import FaultConfig
+
+        pytestmark = pytest.mark.ax12_bus_options(virtual_time=True)
+
+        @pytest.mark.ax12_bus_options(transport="inprocess")
+        def test_module_and_function(ax12_bus):
+            assert (ax12_bus.virtual_time, ax12_bus.transport_name) == (True, "inprocess")
+
+        class TestArm:
+            pytestmark = pytest.mark.ax12_bus_options(transport="inprocess", virtual_time=True)
+
+            @pytest.mark.ax12_bus_options(faults=FaultConfig(drop=0.5, seed=3))
+            def test_class_and_method(self, ax12_bus):
+                assert (ax12_bus.virtual_time, ax12_bus.transport_name) == (True, "inprocess")
+                assert ax12_bus.faults.seed == 3
+
+        @pytest.mark.ax12_bus_options(transport="inprocess")
+        @pytest.mark.ax12_bus_options(ids=[2, 3])
+        def test_two_on_one_function(ax12_bus):
+            assert ax12_bus.transport_name == "inprocess" and ax12_bus.bus.ids == [2, 3]
+        """
+    )
+    result = pytester.runpytest_inprocess("-p", "no:cacheprovider")
+    result.assert_outcomes(passed=3)
+
+
+def test_a_keyword_two_options_markers_give_differently_is_a_usage_error(pytester):
+    pytester.makepyfile(
+        """
+        import pytest
+
+        pytestmark = pytest.mark.ax12_bus_options(virtual_time=True)
+
+        @pytest.mark.ax12_bus_options(virtual_time=False)
+        def test_it(ax12_bus):
+            pass
+        """
+    )
+    result = pytester.runpytest_inprocess("-p", "no:cacheprovider", "-rE")
+    result.assert_outcomes(errors=1)
+    result.stdout.fnmatch_lines(["*UsageError: two ax12_bus_options markers give virtual_time= (False and True); give it once*"])
+
+
+SUITE_AT_1_MBPS = """
+    import pytest
+    from dynamixel_sdk import COMM_SUCCESS, PacketHandler, PortHandler
+
+    pytestmark = pytest.mark.ax12_bus_options(baud_bps=1_000_000)  # the suite's own rate, whatever the servos
+
+    @pytest.mark.ax12_bus_options(transport="inprocess")
+    def test_reads_a_position(ax12_bus):
+        import serial
+
+        class UrlPortHandler(PortHandler):
+            def setupPort(self, cflag_baud):
+                if self.is_open:
+                    self.ser.baudrate = self.baudrate
+                else:
+                    self.ser = serial.serial_for_url(self.port_name, baudrate=self.baudrate, timeout=0)
+                    self.is_open = True
+                self.tx_time_per_byte = (1000.0 / self.baudrate) * 10.0
+                return True
+
+        port = UrlPortHandler(ax12_bus.port)
+        assert port.openPort() and port.setBaudRate(1_000_000)
+        try:
+            _, comm, error = PacketHandler(1.0).read2ByteTxRx(port, 1, 36)
+        finally:
+            port.closePort()
+        assert (comm, error) == (COMM_SUCCESS, 0)
+"""
+
+
+@pytest.mark.parametrize("servo", [[], ["--ax12-servo", "mx-28"]], ids=["ax-12a", "mx-28"])
+def test_a_suite_pins_its_rate_for_every_model(pytester, servo):
+    """An AX-12 suite at 1 Mbps under ``--ax12-servo mx-28``: the MX starts at its factory 57,600 bps, and the
+    marker that pins the rate was refused on the AX-12A bus, so the suite could run against one model only."""
+    pytester.makepyfile(SUITE_AT_1_MBPS)
+    result = pytester.runpytest_inprocess("-p", "no:cacheprovider", *servo)
+    result.assert_outcomes(passed=1)
+
+
+def test_ax12_web_under_xdist_is_a_usage_error_saying_why(pytester):
+    """``pytest -n 2 --ax12-web``: the workers' URLs never reached the terminal and the run hung in their linger
+    (--collect-only here: it starts no workers, so the check cannot hang the run it guards)."""
+    pytest.importorskip("xdist")
+    pytester.makepyfile("def test_it(ax12_bus):\n    pass\n")
+    result = pytester.runpytest_inprocess("-p", "no:cacheprovider", "-n", "2", "--ax12-web", "--collect-only")
+    assert result.ret == pytest.ExitCode.USAGE_ERROR
+    result.stderr.fnmatch_lines(["*--ax12-web cannot run under pytest-xdist*run without -n (or -n 0)*"])
+
+
+def test_an_xdist_worker_is_told_by_its_workerinput():
+    """Not by PYTEST_XDIST_WORKER, which a pytest started from a worker's test inherits."""
+    from types import SimpleNamespace
+
+    from ax12emu.harness.pytest_plugin import _distributed
+
+    assert _distributed(SimpleNamespace(workerinput={}, option=SimpleNamespace()))
+    assert _distributed(SimpleNamespace(option=SimpleNamespace(dist="load", tx=["popen"] * 2)))
+    assert not _distributed(SimpleNamespace(option=SimpleNamespace(dist="no", tx=[])))
+    assert not _distributed(SimpleNamespace(option=SimpleNamespace()))  # pytest without xdist
+
+
+def test_ax12_web_at_an_address_in_use_names_the_option_and_the_address(pytester):
+    """It was a bare ``OSError: Address already in use``."""
+    import socket
+
+    pytest.importorskip("aiohttp")
+    pytester.makepyfile("def test_it(ax12_bus):\n    pass\n")
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen(1)
+        address = f"127.0.0.1:{taken.getsockname()[1]}"
+        result = pytester.runpytest_inprocess("-p", "no:cacheprovider", "-rE", "--ax12-web", f"--ax12-web-at={address}")
+    result.assert_outcomes(errors=1)
+    result.stdout.fnmatch_lines([f"*UsageError: --ax12-web-at {address}: the live view cannot serve there (*in use)*"])

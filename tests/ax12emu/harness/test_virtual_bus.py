@@ -204,3 +204,41 @@ def test_step_and_the_clock_refuse_what_they_cannot_keep():
         VirtualBus([1], virtual_time=True, time_scale=50)  # was ignored
     with pytest.raises(ValueError, match="step_s must be positive"):
         KinematicModel(1, step_s=math.nan)
+
+
+def test_the_ax12a_bus_starts_at_baud_bps():
+    """``baud_bps=`` on the AX-12A bus sets each servo's Baud Rate (it was refused even at 1,000,000), so a suite
+    pins its rate whatever model ``pytest --ax12-servo`` serves: a host at that rate is heard, one at 1 Mbps not."""
+    with VirtualBus([1, 2], transport="inprocess", baud_bps=57_600) as bus:
+        assert [bus.read(i, "baud_rate") for i in (1, 2)] == [34, 34]
+        for host_bps, answer in ((57_600, encode_status(2, 0)), (1_000_000, b"")):
+            with serial.serial_for_url(bus.port, baudrate=host_bps, timeout=0.05) as link:
+                link.write(encode_instruction(2, 0x01))
+                assert link.read(6) == answer
+
+
+def _answered(bus: VirtualBus, packets: int = 40) -> str:
+    """Which of ``packets`` PINGs got an answer, as 1s and 0s."""
+    with serial.serial_for_url(bus.port, baudrate=1_000_000, timeout=0.02) as link:
+        seen = ""
+        for _ in range(packets):
+            link.write(encode_instruction(1, 0x01))
+            seen += "1" if link.read(6) else "0"
+        return seen
+
+
+def test_seed_seeds_the_faults_a_fault_config_starts():
+    """``VirtualBus(seed=N, faults=FaultConfig(...))``: the faults followed FaultConfig.seed (0) and ignored seed=."""
+    from ax12emu import FaultConfig
+
+    def pattern(**kwargs) -> str:
+        with VirtualBus(transport="inprocess", **kwargs) as bus:
+            return _answered(bus)
+
+    by_seed = pattern(faults=FaultConfig(drop=0.5), seed=123)
+    assert by_seed == pattern(faults=FaultConfig(drop=0.5, seed=123))
+    assert by_seed != pattern(faults=FaultConfig(drop=0.5))
+    with VirtualBus(transport="inprocess", faults=FaultConfig(seed=9)) as bus:  # no fault yet: those added later
+        assert bus.faults.seed == 9
+    with pytest.raises(ValueError, match=r"seed=1 and faults=FaultConfig\(seed=2\) give two seeds"):
+        VirtualBus(seed=1, faults=FaultConfig(drop=0.5, seed=2))

@@ -126,7 +126,8 @@ def test_served_over_tcp_with_options_of_the_2_0_servos():
         ({"servo": "xl430-w250", "baud_bps": 12345}, "not 12345"),
         ({"servo": "xl430-w250", "model": "kinematic"}, "shape AX-12As and AX-18As; 'xl430-w250' names none"),
         ({"servo": "ax-18a", "model": object()}, "a model object cannot serve a servo= wire"),
-        ({"baud_bps": 57600}, "baud_bps applies with servo="),
+        ({"baud_bps": 3_000_000}, r"ID 1 \(AX-12A\) cannot run at 3000000 bps"),
+        ({"servo": "mx-28", "baud_bps": float("nan")}, "baud_bps must be a finite bit rate"),  # not Baud Rate 0
         ({"options": Servo2Options()}, "Servo2Options apply with servo="),
         ({"servo": "xl430-w250", "options": ServoOptions(goal_position_enables_torque=False)}, "'xl430-w250' names none"),
         ({"servo": "ax-18a", "options": ServoOptions(profile="ax12-2006")}, "profile: the AX-12A bus alone"),
