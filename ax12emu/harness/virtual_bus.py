@@ -300,6 +300,8 @@ class VirtualBus:
         self.seed = seed
         if faults is not None and faults.active:
             faults.install(self.bus)
+        if trace is not None and not str(trace).strip():  # an unset variable's "": traced nothing without a word
+            raise ValueError("trace= names no file (an empty path); leave it out for no trace")
         self._trace_path = trace
         self._pace, self._echo = pace, echo
         self._tcp_address = tcp_address

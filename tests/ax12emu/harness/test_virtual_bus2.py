@@ -131,6 +131,8 @@ def test_served_over_tcp_with_options_of_the_2_0_servos():
         ({"options": Servo2Options()}, "Servo2Options apply with servo="),
         ({"servo": "xl430-w250", "options": ServoOptions(goal_position_enables_torque=False)}, "'xl430-w250' names none"),
         ({"servo": "ax-18a", "options": ServoOptions(profile="ax12-2006")}, "profile: the AX-12A bus alone"),
+        ({"trace": ""}, "trace= names no file"),  # an unset variable's "": it traced nothing without a word
+        ({"trace": " "}, "trace= names no file"),
     ],
 )
 def test_bad_servo_arguments_are_named(kwargs, message):
