@@ -421,7 +421,9 @@ def _serve(args: argparse.Namespace) -> int:
         state_store=None if args.factory_reset else store,
     )
     if args.factory_reset:
+        # Saved now, not at exit: a server killed before it stopped left the old state for the next run to serve.
         bus.state_store = store
+        bus.save_state()
     faults = cli_hil.fault_config(args)
     if faults.active:
         faults.install(bus)

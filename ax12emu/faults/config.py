@@ -8,13 +8,22 @@ it on a bus.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from ax12emu.protocol.ids import parse_ids
 
-from .injection import HW_ERROR_NAMES, MAX_REPLY_DELAY_S, Faults, MixedFaults, faults_for, parse_alarm_bits
+from .injection import (
+    DEFAULT_REPLY_DELAY_S,
+    HW_ERROR_NAMES,
+    MAX_REPLY_DELAY_S,
+    Faults,
+    MixedFaults,
+    faults_for,
+    parse_alarm_bits,
+)
 
 if TYPE_CHECKING:
     from ax12emu.bus.bus import Bus
@@ -51,7 +60,10 @@ def _vanish(text: str) -> tuple[int, float | None, float | None]:
     if len(parts) == 1:
         return int(parts[0]), None, None
     if len(parts) == 3:
-        return int(parts[0]), float(parts[1]), float(parts[2])
+        every_s, for_s = float(parts[1]), float(parts[2])
+        if not (math.isfinite(every_s) and math.isfinite(for_s)):  # an infinite period: gone FOR_S, then never again
+            raise ValueError(f"expected finite seconds in ID:EVERY_S:FOR_S, got {text!r} (to unplug for good: ID alone)")
+        return int(parts[0]), every_s, for_s
     raise ValueError(f"expected ID or ID:EVERY_S:FOR_S, got {text!r}")
 
 
@@ -111,8 +123,10 @@ class FaultConfig:
             value = getattr(self, name)
             if not isinstance(value, tuple) or not all(isinstance(item, int) and not isinstance(item, bool) for item in value):
                 raise ValueError(f"{name} takes a tuple of IDs, got {value!r}")
-        if self.fault_ids and not (self.drop or self.corrupt or self.delay):  # it did nothing, without a word
-            raise ValueError("fault_ids: names the IDs drop, corrupt and delay act on, and none of them is given")
+        for refusal in _DOES_NOTHING:  # each setting that did nothing (or not what it said), without a word
+            says = refusal(self)
+            if says:
+                raise ValueError(says)
 
     @property
     def active(self) -> bool:
@@ -166,6 +180,42 @@ class FaultConfig:
                 raise ValueError(f"{name}: {exc}") from None
             values[name] = tuple(parsed) if repeated else parsed[-1]
         return cls(**values)  # type: ignore[arg-type]
+
+
+def _fault_ids_alone(config: FaultConfig) -> str | None:
+    if config.fault_ids and not (config.drop or config.corrupt or config.delay):
+        return "fault_ids: names the IDs drop, corrupt and delay act on, and none of them is given"
+    return None
+
+
+def _delay_s_alone(config: FaultConfig) -> str | None:
+    if config.delay_s != DEFAULT_REPLY_DELAY_S and not config.delay:
+        return f"delay_s: how late the delay option's replies leave ({config.delay_s:g} s), and delay is not given"
+    return None
+
+
+def _slot_named_twice(config: FaultConfig) -> str | None:
+    """A second vanish or duplicate of one servo replaced the first: one period, one ID per servo."""
+    for name in ("vanish", "duplicate"):
+        slots = [slot for slot, *_ in getattr(config, name)]
+        twice = sorted({slot for slot in slots if slots.count(slot) > 1})
+        if twice:
+            return f"{name}: ID {', '.join(map(str, twice))} named more than once; a servo takes one {name}"
+    return None
+
+
+def _duplicate_as_itself(config: FaultConfig) -> str | None:
+    same = [slot for slot, as_id in config.duplicate if slot == as_id]
+    if same:
+        return (f"duplicate: {same[0]}:{same[0]} gives servo {same[0]} the ID it was launched as, which changes nothing "
+                "(SLOT:ID gives it another servo's ID)")
+    return None
+
+
+#: The checks of a FaultConfig's settings that would do nothing, or not what they say: each the refusal's text or None.
+_DOES_NOTHING: tuple[Callable[[FaultConfig], str | None], ...] = (
+    _fault_ids_alone, _delay_s_alone, _slot_named_twice, _duplicate_as_itself,
+)
 
 
 #: Option name -> (parser of one value, may repeat).

@@ -57,6 +57,7 @@ firmware shows them (status-packet alarm bits, Torque Limit 0 until a client wri
 from __future__ import annotations
 
 import logging
+import math
 import operator
 import random
 import sys
@@ -83,8 +84,8 @@ if TYPE_CHECKING:
     from ax12emu.servo.servo2 import Servo2
     from ax12emu.servo.virtual_servo import VirtualServo
 
-__all__ = ["Faults", "Faults2", "Faults1X", "MixedFaults", "ALARM_NAMES", "HW_ERROR_NAMES", "MAX_REPLY_DELAY_S", "parse_alarm_bits",
-           "faults_for"]
+__all__ = ["Faults", "Faults2", "Faults1X", "MixedFaults", "ALARM_NAMES", "HW_ERROR_NAMES", "MAX_REPLY_DELAY_S",
+           "DEFAULT_REPLY_DELAY_S", "parse_alarm_bits", "faults_for"]
 
 log = logging.getLogger(__name__)
 
@@ -103,6 +104,8 @@ _FULL_LOAD = 1023
 #: The longest reply delay taken: far beyond any client's timeout a reply is already lost to it; a longer one
 #: (inf) overflowed the wire's pacing and stopped the server.
 MAX_REPLY_DELAY_S = 60.0
+#: How late a delayed reply leaves unless told: past dynamixel-sdk's ~34 ms timeout.
+DEFAULT_REPLY_DELAY_S = 0.1
 
 
 def parse_alarm_bits(text: str, names: Mapping[str, int] | None = None) -> int:
@@ -131,6 +134,15 @@ class _Stall:
     driving_since_s: float | None = None
 
 
+def _warn_if_unanswered(reply_ids: frozenset[int] | None, bus: object) -> None:
+    """Say when the reply faults' IDs are none a servo of ``bus`` answers as: said, not refused, since a client
+    may move a servo there."""
+    answering = {servo.id for servo in getattr(bus, "servos", ())}
+    if reply_ids and answering and not reply_ids & answering:
+        log.warning("reply faults on IDs %s, which no servo answers as now (IDs %s)", sorted(reply_ids),
+                    sorted(answering))
+
+
 class Faults:
     """Live faults on one bus; change them at any time (from the thread serving the bus)."""
 
@@ -141,7 +153,7 @@ class Faults:
         self.drop = 0.0
         self.corrupt = 0.0
         self.delay = 0.0
-        self.delay_s = 0.1
+        self.delay_s = DEFAULT_REPLY_DELAY_S
         #: Wire IDs the reply faults apply to; None: every ID.
         self.reply_ids: frozenset[int] | None = None
         self._vanished: dict[int, tuple[float | None, float | None]] = {}
@@ -183,10 +195,14 @@ class Faults:
         drop: float = 0.0,
         corrupt: float = 0.0,
         delay: float = 0.0,
-        delay_s: float = 0.1,
+        delay_s: float = DEFAULT_REPLY_DELAY_S,
         ids: Iterable[int] | None = None,
+        warn_unanswered: bool = True,
     ) -> None:
-        """Set the fractions of status packets dropped, corrupted or delayed (all 0: off)."""
+        """Set the fractions of status packets dropped, corrupted or delayed (all 0: off).
+
+        ``warn_unanswered`` False: ``ids`` no servo of this bus answers as is not said here (half of a mixed wire,
+        whose other half may hold the ID, leaves it to :meth:`MixedFaults.set_reply_faults`)."""
         for name, value in (("drop", drop), ("corrupt", corrupt), ("delay", delay)):
             if not 0.0 <= value <= 1.0:
                 raise ValueError(f"{name} must be a fraction 0..1, got {value}")
@@ -196,15 +212,15 @@ class Faults:
             raise ValueError(f"delay_s must lie in 0..{MAX_REPLY_DELAY_S:g} s, got {delay_s}")
         self.drop, self.corrupt, self.delay, self.delay_s = drop, corrupt, delay, delay_s
         self.reply_ids = None if ids is None else frozenset(ids)
-        answering = {servo.id for servo in getattr(self.bus, "servos", ())}
-        if self.reply_ids and answering and not self.reply_ids & answering:  # said, not refused: a client may move one there
-            log.warning("reply faults on IDs %s, which no servo answers as now (IDs %s)", sorted(self.reply_ids),
-                        sorted(answering))
+        if warn_unanswered:
+            _warn_if_unanswered(self.reply_ids, self.bus)
 
     def vanish(self, slot: int, *, every_s: float | None = None, for_s: float | None = None) -> None:
         """Unplug the servo; with ``every_s``/``for_s`` it is absent ``for_s`` of every ``every_s`` (simulated)."""
         if (every_s is None) != (for_s is None) or (every_s is not None and not 0 < for_s < every_s):  # type: ignore[operator]
             raise ValueError("vanish needs both every_s and for_s, with 0 < for_s < every_s, or neither")
+        if every_s is not None and not math.isfinite(every_s):  # absent the first for_s, then never again
+            raise ValueError(f"vanish: every_s must be a finite period, got {every_s} (to unplug for good, give neither)")
         self._vanished[self._index(slot)] = (every_s, for_s)
 
     def reappear(self, slot: int) -> None:
@@ -832,9 +848,11 @@ class MixedFaults:
         return have[0]
 
     def set_reply_faults(self, **kwargs: object) -> None:
-        """As :meth:`Faults.set_reply_faults`, on both protocols' replies."""
+        """As :meth:`Faults.set_reply_faults`, on both protocols' replies; the IDs are checked against the whole
+        wire's servos, once (each half knows only its own, and a 1.0 ID is no 2.0 servo's)."""
         for faults in self.by_protocol.values():
-            faults.set_reply_faults(**kwargs)  # type: ignore[arg-type]
+            faults.set_reply_faults(**kwargs, warn_unanswered=False)  # type: ignore[arg-type]
+        _warn_if_unanswered(self.by_protocol[1.0].reply_ids, self.bus)
 
     def clear(self) -> None:
         for faults in self.by_protocol.values():

@@ -113,7 +113,9 @@ class PtyTransport(Transport):
         if link is not None:
             path = Path(link)
             if path.is_symlink():
-                if path.exists():  # it leads somewhere: another server's pty, or a pty number a crashed run's freed
+                # It leads somewhere: another server's pty, or a pty number a crashed run freed, which another
+                # program may hold now; or this transport's own, the number the crashed run freed: nothing to say.
+                if path.exists() and os.path.realpath(path) != os.path.realpath(self.slave_path):
                     log.warning("--link %s pointed at %s, which is there (another server's pty?); it points here now, "
                                 "and the other keeps it only if it started after this one", path, os.readlink(path))
                 path.unlink()  # a stale link from a crashed run

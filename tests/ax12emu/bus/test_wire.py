@@ -53,3 +53,34 @@ def test_a_servo_the_state_directory_kept_starts_at_its_kept_rate_not_at_baud(tm
     bus = start("1-2:xl430-w250")
     assert bus.servo(1).table.get("baud_rate") == 1 and bus.servo(2).table.get("baud_rate") == 3
     bus.close()
+
+
+def test_a_state_not_loaded_is_replaced_on_disk_at_once(tmp_path):
+    """``--factory-reset`` saved the factory image only at close: a server killed before then left the old files, and
+    the next run brought back IDs the reset run never served.  Every family's file holds its factory image as soon
+    as the wire is built, before anything closes it."""
+    import json
+
+    from ax12emu.bus.state_store import StateStore
+    from ax12emu.bus.wire import build_wire_of, servo_models
+
+    models = servo_models("1:ax-12a,2:mx-28,3:xl430-w250", None, mixed=True)
+    store1, store2 = StateStore(tmp_path), StateStore(tmp_path / "2")
+
+    def start(load_state):
+        return build_wire_of(models, clock=VirtualClock(), state_store1=store1, state_store2=store2,
+                             load_state=load_state)
+
+    bus = start(True)
+    for servo_id in (1, 2, 3):
+        bus.servo(servo_id).table.set("return_delay_time", 10)
+    bus.close()
+    files = {1: store1.path_for(1), 2: store1.path_for(2), 3: store2.path_for(3)}
+    assert all(json.loads(path.read_text())["eeprom"]["return_delay_time"] == 10 for path in files.values())
+    bus = start(False)
+    try:
+        factory = {slot: bus.servo(slot).table.get("return_delay_time") for slot in files}
+        saved = {slot: json.loads(path.read_text())["eeprom"]["return_delay_time"] for slot, path in files.items()}
+        assert saved == factory and 10 not in factory.values()
+    finally:
+        bus.close()

@@ -10,6 +10,7 @@ import time
 
 import pytest
 
+from ax12emu.bus.clock import WallClock
 from ax12emu.cli.main import parse_args
 
 
@@ -30,7 +31,8 @@ def run(*args: str) -> subprocess.CompletedProcess:
         (["serve", "--eeprom-busy-ms", "nan"], "finite"),
         (["serve", "--link", "/tmp/x", "--tcp", "127.0.0.1:0"], "not allowed with|not to --tcp"),
         (["bogus"], "invalid choice"),
-        (["serve", "--params", ""], "names no file"),  # was refused as "Is a directory" (the working folder)
+        (["serve", "--params", ""], "names no file"),
+        (["serve", "--vanish", "1:inf:1"], "--vanish: expected finite seconds"),  # gone for 1 s, then never  # was refused as "Is a directory" (the working folder)
         (["conformance", "/dev/null", "--baud", "0"], "must be >= 1"),  # a division by the rate, after the checks began
     ],
 )
@@ -137,6 +139,39 @@ def test_an_external_torque_past_the_heaviest_arm_is_refused(value):
     """1e20 N m put NaN into the physics: Present Temperature read 0 with no alarm."""
     result = run("serve", f"--external-torque={value}")
     assert result.returncode == 2 and "--external-torque: must lie in" in result.stderr, result.stderr
+
+
+@pytest.mark.parametrize("served", [["--ids", "1"], ["--servo", "1:ax-12a,3:xl430-w250", "--baud", "1000000"]])
+def test_a_factory_reset_run_killed_at_once_leaves_the_factory_image(tmp_path, emulator, served):
+    """``--factory-reset`` wrote the factory image only when the server exited: one killed before any write left the
+    old state, and the next normal run served the ID 9 and Return Delay 10 the reset run never served."""
+    import json
+    import signal
+
+    from ax12emu.bus.state_store import StateStore
+    from ax12emu.bus.wire import build_wire_of, servo_models
+
+    store = StateStore(tmp_path)
+    bus = build_wire_of(servo_models("1:ax-12a", None, mixed=True), clock=WallClock(), state_store1=store)
+    bus.servo(1).table.set("return_delay_time", 10)
+    bus.servo(1).table.set("id", 9)
+    bus.close()
+    assert emulator("--state-dir", str(tmp_path), "--factory-reset", *served).stop(signal.SIGKILL) == -signal.SIGKILL
+    saved = json.loads(store.path_for(1).read_text())["eeprom"]
+    assert (saved["id"], saved["return_delay_time"]) == (1, 250)
+
+
+@pytest.mark.parametrize(("flags", "says"), [
+    (["--delay-s", "0.5"], "ax12emu: delay_s: how late the delay option's replies leave (0.5 s), and delay is not given"),
+    (["--duplicate", "1:1"], "ax12emu: duplicate: 1:1 gives servo 1 the ID it was launched as"),
+    (["--duplicate", "2:1", "--duplicate", "2:3"], "ax12emu: duplicate: ID 2 named more than once"),
+])
+def test_fault_flags_that_would_do_nothing_are_refused_in_one_line(flags, says):
+    """They were served without a word: a delay with nothing delayed, a servo duplicated as itself, the last of two
+    duplicates of one servo."""
+    result = run("serve", "--ids", "1,2", *flags)
+    assert result.returncode == 2 and says in result.stderr, result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
 
 
 def test_a_state_dir_that_is_a_file_and_a_taken_port_name_their_flag(tmp_path):

@@ -63,3 +63,42 @@ def test_one_fault_given_bare_in_python_is_refused_naming_its_field(fields, says
     """It was taken, then failed deep inside install with a TypeError naming nothing."""
     with pytest.raises(ValueError, match=says):
         FaultConfig(**fields)
+
+
+@pytest.mark.parametrize(("options", "says"), [
+    ({"delay_s": ["0.5"]}, "delay_s: how late the delay option's replies leave .* delay is not given"),
+    ({"drop": ["0.5"], "delay_s": ["0.5"]}, "delay_s: .* delay is not given"),
+    ({"vanish": ["1:inf:1"]}, r"vanish: expected finite seconds in ID:EVERY_S:FOR_S, got '1:inf:1'"),
+    ({"vanish": ["1:nan:1"]}, "vanish: expected finite seconds"),
+    ({"duplicate": ["1:1"]}, "duplicate: 1:1 gives servo 1 the ID it was launched as, which changes nothing"),
+    ({"duplicate": ["2:1", "2:3"]}, "duplicate: ID 2 named more than once"),
+    ({"vanish": ["1", "1:10:1"]}, "vanish: ID 1 named more than once"),
+    ({"vanish": ["3", "1", "2:4:1", "3:10:1", "1"]}, "vanish: ID 1, 3 named more than once"),
+])
+def test_a_setting_that_would_do_nothing_or_not_what_it_says_is_refused(options, says):
+    """Each was served without a word: a reply delay with nothing delayed, a period of inf (gone for FOR_S, then
+    never), a servo "duplicated" as its own ID, and a second vanish or duplicate of one servo replacing the first."""
+    with pytest.raises(ValueError, match=says):
+        FaultConfig.from_options(options)
+
+
+def test_the_settings_beside_the_refused_ones_are_taken():
+    """What the refusals leave alone: delay_s with delay, the default delay_s without it, one vanish and one duplicate
+    per servo, each on its own servo."""
+    config = FaultConfig.from_options({"delay": ["0.5"], "delay_s": ["0.5"], "vanish": ["1", "2:10:1"],
+                                       "duplicate": ["3:1", "4:1"]})
+    assert config.delay_s == 0.5 and len(config.vanish) == 2 and len(config.duplicate) == 2
+    assert FaultConfig(drop=0.5, delay_s=0.1).delay_s == 0.1
+
+
+def test_an_infinite_vanish_period_is_refused_from_python_too():
+    from ax12emu.bus.bus import Bus
+    from ax12emu.faults.injection import Faults
+
+    faults = Faults(Bus([1]))
+    with pytest.raises(ValueError, match="vanish: every_s must be a finite period, got inf"):
+        faults.vanish(1, every_s=float("inf"), for_s=1.0)
+    with pytest.raises(ValueError, match="vanish: every_s must be a finite period"):
+        FaultConfig(vanish=((1, float("inf"), 1.0),)).install(Bus([1]))
+    faults.vanish(1, every_s=2.0, for_s=1.0)
+    assert faults.active(1)

@@ -46,6 +46,19 @@ def test_the_faults_of_an_mx_wire_are_faults1x():
     assert isinstance(faults_for(mixed), MixedFaults) and isinstance(mixed.bus1.faults, Faults1X)
 
 
+@pytest.mark.parametrize(("ids", "warned"), [([1], False), ([2], False), ([3], False), ([9], True), ([3, 9], False)])
+def test_reply_faults_on_a_mixed_wire_warn_only_when_no_servo_of_it_answers_as_the_ids(caplog, ids, warned):
+    """Each half of a mixed wire checked the IDs against its own servos alone: ``--fault-ids 3`` warned "no servo
+    answers" from the Protocol 1.0 half while the XL430 on the 2.0 half answered as ID 3."""
+    bus = build_wire("1:ax-12a,2:mx-28,3:xl430-w250", clock=VirtualClock())
+    faults = faults_for(bus)
+    with caplog.at_level("WARNING", logger="ax12emu.faults.injection"):
+        faults.set_reply_faults(drop=1.0, ids=ids)
+    said = [record.getMessage() for record in caplog.records if "no servo answers" in record.getMessage()]
+    assert said == ([f"reply faults on IDs {ids}, which no servo answers as now (IDs [1, 2, 3])"] if warned else [])
+    bus.close()
+
+
 def test_reply_faults_act_on_every_status_packet_of_the_wire(wire):
     bus, port, ph = wire
     bus.faults.set_reply_faults(drop=1.0)

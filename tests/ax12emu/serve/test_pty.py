@@ -144,3 +144,36 @@ def test_a_host_that_is_not_raw_gets_its_line_discipline_back(transport):
         assert host.read(1) == b"\n"  # what the host's line discipline makes of it on hardware too
         host.baudrate = 57_600  # no longer announced: read for every packet
         assert transport.line_bps() == 57_600
+
+
+def test_a_link_left_at_this_transports_own_pty_is_taken_without_a_warning(tmp_path, monkeypatch, caplog):
+    """A run killed before it removed its --link left it at a pty number; the next run got that number and warned
+    the link "pointed at /dev/pts/N, which is there (another server's pty?)": its own."""
+    link = tmp_path / "ax12"
+    opened = pty_transport.pty.openpty
+
+    def openpty_as_the_crashed_run_left_it():
+        master, slave = opened()
+        link.symlink_to(os.ttyname(slave))
+        return master, slave
+
+    monkeypatch.setattr(pty_transport.pty, "openpty", openpty_as_the_crashed_run_left_it)
+    with caplog.at_level("WARNING", logger=pty_transport.__name__):
+        own = PtyTransport(link=link)
+    try:
+        assert os.readlink(link) == own.slave_path
+        assert [record.getMessage() for record in caplog.records] == []
+    finally:
+        own.close()
+
+
+def test_a_link_at_another_open_pty_is_taken_with_a_warning(tmp_path, caplog):
+    link = tmp_path / "ax12"
+    other = PtyTransport(link=link)
+    try:
+        with caplog.at_level("WARNING", logger=pty_transport.__name__):
+            second = PtyTransport(link=link)
+        second.close()
+        assert [f"pointed at {other.slave_path}, which is there" in record.getMessage() for record in caplog.records] == [True]
+    finally:
+        other.close()
