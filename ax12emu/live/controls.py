@@ -250,12 +250,21 @@ def _resume(bus: AnyBus) -> None:
 
 @dataclass(frozen=True)
 class Action:
-    """One control: its parameters (name -> checker; a default makes one optional), what it does, how the log says it."""
+    """One control: its parameters (name -> checker; a default makes one optional), what it does, how the log says
+    it (a format of the parameters, or a function of them where the text depends on a value)."""
 
     params: Mapping[str, Callable[[Any], Any]]
     run: Callable[[Controls, dict[str, Any]], Any]
-    says: str
+    says: str | Callable[[dict[str, Any]], str]
     defaults: Mapping[str, Any] = None  # type: ignore[assignment]
+
+    def said(self, params: dict[str, Any]) -> str:
+        return self.says(params) if callable(self.says) else self.says.format(**params)
+
+
+def _held(what: str, param: str, unit: str) -> Callable[[dict[str, Any]], str]:
+    """How the log says a held reading: its value, or "released" for null (the servo's own reading again)."""
+    return lambda p: f"servo {p['id']}: {what} " + ("released" if p[param] is None else f"held at {p[param]} {unit}")
 
 
 def _on(p: dict[str, Any]) -> dict[str, float]:
@@ -292,10 +301,10 @@ ACTIONS: Mapping[str, Action] = {
     "temperature": _servo_action(
         {"id": _ID, "celsius": _number("celsius", 0, 255, optional=True)},
         lambda c, p: c.set_temperature(p["id"], p["celsius"], **_on(p)),
-        "servo {id}: temperature held at {celsius} C",
+        _held("temperature", "celsius", "C"),
     ),
     "voltage": _servo_action(
-        {"id": _ID, "volts": _number("volts", 0, 25.5, optional=True)}, lambda c, p: c.set_voltage(p["id"], p["volts"], **_on(p)), "servo {id}: voltage held at {volts} V"
+        {"id": _ID, "volts": _number("volts", 0, 25.5, optional=True)}, lambda c, p: c.set_voltage(p["id"], p["volts"], **_on(p)), _held("voltage", "volts", "V")
     ),
     "pause": Action({}, lambda c, p: c.call(_pause), "simulated time paused"),
     "resume": Action({}, lambda c, p: c.call(_resume), "simulated time resumed"),
@@ -347,5 +356,5 @@ def apply(controls: Controls, message: Any) -> str:
         raise
     except (ValueError, KeyError, NotImplementedError, RuntimeError) as exc:  # e.g. an ID no servo has
         raise ControlError(f"{name}: {exc}") from None
-    said = action.says.format(**params)
+    said = action.said(params)
     return said if params.get("protocol") is None else f"{said} (Protocol {params['protocol']:.1f})"

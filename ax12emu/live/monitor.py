@@ -10,10 +10,13 @@ renders from the :class:`~ax12emu.live.sampler.Sampler`'s frames at
 
 from __future__ import annotations
 
+import logging
 import sys
 from typing import IO, Any
 
-from rich.console import Console, Group
+from rich.cells import cell_len
+from rich.console import Console, ConsoleOptions, RenderResult
+from rich.file_proxy import FileProxy
 from rich.live import Live
 from rich.table import Table
 from rich.text import Text
@@ -51,43 +54,103 @@ def _position(servo: dict[str, Any], name: str) -> str:
     return str(reading["raw"]) if reading["value"] is None else f"{reading['raw']} ({reading['value']:.1f}°)"
 
 
+#: Prefixes for a rate in bits per second, largest first.
+RATE_PREFIXES = ((1e6, "M"), (1e3, "k"), (1.0, ""))
+
+
+def _bps(servo: dict[str, Any]) -> str:
+    """The rate the servo listens at, short (1M, 57.6k): after a Baud Rate write it is why a host hears nothing."""
+    bps = servo.get("baud_bps")
+    if bps is None:
+        return "-"
+    scale, suffix = next(((scale, suffix) for scale, suffix in RATE_PREFIXES if bps >= scale), RATE_PREFIXES[-1])
+    return f"{bps / scale:.3g}{suffix}"
+
+
 #: Columns of the servo table: heading, how to show one servo (AX-12 and X series alike, from its readings),
-#: whether the column may wrap (the free-text ones, so a narrow terminal keeps the numbers whole).
-COLUMNS: tuple[tuple[str, Any, bool], ...] = (
-    ("ID", lambda s: str(s["id"]), False),
-    ("model", lambda s: f"{s['model']} (P{s['protocol']})", False),
-    ("mode", lambda s: s["mode"] + (f" {s['limits'][0]}..{s['limits'][1]}" if s["limits"] else ""), True),
-    ("position", lambda s: _position(s, "position"), False),
-    ("goal", lambda s: _position(s, "goal"), False),
-    ("velocity", lambda s: _show(_reading(s, "velocity")), False),
-    ("current/load", lambda s: _show(_reading(s, "current", "load")), False),
-    ("PWM", lambda s: _show(_reading(s, "pwm")), False),
-    ("V", lambda s: "-" if (r := _reading(s, "voltage")) is None or r["value"] is None else f"{r['value']:.1f}", False),
-    ("°C", lambda s: "-" if (r := _reading(s, "temperature")) is None else str(r["raw"]), False),
-    ("torque", lambda s: "on" if s["registers"].get("torque_enable") else "off", False),
-    ("moving", lambda s: "yes" if s["registers"].get("moving") else "no", False),
-    ("errors", lambda s: ",".join(s["alarm_names"]) or (f"{s['alarms']:#04x}" if s["alarms"] else "-"), True),
-    ("faults", lambda s: "; ".join(s["faults"]) or "-", True),
+#: and its rank: where the terminal is too narrow for every column, the lowest ranks are kept and the others left
+#: out whole (rich would squeeze every column to a few characters, the short ones to nothing: no ID at 80
+#: columns).  A servo's errors and faults, free text of any length, are lines of their own under the table.
+COLUMNS: tuple[tuple[str, Any, int], ...] = (
+    ("ID", lambda s: str(s["id"]), 0),
+    ("model", lambda s: f"{s['model']} (P{s['protocol']})", 11),
+    ("mode", lambda s: s["mode"] + (f" {s['limits'][0]}..{s['limits'][1]}" if s["limits"] else ""), 3),
+    ("position", lambda s: _position(s, "position"), 1),
+    ("goal", lambda s: _position(s, "goal"), 2),
+    ("velocity", lambda s: _show(_reading(s, "velocity")), 5),
+    ("current/load", lambda s: _show(_reading(s, "current", "load")), 9),
+    ("PWM", lambda s: _show(_reading(s, "pwm")), 12),
+    ("V", lambda s: "-" if (r := _reading(s, "voltage")) is None or r["value"] is None else f"{r['value']:.1f}", 8),
+    ("°C", lambda s: "-" if (r := _reading(s, "temperature")) is None else str(r["raw"]), 7),
+    ("torque", lambda s: "on" if s["registers"].get("torque_enable") else "off", 4),
+    ("moving", lambda s: "yes" if s["registers"].get("moving") else "no", 6),
+    ("baud", _bps, 10),
 )
+#: Characters between two columns (rich's padding, one each side).
+GAP = 2
 
 
-def render(frame: Frame) -> Group:
-    """One frame as a rich renderable: a status line, the servo table, the newest log lines."""
-    stats = frame["stats"]
-    clock = "paused" if frame["paused"] else "running"
-    head = Text(
-        f"t={frame['sim_time_s']:.3f} s ({clock})  packets/s {stats['packets_per_s']:.0f}  packets {stats['packets']}  "
-        f"status errors {stats['status_errors']}  checksum errors {stats['checksum_errors']}  "
-        f"timeouts injected {stats['timeouts_injected']}  corrupt injected {stats['corrupt_injected']}  "
-        f"Protocol {' + '.join(frame.get('protocols', ['1.0']))}"
-    )
-    table = Table(expand=False, show_edge=False, pad_edge=False)
-    for heading, _, wraps in COLUMNS:
-        table.add_column(heading, no_wrap=not wraps)
-    for servo in frame["servos"]:
-        style = "red" if servo["alarm_names"] or servo["faults"] else None
-        table.add_row(*(show(servo) for _, show, _ in COLUMNS), style=style)
-    return Group(head, table)
+def _errors(servo: dict[str, Any]) -> str:
+    return ",".join(servo["alarm_names"]) or (f"{servo['alarms']:#04x}" if servo["alarms"] else "")
+
+
+def _troubles(servo: dict[str, Any]) -> Text | None:
+    """A servo's errors and faults as a line under the table (None: it has neither); the terminal wraps it."""
+    errors, faults = _errors(servo), "; ".join(servo["faults"])
+    if not (errors or faults):
+        return None
+    said = "  ".join(part for part in (errors and f"errors {errors}", faults and f"faults {faults}") if part)
+    return Text(f"ID {servo['id']} (P{servo['protocol']}): {said}", style="red")
+
+
+def _fitting(cells: list[list[str]], width: int) -> list[int]:
+    """The columns (by index, in table order) that fit ``width``, taken by rank, each as wide as its widest cell."""
+    widths = [max(map(cell_len, column)) for column in zip(*cells)]
+    kept: list[int] = []
+    used = -GAP
+    for index in sorted(range(len(COLUMNS)), key=lambda i: COLUMNS[i][2]):
+        if used + GAP + widths[index] <= width:
+            kept.append(index)
+            used += GAP + widths[index]
+    return sorted(kept)
+
+
+class _Picture:
+    """One frame's picture, laid out at the width it is drawn at (a terminal may be resized between frames)."""
+
+    def __init__(self, frame: Frame) -> None:
+        self.frame = frame
+
+    def __rich_console__(self, console: Console, options: ConsoleOptions) -> RenderResult:
+        frame = self.frame
+        stats = frame["stats"]
+        clock = "paused" if frame["paused"] else "running"
+        yield Text(
+            f"t={frame['sim_time_s']:.3f} s ({clock})  packets/s {stats['packets_per_s']:.0f}  packets {stats['packets']}  "
+            f"status errors {stats['status_errors']}  checksum errors in the log {stats['checksum_errors']}  "
+            f"timeouts injected {stats['timeouts_injected']}  corrupt injected {stats['corrupt_injected']}  "
+            f"Protocol {' + '.join(frame.get('protocols', ['1.0']))}"
+        )
+        servos = frame["servos"]
+        rows = [[show(servo) for _, show, _ in COLUMNS] for servo in servos]
+        kept = _fitting([[heading for heading, _, _ in COLUMNS], *rows], options.max_width)
+        table = Table(box=None, show_edge=False, pad_edge=False, padding=(0, GAP // 2))
+        for index in kept:
+            table.add_column(COLUMNS[index][0], no_wrap=True)
+        for servo, row in zip(servos, rows):
+            style = "red" if servo["alarm_names"] or servo["faults"] else None
+            table.add_row(*(row[index] for index in kept), style=style)
+        yield table
+        left_out = [heading for index, (heading, _, _) in enumerate(COLUMNS) if index not in kept]
+        if left_out:
+            yield Text(f"(no room for: {', '.join(left_out)})", style="dim")
+        yield from filter(None, map(_troubles, servos))
+
+
+def render(frame: Frame) -> _Picture:
+    """One frame as a rich renderable: a status line, the servo table (the columns that fit the width it is drawn
+    at), and a line for each servo with errors or faults."""
+    return _Picture(frame)
 
 
 class Monitor:
@@ -115,12 +178,32 @@ class Monitor:
         self._every = max(1, round((1.0 / refresh_hz if self.console.is_terminal else plain_every_s) / sampler.period_s))
         self._live = Live(console=self.console, auto_refresh=False, redirect_stdout=False, redirect_stderr=False) if self.console.is_terminal else None
         self.drawn = 0
+        #: Log handlers that wrote to the monitor's stream, now printing through its console (see :meth:`start`).
+        self._rerouted: list[logging.StreamHandler] = []
 
     def start(self) -> "Monitor":
         if self._live is not None:
             self._live.start()
+            self._reroute_logging()
         self.sampler.subscribe(self._on_frame)
         return self
+
+    def _reroute_logging(self) -> None:
+        """While the table is redrawn in place, a log line written straight to its stream lands inside the table and
+        is drawn over: the root logger's handlers on that stream print through the console instead, which puts each
+        line above the table (rich's Live does this for ``sys.stderr`` itself, but a handler keeps the stream it was
+        given)."""
+        stream = self.console.file
+        for handler in logging.getLogger().handlers:
+            if isinstance(handler, logging.StreamHandler) and handler.stream is stream:
+                handler.setStream(FileProxy(self.console, stream))  # type: ignore[arg-type]
+                self._rerouted.append(handler)
+
+    def _restore_logging(self) -> None:
+        stream = self.console.file
+        for handler in self._rerouted:
+            handler.setStream(stream)
+        self._rerouted.clear()
 
     def _on_frame(self, frame: Frame) -> None:
         if frame["seq"] % self._every == 0:
@@ -136,6 +219,7 @@ class Monitor:
     def close(self) -> None:
         self.sampler.unsubscribe(self._on_frame)
         if self._live is not None:
+            self._restore_logging()
             self._live.stop()
         elif self.sampler.latest is not None:
             self._draw(self.sampler.latest)  # the last picture, for the log

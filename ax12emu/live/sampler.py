@@ -166,6 +166,8 @@ class Sampler:
             **self.stats,
             "timeouts_injected": faults.get("dropped", 0) + faults.get("delayed", 0),
             "corrupt_injected": faults.get("corrupted", 0),
+            # Last: a counter the bus's server keeps over every packet (status errors) replaces the log's own count,
+            # which misses what the log left out; checksum errors are the log's alone.
             **{k: v for k, v in counters.items() if k != "packets_in"},
         }
 

@@ -29,7 +29,7 @@ from ax12emu.servo.classic import CURRENT_ZERO
 
 from .buses import AnyBus, parts, protocol_name
 
-__all__ = ["take", "REGISTERS", "ERROR_BITS", "HW_ERROR_BITS", "READINGS", "REGISTER_UNITS", "MODES", "model_of"]
+__all__ = ["take", "range_counts", "REGISTERS", "ERROR_BITS", "HW_ERROR_BITS", "READINGS", "REGISTER_UNITS", "MODES", "model_of"]
 
 #: Registers shown per servo, by control-table name, where the servo's table has them (the
 #: page and the JSON snapshot use these names).  The union of the AX-12's and the X series'
@@ -37,6 +37,7 @@ __all__ = ["take", "REGISTERS", "ERROR_BITS", "HW_ERROR_BITS", "READINGS", "REGI
 REGISTERS = (
     "model_number",
     "firmware_version",
+    "baud_rate",
     "return_delay_time",
     "operating_mode",
     "control_mode",
@@ -120,9 +121,9 @@ POSITION_SCALE = "position_range_deg/goal_span"
 #: MX-64/MX-106 "Current(68)": "I = ( 4.5mA ) * (CURRENT - 2048)", the unit the model file's ``current_unit_ma``
 #: and the zero the firmware model's (:data:`~ax12emu.servo.classic.CURRENT_ZERO`, so view and servo agree).
 #: Positions and currents (1 mA, 2.69 mA) differ per model: each model file states them.  A position count is
-#: the file's position range over the goal register's span (300 deg over 0..1023 on the AX-12A, 360 over
-#: 0..4095 on the X series), as the dial draws it; the data sheets' rounded resolution (0.29 deg) put 1023
-#: at 296.7 deg on a 300 deg dial.
+#: the file's position range over the counts it spans (:func:`range_counts`: 300 deg over 0..1023 on the AX-12A,
+#: 1023 at 300 deg; a whole turn of 4096 counts on the X and MX series, 0.088 deg a count), as the dial draws it;
+#: the data sheets' rounded resolution (0.29 deg) put 1023 at 296.7 deg on a 300 deg dial.
 REGISTER_UNITS: Mapping[str, Unit] = {
     "present_position": Unit("deg", model_field=POSITION_SCALE),
     "goal_position": Unit("deg", model_field=POSITION_SCALE),
@@ -187,13 +188,27 @@ def model_of(servo: Any, protocol: float) -> ServoModel | None:
     return _models_by_number(protocol_name(protocol)).get(servo.table.get("model_number"))
 
 
+#: A position range of this many degrees closes the circle: its last count is one short of the first again.
+FULL_TURN_DEG = 360.0
+
+
+def range_counts(range_deg: float, maximum: int) -> int:
+    """How many counts the goal register's span ``0..maximum`` puts over ``range_deg``.
+
+    A range short of a turn has two ends, 0 and ``maximum`` (e-manual AX-12A Goal Position: 0..1023 over
+    300 deg); a whole turn has none: count ``maximum + 1`` is count 0 again (e-manual X series Goal Position:
+    0.088 deg a count, 0..4095 a turn, extended -1,048,575..1,048,575 for -256..256 turns: 4096 a turn).
+    """
+    return maximum + 1 if range_deg >= FULL_TURN_DEG else maximum
+
+
 def _model_field(spec: ServoModel | None, field: str, layout: Any = None) -> Any:
     """``"section.name"`` of a model file (``physical.current_unit_ma``), None where the file has no such number;
-    :data:`POSITION_SCALE`: degrees per position count, the position range over the goal register's span."""
+    :data:`POSITION_SCALE`: degrees per position count, the position range over the counts it spans."""
     if field == POSITION_SCALE:
         range_deg = getattr(getattr(spec, "physical", None), "position_range_deg", None)
         goal = layout.by_name.get("goal_position") if layout is not None else None
-        return None if range_deg is None or goal is None or not goal.maximum else range_deg / goal.maximum
+        return None if range_deg is None or goal is None or not goal.maximum else range_deg / range_counts(range_deg, goal.maximum)
     section, name = field.split(".")
     return getattr(getattr(spec, section, None), name, None)
 
@@ -342,9 +357,14 @@ def _servo(protocol: float, servo: Any, slot: int, faults_active: Callable[[int]
         "readings": readings,
         "mode": mode,
         "limits": limits if limits_apply else None,
-        # Dial: the goal register's span covers the model's position range (0..1023 over 300 deg, 0..4095 over 360).
+        # Dial: the goal register's span covers the model's position range (0..1023 over 300 deg, 0..4095 over 360),
+        # ``counts`` of them over ``range_deg`` (:func:`range_counts`).
         "dial": None if goal is None or physical is None or physical.position_range_deg is None
-        else {"max": goal.maximum, "range_deg": physical.position_range_deg},
+        else {"max": goal.maximum, "range_deg": physical.position_range_deg,
+              "counts": range_counts(physical.position_range_deg, goal.maximum)},
+        # The rate the servo listens at now (its Baud Rate register by its own table of rates): a host still at the
+        # old rate after a Baud Rate write hears nothing, and this says why.
+        "baud_bps": getattr(servo, "baud_bps", None),
         "alarms": alarms,
         "alarm_names": [name for name, bit in plan.error_bits.items() if alarms & bit],
         "alarm_bits": list(plan.error_bits),

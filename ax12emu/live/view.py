@@ -62,7 +62,10 @@ class LiveView:
         """A live view of a BusServer's bus of either protocol, or both (call it before the server runs, or from its thread)."""
         tap = ByteTap(server.trace)
         server.trace = tap
-        counters = lambda: {"packets_in": server.packets_in, "bytes_dropped": server.bytes_dropped, "collisions": server.collisions}
+        # The server's count of status packets with error bits stands in for the log's, which decodes at most
+        # ``max_chunks`` chunks a frame (the sampler's stats take a counter of the same name over their own).
+        counters = lambda: {"packets_in": server.packets_in, "bytes_dropped": server.bytes_dropped, "collisions": server.collisions,
+                            "status_errors": server.status_errors}
         if controls is None:
             controls = ServedControls(lambda fn: server.call(fn, CONTROL_TIMEOUT_S), servos=len(server.bus.servos), seed=seed)
         # A short wait: once the server has stopped, a pending sample must not hold the close up.

@@ -28,9 +28,12 @@ after its headers 408 after ``BODY_TIMEOUT_S``; each WebSocket
 client has a queue of ``QUEUE_FRAMES`` frames, and a client that falls that
 far behind (one that never reads) is dropped; requests (and a socket's
 controls) are answered at most ``REQUESTS_PER_S`` a second, the rest wait
-their turn or, past ``MAX_REQUEST_WAIT_S``, get 503; past ``max_connections`` open
+their turn or, past ``MAX_REQUEST_WAIT_S``, get 503 (a WebSocket upgrade too; a socket's messages
+of any kind, malformed or binary or pings, each take a turn, and a socket whose
+next turn is that far away is closed with 1013); past ``max_connections`` open
 connections a new one gets 503 and is closed; idle keep-alive connections
-close after ``KEEPALIVE_S``.
+close after ``KEEPALIVE_S``.  A client's faults are logged in one line each, a burst of them and then one a
+second (:mod:`~ax12emu.live.logs`), and from a thread of their own, never from the event loop.
 
 Other web pages: the server answers only requests addressed to it (a ``Host`` of the bound address,
 ``localhost``, ``127.0.0.1`` or ``[::1]`` with its port; any IP address when bound to every interface),
@@ -54,12 +57,13 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import urlsplit
 
-from aiohttp import WSMsgType, web
+from aiohttp import WSCloseCode, WSMsgType, web
 from aiohttp.http_exceptions import HttpProcessingError
 from aiohttp.web_protocol import RequestPayloadError
 
 from ax12emu.serve.transports.tcp import is_loopback
 
+from . import logs
 from .controls import ACTIONS, ControlError, Controls, apply
 from .sampler import Frame, Sampler
 
@@ -83,9 +87,10 @@ KEEPALIVE_S = 15.0
 FIRST_FRAME_WAIT_S = 2.0
 #: Newest log lines ``/api/log`` returns by default and at most.
 LOG_LINES = 200
-#: Requests the live view answers per second, all routes but the WebSocket's frames together: a page needs a
-#: handful to load and one per control, a script polling the snapshot 25 (the sampler's rate).  Past it requests
-#: wait their turn, so a flood of them costs the bus (which shares this process) little more than the page does.
+#: Requests the live view answers per second, all routes, WebSocket upgrades and every message a socket sends
+#: together (only the frames it streams are not counted): a page needs a handful to load and one per control, a
+#: script polling the snapshot 25 (the sampler's rate).  Past it requests wait their turn, so a flood of them
+#: costs the bus (which shares this process) little more than the page does.
 REQUESTS_PER_S = 100.0
 #: A request whose turn is further away than this gets 503 at once instead of waiting.
 MAX_REQUEST_WAIT_S = 2.0
@@ -97,6 +102,9 @@ BODY_TIMEOUT_S = 5.0
 
 #: Host names that always mean this machine (the loopback address by name and number).
 LOOPBACK_NAMES = ("localhost", "127.0.0.1", "::1")
+#: The loggers the server's event loop writes to: their records are written from a thread of their own.
+LOOP_LOGGERS = ("ax12emu.live.web", "aiohttp.server", "aiohttp.web", "aiohttp.access", "aiohttp.websocket",
+                "aiohttp.internal")
 #: Addresses that bind every interface: requests to any of the machine's addresses reach the server.
 _EVERY_INTERFACE = ("", "0.0.0.0", "::")
 #: The one type ``/api/control`` takes: another origin's page can send a body as text/plain or a form without
@@ -145,9 +153,17 @@ def _parse_json(data: bytes | str) -> Any:
 
 
 class _ClientFaults(logging.Filter):
-    """aiohttp logs a client's own faults (a connection dropped mid-request, a malformed request it has already
-    answered with 400) as errors with a traceback, tens of lines each: one INFO line instead, so a careless or
-    hostile client cannot fill the log or the terminal a ``--monitor`` draws on."""
+    """A client's own faults in one INFO line each, and only so many of them (:class:`~ax12emu.live.logs.ClientFaultBudget`).
+
+    aiohttp logs a client's faults (a connection dropped mid-request, a malformed request it has already answered
+    with 400) as errors with a traceback, tens of lines each: one INFO line instead.  Those and this server's own
+    INFO lines (refusals, bad controls, dropped sockets) are what a careless or hostile client makes happen: past a
+    burst, one a second gets through, so such a client cannot fill the log or the terminal a ``--monitor`` draws on.
+    """
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.budget = logs.ClientFaultBudget()
 
     def filter(self, record: logging.LogRecord) -> bool:
         exc = record.exc_info[1] if record.exc_info else None
@@ -156,10 +172,11 @@ class _ClientFaults(logging.Filter):
             record.msg, record.args = "live view: a client's request ended: %s: %s", (type(exc).__name__, said)
             record.exc_info = record.exc_text = None
             record.levelno, record.levelname = logging.INFO, "INFO"
-        return True
+        return record.levelno > logging.INFO or self.budget.admit(record)
 
 
-_CLIENT_FAULTS = _ClientFaults()
+#: The loggers a client's faults are logged on.
+_CLIENT_FAULT_LOGGERS = ("aiohttp.server", __name__)
 
 
 class _Refuse(asyncio.Protocol):
@@ -210,6 +227,8 @@ class WebServer:
         self._server: asyncio.base_events.Server | None = None
         #: When the next request may be answered (event-loop time): see :meth:`_turn`.
         self._next_slot_s = 0.0
+        #: This server's client-fault lines and their budget, while it runs.
+        self._client_faults: _ClientFaults | None = None
 
     @property
     def url(self) -> str:
@@ -256,9 +275,10 @@ class WebServer:
             loop.close()
 
     async def _setup(self) -> None:
-        server_log = logging.getLogger("aiohttp.server")
-        if _CLIENT_FAULTS not in server_log.filters:
-            server_log.addFilter(_CLIENT_FAULTS)
+        self._client_faults = _ClientFaults()
+        for name in _CLIENT_FAULT_LOGGERS:
+            logging.getLogger(name).addFilter(self._client_faults)
+        logs.off_loop(LOOP_LOGGERS)  # after the budget; released in _teardown, which follows a failed setup too
         app = web.Application(client_max_size=MAX_BODY_BYTES, middlewares=[self._paced, self._guarded])
         app.router.add_get("/", self._index)
         app.router.add_static("/assets/", ASSETS, show_index=False)
@@ -301,6 +321,11 @@ class WebServer:
             await self._server.wait_closed()
         if self._runner is not None:
             await self._runner.cleanup()
+        if self._client_faults is not None:
+            for name in _CLIENT_FAULT_LOGGERS:
+                logging.getLogger(name).removeFilter(self._client_faults)
+            self._client_faults = None
+            logs.release()
 
     # -- frames -----------------------------------------------------------------------------
     def _on_frame(self, frame: Frame) -> None:
@@ -345,15 +370,14 @@ class WebServer:
 
     @web.middleware
     async def _paced(self, request: web.Request, handler: Any) -> web.StreamResponse:
-        # The frames are paced by the sampler, a socket's controls by _serve_messages; a refused upgrade, as any
-        # other request, here (so refusals are logged at a bounded rate).
-        if request.path != "/ws" or self._refusal(request) is not None:
-            wait = self._turn()
-            if wait is None:
-                return _error(503, f"the live view answers {REQUESTS_PER_S:g} requests a second and more are "
-                                   "waiting; frames stream on /ws")
-            if wait:
-                await asyncio.sleep(wait)
+        # Every request, a WebSocket upgrade too (each sends a hello with the log: opened and closed in a loop, they
+        # cost as much as any request); the frames are paced by the sampler, a socket's messages by _serve_messages.
+        wait = self._turn()
+        if wait is None:
+            return _error(503, f"the live view answers {REQUESTS_PER_S:g} requests a second and more are "
+                               "waiting; frames stream on /ws")
+        if wait:
+            await asyncio.sleep(wait)
         return await handler(request)
 
     # -- other web pages ---------------------------------------------------------------------
@@ -472,7 +496,8 @@ class WebServer:
     async def _ws(self, request: web.Request) -> web.StreamResponse:
         if len(self._clients) >= self.max_clients:
             return _error(503, f"at most {self.max_clients} live-view clients at once")
-        ws = web.WebSocketResponse(max_msg_size=MAX_MESSAGE_BYTES, heartbeat=None)
+        # autoping off: a ping is a message as any other, answered in its turn (aiohttp would answer each at once).
+        ws = web.WebSocketResponse(max_msg_size=MAX_MESSAGE_BYTES, heartbeat=None, autoping=False)
         await ws.prepare(request)
         sock = request.transport.get_extra_info("socket") if request.transport is not None else None
         if sock is not None:  # a client that stops reading fills this, then its queue, then is dropped
@@ -492,27 +517,43 @@ class WebServer:
         return ws
 
     async def _serve_messages(self, ws: web.WebSocketResponse) -> None:
-        """Controls sent as WebSocket text messages, each answered with a reply or an error."""
+        """Controls sent as WebSocket text messages, each answered with a reply or an error.
+
+        Every message takes its turn before it is looked at: a malformed or binary one costs an answer as much as a
+        control does.  A client whose next turn is over ``MAX_REQUEST_WAIT_S`` away is sending faster than any
+        page does: it is closed (1013, try again later) rather than answered at once, which would be unpaced.
+        """
         async for message in ws:
-            if message.type != WSMsgType.TEXT:
-                if message.type == WSMsgType.ERROR:
-                    return
-                await ws.send_str(json.dumps({"type": "error", "error": "send control messages as JSON text"}))
-                continue
-            try:
-                parsed = _parse_json(message.data)
-            except ValueError as exc:
-                await ws.send_str(json.dumps({"type": "error", "error": f"not JSON: {exc}"}))
-                continue
+            if message.type == WSMsgType.ERROR:
+                return
             wait = self._turn()
             if wait is None:
-                await ws.send_str(json.dumps({"type": "error", "error": f"more than {REQUESTS_PER_S:g} requests a "
-                                              "second are waiting: control not taken"}))
-                continue
+                await self._drop_flooding(ws)
+                return
             if wait:
                 await asyncio.sleep(wait)
-            status, body = await self._apply(parsed)
-            await ws.send_str(json.dumps({"type": "reply", "status": status, **body}))
+            await self._answer(ws, message)
+
+    async def _drop_flooding(self, ws: web.WebSocketResponse) -> None:
+        log.info("live view: closed a WebSocket client sending over %g messages a second", REQUESTS_PER_S)
+        await ws.close(code=WSCloseCode.TRY_AGAIN_LATER,
+                       message=f"more than {REQUESTS_PER_S:g} messages a second".encode())
+
+    async def _answer(self, ws: web.WebSocketResponse, message: Any) -> None:
+        if message.type == WSMsgType.PING:
+            await ws.pong(message.data)
+            return
+        if message.type != WSMsgType.TEXT:  # binary; a pong, which no ping of ours asked for, needs no answer
+            if message.type == WSMsgType.BINARY:
+                await ws.send_str(json.dumps({"type": "error", "error": "send control messages as JSON text"}))
+            return
+        try:
+            parsed = _parse_json(message.data)
+        except ValueError as exc:
+            await ws.send_str(json.dumps({"type": "error", "error": f"not JSON: {exc}"}))
+            return
+        status, body = await self._apply(parsed)
+        await ws.send_str(json.dumps({"type": "reply", "status": status, **body}))
 
     async def _write(self, ws: web.WebSocketResponse, queue: asyncio.Queue[str]) -> None:
         try:

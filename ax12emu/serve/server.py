@@ -78,6 +78,9 @@ PHYSICS_DEFER_S = 0.0003
 EARLY_STEP_S = 0.00015
 #: What ``next`` returns from a finished physics step.
 _DONE = object()
+#: Where a status packet's error field is, by whether it is a Protocol 2.0 one (header FF FF FD 00, then ID,
+#: length, 0x55, Error; Protocol 1.0: FF FF, ID, length, Error; a 1.0 packet's length byte is never 0).
+_ERROR_AT = (4, 8)
 
 
 class ServerStopped(RuntimeError):
@@ -162,6 +165,9 @@ class BusServer:
         self.packets_in = 0
         self.bytes_dropped = 0
         self.collisions = 0
+        #: Status packets put on the line with error bits set (the live view's "status errors": counted here, where
+        #: every reply passes, because its packet log decodes only part of a fast host's traffic).
+        self.status_errors = 0
 
     def stop(self) -> None:
         """Ask the loop to end after the current iteration (safe from a signal handler)."""
@@ -273,6 +279,13 @@ class BusServer:
         """Put one packet's replies on the line: now, or queued for their delay (and pace)."""
         if not replies:
             return
+        for reply in replies:
+            data = reply.data
+            # (The later servos' shares of a Fast Sync Read's one packet carry their errors elsewhere: not counted.)
+            if not reply.continues and len(data) > 4:
+                at = _ERROR_AT[data[2] == 0xFD and data[3] == 0]
+                if at < len(data) and data[at]:
+                    self.status_errors += 1
         if len(replies) == 1 and replies[0].delay_s == 0.0 and not (self.pace or self._queue):
             data = replies[0].data  # the common case at Return Delay Time 0: _emit, one call shorter
             self._replied = True

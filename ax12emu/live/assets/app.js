@@ -51,6 +51,7 @@ const FIELDS = [
   ["PWM", (s, r) => shown(r.pwm)],
   ["voltage", (s, r) => shown(r.voltage)],
   ["temperature", (s, r) => shown(r.temperature)],
+  ["baud", (s) => s.baud_bps === null ? "–" : `${s.baud_bps.toLocaleString("en-US", {maximumFractionDigits: 0})} bps` + ("baud_rate" in s.registers ? ` (${s.registers.baud_rate})` : "")],
   ["torque", (s) => s.registers.torque_enable ? "on" : "off"],
   ["LED", (s) => "led" in s.registers ? (s.registers.led ? "on" : "off") : "–"],
   ["moving", (s) => yesNo(s.registers.moving)],
@@ -113,18 +114,19 @@ function servoAction(node, act) {
   control({...messages[act], ...on});
 }
 
-// The goal register's span covers the model's range (AX-12: 0..1023 over 300 degrees, the dead band
-// down; X series: 0..4095 over the whole turn); the middle points up.  Extended positions wrap.
+// The goal register's span covers the model's range (AX-12: 0..1023 over 300 degrees, 1023 at the end, the
+// dead band down; X series: 4096 counts a whole turn, 4096 back at 0); the middle points up.  Extended
+// positions wrap.  dial.counts: the counts over range_deg, as the snapshot's degrees take them.
 function dialAngle(position, dial) {
   const span = dial.max + 1;
   const wrapped = ((position % span) + span) % span;
-  return (-90 - dial.range_deg / 2 + wrapped * dial.range_deg / dial.max) * Math.PI / 180;
+  return (-90 - dial.range_deg / 2 + wrapped * dial.range_deg / dial.counts) * Math.PI / 180;
 }
 
 function drawDial(canvas, servo, r) {
   const ctx = canvas.getContext("2d");
   const w = canvas.width, h = canvas.height, cx = w / 2, cy = h / 2, radius = Math.min(w, h) / 2 - 8;
-  const dial = servo.dial || {max: 1023, range_deg: 300};
+  const dial = servo.dial || {max: 1023, range_deg: 300, counts: 1023};
   const present = r.position.raw, goal = r.goal.raw;
   ctx.clearRect(0, 0, w, h);
   ctx.lineWidth = 6;
@@ -266,7 +268,7 @@ function onFrame(frame) {
   }
   const s = frame.stats;
   $("clock").textContent = `t = ${frame.sim_time_s.toFixed(3)} s ${frame.paused ? "(paused)" : ""} · Protocol ${frame.protocols.join(" + ")}`;
-  $("stats").textContent = `packets/s ${s.packets_per_s.toFixed(0)} · packets ${s.packets} · status errors ${s.status_errors} · checksum errors ${s.checksum_errors} · timeouts injected ${s.timeouts_injected} · corrupt injected ${s.corrupt_injected}`;
+  $("stats").textContent = `packets/s ${s.packets_per_s.toFixed(0)} · packets ${s.packets} · status errors ${s.status_errors} · checksum errors in the log ${s.checksum_errors} · timeouts injected ${s.timeouts_injected} · corrupt injected ${s.corrupt_injected}`;
   document.body.dataset.frames = frame.seq;
   if (frame.log.length) addLog(frame.log);
 }

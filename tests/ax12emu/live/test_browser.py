@@ -160,6 +160,11 @@ def test_x_series_cards_on_a_mixed_wire_show_units_and_take_their_own_alarms(pag
             page.wait_for_function("document.querySelector('#servo-1-p20 .dial')?.dataset.present === '2048'", timeout=5000)
             fields = x_card.locator(".fields").inner_text()
             assert "2048 (180.0°)" in fields and "rpm" in fields and "11.1 V" in fields and "position 0..4095" in fields
+            assert "1,000,000 bps (3)" in fields  # the rate it listens at, and its Baud Rate register
+            # The dial as the degrees: 4096 counts a turn (e-manual X series), so 1024 is a quarter of it.
+            dial = next(servo["dial"] for servo in view.sampler.latest["servos"] if servo["protocol"] == "2.0")
+            quarter_deg = page.evaluate("(dial) => (dialAngle(1024, dial) - dialAngle(0, dial)) * 180 / Math.PI", dial)
+            assert quarter_deg == pytest.approx(90.0)
             x_card.locator("select[data-field=alarm]").select_option("electrical_shock")
             x_card.locator("button[data-act=alarm]").click()
             page.wait_for_function(

@@ -38,6 +38,14 @@ def test_temperature_and_voltage_are_pinned_in_each_models_own_register(x_bus):
     assert servo_of(bus, 3)["faults"] == []
 
 
+def test_releasing_a_held_reading_says_released(x_bus):
+    """null releases a held reading: the log and the answer say so, not "held at None"."""
+    _, controls = x_bus
+    apply(controls, {"action": "temperature", "id": 1, "celsius": 75})
+    assert apply(controls, {"action": "temperature", "id": 1, "celsius": None}) == "servo 1: temperature released"
+    assert apply(controls, {"action": "voltage", "id": 3, "volts": None}) == "servo 3: voltage released"
+
+
 def test_a_push_turns_a_limp_x_series_shaft(x_bus):
     bus, controls = x_bus
     before = bus.read(2, "present_position")

@@ -11,6 +11,7 @@ import json
 import logging
 import os
 import socket
+import threading
 import time
 import urllib.error
 import urllib.request
@@ -26,6 +27,7 @@ from ax12emu import VirtualBus  # noqa: E402
 from ax12emu.live import Sampler  # noqa: E402
 from ax12emu.live import web as web_module  # noqa: E402
 from ax12emu.live.web import MAX_MESSAGE_BYTES, QUEUE_FRAMES, WebServer  # noqa: E402
+from ax12emu.protocol.packets import Instruction, InstructionPacket  # noqa: E402
 
 
 def get_json(url: str) -> tuple[int, dict]:
@@ -352,3 +354,184 @@ def test_which_hosts_name_the_server():
     assert web_module._authority("localhost") == ("localhost", 80)
     assert web_module._authority("[::1]:8080") == ("::1", 8080)
     assert web_module._authority("x:port") is None and web_module._authority("a@b:1") is None
+
+
+# -- every message and upgrade takes a turn ------------------------------------------------------
+
+
+async def _answers_to_a_flood(url: str, send, seconds: float) -> int:
+    """Answers (errors, replies, pongs) to ``send``'s messages kept 16 in flight for ``seconds``."""
+    answers = sent = 0
+    async with aiohttp.ClientSession() as session, session.ws_connect(url.replace("http", "ws") + "ws", max_msg_size=0,
+                                                                      autoping=False) as ws:
+        deadline = time.monotonic() + seconds
+        while (left := deadline - time.monotonic()) > 0:
+            while sent - answers < 16:
+                await send(ws)
+                sent += 1
+            try:
+                message = await ws.receive(timeout=left)
+            except asyncio.TimeoutError:
+                break
+            if message.type in (aiohttp.WSMsgType.CLOSE, aiohttp.WSMsgType.CLOSED, aiohttp.WSMsgType.ERROR):
+                break
+            answers += message.type == aiohttp.WSMsgType.PONG or json.loads(message.data)["type"] in ("error", "reply")
+    return answers
+
+
+FLOODS = {
+    "malformed text": lambda ws: ws.send_str("not json"),
+    "nested too deeply": lambda ws: ws.send_str("[" * 3000),
+    "binary": lambda ws: ws.send_bytes(b"\0" * 16),
+    "ping": lambda ws: ws.ping(b"x"),
+}
+
+
+@pytest.mark.parametrize("kind", list(FLOODS))
+def test_a_flood_of_socket_messages_is_answered_at_most_requests_per_s(bus, kind):
+    """Each message takes its turn before it is looked at: malformed, binary or a ping, it is answered no faster
+    than a control (unpaced they were answered 5,000-37,000 a second, which slowed the served bus)."""
+    seconds = 1.0
+    answers = asyncio.run(_answers_to_a_flood(bus.web_url, FLOODS[kind], seconds))
+    assert 10 <= answers <= web_module.REQUESTS_PER_S * seconds * 1.1 + 5, answers
+
+
+def test_websocket_upgrades_are_paced_too(bus):
+    """Each upgrade sends a hello with the log: opened and closed in a loop, they cost what any request does."""
+
+    async def upgrades(seconds: float) -> int:
+        opened = 0
+        async with aiohttp.ClientSession() as session:
+            deadline = time.monotonic() + seconds
+            while time.monotonic() < deadline:
+                async with session.ws_connect(bus.web_url.replace("http", "ws") + "ws") as ws:
+                    await ws.receive(timeout=5)
+                    opened += 1
+        return opened
+
+    seconds = 1.0
+    assert asyncio.run(upgrades(seconds)) <= web_module.REQUESTS_PER_S * seconds * 1.1 + 5
+
+
+def test_a_socket_whose_turn_is_too_far_away_is_closed_not_answered_at_once(bus, monkeypatch):
+    """Past ``MAX_REQUEST_WAIT_S`` of waiting requests a socket's message is not answered with an error at once
+    (which would be unpaced): the socket is closed with 1013, try again later."""
+    monkeypatch.setattr(web_module, "REQUESTS_PER_S", 5.0)
+    monkeypatch.setattr(web_module, "MAX_REQUEST_WAIT_S", 0.3)
+    time.sleep(0.3)  # the fixture's own requests' turns are over
+
+    async def run() -> tuple[int | None, int]:
+        async with aiohttp.ClientSession() as session, session.ws_connect(bus.web_url.replace("http", "ws") + "ws") as ws:
+            await ws.receive(timeout=5)  # hello
+            # The page's requests hold the turns of the next 0.4 s (2 a turn at 5 a second) ...
+            polls = [asyncio.ensure_future(session.get(bus.web_url + "api/log?n=1")) for _ in range(2)]
+            await asyncio.sleep(0.05)
+            await ws.send_str("not json")  # ... so this message's turn is past 0.3 s away
+            answers = 0
+            deadline = time.monotonic() + 3
+            while (left := deadline - time.monotonic()) > 0:  # frames stream meanwhile: until closed, or 3 s
+                try:
+                    message = await ws.receive(timeout=left)
+                except asyncio.TimeoutError:
+                    break
+                if message.type != aiohttp.WSMsgType.TEXT:
+                    break
+                answers += json.loads(message.data)["type"] == "error"
+            for poll in polls:
+                (await poll).release()
+            return ws.close_code, answers
+
+    close_code, answers = asyncio.run(run())
+    assert close_code == 1013 and answers == 0
+
+
+# -- a client's faults in the log -------------------------------------------------------------
+
+
+def _malformed_requests(bus, count: int) -> None:
+    host, port = host_port(bus.web_url)
+    for _ in range(count):
+        answer = _raw_request(host, port, b"POST /api/control HTTP/1.1\r\nHost: x\r\nContent-Length: -1\r\n\r\n")
+        assert answer.split(b"\r\n")[0].endswith(b" 400 Bad Request"), answer[:100]
+
+
+def _client_fault_lines(caplog) -> list[str]:
+    return [r.getMessage() for r in caplog.records if r.name == "aiohttp.server"]
+
+
+def test_a_flood_of_malformed_requests_logs_a_bounded_number_of_lines(bus, caplog):
+    """Each malformed request was an INFO line, with no limit: a flood filled the terminal a monitor draws on, or
+    a stderr pipe nobody read (the event loop then blocked writing to it).  A burst of lines, then one a second,
+    the next one shown saying how many were not."""
+    from ax12emu.live.logs import CLIENT_FAULT_BURST, CLIENT_FAULT_LINES_PER_S
+
+    flood = 3 * CLIENT_FAULT_BURST
+    with caplog.at_level(logging.INFO, logger="aiohttp.server"):
+        start = time.monotonic()
+        _malformed_requests(bus, flood)
+        elapsed_s = time.monotonic() - start
+        time.sleep(0.2)  # written from the log's own thread
+        shown = len(_client_fault_lines(caplog))
+        assert CLIENT_FAULT_BURST <= shown <= CLIENT_FAULT_BURST + elapsed_s * CLIENT_FAULT_LINES_PER_S + 1, shown
+        time.sleep(1.0 / CLIENT_FAULT_LINES_PER_S)
+        _malformed_requests(bus, 1)
+        time.sleep(0.2)
+    lines = _client_fault_lines(caplog)
+    assert f"(and {flood - shown} more client faults not shown)" in lines[-1], lines[-3:]
+
+
+class _Stalled(logging.Handler):
+    """A handler whose stream nobody reads (a full stderr pipe): each write waits until ``free`` is set."""
+
+    def __init__(self) -> None:
+        super().__init__(logging.INFO)
+        self.free = threading.Event()
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.free.wait(30)
+
+
+def test_a_stalled_log_never_holds_the_page_up(bus):
+    """The page's event loop never writes a log line itself: with the log's stream stalled, it still answers."""
+    stalled = _Stalled()
+    server_log = logging.getLogger("aiohttp.server")
+    level = server_log.level
+    server_log.setLevel(logging.INFO)
+    logging.getLogger().addHandler(stalled)
+    try:
+        _malformed_requests(bus, 3)  # each one INFO line, now waiting on the stalled stream
+        status, body = http_json(bus.web_url + "api/servos", method="GET")
+        assert status == 200 and len(body["servos"]) == 18
+    finally:
+        stalled.free.set()
+        logging.getLogger().removeHandler(stalled)
+        server_log.setLevel(level)
+
+
+# -- statistics a fast host cannot outrun -------------------------------------------------------------
+
+
+@pytest.mark.parametrize("servo", ["1:ax-12a", "1:xl430-w250"])
+def test_status_errors_count_every_reply_however_fast_the_host_polls(servo):
+    """The log decodes at most 80 chunks a frame; the status errors are the server's count, so a host polling
+    faster than that (here 150 reads between two frames) is counted whole."""
+    from ax12emu.live import LiveView
+    from ax12emu.protocol.packets2 import Instruction2, InstructionPacket2
+
+    with VirtualBus(servo=servo, transport="tcp", baud_bps=1_000_000) as bus:
+        view = bus.call(lambda _: LiveView.for_server(bus._server))  # the tap goes in on the serving thread
+        bus.faults.force_alarm(1, "overload")  # every status packet from now on carries an error bit
+        before = view.sampler.sample()["stats"]["status_errors"]
+        two = "xl430" in servo
+        read = (InstructionPacket2(1, Instruction2.READ, bytes([132, 0, 4, 0])) if two
+                else InstructionPacket(1, Instruction.READ, bytes([36, 2]))).encode()
+        host, port = bus.port.split("//")[1].rsplit(":", 1)
+        with socket.create_connection((host, int(port)), timeout=5) as sock:
+            for _ in range(150):
+                sock.sendall(read)
+                got = b""
+                while len(got) < (15 if two else 8):
+                    got += sock.recv(64)
+                assert got[8 if two else 4], got  # the error field
+        after = view.sampler.sample()["stats"]
+    assert after["status_errors"] - before == 150, after

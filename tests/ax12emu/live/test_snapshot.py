@@ -44,7 +44,7 @@ def test_x_series_servos_show_their_own_registers_and_units():
     assert xl430["registers"]["goal_position"] == 3000 and xl430["registers"]["present_position"] == table["present_position"]
     assert "cw_angle_limit" not in xl430["registers"] and xl430["registers"]["operating_mode"] == 3
     one = readings(xl430)
-    resolution_deg = 360 / 4095  # the dial's: 0..4095 over a turn
+    resolution_deg = 360 / 4096  # e-manual X series: 0.088 deg a count, 4096 a turn
     assert one["position"]["raw"] == table["present_position"]
     assert one["position"]["value"] == pytest.approx(table["present_position"] * resolution_deg, abs=1e-3)
     assert one["goal"]["value"] == pytest.approx(3000 * resolution_deg, abs=1e-3)
@@ -58,7 +58,7 @@ def test_x_series_servos_show_their_own_registers_and_units():
     two = readings(xl330)
     assert "load" not in two and two["current"]["unit"] == "mA" and two["current"]["register"] == "present_current"
     assert xl430["mode"] == "position" and xl430["limits"] == [table["min_position_limit"], table["max_position_limit"]]
-    assert xl430["dial"] == {"max": 4095, "range_deg": model("xl430-w250").physical.position_range_deg}
+    assert xl430["dial"] == {"max": 4095, "range_deg": model("xl430-w250").physical.position_range_deg, "counts": 4096}
     assert xl430["registers"]["torque_enable"] == 1 and xl430["registers"]["moving"] == 1
     assert xl430["alarm_bits"] == ["input_voltage", "overheating", "motor_encoder", "electrical_shock", "overload"]
 
@@ -176,7 +176,7 @@ def test_an_xl320_is_read_by_its_own_table_names_with_no_code_of_its_own():
     assert speed & 0x400 and one["velocity"]["register"] == "present_speed" and one["velocity"]["raw"] == -(speed & 0x3FF)
     assert one["voltage"]["value"] == pytest.approx(voltage / 10)
     assert one["goal"]["value"] == pytest.approx(100 * 300 / 1023, abs=1e-3)
-    assert joint["dial"] == {"max": 1023, "range_deg": model("xl-320").physical.position_range_deg}
+    assert joint["dial"] == {"max": 1023, "range_deg": model("xl-320").physical.position_range_deg, "counts": 1023}
     # In wheel mode its Present Speed is a share of the output ("the unit is about 0.1%", its model file's wheel_output).
     assert readings(wheel)["velocity"]["unit"] == "%" and readings(wheel)["velocity"]["raw"] == -(wheel_speed & 0x3FF)
     assert readings(wheel)["velocity"]["value"] == pytest.approx(-(wheel_speed & 0x3FF) * 0.1)
@@ -216,4 +216,33 @@ def test_an_ax_12a_at_its_last_count_reads_the_end_of_its_dial():
         bus.write(1, "goal_position", 1023)
         servo = take(bus.bus)["servos"][0]
     goal = next(r for r in servo["readings"] if r["name"] == "goal")
-    assert goal["value"] == pytest.approx(300.0) and servo["dial"] == {"max": 1023, "range_deg": 300}
+    assert goal["value"] == pytest.approx(300.0) and servo["dial"] == {"max": 1023, "range_deg": 300, "counts": 1023}
+
+
+def test_x_series_degrees_take_4096_counts_a_turn_in_extended_position_mode():
+    """e-manual X series Goal Position(116): 0.088 deg a count, 0..4095 a turn, -1,048,575..1,048,575 for -256..256
+    turns: ten turns out (40960) is 3600 degrees; the AX-12A's 1023 stays 300 (its 0..1023 has two ends)."""
+    with VirtualBus(servo="1:xl430-w250", transport="inprocess", virtual_time=True) as bus:
+        bus.write(1, "operating_mode", 4)  # extended position
+        bus.write(1, "goal_position", 40960)
+        goal = readings(take(bus.bus)["servos"][0])["goal"]
+    assert goal["raw"] == 40960 and goal["value"] == pytest.approx(3600.0)
+    assert readings(take_ax12_at(1023))["goal"]["value"] == pytest.approx(300.0)
+
+
+def take_ax12_at(goal: int) -> dict:
+    with VirtualBus([1], transport="inprocess", virtual_time=True) as bus:
+        bus.write(1, "goal_position", goal)
+        return take(bus.bus)["servos"][0]
+
+
+def test_the_rate_a_servo_listens_at_is_shown_after_a_baud_rate_write():
+    """A Baud Rate write takes the servo off the host's rate (it falls silent): the view says the rate it is at."""
+    with VirtualBus(servo="1:ax-12a,1:xl430-w250", transport="inprocess", virtual_time=True, baud_bps=BAUD) as bus:
+        before = {servo["protocol"]: servo for servo in take(bus.bus)["servos"]}
+        bus.write(1, "baud_rate", 34, protocol=1.0)  # e-manual AX-12A: 2,000,000 / (34 + 1) bps
+        bus.write(1, "baud_rate", 1, protocol=2.0)
+        after = {servo["protocol"]: servo for servo in take(bus.bus)["servos"]}
+    assert before["1.0"]["baud_bps"] == BAUD and before["2.0"]["baud_bps"] == BAUD
+    assert after["1.0"]["registers"]["baud_rate"] == 34 and after["1.0"]["baud_bps"] == pytest.approx(2_000_000 / 35)
+    assert after["2.0"]["registers"]["baud_rate"] == 1 and after["2.0"]["baud_bps"] == 57_600  # X series: 1 is 57,600 bps

@@ -198,7 +198,7 @@ def test_an_mx_in_multi_turn_mode_shows_a_position_below_zero_as_negative():
         servo = wait_for(lambda: (s := servos(bus)[2])["registers"]["goal_position"] == 62536 and s)
         assert servo["mode"] == "multi-turn" and servo["limits"] is None
         one = readings_of(servo)
-        assert one["goal"]["raw"] == -3000 and one["goal"]["value"] == pytest.approx(-3000 * 360 / 4095, abs=1e-3)
+        assert one["goal"]["raw"] == -3000 and one["goal"]["value"] == pytest.approx(-3000 * 360 / 4096, abs=1e-3)
         assert one["position"]["raw"] < 0 and one["position"]["value"] == pytest.approx(shaft_deg, abs=0.5)
         bus.write(2, "torque_enable", 0)
         bus.write(2, "resolution_divider", 2)
@@ -208,7 +208,7 @@ def test_an_mx_in_multi_turn_mode_shows_a_position_below_zero_as_negative():
         shaft_deg = bus.angle_deg(2)
         servo = wait_for(lambda: (s := servos(bus)[2])["registers"]["goal_position"] == -1500 & 0xFFFF and s)
         one = readings_of(servo)
-        assert one["goal"]["raw"] == -1500 and one["goal"]["value"] == pytest.approx(-1500 * 2 * 360 / 4095, abs=1e-3)
+        assert one["goal"]["raw"] == -1500 and one["goal"]["value"] == pytest.approx(-1500 * 2 * 360 / 4096, abs=1e-3)
         assert one["position"]["value"] == pytest.approx(shaft_deg, abs=0.5)
         bus.write(2, "torque_enable", 0)
         bus.write(2, "ccw_angle_limit", 3000)  # joint mode: the same registers read unsigned again
