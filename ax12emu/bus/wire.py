@@ -34,7 +34,7 @@ from .mixed import MixedBus, model_name, model_of
 from .state_store import StateStore
 
 __all__ = ["build_bus2", "build_wire", "build_wire_of", "protocol1_keys", "servo_family", "servo_list", "servo_models",
-           "start_at_baud"]
+           "save_wire_state", "start_at_baud"]
 
 log = logging.getLogger(__name__)
 
@@ -92,13 +92,12 @@ def build_wire_of(models: Sequence[tuple[int, str]], *, clock: WallClock | Virtu
     starts at its model's factory rate (1,000,000 bps on the AX series, 57,600 on the MX (Baud Rate 34) and X series) unless
     ``baud_bps``, which each servo turns into its own Baud Rate value.  ``state_store1``/``state_store2``: where
     each protocol's servos keep their EEPROM area (IDs are per protocol, so apart); ``load_state`` False starts
-    from factory defaults and saves them there at once.
+    from factory defaults and still saves there (:func:`save_wire_state` writes them at once).
     """
     ax = [(servo_id, key) for servo_id, key in models if servo_family(key) == "AX"]
     mx = [(servo_id, model(key)) for servo_id, key in models if servo_family(key) == "MX"]
     x_models = [(servo_id, model(key)) for servo_id, key in models if servo_family(key) == "X"]
     bus1: Bus | Bus1X | None = None
-    built: list[Bus | Bus1X | Bus2] = []  # each keeps its own servos' state (an MX bus not the AX-12As' inside it)
     if ax:
         keys1 = [key for _, key in ax]
         physics = build_protocol1_model(keys1, replace(choice1, profile=options1.profile) if choice1 is not None else ModelChoice(
@@ -107,18 +106,15 @@ def build_wire_of(models: Sequence[tuple[int, str]], *, clock: WallClock | Virtu
                    state_store=state_store1 if load_state else None,
                    table_layout=[None if key == AX12_MODEL else model(key).layout() for key in keys1])
         bus1.state_store = state_store1
-        built.append(bus1)
     if mx:
         bus1 = Bus1X(mx, lambda servo_model, servo: build_plant1x(servo_model, servo.table, choice), ax_bus=bus1,
                      clock=clock, options=options1x, state_store=state_store1 if load_state else None)
         bus1.state_store = state_store1
-        built.append(bus1)
     bus2 = None
     if x_models:
         bus2 = Bus2(x_models, lambda servo_model, index: build_x_firmware(servo_model, choice), clock=clock,
                     options=options, state_store=state_store2 if load_state else None)
         bus2.state_store = state_store2
-        built.append(bus2)
     if baud_bps is not None:
         # A servo whose EEPROM the state directory kept starts at the Baud Rate it kept, as a real one does after a
         # client changed it (``baud_bps`` overwrote it at every start, and the file with it).
@@ -136,14 +132,22 @@ def build_wire_of(models: Sequence[tuple[int, str]], *, clock: WallClock | Virtu
         for slot, servo in zip(bus2.slots, bus2.servos) if bus2 is not None else ():
             if not kept(state_store2, slot, servo):
                 servo.start_at_baud(baud_bps)
-    if not load_state:
-        # The state not loaded is replaced now, as the servos start serving it: saved only at close, a server killed
-        # before then left the old files, and the next run brought back an image this one never served.
-        for bus in built:
-            bus.save_state()
     if bus1 is not None and bus2 is not None:
         return MixedBus(bus1, bus2)
     return bus1 if bus1 is not None else bus2  # type: ignore[return-value]
+
+
+def save_wire_state(wire: Bus | Bus1X | Bus2 | MixedBus) -> None:
+    """Every servo's EEPROM on ``wire`` (each protocol's, an MX bus's AX-12As too) written to its state store now.
+
+    Why: ``serve --factory-reset`` serves the factory image without loading the saved one; saved only at exit, a
+    server killed before then left the old files for the next run to serve.  The server saves once it has started
+    (after every check that can refuse the run, which then leaves the state alone).
+    """
+    for part in (wire.bus1, wire.bus2) if isinstance(wire, MixedBus) else (wire,):
+        if isinstance(part, Bus1X) and part.ax_bus is not None:
+            part.ax_bus.save_state()
+        part.save_state()
 
 
 def start_at_baud(servo, bps: float) -> None:

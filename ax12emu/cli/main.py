@@ -301,6 +301,7 @@ def build_serve_wire(args: argparse.Namespace, clock):
 
 def _serve2(args: argparse.Namespace) -> int:
     """``serve --servo``: the X series on Protocol 2.0, the AX and MX series on 1.0, or both on one wire."""
+    from ax12emu.bus.wire import save_wire_state
     from ax12emu.protocol.servo_models import model
     from ax12emu.serve import BusServer
 
@@ -316,6 +317,8 @@ def _serve2(args: argparse.Namespace) -> int:
     server = BusServer(bus, transport, pace=args.pace, echo=args.echo, trace=trace)
     live = _open_live(args, server, transport, bus)
     _stop_on_signals(server)
+    if args.factory_reset:  # started: the factory image saved now, a refused run left the state alone
+        save_wire_state(bus)
     print(transport.url, flush=True)  # the first stdout line: the port, which scripts and tests read
     if live is not None and live.url:
         print(live.url, flush=True)
@@ -420,10 +423,6 @@ def _serve(args: argparse.Namespace) -> int:
         clock=WallClock(args.time_scale),
         state_store=None if args.factory_reset else store,
     )
-    if args.factory_reset:
-        # Saved now, not at exit: a server killed before it stopped left the old state for the next run to serve.
-        bus.state_store = store
-        bus.save_state()
     faults = cli_hil.fault_config(args)
     if faults.active:
         faults.install(bus)
@@ -433,6 +432,9 @@ def _serve(args: argparse.Namespace) -> int:
     server = BusServer(bus, transport, pace=args.pace, echo=args.echo, trace=trace)
     live = _open_live(args, server, transport, bus)
     _stop_on_signals(server)
+    if args.factory_reset:  # started: the factory image saved now, a refused run left the state alone
+        bus.state_store = store
+        bus.save_state()
     print(where, flush=True)  # the first stdout line: the port, which scripts and tests read
     if live is not None and live.url:
         print(live.url, flush=True)

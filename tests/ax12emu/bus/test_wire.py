@@ -57,12 +57,12 @@ def test_a_servo_the_state_directory_kept_starts_at_its_kept_rate_not_at_baud(tm
 
 def test_a_state_not_loaded_is_replaced_on_disk_at_once(tmp_path):
     """``--factory-reset`` saved the factory image only at close: a server killed before then left the old files, and
-    the next run brought back IDs the reset run never served.  Every family's file holds its factory image as soon
-    as the wire is built, before anything closes it."""
+    the next run brought back IDs the reset run never served.  save_wire_state writes every family's factory image
+    (the AX-12As inside an MX bus too), before anything closes the wire."""
     import json
 
     from ax12emu.bus.state_store import StateStore
-    from ax12emu.bus.wire import build_wire_of, servo_models
+    from ax12emu.bus.wire import build_wire_of, save_wire_state, servo_models
 
     models = servo_models("1:ax-12a,2:mx-28,3:xl430-w250", None, mixed=True)
     store1, store2 = StateStore(tmp_path), StateStore(tmp_path / "2")
@@ -79,6 +79,7 @@ def test_a_state_not_loaded_is_replaced_on_disk_at_once(tmp_path):
     assert all(json.loads(path.read_text())["eeprom"]["return_delay_time"] == 10 for path in files.values())
     bus = start(False)
     try:
+        save_wire_state(bus)  # as serve --factory-reset does once it has started
         factory = {slot: bus.servo(slot).table.get("return_delay_time") for slot in files}
         saved = {slot: json.loads(path.read_text())["eeprom"]["return_delay_time"] for slot, path in files.items()}
         assert saved == factory and 10 not in factory.values()

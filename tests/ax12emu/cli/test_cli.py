@@ -161,6 +161,24 @@ def test_a_factory_reset_run_killed_at_once_leaves_the_factory_image(tmp_path, e
     assert (saved["id"], saved["return_delay_time"]) == (1, 250)
 
 
+@pytest.mark.parametrize("served", [["--ids", "1"], ["--servo", "1:ax-12a,3:xl430-w250", "--baud", "1000000"]])
+def test_a_factory_reset_run_refused_at_start_leaves_the_state_alone(tmp_path, served):
+    """Saved before the server's other checks, a reset run refused for a fault flag (or a port in use) wiped the saved
+    state though it never served; it is saved once the server has started."""
+    import json
+
+    from ax12emu.bus.state_store import StateStore
+    from ax12emu.bus.wire import build_wire_of, servo_models
+
+    store = StateStore(tmp_path)
+    bus = build_wire_of(servo_models("1:ax-12a", None, mixed=True), clock=WallClock(), state_store1=store)
+    bus.servo(1).table.set("return_delay_time", 10)
+    bus.close()
+    result = run("serve", "--state-dir", str(tmp_path), "--factory-reset", "--delay-s", "0.5", *served)
+    assert result.returncode == 2 and "delay_s" in result.stderr, result.stderr
+    assert json.loads(store.path_for(1).read_text())["eeprom"]["return_delay_time"] == 10
+
+
 @pytest.mark.parametrize(("flags", "says"), [
     (["--delay-s", "0.5"], "ax12emu: delay_s: how late the delay option's replies leave (0.5 s), and delay is not given"),
     (["--duplicate", "1:1"], "ax12emu: duplicate: 1:1 gives servo 1 the ID it was launched as"),
