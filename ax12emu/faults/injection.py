@@ -236,7 +236,9 @@ class Faults:
             raise ValueError(f"the AX-12's alarm bits are {', '.join(f'{k} {v:#04x}' for k, v in _ALARM_FIRST.items())}; "
                              f"got {value:#04x}")
         index = self._index(slot)
-        self._alarms[index] = value
+        # Added to those already forced, as the MX and X servos' faults add them: replaced, the first stayed raised
+        # on the servo and clear_alarm no longer knew it (Torque Limit 0 for good).
+        self._alarms[index] = self._alarms.get(index, 0) | value
         self._raise_forced(self.bus.servos[index], value)  # at once, not at the next packet: a live view shows it
 
     def _raise_forced(self, servo: "VirtualServo", bits: int) -> None:

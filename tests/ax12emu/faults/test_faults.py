@@ -119,6 +119,18 @@ def test_alarms_set_error_bits_and_clear(vbus, force, lift, bit):
         assert ph.read2ByteTxRx(port, 1, PRESENT_POSITION)[2] == 0
 
 
+def test_two_forced_alarms_add_up_and_clear_together():
+    """A second force_alarm (a second --alarm for one servo) replaced the first's record: the first stayed raised
+    after clear_alarm, Torque Limit 0 for good; they add up, as the MX and X servos' do."""
+    with VirtualBus([1], transport="inprocess", virtual_time=True) as vbus:
+        vbus.faults.force_alarm(1, "overload")
+        vbus.faults.force_alarm(1, "overheating")
+        assert vbus.bus.servos[0].alarms == StatusError.OVERLOAD | StatusError.OVERHEATING
+        vbus.faults.clear_alarm(1)
+        vbus.step(0.1)
+        assert vbus.bus.servos[0].alarms == 0
+
+
 def test_overload_alarm_triggers_shutdown(vbus):
     """Alarm Shutdown acts on a forced overload as the firmware does: Torque Limit drops to 0."""
     with sdk_port(vbus.port) as (port, ph):
