@@ -22,8 +22,8 @@ wins over a module's or class's marker); the default is ID 1.  The
 ``ax12_bus_options`` marker passes keyword arguments to
 :class:`~ax12emu.VirtualBus` (``transport="inprocess"``,
 ``virtual_time=True``, ``faults=FaultConfig(...)``, ...); markers on the
-module, the class and the test add up, and a keyword two of them give with
-different values is a usage error.  IDs and servos given twice (``ax12_ids`` and ``ids=``, ``ax12_servo`` and ``servo=``, IDs
+module, the class and the test add up, and where two give one keyword the
+closest wins (a subclass's own over those it inherits).  IDs and servos given twice (``ax12_ids`` and ``ids=``, ``ax12_servo`` and ``servo=``, IDs
 beside a per-ID servo text) are a usage error, not a silent choice.
 
 Other models (the X series on Protocol 2.0, the MX series on Protocol 1.0): the ``ax12_servo``
@@ -140,26 +140,20 @@ def _id_values(values: Any, where: str, example: str) -> list[int]:
     return [_marker_id(value, where, example) for value in items]
 
 
-def _same(a: Any, b: Any) -> bool:
-    """Whether two option values are equal (a value that cannot say, such as a numpy array, is not)."""
-    try:
-        return a is b or bool(a == b)
-    except Exception:  # noqa: BLE001 - any comparison that cannot give one answer counts as different
-        return False
-
-
 def _bus_options(node: Any) -> dict[str, Any]:
-    """The keywords of every ``ax12_bus_options`` marker on the test (its own, its class's, its module's, ...),
-    merged: a key two of them give with different values is a UsageError naming it, as IDs given twice are, where
-    taking the closest marker alone would drop the others' keys without a word."""
-    given: dict[str, Any] = {}
-    for marker in node.iter_markers("ax12_bus_options"):
+    """The keywords of every ``ax12_bus_options`` marker on the test (its own, its class's, its module's, ...), merged
+    closest first: a keyword two of them give takes the closest one's value (the test's over its class's, a
+    subclass's own over those it inherits, over its module's), as pytest's own closest marker does; taking the
+    closest marker alone dropped the others' keywords without a word."""
+    by_node: dict[int, list[Any]] = {}  # closest node first; within one, pytest lists a base class's marks first
+    for owner, marker in node.iter_markers_with_node("ax12_bus_options"):
         _marker_takes(marker, "ax12_bus_options(virtual_time=True)", args=False)
-        for key, value in marker.kwargs.items():
-            if key in given and not _same(given[key], value):
-                raise pytest.UsageError(f"two ax12_bus_options markers give {key}= ({given[key]!r} and {value!r}); "
-                                        "give it once")
-            given.setdefault(key, value)
+        by_node.setdefault(id(owner), []).append(marker)
+    given: dict[str, Any] = {}
+    for markers in by_node.values():
+        for marker in reversed(markers):  # a class's own marks after those it inherits: they win
+            for key, value in marker.kwargs.items():
+                given.setdefault(key, value)
     return given
 
 
