@@ -70,7 +70,7 @@ def _bps(servo: dict[str, Any]) -> str:
 #: Columns of the servo table: heading, how to show one servo (AX-12 and X series alike, from its readings),
 #: and its rank: where the terminal is too narrow for every column, the lowest ranks are kept and the others left
 #: out whole (rich would squeeze every column to a few characters, the short ones to nothing: no ID at 80
-#: columns).  A servo's errors and faults, free text of any length, are lines of their own under the table.
+#: columns).  A servo's errors and faults, free text of any length, are :data:`TROUBLE_COLUMNS`.
 COLUMNS: tuple[tuple[str, Any, int], ...] = (
     ("ID", lambda s: str(s["id"]), 0),
     ("model", lambda s: f"{s['model']} (P{s['protocol']})", 11),
@@ -94,6 +94,15 @@ def _errors(servo: dict[str, Any]) -> str:
     return ",".join(servo["alarm_names"]) or (f"{servo['alarms']:#04x}" if servo["alarms"] else "")
 
 
+#: A servo's errors and faults: columns of the table where the terminal is wide enough for every column (each
+#: servo's trouble in its row, however many servos the terminal's height leaves room for), else lines of their own
+#: under the table.
+TROUBLE_COLUMNS: tuple[tuple[str, Any, int], ...] = (
+    ("errors", lambda s: _errors(s) or "-", len(COLUMNS)),
+    ("faults", lambda s: "; ".join(s["faults"]) or "-", len(COLUMNS) + 1),
+)
+
+
 def _troubles(servo: dict[str, Any]) -> Text | None:
     """A servo's errors and faults as a line under the table (None: it has neither); the terminal wraps it."""
     errors, faults = _errors(servo), "; ".join(servo["faults"])
@@ -103,9 +112,14 @@ def _troubles(servo: dict[str, Any]) -> Text | None:
     return Text(f"ID {servo['id']} (P{servo['protocol']}): {said}", style="red")
 
 
+def _widths(cells: list[list[str]]) -> list[int]:
+    """Each column's width: its widest cell."""
+    return [max(map(cell_len, column)) for column in zip(*cells)]
+
+
 def _fitting(cells: list[list[str]], width: int) -> list[int]:
     """The columns (by index, in table order) that fit ``width``, taken by rank, each as wide as its widest cell."""
-    widths = [max(map(cell_len, column)) for column in zip(*cells)]
+    widths = _widths(cells)
     kept: list[int] = []
     used = -GAP
     for index in sorted(range(len(COLUMNS)), key=lambda i: COLUMNS[i][2]):
@@ -132,24 +146,35 @@ class _Picture:
             f"Protocol {' + '.join(frame.get('protocols', ['1.0']))}"
         )
         servos = frame["servos"]
-        rows = [[show(servo) for _, show, _ in COLUMNS] for servo in servos]
-        kept = _fitting([[heading for heading, _, _ in COLUMNS], *rows], options.max_width)
-        table = Table(box=None, show_edge=False, pad_edge=False, padding=(0, GAP // 2))
-        for index in kept:
-            table.add_column(COLUMNS[index][0], no_wrap=True)
-        for servo, row in zip(servos, rows):
-            style = "red" if servo["alarm_names"] or servo["faults"] else None
-            table.add_row(*(row[index] for index in kept), style=style)
-        yield table
+        every = COLUMNS + TROUBLE_COLUMNS
+        cells = [[heading for heading, _, _ in every], *([show(servo) for _, show, _ in every] for servo in servos)]
+        if sum(_widths(cells)) + GAP * (len(every) - 1) <= options.max_width:
+            yield _table(every, cells, range(len(every)), servos)
+            return
+        cells = [row[: len(COLUMNS)] for row in cells]
+        kept = _fitting(cells, options.max_width)
+        yield _table(COLUMNS, cells, kept, servos)
         left_out = [heading for index, (heading, _, _) in enumerate(COLUMNS) if index not in kept]
         if left_out:
             yield Text(f"(no room for: {', '.join(left_out)})", style="dim")
         yield from filter(None, map(_troubles, servos))
 
 
+def _table(columns: tuple[tuple[str, Any, int], ...], cells: list[list[str]], kept: Any, servos: list) -> Table:
+    """The servo table of the ``kept`` columns (by index) of ``cells`` (headings first, then a row a servo)."""
+    table = Table(box=None, show_edge=False, pad_edge=False, padding=(0, GAP // 2))
+    for index in kept:
+        table.add_column(columns[index][0], no_wrap=True)
+    for servo, row in zip(servos, cells[1:]):
+        style = "red" if servo["alarm_names"] or servo["faults"] else None
+        table.add_row(*(row[index] for index in kept), style=style)
+    return table
+
+
 def render(frame: Frame) -> _Picture:
-    """One frame as a rich renderable: a status line, the servo table (the columns that fit the width it is drawn
-    at), and a line for each servo with errors or faults."""
+    """One frame as a rich renderable: a status line and the servo table, errors and faults its last columns where
+    every column fits the width it is drawn at; else the columns that fit, and a line for each servo with errors or
+    faults under the table."""
     return _Picture(frame)
 
 

@@ -28,12 +28,15 @@ after its headers 408 after ``BODY_TIMEOUT_S``; each WebSocket
 client has a queue of ``QUEUE_FRAMES`` frames, and a client that falls that
 far behind (one that never reads) is dropped; requests (and a socket's
 controls) are answered at most ``REQUESTS_PER_S`` a second, the rest wait
-their turn or, past ``MAX_REQUEST_WAIT_S``, get 503 (a WebSocket upgrade too; a socket's messages
-of any kind, malformed or binary or pings, each take a turn, and a socket whose
-next turn is that far away is closed with 1013); past ``max_connections`` open
+their turn or, past ``MAX_REQUEST_WAIT_S``, get 503; a socket's messages of any kind (malformed or binary
+or pings) each take a turn, and one whose turn is that far away gets the error reply, the socket staying
+open; WebSocket upgrades are paced alike but by a turn of their own, so a flood of plain requests never keeps
+the page from its stream; past ``max_connections`` open
 connections a new one gets 503 and is closed; idle keep-alive connections
-close after ``KEEPALIVE_S``.  A client's faults are logged in one line each, a burst of them and then one a
-second (:mod:`~ax12emu.live.logs`), and from a thread of their own, never from the event loop.
+close after ``KEEPALIVE_S``.  A client's faults are logged in one short line each (what it sent cut to
+``CLIENT_TEXT_CHARS``), a burst of them and then one a second for the whole process (:mod:`~ax12emu.live.logs`);
+they are written as they happen, so a stderr pipe nobody reads will in the end block the server, as it would
+any program.
 
 Other web pages: the server answers only requests addressed to it (a ``Host`` of the bound address,
 ``localhost``, ``127.0.0.1`` or ``[::1]`` with its port; any IP address when bound to every interface),
@@ -57,7 +60,7 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import urlsplit
 
-from aiohttp import WSCloseCode, WSMsgType, web
+from aiohttp import WSMsgType, web
 from aiohttp.http_exceptions import HttpProcessingError
 from aiohttp.web_protocol import RequestPayloadError
 
@@ -102,9 +105,6 @@ BODY_TIMEOUT_S = 5.0
 
 #: Host names that always mean this machine (the loopback address by name and number).
 LOOPBACK_NAMES = ("localhost", "127.0.0.1", "::1")
-#: The loggers the server's event loop writes to: their records are written from a thread of their own.
-LOOP_LOGGERS = ("ax12emu.live.web", "aiohttp.server", "aiohttp.web", "aiohttp.access", "aiohttp.websocket",
-                "aiohttp.internal")
 #: Addresses that bind every interface: requests to any of the machine's addresses reach the server.
 _EVERY_INTERFACE = ("", "0.0.0.0", "::")
 #: The one type ``/api/control`` takes: another origin's page can send a body as text/plain or a form without
@@ -158,12 +158,9 @@ class _ClientFaults(logging.Filter):
     aiohttp logs a client's faults (a connection dropped mid-request, a malformed request it has already answered
     with 400) as errors with a traceback, tens of lines each: one INFO line instead.  Those and this server's own
     INFO lines (refusals, bad controls, dropped sockets) are what a careless or hostile client makes happen: past a
-    burst, one a second gets through, so such a client cannot fill the log or the terminal a ``--monitor`` draws on.
+    burst, one a second gets through (one budget for every live view in the process: they share its log), so such
+    a client cannot fill the log or the terminal a ``--monitor`` draws on; what it sent is quoted cut short.
     """
-
-    def __init__(self) -> None:
-        super().__init__()
-        self.budget = logs.ClientFaultBudget()
 
     def filter(self, record: logging.LogRecord) -> bool:
         exc = record.exc_info[1] if record.exc_info else None
@@ -172,11 +169,39 @@ class _ClientFaults(logging.Filter):
             record.msg, record.args = "live view: a client's request ended: %s: %s", (type(exc).__name__, said)
             record.exc_info = record.exc_text = None
             record.levelno, record.levelname = logging.INFO, "INFO"
-        return record.levelno > logging.INFO or self.budget.admit(record)
+        record.args = _bounded_args(record.args)
+        return record.levelno > logging.INFO or logs.BUDGET.admit(record)
+
+
+def _bounded_args(args: Any) -> Any:
+    """A record's arguments with each text (a client's request, header or control, quoted) cut short; numbers kept,
+    for the ``%d`` that shows them."""
+    if not isinstance(args, tuple):
+        return args
+    return tuple(arg if isinstance(arg, (int, float)) or len(text := str(arg)) <= logs.CLIENT_TEXT_CHARS
+                 else logs.bounded(text) for arg in args)
 
 
 #: The loggers a client's faults are logged on.
 _CLIENT_FAULT_LOGGERS = ("aiohttp.server", __name__)
+_CLIENT_FAULTS = _ClientFaults()
+#: Live views running, which the filter is on the loggers for (the last to close takes it off).
+_filtering = 0
+_filtering_lock = threading.Lock()
+
+
+def _filter_client_faults(on: bool) -> None:
+    """One live view starts (``on``) or stops filtering its client faults: the first puts the one filter on, the
+    last takes it off."""
+    global _filtering
+    with _filtering_lock:
+        _filtering += 1 if on else -1
+        if _filtering == (1 if on else 0):
+            for logger in map(logging.getLogger, _CLIENT_FAULT_LOGGERS):
+                if on:
+                    logger.addFilter(_CLIENT_FAULTS)
+                else:
+                    logger.removeFilter(_CLIENT_FAULTS)
 
 
 class _Refuse(asyncio.Protocol):
@@ -190,6 +215,23 @@ class _Refuse(asyncio.Protocol):
             + body
         )
         transport.close()
+
+
+class _Turns:
+    """Turns of answering, ``REQUESTS_PER_S`` a second, one after another (event-loop time)."""
+
+    def __init__(self) -> None:
+        #: When the next one may be answered.
+        self._next_slot_s = 0.0
+
+    def turn(self) -> float | None:
+        """Seconds until the next turn (0: now), taken; or None, none taken, when that is over ``MAX_REQUEST_WAIT_S``."""
+        now = asyncio.get_running_loop().time()
+        slot = max(now, self._next_slot_s)
+        if slot - now > MAX_REQUEST_WAIT_S:
+            return None
+        self._next_slot_s = slot + 1.0 / REQUESTS_PER_S
+        return slot - now
 
 
 class WebServer:
@@ -225,10 +267,10 @@ class WebServer:
         self._executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="ax12emu-live-control")
         self._runner: web.AppRunner | None = None
         self._server: asyncio.base_events.Server | None = None
-        #: When the next request may be answered (event-loop time): see :meth:`_turn`.
-        self._next_slot_s = 0.0
-        #: This server's client-fault lines and their budget, while it runs.
-        self._client_faults: _ClientFaults | None = None
+        #: Turns of requests (every route, a socket's messages) and, apart, of WebSocket upgrades: see :class:`_Turns`.
+        self._requests, self._upgrades = _Turns(), _Turns()
+        #: Whether this server has the client-fault filter on (from setup to teardown).
+        self._filtering = False
 
     @property
     def url(self) -> str:
@@ -275,10 +317,8 @@ class WebServer:
             loop.close()
 
     async def _setup(self) -> None:
-        self._client_faults = _ClientFaults()
-        for name in _CLIENT_FAULT_LOGGERS:
-            logging.getLogger(name).addFilter(self._client_faults)
-        logs.off_loop(LOOP_LOGGERS)  # after the budget; released in _teardown, which follows a failed setup too
+        _filter_client_faults(True)  # taken off in _teardown, which follows a failed setup too
+        self._filtering = True
         app = web.Application(client_max_size=MAX_BODY_BYTES, middlewares=[self._paced, self._guarded])
         app.router.add_get("/", self._index)
         app.router.add_static("/assets/", ASSETS, show_index=False)
@@ -321,11 +361,9 @@ class WebServer:
             await self._server.wait_closed()
         if self._runner is not None:
             await self._runner.cleanup()
-        if self._client_faults is not None:
-            for name in _CLIENT_FAULT_LOGGERS:
-                logging.getLogger(name).removeFilter(self._client_faults)
-            self._client_faults = None
-            logs.release()
+        if self._filtering:
+            self._filtering = False
+            _filter_client_faults(False)
 
     # -- frames -----------------------------------------------------------------------------
     def _on_frame(self, frame: Frame) -> None:
@@ -359,20 +397,12 @@ class WebServer:
         log.info("live view: dropped a WebSocket client (%s)", why)
 
     # -- pacing ------------------------------------------------------------------------------
-    def _turn(self) -> float | None:
-        """Seconds until the next request may be answered (0: now), or None when that is too far away."""
-        now = asyncio.get_running_loop().time()
-        slot = max(now, self._next_slot_s)
-        if slot - now > MAX_REQUEST_WAIT_S:
-            return None
-        self._next_slot_s = slot + 1.0 / REQUESTS_PER_S
-        return slot - now
-
     @web.middleware
     async def _paced(self, request: web.Request, handler: Any) -> web.StreamResponse:
         # Every request, a WebSocket upgrade too (each sends a hello with the log: opened and closed in a loop, they
-        # cost as much as any request); the frames are paced by the sampler, a socket's messages by _serve_messages.
-        wait = self._turn()
+        # cost as much as any request) but in turns of their own: a flood of plain requests must not keep the page
+        # from its stream.  The frames are paced by the sampler, a socket's messages by _serve_messages.
+        wait = (self._upgrades if request.path == "/ws" else self._requests).turn()
         if wait is None:
             return _error(503, f"the live view answers {REQUESTS_PER_S:g} requests a second and more are "
                                "waiting; frames stream on /ws")
@@ -519,25 +549,24 @@ class WebServer:
     async def _serve_messages(self, ws: web.WebSocketResponse) -> None:
         """Controls sent as WebSocket text messages, each answered with a reply or an error.
 
-        Every message takes its turn before it is looked at: a malformed or binary one costs an answer as much as a
-        control does.  A client whose next turn is over ``MAX_REQUEST_WAIT_S`` away is sending faster than any
-        page does: it is closed (1013, try again later) rather than answered at once, which would be unpaced.
+        Every message takes its turn before it is looked at (a malformed or binary one costs an answer as much as a
+        control does), and the next is read once it is answered: one message, one turn.  Where the turn is over
+        ``MAX_REQUEST_WAIT_S`` away (other clients' requests hold the turns), the message gets the error reply at
+        once, as a request gets 503, and the socket stays open: with one turn waiting at most, a socket is never
+        what floods.
         """
         async for message in ws:
             if message.type == WSMsgType.ERROR:
                 return
-            wait = self._turn()
+            wait = self._requests.turn()
             if wait is None:
-                await self._drop_flooding(ws)
-                return
+                if message.type != WSMsgType.PONG:  # (no ping of ours asked for it: nothing to answer)
+                    await ws.send_str(json.dumps({"type": "error", "error": f"more than {REQUESTS_PER_S:g} requests a "
+                                                  "second are waiting: control not taken"}))
+                continue
             if wait:
                 await asyncio.sleep(wait)
             await self._answer(ws, message)
-
-    async def _drop_flooding(self, ws: web.WebSocketResponse) -> None:
-        log.info("live view: closed a WebSocket client sending over %g messages a second", REQUESTS_PER_S)
-        await ws.close(code=WSCloseCode.TRY_AGAIN_LATER,
-                       message=f"more than {REQUESTS_PER_S:g} messages a second".encode())
 
     async def _answer(self, ws: web.WebSocketResponse, message: Any) -> None:
         if message.type == WSMsgType.PING:

@@ -52,6 +52,7 @@ from typing import Any
 
 from ax12emu.bus import BITS_PER_BYTE, Bus, Reply, merge_replies
 from ax12emu.bus.clock import WallClock
+from ax12emu.protocol.crc16 import crc16
 from ax12emu.tracing.trace import IN, OUT, TraceWriter
 
 from .transports.base import Transport
@@ -81,6 +82,22 @@ _DONE = object()
 #: Where a status packet's error field is, by whether it is a Protocol 2.0 one (header FF FF FD 00, then ID,
 #: length, 0x55, Error; Protocol 1.0: FF FF, ID, length, Error; a 1.0 packet's length byte is never 0).
 _ERROR_AT = (4, 8)
+
+
+def _intact(replies: Sequence[Reply], k: int, two: bool) -> bool:
+    """Whether the status packet ``replies[k]`` begins has the checksum (1.0) or CRC (2.0) it was built with: one the
+    fault injection corrupted (or twin servos garbled) reaches the host as a checksum error, not a status error.
+    Asked only of a packet with error bits, so the common reply costs nothing more."""
+    if not two:
+        data = replies[k].data
+        return (~sum(data[2:-1])) & 0xFF == data[-1]
+    shares = [replies[k].data]  # a Fast Sync Read's packet: its CRC ends the last share
+    for reply in replies[k + 1 :]:
+        if not reply.continues:
+            break
+        shares.append(reply.data)
+    packet = b"".join(shares)
+    return crc16(packet[:-2]) == int.from_bytes(packet[-2:], "little")
 
 
 class ServerStopped(RuntimeError):
@@ -165,8 +182,10 @@ class BusServer:
         self.packets_in = 0
         self.bytes_dropped = 0
         self.collisions = 0
-        #: Status packets put on the line with error bits set (the live view's "status errors": counted here, where
-        #: every reply passes, because its packet log decodes only part of a fast host's traffic).
+        #: Status packets put on the line with error bits set and their checksum or CRC intact (the live view's "status
+        #: errors": counted here, where every reply passes, because its packet log decodes only part of a fast host's
+        #: traffic; a corrupted one the host takes as a checksum error).  A Fast Sync Read's one packet counts the
+        #: first servo's error field alone.
         self.status_errors = 0
 
     def stop(self) -> None:
@@ -279,12 +298,13 @@ class BusServer:
         """Put one packet's replies on the line: now, or queued for their delay (and pace)."""
         if not replies:
             return
-        for reply in replies:
+        for k, reply in enumerate(replies):
             data = reply.data
             # (The later servos' shares of a Fast Sync Read's one packet carry their errors elsewhere: not counted.)
             if not reply.continues and len(data) > 4:
-                at = _ERROR_AT[data[2] == 0xFD and data[3] == 0]
-                if at < len(data) and data[at]:
+                two = data[2] == 0xFD and data[3] == 0
+                at = _ERROR_AT[two]
+                if at < len(data) and data[at] and _intact(replies, k, two):
                     self.status_errors += 1
         if len(replies) == 1 and replies[0].delay_s == 0.0 and not (self.pace or self._queue):
             data = replies[0].data  # the common case at Return Delay Time 0: _emit, one call shorter

@@ -11,7 +11,6 @@ import json
 import logging
 import os
 import socket
-import threading
 import time
 import urllib.error
 import urllib.request
@@ -413,39 +412,87 @@ def test_websocket_upgrades_are_paced_too(bus):
     assert asyncio.run(upgrades(seconds)) <= web_module.REQUESTS_PER_S * seconds * 1.1 + 5
 
 
-def test_a_socket_whose_turn_is_too_far_away_is_closed_not_answered_at_once(bus, monkeypatch):
-    """Past ``MAX_REQUEST_WAIT_S`` of waiting requests a socket's message is not answered with an error at once
-    (which would be unpaced): the socket is closed with 1013, try again later."""
+async def _answer(ws, seconds: float) -> dict | None:
+    """The first reply or error ``ws`` gets within ``seconds`` (frames skipped; None: it was closed first)."""
+    deadline = time.monotonic() + seconds
+    while True:
+        message = await ws.receive(timeout=deadline - time.monotonic())
+        if message.type != aiohttp.WSMsgType.TEXT:
+            return None
+        data = json.loads(message.data)
+        if data["type"] in ("reply", "error"):
+            return data
+
+
+def _holding_turns(session, url: str) -> list:
+    """Another client's GETs holding the request turns of the next 0.4 s (at 5 a second, 2 turns)."""
+    return [asyncio.ensure_future(session.get(url + "api/log?n=1")) for _ in range(2)]
+
+
+@pytest.fixture
+def few_turns(bus, monkeypatch):
+    """5 turns a second and 0.3 s of waiting at most: two requests hold the turns past a message's reach."""
     monkeypatch.setattr(web_module, "REQUESTS_PER_S", 5.0)
     monkeypatch.setattr(web_module, "MAX_REQUEST_WAIT_S", 0.3)
-    time.sleep(0.3)  # the fixture's own requests' turns are over
+    time.sleep(0.5)  # the fixture's own requests' turns are over
+    return bus
 
-    async def run() -> tuple[int | None, int]:
-        async with aiohttp.ClientSession() as session, session.ws_connect(bus.web_url.replace("http", "ws") + "ws") as ws:
+
+def test_a_control_socket_stays_open_while_other_clients_hold_the_turns(few_turns):
+    """A socket has one message waiting at most, so it is never what floods: where other clients' requests hold
+    the turns, its control gets the error reply and the socket stays open (it was closed with 1013), and its next
+    control, once the turns are free, is taken."""
+    url = few_turns.web_url
+
+    async def run() -> tuple[dict | None, dict | None, int | None]:
+        async with aiohttp.ClientSession() as session, session.ws_connect(url.replace("http", "ws") + "ws") as ws:
             await ws.receive(timeout=5)  # hello
-            # The page's requests hold the turns of the next 0.4 s (2 a turn at 5 a second) ...
-            polls = [asyncio.ensure_future(session.get(bus.web_url + "api/log?n=1")) for _ in range(2)]
+            polls = _holding_turns(session, url)
             await asyncio.sleep(0.05)
-            await ws.send_str("not json")  # ... so this message's turn is past 0.3 s away
-            answers = 0
-            deadline = time.monotonic() + 3
-            while (left := deadline - time.monotonic()) > 0:  # frames stream meanwhile: until closed, or 3 s
-                try:
-                    message = await ws.receive(timeout=left)
-                except asyncio.TimeoutError:
-                    break
-                if message.type != aiohttp.WSMsgType.TEXT:
-                    break
-                answers += json.loads(message.data)["type"] == "error"
+            await ws.send_json({"action": "clear_faults"})  # its turn past 0.3 s away
+            during = await _answer(ws, 3)
             for poll in polls:
                 (await poll).release()
-            return ws.close_code, answers
+            await ws.send_json({"action": "clear_faults"})
+            after = await _answer(ws, 3)
+            return during, after, ws.close_code
 
-    close_code, answers = asyncio.run(run())
-    assert close_code == 1013 and answers == 0
+    during, after, close_code = asyncio.run(run())
+    assert close_code is None, close_code
+    assert during is not None and during["type"] == "error" and "control not taken" in during["error"], during
+    assert after is not None and after["type"] == "reply" and after["status"] == 200, after
+
+
+def test_the_page_connects_its_stream_while_other_clients_hold_the_request_turns(few_turns):
+    """WebSocket upgrades take turns of their own: a flood of plain requests does not keep the page from its
+    stream (it got 503)."""
+    url = few_turns.web_url
+
+    async def run() -> str:
+        async with aiohttp.ClientSession() as session:
+            polls = _holding_turns(session, url)
+            await asyncio.sleep(0.05)
+            try:
+                async with session.ws_connect(url.replace("http", "ws") + "ws") as ws:
+                    return json.loads((await ws.receive(timeout=5)).data)["type"]
+            finally:
+                for poll in polls:
+                    (await poll).release()
+
+    assert asyncio.run(run()) == "hello"
 
 
 # -- a client's faults in the log -------------------------------------------------------------
+
+
+@pytest.fixture
+def fresh_budget(monkeypatch):
+    """The process's client-fault budget, full (other tests' faults spent it: one budget for every live view)."""
+    from ax12emu.live import logs
+
+    budget = logs.ClientFaultBudget()
+    monkeypatch.setattr(logs, "BUDGET", budget)
+    return budget
 
 
 def _malformed_requests(bus, count: int) -> None:
@@ -459,7 +506,7 @@ def _client_fault_lines(caplog) -> list[str]:
     return [r.getMessage() for r in caplog.records if r.name == "aiohttp.server"]
 
 
-def test_a_flood_of_malformed_requests_logs_a_bounded_number_of_lines(bus, caplog):
+def test_a_flood_of_malformed_requests_logs_a_bounded_number_of_lines(bus, caplog, fresh_budget):
     """Each malformed request was an INFO line, with no limit: a flood filled the terminal a monitor draws on, or
     a stderr pipe nobody read (the event loop then blocked writing to it).  A burst of lines, then one a second,
     the next one shown saying how many were not."""
@@ -470,42 +517,61 @@ def test_a_flood_of_malformed_requests_logs_a_bounded_number_of_lines(bus, caplo
         start = time.monotonic()
         _malformed_requests(bus, flood)
         elapsed_s = time.monotonic() - start
-        time.sleep(0.2)  # written from the log's own thread
         shown = len(_client_fault_lines(caplog))
         assert CLIENT_FAULT_BURST <= shown <= CLIENT_FAULT_BURST + elapsed_s * CLIENT_FAULT_LINES_PER_S + 1, shown
         time.sleep(1.0 / CLIENT_FAULT_LINES_PER_S)
         _malformed_requests(bus, 1)
-        time.sleep(0.2)
     lines = _client_fault_lines(caplog)
     assert f"(and {flood - shown} more client faults not shown)" in lines[-1], lines[-3:]
 
 
-class _Stalled(logging.Handler):
-    """A handler whose stream nobody reads (a full stderr pipe): each write waits until ``free`` is set."""
-
-    def __init__(self) -> None:
-        super().__init__(logging.INFO)
-        self.free = threading.Event()
-
-    def emit(self, record: logging.LogRecord) -> None:
-        self.free.wait(30)
+def _bad_control(url: str, action: str) -> int:
+    return http_json(url + "api/control", json.dumps({"action": action}).encode(), {"Content-Type": "application/json"})[0]
 
 
-def test_a_stalled_log_never_holds_the_page_up(bus):
-    """The page's event loop never writes a log line itself: with the log's stream stalled, it still answers."""
-    stalled = _Stalled()
-    server_log = logging.getLogger("aiohttp.server")
-    level = server_log.level
-    server_log.setLevel(logging.INFO)
-    logging.getLogger().addHandler(stalled)
+def test_a_client_fault_line_quotes_a_bounded_part_of_what_the_client_sent(bus, caplog, fresh_budget):
+    """A control naming a 10,000-character action was quoted whole: one line 10,000 characters long."""
+    from ax12emu.live.logs import CLIENT_TEXT_CHARS
+
+    with caplog.at_level(logging.INFO, logger="ax12emu.live.web"):
+        assert _bad_control(bus.web_url, "x" * 10_000) == 400
+    line = next(r.getMessage() for r in caplog.records if "refused a control" in r.getMessage())
+    assert len(line) <= CLIENT_TEXT_CHARS + 80 and line.endswith(" more)"), line[-120:]
+
+
+def test_client_fault_lines_are_logged_where_they_happen_through_the_users_filters(bus, caplog, fresh_budget):
+    """The lines are written as they are logged: a handler (here caplog) has each at once, in order, and a filter
+    the user puts on the live view's logger runs and may drop one."""
+    seen: list[str] = []
+
+    def users_filter(record: logging.LogRecord) -> bool:
+        seen.append(record.getMessage())
+        return "drop me" not in record.getMessage()
+
+    logger = logging.getLogger("ax12emu.live.web")
+    logger.addFilter(users_filter)
     try:
-        _malformed_requests(bus, 3)  # each one INFO line, now waiting on the stalled stream
-        status, body = http_json(bus.web_url + "api/servos", method="GET")
-        assert status == 200 and len(body["servos"]) == 18
+        with caplog.at_level(logging.INFO, logger="ax12emu.live.web"):
+            for action in ("first", "drop me", "third"):
+                assert _bad_control(bus.web_url, action) == 400
+            shown = [r.getMessage() for r in caplog.records if "refused a control" in r.getMessage()]
     finally:
-        stalled.free.set()
-        logging.getLogger().removeHandler(stalled)
-        server_log.setLevel(level)
+        logger.removeFilter(users_filter)
+    assert len(seen) == 3 and "drop me" in seen[1], seen
+    assert len(shown) == 2 and "'first'" in shown[0] and "'third'" in shown[1], shown
+
+
+def test_every_live_view_in_a_process_shares_one_client_fault_budget(bus, caplog, monkeypatch):
+    """The log is the process's: a second live view's client faults are counted against the same lines, and the
+    line that next gets through counts every one held back, whichever view it came to."""
+    from ax12emu.live import logs
+
+    monkeypatch.setattr(logs, "BUDGET", logs.ClientFaultBudget(burst=3, per_s=1e-9))
+    with VirtualBus([1], transport="tcp", web=True) as other, caplog.at_level(logging.INFO, logger="ax12emu.live.web"):
+        for url in (bus.web_url, bus.web_url, other.web_url, other.web_url, other.web_url):
+            assert _bad_control(url, "nothing") == 400
+    lines = [r.getMessage() for r in caplog.records if "refused a control" in r.getMessage()]
+    assert len(lines) == 3 and logs.BUDGET.held == 2, lines
 
 
 # -- statistics a fast host cannot outrun -------------------------------------------------------------

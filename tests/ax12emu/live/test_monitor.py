@@ -5,6 +5,7 @@ from __future__ import annotations
 import io
 import logging
 import os
+import re
 
 import pytest
 from rich.cells import cell_len
@@ -45,7 +46,7 @@ def test_x_series_rows_show_model_mode_degrees_units_and_errors():
     assert f"{one['present_load'] * REGISTER_UNITS['present_load'].per_raw:+.1f} %" in rows["1"]  # the XL430's Present Load
     current_ma = two["present_current"] * model("xl330-m288").physical.current_unit_ma
     assert "XL330-M288 (P2.0)" in rows["2"] and "velocity" in rows["2"] and f"{current_ma:+.1f} mA" in rows["2"]
-    assert "ID 2 (P2.0): errors overheating  faults alarm 0x04" in text and two["torque_enable"] == 0
+    assert "overheating" in rows["2"] and "alarm 0x04" in rows["2"] and two["torque_enable"] == 0  # its row's columns
     assert "Protocol 2.0" in text
 
 
@@ -116,3 +117,25 @@ def test_log_lines_print_above_the_table_while_it_is_drawn_in_place():
     said = after.index("a line from the log")
     assert "\x1b[2K" in after[:said]  # the table erased first (rich's Live: cursor up, erase line) ...
     assert "position" in after[said:]  # ... and drawn again under the line
+
+
+def test_a_wide_terminal_shows_each_servos_errors_in_its_row_however_short_the_terminal():
+    """18 servos in a 220x24 terminal: the errors and faults were lines under the table, which rich's Live cut off
+    past the terminal's 24 lines; where every column fits, they are the table's last columns, a servo's in its row."""
+    troubled = (2, 7, 11, 16)
+    with VirtualBus(list(range(1, 19)), transport="inprocess", virtual_time=True) as bus:
+        for servo_id in troubled:
+            bus.faults.force_alarm(servo_id, "overheating")
+        sampler = Sampler(bus.call, **bus.call(decoder_options))
+        terminal = _Terminal()
+        monitor = Monitor(sampler, stream=terminal, force_terminal=True, width=220)
+        monitor.console.height = 24
+        monitor.start()
+        try:
+            monitor._draw(sampler.sample())
+            screen = re.sub(r"\x1b\[[0-9;?]*[a-zA-Z]", "", terminal.getvalue())  # what the terminal shows
+        finally:
+            monitor.close()
+    rows = {line.split()[0]: line for line in screen.splitlines() if line[:1].isdigit()}
+    assert all("overheating" in rows.get(str(servo_id), "") for servo_id in troubled), screen
+    assert not any("overheating" in row for servo_id, row in rows.items() if int(servo_id) not in troubled)

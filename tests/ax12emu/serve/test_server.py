@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import gc
 import os
+import socket
 import time
 
 import pytest
@@ -13,7 +14,8 @@ from emu_testkit import PipeTransport, wait_eeprom
 from ax12emu.bus import Bus, Reply
 from ax12emu.bus.clock import WallClock
 from ax12emu.bus.reply import merge_replies
-from ax12emu.protocol.packets import encode_instruction, encode_status
+from ax12emu.protocol.packets import Instruction, InstructionPacket, encode_instruction, encode_status
+from ax12emu.protocol.packets2 import Instruction2, InstructionPacket2
 from ax12emu.serve.server import BusServer
 
 #: Real time and real ports: the wall-clock tier (CI runs it too).
@@ -233,3 +235,39 @@ def test_a_delayed_reply_is_released_after_its_return_delay_not_before():
     assert len(transport.replies) == 50 * 8
     assert min(delays) >= 200e-6, min(delays)
     assert sorted(delays)[25] < 0.005, sorted(delays)
+
+
+def _read_n_times(bus, packet: bytes, reply_bytes: int, times: int) -> None:
+    """``packet`` sent ``times`` times over the TCP bus, each reply read whole before the next is sent."""
+    host, port = bus.port.split("//")[1].rsplit(":", 1)
+    with socket.create_connection((host, int(port)), timeout=5) as sock:
+        for _ in range(times):
+            sock.sendall(packet)
+            got = b""
+            while len(got) < reply_bytes:
+                got += sock.recv(64)
+
+
+READS = {  # servo(s), the read, its reply's length in bytes
+    "1.0 READ": ("1:ax-12a", lambda: InstructionPacket(1, Instruction.READ, bytes([36, 2])).encode(), 8),
+    "2.0 READ": ("1:xl430-w250", lambda: InstructionPacket2(1, Instruction2.READ, bytes([132, 0, 4, 0])).encode(), 15),
+    "2.0 Fast Sync Read": ("1-2:xl430-w250",
+                           lambda: InstructionPacket2(0xFE, Instruction2.FAST_SYNC_READ, bytes([132, 0, 4, 0, 1, 2])).encode(),
+                           24),
+}
+
+
+@pytest.mark.parametrize("corrupt", [0.0, 1.0])
+@pytest.mark.parametrize("kind", list(READS))
+def test_status_errors_count_replies_with_error_bits_the_host_can_take_as_such(kind, corrupt):
+    """A reply with error bits whose checksum (1.0) or CRC (2.0) the fault injection corrupted reaches the host as a
+    checksum error: it is no status error (the live view counted both, where the host saw only the one)."""
+    from ax12emu import VirtualBus
+
+    servo, packet, reply_bytes = READS[kind]
+    with VirtualBus(servo=servo, transport="tcp", baud_bps=1_000_000) as bus:
+        bus.faults.force_alarm(1, "overload")  # every reply of servo 1 carries an error bit
+        bus.faults.set_reply_faults(corrupt=corrupt)
+        _read_n_times(bus, packet(), reply_bytes, 20)
+        counted = bus.call(lambda _: bus._server.status_errors)
+    assert counted == (0 if corrupt else 20), counted
