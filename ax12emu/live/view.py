@@ -62,6 +62,7 @@ class LiveView:
         """A live view of a BusServer's bus of either protocol, or both (call it before the server runs, or from its thread)."""
         tap = ByteTap(server.trace)
         server.trace = tap
+        server.count_status_errors = True
         # The server's count of status packets with error bits stands in for the log's, which decodes at most
         # ``max_chunks`` chunks a frame (the sampler's stats take a counter of the same name over their own).
         counters = lambda: {"packets_in": server.packets_in, "bytes_dropped": server.bytes_dropped, "collisions": server.collisions,

@@ -185,8 +185,10 @@ class BusServer:
         #: Status packets put on the line with error bits set and their checksum or CRC intact (the live view's "status
         #: errors": counted here, where every reply passes, because its packet log decodes only part of a fast host's
         #: traffic; a corrupted one the host takes as a checksum error).  A Fast Sync Read's one packet counts the
-        #: first servo's error field alone.
+        #: first servo's error field alone.  Counted only while ``count_status_errors`` (a live view sets it): the look
+        #: at every reply costs a few percent of a fast host's cycle rate, which a server nobody watches need not pay.
         self.status_errors = 0
+        self.count_status_errors = False
 
     def stop(self) -> None:
         """Ask the loop to end after the current iteration (safe from a signal handler)."""
@@ -294,10 +296,7 @@ class BusServer:
             self._answer(replies, now, end)
             self._unsettled = self._settle is not None
 
-    def _answer(self, replies: Sequence[Reply], now: float, end: float) -> None:
-        """Put one packet's replies on the line: now, or queued for their delay (and pace)."""
-        if not replies:
-            return
+    def _count_status_errors(self, replies: Sequence[Reply]) -> None:
         for k, reply in enumerate(replies):
             data = reply.data
             # (The later servos' shares of a Fast Sync Read's one packet carry their errors elsewhere: not counted.)
@@ -306,6 +305,13 @@ class BusServer:
                 at = _ERROR_AT[two]
                 if at < len(data) and data[at] and _intact(replies, k, two):
                     self.status_errors += 1
+
+    def _answer(self, replies: Sequence[Reply], now: float, end: float) -> None:
+        """Put one packet's replies on the line: now, or queued for their delay (and pace)."""
+        if not replies:
+            return
+        if self.count_status_errors:
+            self._count_status_errors(replies)
         if len(replies) == 1 and replies[0].delay_s == 0.0 and not (self.pace or self._queue):
             data = replies[0].data  # the common case at Return Delay Time 0: _emit, one call shorter
             self._replied = True

@@ -268,6 +268,7 @@ def test_status_errors_count_replies_with_error_bits_the_host_can_take_as_such(k
     with VirtualBus(servo=servo, transport="tcp", baud_bps=1_000_000) as bus:
         bus.faults.force_alarm(1, "overload")  # every reply of servo 1 carries an error bit
         bus.faults.set_reply_faults(corrupt=corrupt)
+        bus.call(lambda _: setattr(bus._server, "count_status_errors", True))  # as a live view asks it to
         _read_n_times(bus, packet(), reply_bytes, 20)
         counted = bus.call(lambda _: bus._server.status_errors)
     assert counted == (0 if corrupt else 20), counted
