@@ -53,6 +53,7 @@ from typing import Any
 from ax12emu.bus import BITS_PER_BYTE, Bus, Reply, merge_replies
 from ax12emu.bus.clock import WallClock
 from ax12emu.protocol.crc16 import crc16
+from ax12emu.protocol.packets import checksum
 from ax12emu.tracing.trace import IN, OUT, TraceWriter
 
 from .transports.base import Transport
@@ -90,7 +91,7 @@ def _intact(replies: Sequence[Reply], k: int, two: bool) -> bool:
     Asked only of a packet with error bits, so the common reply costs nothing more."""
     if not two:
         data = replies[k].data
-        return (~sum(data[2:-1])) & 0xFF == data[-1]
+        return checksum(data[2:-1]) == data[-1]
     shares = [replies[k].data]  # a Fast Sync Read's packet: its CRC ends the last share
     for reply in replies[k + 1 :]:
         if not reply.continues:
