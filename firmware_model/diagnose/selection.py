@@ -197,6 +197,13 @@ class Selection:
         s, h = self.ev.costs(z)
         return Score(s, h, effective_count(self.ev.weigh(z)[self.ev.train], self.ev.weight[self.ev.train]))
 
+    def _traits(self, effect: Effect, knobs: dict[str, float]) -> dict[str, float]:
+        """The recording's traits ``effect`` moves (its ``nuisances``), re-fitted for ``knobs``: knob -> value."""
+        traits: dict[str, float] = {}
+        for nuisance in effect.nuisances:
+            traits.update(PROFILERS[nuisance](self.ev, knobs))
+        return traits
+
     # ------------------------------------------------------------------ screen
     def screen(self, remaining: list[str], round_no: int) -> dict[str, Screened]:
         """Every remaining effect on its coarse grid, in one batched simulation (see the module docstring)."""
@@ -208,9 +215,7 @@ class Selection:
             for combo in itertools.product(*(p.grid for p in e.params)):
                 vals = dict(zip([p.name for p in e.params], combo))
                 req = self.knobs(self.base, {**self.chosen, name: vals})
-                prof: dict[str, float] = {}
-                for nuisance in e.nuisances:  # re-fitted for this grid point (sensing only: no new simulation)
-                    prof.update(PROFILERS[nuisance](ev, req))
+                prof = self._traits(e, req)  # re-fitted for this grid point (sensing only: no new simulation)
                 req.update(prof)
                 profiled[(name, combo)] = prof
                 grid_reqs.append(req)
@@ -285,9 +290,7 @@ class Selection:
         reqs, profiled = [], []
         for x in xs:
             req = self.knobs(fit.base, {**fit.refitted, effect.name: {p.name: x}})
-            traits: dict[str, float] = {}
-            for nuisance in effect.nuisances:
-                traits.update(PROFILERS[nuisance](self.ev, req))
+            traits = self._traits(effect, req)
             reqs.append({**req, **traits})
             profiled.append(traits)
         costs = [self.ev.costs(z)[0] for z in self.ev.whiten(self.ev.run(reqs))]
