@@ -447,6 +447,11 @@ class Faults:
         with a command delay the model acted on it later still; the firmware's Alarm Shutdown finds the alarm at
         every control step, so no step drives with the register written back.
         """
+        self._raise_lasting()
+
+    def _raise_lasting(self) -> None:
+        """Raise the forced alarms and the pinned readings' alarms with their Alarm Shutdown, as the firmware finds
+        them at each step (the readings judged as they are pinned)."""
         for index, bits in self._alarms.items():
             self._raise_forced(self.bus.servos[index], bits)
         for index in self._held:
@@ -463,16 +468,11 @@ class Faults:
         if not (self._stalls or self._held or self._alarms):
             return
         bus = self.bus
-        for index, bits in self._alarms.items():
-            self._raise_forced(bus.servos[index], bits)
         for index, held in self._held.items():
-            servo = bus.servos[index]
-            table = servo.table
+            table = bus.servos[index].table
             for name, value in held.items():
                 table.set(name, value)
-            bits = _held_alarms(servo)  # the firmware judges the pinned readings at its step, not at a packet
-            if bits:
-                self._raise_forced(servo, bits)
+        self._raise_lasting()  # the firmware judges the pinned readings at its step, not at a packet
         now_s = bus.clock.now_s()
         # A model that cannot block its shaft (else the stall would be there) is held at the stall's angle.
         model = bus.model
