@@ -34,7 +34,7 @@ from .mixed import MixedBus, model_name, model_of
 from .state_store import StateStore
 
 __all__ = ["build_bus2", "build_wire", "build_wire_of", "protocol1_keys", "servo_family", "servo_list", "servo_models",
-           "save_wire_state", "start_at_baud"]
+           "attach_wire_stores", "save_wire_state", "start_at_baud"]
 
 log = logging.getLogger(__name__)
 
@@ -135,6 +135,21 @@ def build_wire_of(models: Sequence[tuple[int, str]], *, clock: WallClock | Virtu
     if bus1 is not None and bus2 is not None:
         return MixedBus(bus1, bus2)
     return bus1 if bus1 is not None else bus2  # type: ignore[return-value]
+
+
+def attach_wire_stores(wire: Bus | Bus1X | Bus2 | MixedBus, state_store1: StateStore | None,
+                       state_store2: StateStore | None) -> None:
+    """Give each protocol's servos on ``wire`` their state store (an MX bus's AX-12As the Protocol 1.0 one), as
+    :func:`build_wire_of` does.
+
+    Why: ``serve --factory-reset`` builds its wire without them and attaches them once the server has started. A
+    run refused after the build (a live view whose port is taken) closes its bus, and a bus with a store saves as
+    it closes: the factory image it never served replaced the saved state.
+    """
+    for part in (wire.bus1, wire.bus2) if isinstance(wire, MixedBus) else (wire,):
+        part.state_store = state_store2 if isinstance(part, Bus2) else state_store1
+        if isinstance(part, Bus1X) and part.ax_bus is not None:
+            part.ax_bus.state_store = state_store1
 
 
 def save_wire_state(wire: Bus | Bus1X | Bus2 | MixedBus) -> None:

@@ -272,11 +272,22 @@ def _ax_choice(args: argparse.Namespace) -> ModelChoice:
                        external_torque_nm=args.external_torque, arm=args.arm, profile=args.profile)
 
 
-def build_serve_wire(args: argparse.Namespace, clock):
+def serve_stores(args: argparse.Namespace) -> tuple[StateStore | None, StateStore | None]:
+    """The state directories ``serve --servo`` keeps each protocol's EEPROM in, claimed; (None, None) without ``--state-dir``.
+
+    Protocol 2.0 servos keep theirs in a directory of their own: IDs are per protocol.
+    """
+    if not args.state_dir:
+        return None, None
+    return _claimed(args.state_dir), _claimed(Path(args.state_dir) / STATE_SUBDIR_2)
+
+
+def build_serve_wire(args: argparse.Namespace, clock, stores: tuple[StateStore | None, StateStore | None] = (None, None)):
     """The wire ``serve --servo`` serves, built by the one builder the harness uses (:func:`ax12emu.bus.wire.build_wire_of`).
 
     Every servo takes ``--baud`` as its own model says its Baud Rate values (an MX runs up to 3 Mbps, an
-    AX-12A not); ``ValueError`` names a servo that cannot, or a model the other flags do not fit.
+    AX-12A not); ``ValueError`` names a servo that cannot, or a model the other flags do not fit.  ``stores``
+    (:func:`serve_stores`): loaded from and saved to, each protocol's servos their own.
     """
     from ax12emu.bus.wire import build_wire_of
     from ax12emu.servo.model_factory2 import XModelChoice
@@ -292,20 +303,19 @@ def build_serve_wire(args: argparse.Namespace, clock):
         options=Servo2Options(reply_on_crc_error=reply), options1=options1,
         options1x=Servo1XOptions(reply_on_checksum_error=reply, reply_to_broadcast_ping=options1.reply_to_broadcast_ping,
                                  goal_position_enables_torque=options1.goal_position_enables_torque),
-        # Protocol 2.0 servos keep their EEPROM in a directory of their own: IDs are per protocol.
-        state_store1=_claimed(args.state_dir) if args.state_dir else None,
-        state_store2=_claimed(Path(args.state_dir) / STATE_SUBDIR_2) if args.state_dir else None,
-        load_state=not args.factory_reset,
+        state_store1=stores[0], state_store2=stores[1],
     )
 
 
 def _serve2(args: argparse.Namespace) -> int:
     """``serve --servo``: the X series on Protocol 2.0, the AX and MX series on 1.0, or both on one wire."""
-    from ax12emu.bus.wire import save_wire_state
+    from ax12emu.bus.wire import attach_wire_stores, save_wire_state
     from ax12emu.protocol.servo_models import model
     from ax12emu.serve import BusServer
 
-    bus = build_serve_wire(args, WallClock(args.time_scale))
+    stores = serve_stores(args)
+    # A reset run's bus gets its stores once started: a run refused before that closes its bus without saving.
+    bus = build_serve_wire(args, WallClock(args.time_scale), (None, None) if args.factory_reset else stores)
     protocols = sorted({"2.0" if "2.0" in model(key).protocols else "1.0" for _, key in args.servo_models}, reverse=True)
     faults = cli_hil.fault_config(args)
     if faults.active:  # MX servos' through their firmware (Faults1X); a slot both protocols launched is refused (ValueError)
@@ -318,6 +328,7 @@ def _serve2(args: argparse.Namespace) -> int:
     live = _open_live(args, server, transport, bus)
     _stop_on_signals(server)
     if args.factory_reset:  # started: the factory image saved now, a refused run left the state alone
+        attach_wire_stores(bus, *stores)
         save_wire_state(bus)
     print(transport.url, flush=True)  # the first stdout line: the port, which scripts and tests read
     if live is not None and live.url:

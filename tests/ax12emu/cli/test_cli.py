@@ -177,6 +177,15 @@ def test_a_factory_reset_run_refused_at_start_leaves_the_state_alone(tmp_path, s
     result = run("serve", "--state-dir", str(tmp_path), "--factory-reset", "--delay-s", "0.5", *served)
     assert result.returncode == 2 and "delay_s" in result.stderr, result.stderr
     assert json.loads(store.path_for(1).read_text())["eeprom"]["return_delay_time"] == 10
+    # Refused later, by a live view whose port is taken: the bus built and closed (on --servo it saved as it closed).
+    with socket.socket() as held:
+        held.bind(("127.0.0.1", 0))
+        held.listen()
+        port = held.getsockname()[1]
+        result = run("serve", "--state-dir", str(tmp_path), "--factory-reset", "--tcp", "127.0.0.1:0", "--web",
+                     f"127.0.0.1:{port}", *served)
+    assert result.returncode == 1 and "in use" in result.stderr, result.stderr
+    assert json.loads(store.path_for(1).read_text())["eeprom"]["return_delay_time"] == 10
 
 
 @pytest.mark.parametrize(("flags", "says"), [
