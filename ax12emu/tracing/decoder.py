@@ -451,7 +451,10 @@ def choose_protocol(chunks: Iterable[Chunk], servos: str | None = None) -> str:
     if tables["2.0"] and tables["1.0"]:
         return "both"
     if tables["2.0"]:  # 2.0 servos named only: a chunk of no direction (a raw capture) may hold 1.0 packets too
-        return "both" if any(chunk.direction is None for chunk in chunks) else "2.0"
+        # A trace records every chunk's direction and a raw capture none: the first chunk says which (reading on
+        # through a trace read every line once more before the first was printed)
+        first = next(iter(chunks), None)
+        return "both" if first is not None and first.direction is None else "2.0"
     keep = len(HEADER2) - 1
     tails: dict[str | None, bytes] = {}
     for chunk in chunks:

@@ -95,3 +95,14 @@ def test_the_choice_reads_every_byte_and_each_direction_on_its_own():
                             Chunk(0.3, IN, b"\x00")]) == "both"
     assert choose_protocol([], servos="1:xl430-w250") == "2.0"
     assert choose_protocol([Chunk(None, None, PING)], servos="1:xl430-w250") == "both"
+
+
+def test_a_trace_of_protocol_2_servos_only_is_chosen_from_its_first_line():
+    """Its header names only 2.0 servos and every line has a direction: the choice needs no more, and reading on
+    read the whole trace once more before the first decoded line was printed."""
+
+    def trace():
+        yield Chunk(0.0, IN, encode_instruction2(1, 1))
+        raise AssertionError("read past the first line")
+
+    assert choose_protocol(trace(), servos="1:xl430-w250") == "2.0"
