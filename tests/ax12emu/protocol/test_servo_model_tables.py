@@ -95,3 +95,19 @@ def test_each_indirect_address_points_at_its_indirect_data(key):
         assert by_name[f"indirect_address_{n}"].default == by_name[f"indirect_data_{n}"].address, n
         n += 1
     assert n - 1 in (20, 56)
+
+
+def _answers_backup(key: str) -> bool:
+    from ax12emu.protocol.packets2 import Instruction2
+
+    spec = model(key)
+    return "2.0" in spec.protocols and Instruction2.CONTROL_TABLE_BACKUP not in spec.unsupported_instructions
+
+
+@pytest.mark.parametrize("key", [k for k in model_names() if _answers_backup(k)])
+def test_a_model_that_answers_control_table_backup_has_its_startup_and_ready_registers(key):
+    """Control Table Backup stores the RAM too, which only Startup Configuration(60)'s RAM Restore brings back, and a
+    client polls Backup Ready(147) after the store (e-manual, Protocol 2.0, Control Table Backup): an XM430-W350
+    answered the store, then read Backup Ready 0 ("no backup") and refused the restore setting with Access Error."""
+    names = model(key).layout().by_name
+    assert names["startup_configuration"].address == 60 and names["backup_ready"].address == 147
