@@ -238,9 +238,15 @@ class Servo2(TableServo):
 
     def _checked(self, address: int, data: bytes) -> tuple[WriteCheck, int]:
         """The table's check of a client's write and its error number (this servo's refusals included)."""
-        check = self.table.check_write(address, data, refused=GOAL_REGISTERS if self.watchdog_error else _NOTHING_REFUSED)
+        tripped = self.watchdog_error
+        check = self.table.check_write(address, data, refused=GOAL_REGISTERS if tripped else _NOTHING_REFUSED)
         if check.error:
             return check, check.error
+        if tripped and check.changes.get(self._watchdog_at, 0):
+            # e-manual (X series, Bus Watchdog(98)): "If the value of Bus Watchdog(98) is changed to '0', Bus
+            # Watchdog Error will be cleared"; 0 is the one value its table gives for it.  Stored, another value
+            # cleared it too, and a reconnect that re-armed without writing 0 first passed here, not on a servo.
+            return check, ErrorNumber.DATA_RANGE
         if self.ram_only and self._what_is_written(check.entries)[2]:
             return check, ErrorNumber.ACCESS  # "The EEPROM area ... cannot be modified with Secondary ID(12)"
         return check, ErrorNumber.NONE

@@ -357,6 +357,10 @@ def test_bus_watchdog_stops_the_servo_and_refuses_goals_until_cleared(xm):
     # "When it stops, the Profile Acceleration(108) and Profile Velocity(112) are applied as '0'": a step, no ramp
     assert firmware[0].last.profile_acceleration == 0 and firmware[0].last.profile_velocity == 0
     assert status(bus, 1, Instruction2.WRITE, bytes((104, 0)) + u32(150)).error == ErrorNumber.DATA_RANGE
+    # Only 0 clears the error ("If the value of Bus Watchdog(98) is changed to '0'"): re-armed at once, it stays
+    assert status(bus, 1, Instruction2.WRITE, bytes((98, 0, 5))).error == ErrorNumber.DATA_RANGE
+    assert bus.servo(1).table.get("bus_watchdog") == 0xFF
+    assert status(bus, 1, Instruction2.WRITE, bytes((104, 0)) + u32(150)).error == ErrorNumber.DATA_RANGE
     assert status(bus, 1, Instruction2.WRITE, bytes((98, 0, 0))).error == ErrorNumber.NONE
     assert firmware[0].last.goal_velocity == 0  # still stopped: nothing new was asked
     assert status(bus, 1, Instruction2.WRITE, bytes((104, 0)) + u32(150)).error == ErrorNumber.NONE
