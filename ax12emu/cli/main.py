@@ -32,7 +32,7 @@ from ax12emu.cli.arg_types import positive_float as _positive_float
 from ax12emu.protocol.control_table import AX12_MODEL, DEFAULT_PROFILE, PROFILES
 from ax12emu.protocol.ids import parse_ids
 from ax12emu.servo.model_factory import EXTERNAL_TORQUE_MAX_NM, MODELS, ModelChoice, build_model, parse_arm
-from ax12emu.servo.virtual_servo import ServoOptions
+from ax12emu.servo.virtual_servo import EEPROM_BUSY_MAX_S, ServoOptions
 from ax12emu.tracing.trace import TraceWriter
 
 if TYPE_CHECKING:
@@ -67,8 +67,8 @@ def _external_torque(text: str) -> float:
 
 def _eeprom_busy_ms(text: str) -> float:
     value = _finite_float(text)
-    if not 0.0 <= value <= 1000.0:
-        raise argparse.ArgumentTypeError(f"must lie in 0..1000 ms, got {text}")
+    if not 0.0 <= value <= EEPROM_BUSY_MAX_S * 1e3:
+        raise argparse.ArgumentTypeError(f"must lie in 0..{EEPROM_BUSY_MAX_S * 1e3:g} ms, got {text}")
     return value
 
 

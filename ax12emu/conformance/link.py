@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import socket
 import time
+import urllib.parse
 from typing import NamedTuple
 
 import serial
@@ -65,13 +66,39 @@ class Response2(NamedTuple):
     rtt_s: float
 
 
+#: The options pyserial's ``socket://`` URL takes, each with its values; the form its errors name.
+_SOCKET_URL_OPTIONS = {"logging": ("debug", "info", "warning", "error")}
+_SOCKET_URL_FORM = "socket://HOST:PORT[?logging=debug|info|warning|error] (PORT 1..65535)"
+
+
+def _check_socket_url(url: str) -> None:
+    """ValueError naming the ``socket://HOST:PORT`` form for a socket URL pyserial cannot read (other names pass).
+
+    pyserial's own parser leaves such a URL to fail deep inside: with no port it compares None with 0 (a
+    ``TypeError`` about ``'<='``), and a port that is no number or out of range, or an unknown option, breaks the
+    template of its own message (the whole error reads ``'debug|info|warning|error'``).  Read here as pyserial
+    reads it (``urlsplit``), so what passes is what its parser takes, bar port 0, where no server listens."""
+    parts = urllib.parse.urlsplit(url)
+    if parts.scheme != "socket":
+        return
+    try:
+        port = parts.port
+    except ValueError:  # not a number, or out of range
+        port = None
+    options = urllib.parse.parse_qs(parts.query, keep_blank_values=True)
+    known = all(value in _SOCKET_URL_OPTIONS.get(name, ()) for name, values in options.items() for value in values)
+    if not port or not known:  # None: no port, or one urlsplit cannot read; 0: no server listens there
+        raise ValueError(f"expected {_SOCKET_URL_FORM}, got {url!r}")
+
+
 def open_port(port: str, baud: int) -> serial.SerialBase:
-    """Open a device path or any pyserial URL at ``baud``.
+    """Open a device path or any pyserial URL at ``baud``; ValueError for a ``socket://`` URL pyserial cannot read.
 
     pyserial's ``socket://`` leaves Nagle's algorithm on, which holds back a
     packet's later bytes for a delayed ACK (~40 ms), past the servo's
     partial-packet timeout; a serial line never does that, so it is turned off.
     """
+    _check_socket_url(port)
     link = serial.serial_for_url(port, baudrate=baud, timeout=_POLL_S, write_timeout=1.0)
     sock = getattr(link, "_socket", None)
     if sock is not None:

@@ -107,8 +107,27 @@ def _distributed(config: pytest.Config) -> bool:
     return getattr(config.option, "dist", "no") != "no" and bool(getattr(config.option, "tx", None))
 
 
+def _check_servo_option(config: pytest.Config) -> None:
+    """A UsageError for an ``--ax12-servo`` text the bus builder would refuse, read by the builder's own parser.
+
+    The fixture reads the option only for a bus without an ``ax12_servo`` marker, so a mistyped model would pass
+    the marked tests and error each of the others with a traceback: a run that looks half broken, not mistyped.
+    IDs it is paired with (``ax12_ids``) are a fixture's matter: a bare MODEL is checked on ID 1."""
+    text = config.getoption("--ax12-servo", None)
+    if text is None:
+        return
+    from ax12emu.bus.wire import servo_models
+
+    try:
+        servo_models(text, None, mixed=True)
+    except ValueError as exc:
+        raise pytest.UsageError(f"--ax12-servo {text!r}: {exc}") from None
+
+
 def pytest_configure(config: pytest.Config) -> None:
-    """Register the markers so ``--strict-markers`` accepts them; refuse ``--ax12-web`` where it cannot work."""
+    """Register the markers so ``--strict-markers`` accepts them; refuse ``--ax12-web`` where it cannot work and an
+    ``--ax12-servo`` text that names no servos."""
+    _check_servo_option(config)
     if config.getoption("--ax12-web", False) and _distributed(config):
         # A worker's output never reaches the terminal (no URL is shown) and its linger waits for a Ctrl-C that
         # only the controller gets, so the run hangs; the workers would also share one --ax12-web-at address.

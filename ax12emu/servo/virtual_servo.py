@@ -13,7 +13,7 @@ import numpy as np
 
 from ax12emu.protocol.control_table import DEFAULT_PROFILE, PROFILES, ControlTable, Layout
 
-__all__ = ["ServoOptions", "VirtualServo", "baud_bps", "power_on_1"]
+__all__ = ["EEPROM_BUSY_MAX_S", "ServoOptions", "VirtualServo", "baud_bps", "power_on_1"]
 
 
 def power_on_1(servo) -> None:
@@ -30,6 +30,9 @@ def power_on_1(servo) -> None:
 def baud_bps(value: int) -> float:
     """Baud Rate register to bits per second: 2,000,000 / (value + 1) (e-manual, Baud Rate)."""
     return 2_000_000.0 / (value + 1)
+
+#: The longest EEPROM pause per byte a servo may be given: far past the measured 6 ms, and still a servo that answers.
+EEPROM_BUSY_MAX_S = 1.0
 
 
 @dataclass(frozen=True)
@@ -75,8 +78,8 @@ class ServoOptions:
     def __post_init__(self) -> None:
         if self.profile not in PROFILES:
             raise ValueError(f"unknown profile {self.profile!r}; choose one of: {', '.join(PROFILES)}")
-        if not 0.0 <= self.eeprom_busy_s_per_byte <= 1.0:  # also refuses NaN
-            raise ValueError(f"eeprom_busy_s_per_byte must lie in 0..1 s, got {self.eeprom_busy_s_per_byte!r}")
+        if not 0.0 <= self.eeprom_busy_s_per_byte <= EEPROM_BUSY_MAX_S:  # also refuses NaN
+            raise ValueError(f"eeprom_busy_s_per_byte must lie in 0..{EEPROM_BUSY_MAX_S:g} s, got {self.eeprom_busy_s_per_byte!r}")
 
 
 class VirtualServo:

@@ -54,7 +54,7 @@ from ax12emu.harness.inprocess import InProcessLink, LinkBusy, LinkClosed, looku
 from ax12emu.harness.servos2 import build_wire, servo_list, servo_models
 from ax12emu.protocol.ids import parse_ids
 from ax12emu.servo.model_factory import ModelChoice, build_model
-from ax12emu.servo.virtual_servo import ServoOptions
+from ax12emu.servo.virtual_servo import EEPROM_BUSY_MAX_S, ServoOptions
 from ax12emu.tracing.trace import TraceWriter
 
 __all__ = ["Serial", "UrlError", "EXPECTED"]
@@ -82,12 +82,20 @@ def _ax_options(options: dict[str, list[str]], busy_default_s: float, profile: s
         raise ValueError(f"goal_torque must be on or unchanged, got {goal_torque!r}")
     busy_s = busy_default_s
     if "eeprom_busy_ms" in options:
-        busy_text = options.pop("eeprom_busy_ms")[-1]
-        try:
-            busy_s = float(busy_text) * 1e-3
-        except ValueError:
-            raise ValueError(f"eeprom_busy_ms must be a number of milliseconds, got {busy_text!r}") from None
+        busy_s = _eeprom_busy_ms(options.pop("eeprom_busy_ms")[-1]) * 1e-3
     return ServoOptions(profile=profile, goal_position_enables_torque=goal_torque == "on", eeprom_busy_s_per_byte=busy_s)
+
+
+def _eeprom_busy_ms(text: str) -> float:
+    """The URL's eeprom_busy_ms in milliseconds; ValueError naming the option as written, in its unit (ServoOptions'
+    own check names its field in seconds, which the URL never shows)."""
+    try:
+        busy_ms = float(text)
+    except ValueError:
+        raise ValueError(f"eeprom_busy_ms: must be a number of milliseconds, got {text!r}") from None
+    if not 0.0 <= busy_ms <= EEPROM_BUSY_MAX_S * 1e3:  # also refuses NaN
+        raise ValueError(f"eeprom_busy_ms: must lie in 0..{EEPROM_BUSY_MAX_S * 1e3:g} ms, got {text}")
+    return busy_ms
 
 
 def _trace_writer(path: str | None, **header: str) -> TraceWriter | None:

@@ -45,6 +45,16 @@ def test_bad_flags_exit_2_with_usage(args, message):
     assert len(result.stderr.strip().splitlines()) == 1 and "--help" in result.stderr, result.stderr
 
 
+@pytest.mark.parametrize("url", ["socket://127.0.0.1", "socket://localhost:abc"])
+def test_conformance_on_a_socket_url_without_its_port_is_one_line_naming_the_form(url):
+    """pyserial's parser said "'<=' not supported between instances of 'int' and 'NoneType'" or only
+    "'debug|info|warning|error'", as serve --tcp names HOST:PORT for the same mistake."""
+    result = run("conformance", url, "--ids", "1")
+    assert result.returncode == 2
+    assert result.stderr.strip().splitlines() == [f"ax12emu: expected socket://HOST:PORT[?logging=debug|info|warning|error] "
+                                                  f"(PORT 1..65535), got {url!r}"], result.stderr
+
+
 def test_corrupt_state_file_is_one_line(tmp_path):
     """A corrupt state file stops start-up with one line naming the file."""
     (tmp_path / "servo-001.json").write_text("garbage")

@@ -7,6 +7,7 @@ judged the packet silent, which is what a late reply is.
 from __future__ import annotations
 
 import os
+import re
 import select
 import time
 
@@ -71,3 +72,25 @@ def test_a_check_fails_when_a_reply_comes_after_the_silence_window(wire):
         return "silent"
 
     assert run_one(Check("absent ID is silent", quiet), ctx).outcome == PASS
+
+
+@pytest.mark.parametrize("url", ["socket://127.0.0.1", "socket://localhost:abc", "socket://localhost:70000",
+                                 "socket://localhost:0", "socket://[::1]", "socket://localhost:7777?nodelay=1",
+                                 "socket://localhost:7777?logging=verbose"])
+def test_a_socket_url_pyserial_cannot_read_names_the_host_port_form(url):
+    """pyserial's parser said "'<=' not supported between instances of 'int' and 'NoneType'" (no port), or only
+    "'debug|info|warning|error'" (a port that is no number, an unknown option), or a bare KeyError (a level)."""
+    form = "socket://HOST:PORT[?logging=debug|info|warning|error] (PORT 1..65535)"
+    with pytest.raises(ValueError, match=f"^{re.escape(f'expected {form}, got {url!r}')}$"):
+        open_port(url, 1_000_000)
+
+
+def test_a_socket_url_with_its_port_and_option_opens():
+    """The check lets through what pyserial opens: a port, and its one option."""
+    import socket
+
+    with socket.socket() as server:
+        server.bind(("127.0.0.1", 0))
+        server.listen(1)
+        link = open_port(f"socket://127.0.0.1:{server.getsockname()[1]}?logging=warning", 1_000_000)
+        link.close()

@@ -342,3 +342,29 @@ def test_ax12_web_at_an_address_in_use_names_the_option_and_the_address(pytester
         result = pytester.runpytest_inprocess("-p", "no:cacheprovider", "-rE", "--ax12-web", f"--ax12-web-at={address}")
     result.assert_outcomes(errors=1)
     result.stdout.fnmatch_lines([f"*UsageError: --ax12-web-at {address}: the live view cannot serve there (*in use)*"])
+
+
+@pytest.mark.parametrize("text, says", [
+    ("xl430", "unknown servo model 'xl430'; choose one of: *xl430-w250*"),
+    ("1:xl430-w250,1:xm430-w350", "ID 1 is given two models"),
+    ("", "empty servo list*"),
+])
+def test_an_ax12_servo_text_that_names_no_servos_is_one_usage_error_at_start(pytester, text, says):
+    """``--ax12-servo xl430`` errored every test without an ax12_servo marker with a traceback, while the marked
+    ones passed; the run is refused before it starts, naming the option, the text and the known models."""
+    pytester.makepyfile(
+        """
+        import pytest
+
+        @pytest.mark.ax12_servo("xl430-w250")
+        def test_marked(ax12_bus):
+            pass
+
+        def test_unmarked(ax12_bus):
+            pass
+        """
+    )
+    result = pytester.runpytest_inprocess("-p", "no:cacheprovider", "--ax12-servo", text)
+    assert result.ret == pytest.ExitCode.USAGE_ERROR
+    result.stderr.fnmatch_lines([f"ERROR: --ax12-servo {text!r}: {says}"])
+    assert "Traceback" not in result.stdout.str() + result.stderr.str()

@@ -52,7 +52,11 @@ def test_host_baud_must_match():
         ("ax12emu://?virtual_time=yes", "virtual_time"),
         ("ax12emu://?goal_torque=maybe", "goal_torque"),
         ("ax12emu://?eeprom_busy_ms=soon", "eeprom_busy_ms"),
-        ("ax12emu://?eeprom_busy_ms=-1", "eeprom_busy_s_per_byte"),
+        # As written and in ms, as serve --eeprom-busy-ms says it (not ServoOptions' eeprom_busy_s_per_byte, in s).
+        ("ax12emu://?eeprom_busy_ms=-5", r"eeprom_busy_ms: must lie in 0\.\.1000 ms, got -5$"),
+        ("ax12emu://?eeprom_busy_ms=5000", r"eeprom_busy_ms: must lie in 0\.\.1000 ms, got 5000$"),
+        ("ax12emu://?eeprom_busy_ms=nan", r"eeprom_busy_ms: must lie in 0\.\.1000 ms, got nan$"),
+        ("ax12emu://?servo=1:ax-12a,2:xl430-w250&eeprom_busy_ms=-5", r"eeprom_busy_ms: must lie in 0\.\.1000 ms, got -5$"),
         ("ax12emu://?logging=loud", "logging"),
         ("ax12emu://?ids=1&ids=2", "ids given more than once"),  # served ID 2 alone, silently
         ("ax12emu://?trace=/no/such/folder/bus.jsonl", "trace=/no/such/folder/bus.jsonl: No such file"),
