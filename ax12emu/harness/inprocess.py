@@ -37,7 +37,8 @@ from ax12emu.bus.bus2 import Bus2
 from ax12emu.bus.reply import merge_replies
 from ax12emu.tracing.trace import IN, OUT, TraceWriter
 
-__all__ = ["InProcessLink", "register", "lookup", "check_name", "is_registered", "NameTaken", "LinkBusy", "LinkClosed"]
+__all__ = ["InProcessLink", "register", "lookup", "check_name", "is_registered", "NameTaken", "LinkBusy", "LinkClosed",
+           "LinkDetached"]
 
 _REGISTRY: "weakref.WeakValueDictionary[str, InProcessLink]" = weakref.WeakValueDictionary()
 _REGISTRY_LOCK = threading.Lock()
@@ -60,6 +61,10 @@ class LinkClosed(RuntimeError):
     """The bus behind the link was closed: its port is gone, as an unplugged adapter's."""
 
 
+class LinkDetached(RuntimeError):
+    """A host wrote in a session that has ended: its port was closed (another may be open on the bus now)."""
+
+
 class InProcessLink:
     """A host endpoint on ``bus``, safe to use from several threads."""
 
@@ -74,6 +79,9 @@ class InProcessLink:
         self._seq = 0
         self._rx = bytearray()
         self._attached = False
+        #: Bumped by every attach and detach: a read begun in one host's session ends with it (a thread still
+        #: reading on a closed port took the replies meant for the next port opened on the bus).
+        self._session = 0
         #: The bus was closed (:meth:`close`): a host's reads and writes fail from then on.
         self.closed = False
         #: A host's read is to return at once with what has arrived (:meth:`cancel_read`), once.
@@ -82,19 +90,22 @@ class InProcessLink:
         self.packets_in = 0
 
     # -- host side ---------------------------------------------------------------------
-    def attach(self) -> None:
-        """Claim the link for one host (a port being opened)."""
+    def attach(self) -> int:
+        """Claim the link for one host (a port being opened); returns the session its reads and writes name."""
         with self.lock:
             if self._attached:
                 raise LinkBusy("another port is open on this in-process bus: one host at a time")
             self._attached = True
+            self._session += 1
             self._rx.clear()
+            return self._session
 
     def detach(self) -> None:
         """Release the link (the port closed); bytes in flight are lost, those already on the line are traced."""
         with self._cond:
             self._release(time.monotonic())
             self._attached = False
+            self._session += 1
             self._cancel_read = False
             self._rx.clear()
             self._pending.clear()
@@ -122,10 +133,13 @@ class InProcessLink:
         if self.closed:
             raise LinkClosed("the in-process bus was closed")
 
-    def write(self, data: bytes, line_bps: float | None = None) -> int:
-        """The host sends ``data``; servos act at once and their replies are queued."""
+    def write(self, data: bytes, line_bps: float | None = None, session: int | None = None) -> int:
+        """The host sends ``data``; servos act at once and their replies are queued.  ``session`` (:meth:`attach`'s):
+        :class:`LinkDetached` once it has ended, so a write racing its port's close never reaches the servos."""
         with self._cond:
             self._check_open()
+            if session is not None and session != self._session:
+                raise LinkDetached("the port was closed")
             now = time.monotonic()
             # Replies due by now went out before these bytes came in, read or not: traced (and received) first,
             # so the trace keeps time order as a pty's does.
@@ -156,12 +170,17 @@ class InProcessLink:
             self._release(time.monotonic())
             return len(self._rx)
 
-    def read(self, size: int, timeout_s: float | None) -> bytes:
-        """Up to ``size`` bytes; waits for them up to ``timeout_s`` (None: forever, 0: not at all)."""
+    def read(self, size: int, timeout_s: float | None, session: int | None = None) -> bytes:
+        """Up to ``size`` bytes; waits for them up to ``timeout_s`` (None: forever, 0: not at all).  ``session``
+        (:meth:`attach`'s; None: the one under way): once it has ended, nothing more is read (b"")."""
         deadline = None if timeout_s is None else time.monotonic() + timeout_s
         with self._cond:
+            if session is None:
+                session = self._session
             while True:
                 self._check_open()
+                if self._session != session:  # its port closed meanwhile: what arrives now is the next host's
+                    return b""
                 now = time.monotonic()
                 self._release(now)
                 if self._cancel_read:

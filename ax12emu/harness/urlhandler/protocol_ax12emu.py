@@ -50,7 +50,7 @@ from ax12emu.bus.clock import VirtualClock, WallClock
 from ax12emu.bus.mixed import MixedBus
 from ax12emu.bus.wire import servo_family
 from ax12emu.faults.config import FAULT_OPTIONS, FaultConfig
-from ax12emu.harness.inprocess import InProcessLink, LinkBusy, LinkClosed, lookup
+from ax12emu.harness.inprocess import InProcessLink, LinkBusy, LinkClosed, LinkDetached, lookup
 from ax12emu.harness.servos2 import build_wire, servo_list, servo_models
 from ax12emu.protocol.ids import parse_ids
 from ax12emu.servo.model_factory import ModelChoice, build_model
@@ -130,6 +130,8 @@ class Serial(SerialBase):
 
     def __init__(self, *args, **kwargs) -> None:
         self._link: InProcessLink | None = None
+        #: This port's session on the link (``InProcessLink.attach``): a read or write racing close() ends with it.
+        self._session = 0
         self._private: tuple[Bus | Bus1X | Bus2 | MixedBus, TraceWriter | None] | None = None
         self.logger: logging.Logger | None = None
         super().__init__(*args, **kwargs)
@@ -146,7 +148,7 @@ class Serial(SerialBase):
             self._reconfigure_port()  # before claiming the bus: a refused setting leaves it free, as pyserial's ports do
             if link.closed:
                 raise LinkClosed("the in-process bus was closed")
-            link.attach()
+            self._session = link.attach()
         except (LinkBusy, LinkClosed) as exc:
             self._close_private()
             raise SerialException(f"{self.portstr}: {exc}") from None
@@ -280,16 +282,19 @@ class Serial(SerialBase):
     @property
     def in_waiting(self) -> int:
         """Bytes that can be read without waiting."""
-        if not self.is_open or self._link is None:
+        link = self._link  # once: close() in another thread sets it to None
+        if not self.is_open or link is None:
             raise PortNotOpenError()
-        return self._link.in_waiting()
+        return link.in_waiting()
 
     def read(self, size: int = 1) -> bytes:
-        """Up to ``size`` bytes, waiting up to the timeout (None: until all arrive, or :meth:`cancel_read`)."""
-        if not self.is_open or self._link is None:
+        """Up to ``size`` bytes, waiting up to the timeout (None: until all arrive, or :meth:`cancel_read`); b"" once
+        the port is closed meanwhile (from another thread)."""
+        link, session = self._link, self._session
+        if not self.is_open or link is None:
             raise PortNotOpenError()
         try:
-            data = self._link.read(size, self._timeout)
+            data = link.read(size, self._timeout, session)
         except LinkClosed as exc:
             raise SerialException(f"{self.portstr}: {exc}") from None
         if self.logger:
@@ -302,7 +307,8 @@ class Serial(SerialBase):
         Takes what pyserial's own ports take (``to_bytes``): bytes-likes and
         sequences of ints, which dynamixel-sdk writes.
         """
-        if not self.is_open or self._link is None:
+        link, session = self._link, self._session
+        if not self.is_open or link is None:
             raise PortNotOpenError()
         payload = bytes(to_bytes(data))
         if self.logger:
@@ -310,14 +316,17 @@ class Serial(SerialBase):
         if not heard_at_8n1(self._bytesize, self._parity, bool(self._break_state)):
             return len(payload)  # sent, into framing errors
         try:
-            return self._link.write(payload, float(self._baudrate))
+            return link.write(payload, float(self._baudrate), session)
         except LinkClosed as exc:
             raise SerialException(f"{self.portstr}: {exc}") from None
+        except LinkDetached:  # closed by another thread since the check above
+            raise PortNotOpenError() from None
 
     def cancel_read(self) -> None:
         """Make a read blocked in another thread return at once with what has arrived (pyserial's ``cancel_read``)."""
-        if self._link is not None:
-            self._link.cancel_read()
+        link = self._link
+        if link is not None:
+            link.cancel_read()
 
     def cancel_write(self) -> None:
         """Writes complete at once: nothing to cancel."""
@@ -329,9 +338,10 @@ class Serial(SerialBase):
 
     def reset_input_buffer(self) -> None:
         """Drop received bytes."""
-        if not self.is_open or self._link is None:
+        link = self._link
+        if not self.is_open or link is None:
             raise PortNotOpenError()
-        self._link.clear_input()
+        link.clear_input()
 
     def reset_output_buffer(self) -> None:
         """Nothing is ever waiting to be sent."""
