@@ -11,22 +11,36 @@ one reads fills at 64 KiB and then blocks the child mid-write, so it stops
 answering and no longer sees SIGTERM.  Its stdout stays a pipe: ``serve``
 prints two lines there at most (the port, the live view's address), which
 callers read as they come.
+
+On Linux the child dies with its starter: it is sent SIGTERM (``PR_SET_PDEATHSIG``) when the process that
+started it dies, also of SIGKILL (a CI job's timeout), where no clean-up of the caller's runs; otherwise it
+went on serving and kept its ``--state-dir`` locked, so the next run on that folder was refused.  The kernel
+ties that signal to the *thread* that started the child, so it is asked for from the main thread only: a
+child started from another thread would be stopped when that thread ends.  Elsewhere (macOS has no such
+call) a child outlives a killed caller, as it does when started from another thread.
 """
 
 from __future__ import annotations
 
+import ctypes
 import os
 import select
 import signal
 import subprocess
 import sys
 import tempfile
+import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 __all__ = ["ServedProcess", "start_served"]
+
+#: prctl(2)'s option for the signal a process gets when its parent dies (linux/prctl.h).
+_PR_SET_PDEATHSIG = 1
+#: What a child whose parent died before it could ask for the signal exits with: as if SIGTERM had come.
+_ORPHAN_EXIT = 128 + signal.SIGTERM
 
 
 @dataclass
@@ -71,7 +85,7 @@ def start_served(args: Sequence[str], *, cwd: str | os.PathLike[str] | Path | No
     process: subprocess.Popen | None = None
     try:
         process = subprocess.Popen([sys.executable, "-m", "ax12emu", "serve", *args], cwd=cwd,
-                                   stdout=subprocess.PIPE, stderr=log_fd, text=True)
+                                   stdout=subprocess.PIPE, stderr=log_fd, text=True, preexec_fn=_dying_with_parent())
         process.stderr = log_reader  # read as a pipe's end would be: process.stderr.read() once stopped
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
@@ -94,6 +108,22 @@ def start_served(args: Sequence[str], *, cwd: str | os.PathLike[str] | Path | No
     err = log_reader.read()
     log_reader.close()
     raise RuntimeError(f"ax12emu serve {' '.join(args)} did not start: {err.strip()}")
+
+
+def _dying_with_parent() -> Callable[[], None] | None:
+    """What the child runs between fork and exec to be sent SIGTERM when this process dies (module docstring);
+    None off Linux or off the main thread."""
+    if not sys.platform.startswith("linux") or threading.current_thread() is not threading.main_thread():
+        return None
+    prctl = ctypes.CDLL(None, use_errno=True).prctl  # looked up before the fork: the child only calls it
+    parent_pid = os.getpid()
+
+    def ask() -> None:
+        prctl(_PR_SET_PDEATHSIG, int(signal.SIGTERM))
+        if os.getppid() != parent_pid:  # the parent died between the fork and the prctl: no signal will come
+            os._exit(_ORPHAN_EXIT)
+
+    return ask
 
 
 def _kill(process: subprocess.Popen) -> None:

@@ -45,6 +45,7 @@ import numbers
 import operator
 import os
 import threading
+import weakref
 from collections.abc import Callable, Iterable
 from typing import Any
 
@@ -180,6 +181,97 @@ def _servo_with(bus: AnyBus, servo_id: int, name: str, protocol: float | None = 
     return holder, servo
 
 
+def _serve(server: Any, name: str, dropped: "_Dropped") -> None:
+    """The serving thread: it holds what it serves with (the server, the bus's name), never the VirtualBus, so a
+    bus its user dropped unclosed is still collected; it then releases that bus (:func:`_release_dropped`)."""
+    try:
+        server.serve_forever()
+    except Exception:  # pragma: no cover - reported, and close() still cleans up
+        log.exception("the serving thread of %s stopped", name)
+    if dropped.held is not None:
+        _release(dropped.held)
+
+
+def _named(what: str, address: tuple[str, int], exc: OSError) -> OSError:
+    """``exc`` naming the argument whose address it is about (``tcp_address`` and ``web`` each bind one), errno kept."""
+    host, port = address
+    return OSError(exc.errno, f"{what} {host}:{port}: {exc.strerror or exc}")
+
+
+@dataclasses.dataclass(frozen=True)
+class _Held:
+    """What a started VirtualBus holds open, none of which refers back to it: so a collected bus can still be
+    released (its finalizer may not hold the bus), and close() releases it through the same code."""
+
+    name: str
+    bus: Any
+    live: Any = None
+    server: Any = None
+    thread: threading.Thread | None = None
+    link: InProcessLink | None = None
+    transport: Any = None
+    trace: TraceWriter | None = None
+
+
+class _Dropped:
+    """What a bus collected unclosed held, once its finalizer has run (None before): for a thread of its own to
+    release (:func:`_release_dropped`)."""
+
+    held: _Held | None = None
+
+
+def _release(held: _Held) -> None:
+    """Stop serving, join the thread, close the port and the trace."""
+    if held.live is not None:  # first: it reads the bus through the serving thread
+        held.live.close()
+    if held.server is not None:
+        held.server.stop()
+    if held.thread is not None and held.thread is not threading.current_thread():
+        held.thread.join(5.0)
+        if held.thread.is_alive():  # pragma: no cover
+            log.error("serving thread of %s did not stop", held.name)
+    if held.link is not None:
+        unregister(held.name)
+        held.link.close()  # a port still open on it fails from now on, as an unplugged adapter's
+    if held.transport is not None:
+        held.transport.close()
+    held.bus.close()
+    if held.trace is not None:
+        held.trace.close()
+
+
+def _release_dropped(held: _Held, dropped: _Dropped) -> None:
+    """A started bus collected unclosed: said, and its release handed to a thread it has.
+
+    A collection runs wherever an allocation falls, on any thread and inside any lock that thread holds (the
+    name registry's, a link's, threading's own), so nothing here takes a lock but logging's (reentrant) or starts
+    a thread: the serving thread, told to stop, releases the rest as it ends; an in-process bus's live view does
+    so at its next sample (:func:`_weak_call`).  An in-process bus without one has no thread or descriptor to
+    release: its name, in a registry of weak references, goes with its link.
+    """
+    log.warning("VirtualBus %s was never closed; closing it", held.name)
+    dropped.held = held
+    if held.server is not None:
+        held.server.stop()
+
+
+def _weak_call(owner: "weakref.ReferenceType[VirtualBus]", dropped: _Dropped) -> Callable[[Callable[[Any], Any]], Any]:
+    """``owner().call`` for an in-process bus's live view, which must not keep the bus alive: once the bus is
+    collected unclosed, the first sample after starts the release on a thread of its own (the release joins the
+    sampling thread) and fails, as a sample of a closed bus does."""
+
+    def call(fn: Callable[[Any], Any]) -> Any:
+        bus = owner()
+        if bus is not None:
+            return bus.call(fn)
+        held, dropped.held = dropped.held, None
+        if held is not None:
+            threading.Thread(target=_release, args=(held,), name=f"ax12emu-{held.name}-release", daemon=True).start()
+        raise RuntimeError("the VirtualBus of this live view was collected unclosed")
+
+    return call
+
+
 class _FaultsOnBus:
     """``bus.faults``: every Faults method, run where the bus is served."""
 
@@ -209,6 +301,12 @@ class VirtualBus:
     the FaultConfig's own (a FaultConfig at its default seed 0 takes ``seed=``; two different seeds are a
     ValueError).  ``baud_bps``: every servo starts at that rate, its Baud Rate set to the value its model gives
     for it, on the AX-12A bus as with ``servo=``.
+
+    Its lifetime: close it (:meth:`close`, or a ``with`` block).  On every transport a started bus no longer
+    referenced is released when Python collects it, with a warning that it was never closed: its serving thread
+    and live view stop and its port goes (an in-process port already open keeps its link until closed), so keep
+    the bus itself, not only its ``port``, for as long as clients use it.  Neither its serving thread nor its
+    live view holds it, so a forgotten bus keeps no thread or descriptor open past a collection.
     """
 
     def __init__(
@@ -324,6 +422,9 @@ class VirtualBus:
         self._servo_spec = servo
         self._closed = self._closing = False
         self._started = False
+        #: Releases what start() opened should the bus be collected unclosed (see the class docstring).
+        self._finalizer: weakref.finalize | None = None
+        self._dropped = _Dropped()
 
     # -- life cycle -----------------------------------------------------------------------
     def start(self) -> "VirtualBus":
@@ -337,41 +438,58 @@ class VirtualBus:
             if self._trace_path:
                 self._trace = self._open_trace(self._trace_path)
             if self.transport_name == "inprocess":
-                if self._trace is not None:
-                    self._trace.note(echo=False)  # the decoder then never takes a repeated poll for an echo
-                link = InProcessLink(self.bus, trace=self._trace)
-                while True:
-                    try:
-                        register(self.name, link)  # a name another bus holds is refused here, and that bus keeps it
-                        break
-                    except NameTaken:
-                        if not self._auto_name:
-                            raise
-                        self.name = _next_name()
-                self._link = link
-                self.port = f"ax12emu://{self.name}"
-                self._start_live()
-                return self
-            from ax12emu.serve import BusServer, open_transport
-
-            if self.transport_name == "pty":
-                self._transport = open_transport("pty")
+                self._start_link()
             else:
-                host, port = self._tcp_address
-                self._transport = open_transport("tcp", host=host, port=port)
-                from ax12emu.serve.transports.tcp import is_loopback
-
-                if not is_loopback(host):  # (allow_remote=True): said, as serve --allow-remote says it
-                    log.warning("VirtualBus %s serving on %s, reachable from other machines", self.name, self._transport.url)
-            self.port = self._transport.url
-            self._server = BusServer(self.bus, self._transport, pace=self._pace, echo=self._echo, trace=self._trace)
-            self._thread = threading.Thread(target=self._serve, name=f"ax12emu-{self.name}", daemon=True)
-            self._thread.start()
+                self._start_wire()
             self._start_live()
         except BaseException:
             self.close()
             raise
+        self._finalizer = weakref.finalize(self, _release_dropped, self._held(), self._dropped)
+        self._finalizer.atexit = False  # a bus still held at exit ends with the process, as its daemon thread does
         return self
+
+    def _start_link(self) -> None:
+        """Register the in-process link under the bus's name (a free one, when the name was automatic)."""
+        if self._trace is not None:
+            self._trace.note(echo=False)  # the decoder then never takes a repeated poll for an echo
+        link = InProcessLink(self.bus, trace=self._trace)
+        while True:
+            try:
+                register(self.name, link)  # a name another bus holds is refused here, and that bus keeps it
+                break
+            except NameTaken:
+                if not self._auto_name:
+                    raise
+                self.name = _next_name()
+        self._link = link
+        self.port = f"ax12emu://{self.name}"
+
+    def _start_wire(self) -> None:
+        """Open the pty or TCP port and start the serving thread on it."""
+        from ax12emu.serve import BusServer, open_transport
+
+        if self.transport_name == "pty":
+            self._transport = open_transport("pty")
+        else:
+            host, port = self._tcp_address
+            try:
+                self._transport = open_transport("tcp", host=host, port=port)
+            except OSError as exc:
+                raise _named("tcp_address", (host, port), exc) from None
+            from ax12emu.serve.transports.tcp import is_loopback
+
+            if not is_loopback(host):  # (allow_remote=True): said, as serve --allow-remote says it
+                log.warning("VirtualBus %s serving on %s, reachable from other machines", self.name, self._transport.url)
+        self.port = self._transport.url
+        self._server = BusServer(self.bus, self._transport, pace=self._pace, echo=self._echo, trace=self._trace)
+        self._thread = threading.Thread(target=_serve, args=(self._server, self.name, self._dropped), name=f"ax12emu-{self.name}",
+                                        daemon=True)
+        self._thread.start()
+
+    def _held(self) -> _Held:
+        return _Held(self.name, self.bus, live=self._live, server=self._server, thread=self._thread, link=self._link,
+                     transport=self._transport, trace=self._trace)
 
     def _open_trace(self, path: str) -> TraceWriter:
         if self._servo_spec is not None:  # every servo's model, so ax12emu decode names each ID's registers by its table
@@ -386,50 +504,36 @@ class VirtualBus:
         from ax12emu.live import ByteTap, LiveView
         from ax12emu.live.buses import decoder_options
 
+        # Its threads hold the bus weakly: a page left open must not keep a dropped bus from being collected.
+        controls = weakref.proxy(self)
         if self._link is not None:
             link = self._link
             tap = ByteTap(link.trace)
             link.trace = tap
             self._live = LiveView(
-                self.call, controls=self, tap=tap, counters=lambda: {"packets_in": link.packets_in}, web=self._web_address,
-                allow_remote=self._allow_remote, echo=False, **self.call(decoder_options),
+                _weak_call(weakref.ref(self), self._dropped), controls=controls, tap=tap, counters=lambda: {"packets_in": link.packets_in},
+                web=self._web_address, allow_remote=self._allow_remote, echo=False, **self.call(decoder_options),
             )
         else:
-            self._live = LiveView.for_server(self._server, controls=self, web=self._web_address, allow_remote=self._allow_remote)
-        self._live.start()
+            self._live = LiveView.for_server(self._server, controls=controls, web=self._web_address, allow_remote=self._allow_remote)
+        try:
+            self._live.start()
+        except OSError as exc:
+            raise _named("web", self._web_address, exc) from None
 
     @property
     def web_url(self) -> str | None:
         """The live page's address (``VirtualBus(web=True)``), or None."""
         return None if self._live is None else self._live.url
 
-    def _serve(self) -> None:
-        try:
-            self._server.serve_forever()
-        except Exception:  # pragma: no cover - reported, and close() still cleans up
-            log.exception("the serving thread of %s stopped", self.name)
-
     def close(self) -> None:
         """Stop serving, join the thread, close the port and the trace; safe to call more than once."""
         if self._closing:
             return
         self._closing = True  # (the live view, closing first, may still read the bus through call)
-        if self._live is not None:  # first: it reads the bus through the serving thread
-            self._live.close()
-        if self._server is not None:
-            self._server.stop()
-        if self._thread is not None:
-            self._thread.join(5.0)
-            if self._thread.is_alive():  # pragma: no cover
-                log.error("serving thread of %s did not stop", self.name)
-        if self._link is not None:
-            unregister(self.name)
-            self._link.close()  # a port still open on it fails from now on, as an unplugged adapter's
-        if self._transport is not None:
-            self._transport.close()
-        self.bus.close()
-        if self._trace is not None:
-            self._trace.close()
+        if self._finalizer is not None:
+            self._finalizer.detach()
+        _release(self._held())
         self._closed = True
 
     @property
@@ -444,10 +548,6 @@ class VirtualBus:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
-
-    def __del__(self) -> None:
-        if getattr(self, "_started", False) and not getattr(self, "_closed", True):
-            log.warning("VirtualBus %s was never closed", self.name)
 
     # -- running code where the bus lives ---------------------------------------------------
     def call(self, fn: Callable[[Bus], Any], timeout_s: float | None = None) -> Any:

@@ -1,10 +1,14 @@
-"""start_served: the child's log never blocks it, and an interrupted start leaves no child behind."""
+"""start_served: the child's log never blocks it, an interrupted start leaves no child behind, and on Linux the child
+dies with a caller killed outright."""
 
 from __future__ import annotations
 
 import os
+import signal
 import stat
 import subprocess
+import sys
+import time
 
 import pytest
 import serial
@@ -68,3 +72,37 @@ def test_an_interrupted_wait_for_the_port_line_kills_the_child(monkeypatch):
 def test_a_serve_that_fails_to_start_is_reported_with_its_log():
     with pytest.raises(RuntimeError, match="did not start: .*unrecognized arguments: --no-such-flag"):
         served.start_served(["--no-such-flag"])
+
+
+def _running(pid: int) -> bool:
+    """Whether ``pid`` is a live process (not gone, not a zombie left for its new parent to reap)."""
+    try:
+        with open(f"/proc/{pid}/stat") as stat_file:
+            return stat_file.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except FileNotFoundError:
+        return False
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the child dies with its starter on Linux only")
+def test_a_child_dies_with_a_caller_killed_by_sigkill(tmp_path):
+    """A test process killed with SIGKILL (a CI timeout) runs no clean-up: its serve child went on serving and kept
+    its --state-dir locked, so the next run on that folder was refused."""
+    caller = (
+        "import os, signal, sys\n"
+        "from ax12emu.harness.served import start_served\n"
+        f"served = start_served(['--ids', '1', '--state-dir', {str(tmp_path)!r}])\n"
+        "print(served.process.pid, flush=True)\n"
+        "os.kill(os.getpid(), signal.SIGKILL)\n"
+    )
+    killed = subprocess.run([sys.executable, "-c", caller], capture_output=True, text=True, timeout=60)
+    assert killed.returncode == -signal.SIGKILL, killed.stderr
+    child = int(killed.stdout.split()[0])
+    try:
+        deadline = time.monotonic() + 10.0
+        while _running(child) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert not _running(child)
+        served.start_served(["--ids", "1", "--state-dir", str(tmp_path)]).close()  # the folder is free again
+    finally:
+        if _running(child):
+            os.kill(child, signal.SIGKILL)
