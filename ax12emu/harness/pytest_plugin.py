@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import importlib.util
 import numbers
+import os
 import time
 from collections.abc import Iterator
 from typing import Any
@@ -185,7 +186,9 @@ def _started(bus: Any, web_at: str | None) -> Any:
     except OSError as exc:
         if web_at is None or not bus.port:  # no live view of the command line's, or the bus's own port failed
             raise
-        raise pytest.UsageError(f"--ax12-web-at {web_at}: the live view cannot serve there ({exc.strerror or exc}); "
+        # (the bus's own error names its argument and address again: the errno's words alone here)
+        said = os.strerror(exc.errno) if exc.errno else str(exc)
+        raise pytest.UsageError(f"--ax12-web-at {web_at}: the live view cannot serve there ({said}); "
                                 "give another HOST:PORT, or leave the option out for a free port") from exc
 
 

@@ -246,13 +246,17 @@ def _release_dropped(held: _Held, dropped: _Dropped) -> None:
     A collection runs wherever an allocation falls, on any thread and inside any lock that thread holds (the
     name registry's, a link's, threading's own), so nothing here takes a lock but logging's (reentrant) or starts
     a thread: the serving thread, told to stop, releases the rest as it ends; an in-process bus's live view does
-    so at its next sample (:func:`_weak_call`).  An in-process bus without one has no thread or descriptor to
-    release: its name, in a registry of weak references, goes with its link.
+    so at its next sample (:func:`_weak_call`).  An in-process bus without one has no thread to do it: its link is
+    marked closed (a plain store, no lock), so a port still open on it fails at its next read or write as on
+    every other transport; its name, in a registry of weak references, goes with the link, and a ``trace=``
+    file is closed when the collector reaches it.
     """
     log.warning("VirtualBus %s was never closed; closing it", held.name)
     dropped.held = held
     if held.server is not None:
         held.server.stop()
+    if held.link is not None:
+        held.link.closed = True
 
 
 def _weak_call(owner: "weakref.ReferenceType[VirtualBus]", dropped: _Dropped) -> Callable[[Callable[[Any], Any]], Any]:
@@ -304,7 +308,7 @@ class VirtualBus:
 
     Its lifetime: close it (:meth:`close`, or a ``with`` block).  On every transport a started bus no longer
     referenced is released when Python collects it, with a warning that it was never closed: its serving thread
-    and live view stop and its port goes (an in-process port already open keeps its link until closed), so keep
+    and live view stop and its port goes (a port still open on it fails at its next read or write), so keep
     the bus itself, not only its ``port``, for as long as clients use it.  Neither its serving thread nor its
     live view holds it, so a forgotten bus keeps no thread or descriptor open past a collection.
     """

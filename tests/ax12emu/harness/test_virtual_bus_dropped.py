@@ -103,3 +103,30 @@ def test_a_collection_inside_the_name_registrys_lock_does_not_hang():
     )
     done = subprocess.run([sys.executable, "-c", program], capture_output=True, text=True, timeout=30)
     assert done.stdout.strip() == "collected", done.stderr
+
+
+@pytest.mark.parametrize("web", [False, True], ids=["no-web", "web"])
+def test_a_port_still_open_on_a_dropped_in_process_bus_fails_as_on_the_other_transports(web, caplog):
+    """Without a live view the warning said "closing it" and the open port went on answering: with one, it failed."""
+    if web:
+        pytest.importorskip("aiohttp")
+    bus = VirtualBus([1], transport="inprocess", web=web).start()
+    port = serial.serial_for_url(bus.port, baudrate=1_000_000, timeout=0.2)
+    try:
+        port.write(bytes((0xFF, 0xFF, 1, 2, 1, 0xFB)))
+        assert port.read(6) == bytes((0xFF, 0xFF, 1, 2, 0, 0xFC))
+        del bus
+        with caplog.at_level(logging.WARNING, logger="ax12emu.harness.virtual_bus"):
+            gc.collect()
+        assert "was never closed" in caplog.text
+        deadline = time.monotonic() + RELEASE_S
+        while True:  # with a live view the release comes at its next sample
+            try:
+                port.write(bytes((0xFF, 0xFF, 1, 2, 1, 0xFB)))
+            except serial.SerialException as exc:
+                assert "closed" in str(exc)
+                break
+            assert time.monotonic() < deadline, "the port still answers"
+            time.sleep(0.02)
+    finally:
+        port.close()
