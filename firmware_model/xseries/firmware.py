@@ -642,13 +642,17 @@ class XFirmware:
         target_a = target_units * (self.current_unit_a or 0.0)
         supply_v = max(physics.supply_v, 0.1)
         per_amp = self.resistance_ohm / supply_v
-        correction = self._current_correction + 0.5 * (target_a - sign * physics.current_a) * per_amp
+        step = 0.5 * (target_a - sign * physics.current_a) * per_amp
+        correction = self._current_correction + step
         back_emf_v = sign * physics.velocity_rad_s * physics.params.back_emf_v_s_rad
         duty = target_a * per_amp + back_emf_v / supply_v + correction
         limit = pwm_limit / PWM_FULL_SCALE
         saturated = abs(duty) >= limit
-        if not saturated:
-            self._current_correction = correction  # anti-windup: the correction holds while the duty is at its limit
+        # Anti-windup as the velocity PI's: at the limit the correction moves only back toward it.  Held there
+        # whatever the error, a correction wound up while the shaft was driven backwards froze with the duty at
+        # its limit, and Goal Torque/Current 0 (or Torque Limit 0) no longer stopped the motor.
+        if not saturated or step * duty < 0:
+            self._current_correction = correction
         return min(max(duty, -limit), limit) * PWM_FULL_SCALE, saturated
 
     # ------------------------------------------------------------------ protection

@@ -92,6 +92,36 @@ def test_external_torque_reaches_the_firmware():
         assert bus.angle_deg(1) > start + 5.0
 
 
+@pytest.mark.parametrize(("servo", "mode", "goal", "stop"), [
+    # an XM430-W350 in Current Control Mode (0): Goal Current(102), signed
+    ("xm430-w350", {"operating_mode": 0}, ("goal_current", 50, -50), ("goal_current", 0)),
+    # an MX-64 (Protocol 1.0) in Torque Control Mode: Goal Torque(71) CCW 0..1023, CW 1024 + magnitude; Torque Limit 0
+    ("mx-64", {"torque_ctrl_mode_enable": 1}, ("goal_torque", 100, 1124), ("torque_limit", 0)),
+])
+def test_a_current_loop_driven_backwards_hard_still_obeys_its_goal(servo, mode, goal, stop):
+    """Back-driven at twice its stall torque, the current loop's correction wound up and froze with the duty at its
+    limit: released, the motor ran at its no-load speed whatever Goal Current / Goal Torque / Torque Limit said;
+    only Torque Enable 0 stopped it."""
+    name, first, then = goal
+    with VirtualBus([1], servo=servo, transport="inprocess", virtual_time=True) as bus:
+        for register, value in mode.items():
+            bus.write(1, register, value)
+        bus.write(1, "torque_enable", 1)
+        bus.write(1, name, first)
+        bus.step(0.5)
+        bus.set_external_torque(1, -16.0)
+        bus.step(0.5)
+        bus.set_external_torque(1, 0.0)
+        bus.write(1, name, then)
+        bus.step(0.5)
+        bus.write(1, *stop)
+        start = bus.angle_deg(1)
+        bus.step(1.0)
+        stopped_at = bus.angle_deg(1)
+        bus.step(0.5)
+        assert abs(bus.angle_deg(1) - stopped_at) < 1.0, (start, stopped_at, bus.angle_deg(1))  # it ran ~190 deg/s
+
+
 def test_served_on_a_pty_too():
     """The same servos behind a pty, at another start baud (baud_bps)."""
     with VirtualBus([3], servo="xl330-m077", baud_bps=1_000_000) as bus:
