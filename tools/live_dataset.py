@@ -94,6 +94,9 @@ class Setup:
     #: Present Position reported as ``gain (x - 511.5) + 511.5 + offset`` (speed times ``gain``), afterwards.
     offset_units: float = 0.0
     gain: float = 1.0
+    #: Present Voltage left out of the recording, afterwards: a logger that does not read the supply (record.py
+    #: reads it), so the workflow runs at the supply it assumes.
+    supply_unrecorded: bool = False
     #: Seconds of the breakaway block at the end of the excitation.
     breakaway_s: float = 0.0
     #: The library effect's parameter values this setup amounts to (for the key).
@@ -127,9 +130,10 @@ def _torque_limit(rng):
 
 def _voltage(rng):
     # A weak supply caps the drive as a lower PWM ceiling would (torque and top speed both scale with volts):
-    # the model assumes 9.6 V, so 7.0-7.3 V reads as a ceiling of 0.73-0.76.
+    # the model assumes 9.6 V, so 7.0-7.3 V reads as a ceiling of 0.73-0.76.  Hidden only from a recording that
+    # does not hold the supply: with record.py's voltage column the workflow simply runs at the recorded one.
     volts = float(rng.uniform(7.0, 7.3))
-    return Setup(serve_args=("--voltage", f"{volts:.2f}"),
+    return Setup(serve_args=("--voltage", f"{volts:.2f}"), supply_unrecorded=True,
                  truth={"drive_ceiling": volts / ServoParams().supply_voltage_v})
 
 
@@ -194,7 +198,8 @@ KNOBS: dict[str, Knob] = {
     "none": Knob(None, "nothing hidden", lambda rng: Setup()),
     "arm": Knob("gravity_load", "ax12emu serve --arm MASS,0.05 (weight moment 0.15-0.6 N m)", _arm),
     "torque_limit": Knob("torque_saturation", "Torque Limit written through the SDK (30-70 % of 1023)", _torque_limit),
-    "voltage": Knob("torque_saturation", "ax12emu serve --voltage 7.0-7.3 (the model assumes 9.6 V)", _voltage),
+    "voltage": Knob("torque_saturation", "ax12emu serve --voltage 7.0-7.3, the recording without its supply (the model "
+                    "assumes 9.6 V)", _voltage),
     "compliance_margin": Knob("compliance_deadband", "CW/CCW Compliance Margin written through the SDK (4-9)",
                               _margin),
     "delay": Knob("delay", "readings stamped 10-50 ms late, afterwards (commands keep their send times)", _delay),
@@ -309,6 +314,8 @@ def record_live(knob: str, seed: int, duration_s: float = 10.0, rate_hz: float =
                 trace = record(served.port, 1, 1_000_000, duration, rate_hz, setup.breakaway_s, setup.writes)
         finally:
             served.close()
+    if setup.supply_unrecorded:
+        trace = Trace({k: v for k, v in trace.columns.items() if k != "voltage"}, list(trace.comments), dict(trace.meta))
     if setup.shift_s:
         trace = shift_readings(trace, setup.shift_s)
     if setup.offset_units or setup.gain != 1.0:

@@ -5,7 +5,10 @@ Why it exists: a user with hardware gets data for ``python -m
 firmware_model.diagnose`` in one command.  It runs the same excitation
 program as tools/make_dataset.py (firmware_model.diagnose.excitation),
 writing Goal Position / Moving Speed when they change and reading Present
-Position, Speed and Load (addresses 36-41, one read) at ``--rate``.  The
+Position, Speed, Load and Voltage (addresses 36-42, one read) at ``--rate``.
+The supply goes into the trace's ``voltage`` column as one value, the
+median of the readings (the diagnosis otherwise assumes one, and a fit at
+the wrong supply names the difference as friction or a drive ceiling).  The
 program's external-load segments are plain holds here (a bus cannot apply a
 load; hang one by hand if wanted).  ``t`` is the host's monotonic clock
 midway between sending the read and its reply returning, relative to the
@@ -48,12 +51,28 @@ from firmware_model.diagnose.trace import Trace, write_trace  # noqa: E402
 
 #: The registers the recorder itself uses (e-manual names; addresses and sizes from the control table).
 _TABLE = layout().by_name
-_PRESENT = ("present_position", "present_speed", "present_load")
-_COLUMNS = ("t", "goal_position", "moving_speed", "present_position", "present_speed", "present_load", "command_t")
+_PRESENT = ("present_position", "present_speed", "present_load", "present_voltage")
+_COLUMNS = ("t", "goal_position", "moving_speed", "present_position", "present_speed", "present_load", "command_t",
+            "voltage")
 
 
 def _signed(raw: int) -> int:
     return -(raw & 0x3FF) if raw & 0x400 else raw & 0x3FF
+
+
+def supply_column(readings: np.ndarray) -> tuple[np.ndarray, list[str]]:
+    """The trace's ``voltage`` column from each row's Present Voltage (0.1 V): their median on every row, and a
+    comment where the readings varied.
+
+    Why one value: a trace's voltage is a command, in effect from its row on, and each change starts a new
+    segment of the replay; a reading that wavers by 0.1 V as the motor draws current would make every waver a
+    command the servo never got (and, without a write at that row, a ``command_t`` the trace format refuses).
+    """
+    volts = np.full(len(readings), int(round(float(np.median(readings)))), dtype=np.int64)
+    if int(np.ptp(readings)) == 0:
+        return volts, []
+    return volts, [f"Present Voltage read {readings.min() / 10:.1f}-{readings.max() / 10:.1f} V; the voltage column "
+                   f"is their median, {volts[0] / 10:.1f} V"]
 
 
 #: Registers whose write cuts the recorder off from the servo it goes on talking to (``--id`` at ``--baud``, every
@@ -146,6 +165,7 @@ def record(port_name: str, servo_id: int, baud: int, duration_s: float, rate_hz:
             pos = data[0] | data[1] << 8
             spd = _signed(data[2] | data[3] << 8)
             load = _signed(data[4] | data[5] << 8)
+            supply = data[6]  # 0.1 V: one more byte of the same read
             step = steps[min(int(np.searchsorted(ends, t, side="right")), len(steps) - 1)]
             cmd = (step.goal_position, step.moving_speed)
             if cmd != written:  # Goal Position and Moving Speed in one write, after the read
@@ -153,14 +173,16 @@ def record(port_name: str, servo_id: int, baud: int, duration_s: float, rate_hz:
                 sent_t = time.monotonic() - start
                 ph.writeTxRx(port, servo_id, goal.address, 4, payload)
                 written = cmd
-            rows.append([t, cmd[0], cmd[1], pos, spd, load, sent_t])
+            rows.append([t, cmd[0], cmd[1], pos, spd, load, sent_t, supply])
     finally:
         port.closePort()
     if not rows:
         raise RuntimeError(f"no reading of servo {servo_id} on {port_name} succeeded in {duration_s:g} s")
     a = np.array(rows, dtype=float)
     comment = f"recorded by tools/record.py on {port_name}" + "".join(f", {k}={v}" for k, v in (writes or {}).items())
-    return Trace({c: a[:, i] for i, c in enumerate(_COLUMNS)}, comments=[comment])
+    columns = {c: a[:, i] for i, c in enumerate(_COLUMNS)}
+    columns["voltage"], supply_notes = supply_column(columns["voltage"])
+    return Trace(columns, comments=[comment, *supply_notes])
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -19,6 +19,11 @@ every assumption is printed with the verdict and in the report:
 * ``--moving-speed`` (default 0, full speed) and ``--voltage`` (default: the
   ``--params`` file's supply, which a twin's params.toml carries, else
   :data:`DEFAULT_VOLTAGE_V`).
+
+``--voltage`` also gives the supply of a trace CSV without a ``voltage``
+column (default: the ``--params`` file's, else the model's own), which is
+then printed as assumed: a fit at the wrong supply names the difference as
+an effect.
 """
 
 from __future__ import annotations
@@ -26,11 +31,13 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from ..interface import POWER_UP
 from ..params import ServoParams
 from ..stepping import check_step
 from ..units import RAD_PER_POSITION_UNIT, speed_rad_s_to_raw
@@ -41,7 +48,7 @@ from .nuisance import first_movement_onset, first_movement_row, locate_onset
 from .output import json_safe, verdict_json, verdict_text, write_outputs
 from .schedule import CONTROL_STEP_S
 from .search import Diagnosis, diagnose
-from .trace import Trace, TraceFormatError, read_trace
+from .trace import Trace, TraceFormatError, read_trace, rest_level
 from .wizard import (
     ITEM_COLUMNS,
     SPEED_LIMITED_SHARE,
@@ -64,6 +71,13 @@ DEFAULT_VOLTAGE_V = 12.0
 PINNED_S = 0.002
 #: The options that supply what a Wizard export does not record (dest names).
 _WIZARD_OPTIONS = ("goal", "initial_goal", "onset", "moving_speed", "voltage")
+#: Of those, the ones a trace CSV may need too: what it may leave out (``voltage``), not its commands.
+_TRACE_OPTIONS = ("voltage",)
+#: How far from its goal a servo comes to rest, raw units: within the compliance margin the drive is off and
+#: across the slope it grows from nothing, so friction stops the shaft within about margin + slope of the goal
+#: (the e-manual's defaults, 1 + 32; the shared real steps rest 1-2 units short of 500).  A recording resting
+#: farther from the default goal was stepped to another one.
+SETTLES_WITHIN_UNITS = POWER_UP["cw_compliance_margin"] + POWER_UP["cw_compliance_slope"]
 
 
 @dataclass
@@ -76,6 +90,8 @@ class Input:
     notes: list[str] = field(default_factory=list)
     #: JSON-able facts about the input (format, rows, skipped rows, assumptions).
     facts: dict = field(default_factory=dict)
+    #: How the supply the fit runs at is known (:data:`.output.SUPPLY_SOURCES`); None: the trace's columns say.
+    supply: str | None = None
 
 
 class _OneLineParser(argparse.ArgumentParser):
@@ -101,6 +117,12 @@ def parse_args(argv: list[str] | None = None, prog: str = "python -m firmware_mo
     p.add_argument("--effects", metavar="LIST", help=f"comma-separated subset of: {', '.join(LIBRARY)} "
                                                       f"(X-series traces: {', '.join(X_LIBRARY)})")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
+    p.add_argument("--voltage", type=float, metavar="V",
+                   help="supply voltage, where the recording does not hold it (a trace CSV without a voltage column, a "
+                        "Wizard 2 export without Present Voltage); default: --params' supply_voltage_v, else "
+                        f"{DEFAULT_VOLTAGE_V} for a Wizard export and the model's {ServoParams().supply_voltage_v} for a "
+                        "trace CSV; ax12emu diagnose gives another AX model's Wizard export (an AX-18A's) that model's "
+                        "served parameters as --params, so its served supply")
     w = p.add_argument_group("what a Wizard 2 export does not record (only for such files)")
     w.add_argument("--goal", type=int, metavar="UNITS",
                    help=f"Goal Position written once (default {DEFAULT_GOAL})")
@@ -110,8 +132,6 @@ def parse_args(argv: list[str] | None = None, prog: str = "python -m firmware_mo
                    help="when the goal was written, s after the first row read (default: estimated from the first "
                         "movement and fitted)")
     w.add_argument("--moving-speed", type=int, metavar="N", help="Moving Speed register (default 0: full speed)")
-    w.add_argument("--voltage", type=float, metavar="V",
-                   help=f"supply voltage (default: --params' supply_voltage_v, else {DEFAULT_VOLTAGE_V})")
     args = p.parse_args(argv)
     if args.effects:
         unknown = [e for e in args.effects.split(",") if e not in LIBRARY and e not in X_LIBRARY]  # the trace's, in main
@@ -156,7 +176,8 @@ def check_span(t_s: np.ndarray, source: str, unit_s: float = 1.0) -> None:
 
 def load_input(args: argparse.Namespace, params: ServoParams, say=lambda msg: None) -> Input:
     """The trace named on the command line, in either format; raises ValueError / OSError on bad input."""
-    given = [f"--{n.replace('_', '-')}" for n in _WIZARD_OPTIONS if getattr(args, n, None) is not None]
+    given = [f"--{n.replace('_', '-')}" for n in _WIZARD_OPTIONS
+             if n not in _TRACE_OPTIONS and getattr(args, n, None) is not None]
     # opened first: a file that cannot be read is neither format, and saying which it is would mislead
     with open(args.trace, "rb"):
         pass
@@ -166,18 +187,54 @@ def load_input(args: argparse.Namespace, params: ServoParams, say=lambda msg: No
                              f"exports; {args.trace} is a trace CSV, which records its own commands")
         trace = read_trace(args.trace)
         check_span(trace.t, args.trace)
-        if trace.servo == "ax" and trace.has("voltage"):  # the model is valid over its supply range, as --voltage
-            for volts in (float(trace["voltage"].min()) / 10.0, float(trace["voltage"].max()) / 10.0):
-                params.check_supply(volts, f"{args.trace}: the voltage column's")
         notes = [f"{args.trace}: trace CSV, {len(trace)} rows"]
         if not trace.records_command_times:
             notes.append("the trace does not say when commands were sent (no command_t): each change's onset is "
                          "fitted within its sample as part of the base model")
-        return Input(trace, "trace", notes, {"format": "trace", "rows": len(trace),
-                                             "records_command_times": trace.records_command_times})
+        facts = {"format": "trace", "rows": len(trace), "records_command_times": trace.records_command_times}
+        trace, supply = _trace_supply(trace, args, params, notes, facts)
+        return Input(trace, "trace", notes, facts, supply)
     export = read_wizard(args.trace)
     check_span(export.t_s, args.trace)
     return _wizard_input(export, args, params, say)
+
+
+def _trace_supply(trace: Trace, args: argparse.Namespace, params: ServoParams, notes: list[str],
+                  facts: dict) -> tuple[Trace, str | None]:
+    """The trace with the supply its fit runs at, and how that is known: its voltage column, ``--voltage`` (made
+    a column, as a Wizard export's is), else ``params``' supply, said as assumed in ``notes`` and ``facts``."""
+    if trace.servo != "ax":
+        if args.voltage is not None:  # its model is built from the metadata, which says the supply
+            raise ValueError(f"--voltage: {args.trace} is an X-series trace, whose supply is its voltage column or "
+                             "#@ supply_v metadata")
+        return trace, None
+    if trace.has("voltage"):  # the model is valid over its supply range, as --voltage
+        if args.voltage is not None:
+            raise ValueError(f"--voltage: {args.trace} records its supply (a voltage column); the flag stands in for "
+                             "it only where it does not")
+        for volts in (float(trace["voltage"].min()) / 10.0, float(trace["voltage"].max()) / 10.0):
+            params.check_supply(volts, f"{args.trace}: the voltage column's")
+        return trace, "recorded"
+    if args.voltage is not None:
+        params.check_supply(args.voltage, "--voltage")
+        facts["voltage_v"] = args.voltage
+        return trace.with_columns(voltage=np.full(len(trace), int(round(args.voltage * 10)))), "given"
+    whose = "--params' supply_voltage_v" if args.params else "the model's default"
+    notes.append(f"assumed: {params.supply_voltage_v:.1f} V ({whose}; the trace has no voltage column) — override "
+                 "with --voltage")
+    facts["voltage_v"], facts["assumed"] = params.supply_voltage_v, [f"{params.supply_voltage_v:.1f} V"]
+    return trace, "assumed"
+
+
+def _check_default_goal(ex: WizardExport) -> None:
+    """Refuse to fit an export against :data:`DEFAULT_GOAL` when it comes to rest farther from it than a servo
+    settles from its goal: the fit would read the distance as physics (a weak motor, friction) and write a twin
+    of it.  Only the user knows the goal written."""
+    rest = rest_level(ex.values["present_position"], end=True)
+    if abs(rest - DEFAULT_GOAL) > SETTLES_WITHIN_UNITS:
+        raise ValueError(f"{ex.source}: the export comes to rest at {rest:g}, {abs(rest - DEFAULT_GOAL):g} units from "
+                         f"the default goal {DEFAULT_GOAL} (a servo rests within {SETTLES_WITHIN_UNITS} of its goal): "
+                         "give the Goal Position written with --goal")
 
 
 #: The Wizard flags that stand in for a plotted item, and the trace column each replaces.
@@ -201,6 +258,8 @@ def _wizard_input(ex: WizardExport, args: argparse.Namespace, params: ServoParam
         params.check_supply(volts, f"{ex.source}: the recorded Present Voltage (median)")
     if "present_position" not in ex.values:
         raise ValueError(f"{ex.source}: the export has no Present Position column: nothing to compare the model with")
+    if args.goal is None and "goal_position" not in ex.values:
+        _check_default_goal(ex)
     initial = int(ex.values["present_position"][0]) if args.initial_goal is None else args.initial_goal
 
     def build(onset_s: float, known: bool = False) -> Trace:
@@ -254,7 +313,8 @@ def _wizard_input(ex: WizardExport, args: argparse.Namespace, params: ServoParam
         notes.append("assumed: " + ", ".join(assumed)
                      + " — override with --goal, --initial-goal, --onset, --moving-speed, --voltage")
     facts["assumed"] = assumed
-    return Input(trace, "wizard", notes, facts)
+    supply = "recorded" if "voltage" in ex.values else "given" if args.voltage is not None else "assumed"
+    return Input(trace, "wizard", notes, facts, supply)
 
 
 def _cruise_notes(ex: WizardExport, params: ServoParams, volts: float, facts: dict) -> list[str]:
@@ -295,6 +355,39 @@ def _insert_input_section(report: Path, notes: list[str]) -> None:
     report.write_text(text[:at] + section + text[at:] if at >= 0 else text + "\n" + section, encoding="utf-8")
 
 
+def _cannot_write(out: str, exc: OSError, what: str | None = None) -> str:
+    """The one line for an ``--out`` that could not be written: ``what`` (default: the file the error names)."""
+    if what is None:
+        what = Path(exc.filename).name if isinstance(exc.filename, str) else "its files"
+    return f"--out {out}: cannot write {what} ({exc.strerror or exc})"
+
+
+def _check_out(out: str) -> None:
+    """Refuse an ``--out`` that is not a folder this process can write, before the fit rather than after it: the
+    folder is made and a file created and removed in it."""
+    if Path(out).exists() and not Path(out).is_dir():
+        raise ValueError(f"--out {out}: exists and is not a folder")
+    try:
+        Path(out).mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=out, prefix=".diagnose-probe-"):
+            pass
+    except OSError as exc:
+        raise ValueError(_cannot_write(out, exc, "a file in it")) from None
+
+
+def _write_results(args: argparse.Namespace, data: Input, d: Diagnosis, params: ServoParams, notes: list[str]) -> dict:
+    """Write the report, plots, params.toml and verdict.json into ``--out``; return the verdict (JSON-able)."""
+    write_outputs(data.trace, d, args.out, source=args.trace, params=params, supply=data.supply)
+    _insert_input_section(Path(args.out) / "report.md", notes)
+    verdict = verdict_json(d)
+    verdict["input"] = data.facts
+    verdict["recording"] = {"hold_phase_s": d.nuisance.hold_phase_s, "onsets_fitted": d.nuisance.onsets_fitted,
+                            "not_offered": d.not_offered}
+    verdict = json_safe(verdict)
+    (Path(args.out) / "verdict.json").write_text(json.dumps(verdict, indent=2, allow_nan=False), encoding="utf-8")
+    return verdict
+
+
 def main(argv: list[str] | None = None, prog: str = "python -m firmware_model.diagnose") -> int:
     """Run the workflow; exit 2 on a malformed trace or a bad option for it."""
     args = parse_args(argv, prog)
@@ -305,9 +398,7 @@ def main(argv: list[str] | None = None, prog: str = "python -m firmware_model.di
         check_step(params, CONTROL_STEP_S)  # the fit steps the physics as the served servo does: too stiff, refused now
         null_knobs(params)  # the fit simulates the file's [effects] too: refuse one it cannot, before any work
         data = load_input(args, params, say)
-        if Path(args.out).exists() and not Path(args.out).is_dir():  # refused before any work, not after it
-            raise ValueError(f"--out {args.out}: exists and is not a folder")
-        Path(args.out).mkdir(parents=True, exist_ok=True)
+        _check_out(args.out)
     except (TraceFormatError, ValueError, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -330,14 +421,11 @@ def main(argv: list[str] | None = None, prog: str = "python -m firmware_model.di
         print(f"error: {args.trace}: {exc}", file=sys.stderr)
         return 2
     notes = data.notes + _recording_notes(d, data.trace)
-    write_outputs(data.trace, d, args.out, source=args.trace, params=params)
-    _insert_input_section(Path(args.out) / "report.md", notes)
-    verdict = verdict_json(d)
-    verdict["input"] = data.facts
-    verdict["recording"] = {"hold_phase_s": d.nuisance.hold_phase_s, "onsets_fitted": d.nuisance.onsets_fitted,
-                            "not_offered": d.not_offered}
-    verdict = json_safe(verdict)
-    (Path(args.out) / "verdict.json").write_text(json.dumps(verdict, indent=2, allow_nan=False), encoding="utf-8")
+    try:  # checked writable before the fit; a disk filling up or a folder changed since is still one line
+        verdict = _write_results(args, data, d, params, notes)
+    except OSError as exc:
+        print(f"error: {_cannot_write(args.out, exc)}", file=sys.stderr)
+        return 2
     if args.json:
         print(json.dumps(verdict, allow_nan=False))
     else:

@@ -35,7 +35,7 @@ from .search import Diagnosis
 from .trace import Trace
 
 __all__ = ["verdict_text", "verdict_json", "json_safe", "fitted_params", "fitted_effects", "fitted_inertia", "write_outputs", "EFFECT_FIELDS",
-           "BASE_FIELD_EFFECTS"]
+           "BASE_FIELD_EFFECTS", "SUPPLY_SOURCES", "supply_source"]
 
 #: Library effects folded into base ServoParams fields by :func:`fitted_params`.
 BASE_FIELD_EFFECTS = ("coulomb_friction", "stribeck_friction", "extra_inertia", "sample_hold")
@@ -109,6 +109,22 @@ def fitted_inertia(extra: float, params: ServoParams) -> tuple[dict[str, float],
     return ({"load_inertia_kg_m2": 0.0},
             [f"extra_inertia: fitted {extra:.6g} kg m^2 leaves no inertia (rotor {params.rotor_inertia_reflected_kg_m2:g}"
              f" + load {params.load_inertia_kg_m2:g}); served with the load at 0"])
+
+
+#: How the supply a twin was fitted at is known -> params.toml's words for it ({v}: the supply, V).  A supply the
+#: recording does not hold is the fit's assumption, and a twin fitted at the wrong one names the difference as an
+#: effect (friction, a drive ceiling): the file says which it was, so a reader knows whether to trust it.
+SUPPLY_SOURCES = {
+    "recorded": "the recording's supply, {v:g} V",
+    "given": "the supply given (--voltage), {v:g} V",
+    "assumed": "assumed {v:g} V: the recording does not hold its supply (give it with --voltage)",
+}
+
+
+def supply_source(trace: Trace, source: str | None = None) -> str:
+    """How the supply of ``trace``'s fit is known (a :data:`SUPPLY_SOURCES` key): ``source`` where the caller knows
+    (a voltage column it made from a flag or a default is not recorded), else the trace's voltage column says."""
+    return source or ("recorded" if trace.has("voltage") else "assumed")
 
 
 def fitted_supply_v(trace: Trace, params: ServoParams) -> tuple[float, list[str]]:
@@ -248,21 +264,24 @@ def _report(trace: Trace, d: Diagnosis, files: list[str], source: str) -> str:
 
 
 def write_outputs(trace: Trace, d: Diagnosis, out: str | Path, source: str = "trace",
-                  params: ServoParams = ServoParams()) -> None:
-    """Write report.md, the PNG plots, params.toml (base and effects) and verdict.json into ``out``."""
+                  params: ServoParams = ServoParams(), supply: str | None = None) -> None:
+    """Write report.md, the PNG plots, params.toml (base and effects) and verdict.json into ``out``.
+
+    ``supply``: how the supply the fit ran at is known (:func:`supply_source`; None: from the trace's columns).
+    """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     files = _plots(trace, d, out)
     (out / "report.md").write_text(_report(trace, d, files, source), encoding="utf-8")
-    _PARAM_FILES[d.servo][1](d, out, source, params, trace)
+    _PARAM_FILES[d.servo][1](d, out, source, params, trace, supply_source(trace, supply))
     (out / "verdict.json").write_text(json.dumps(verdict_json(d), indent=2, allow_nan=False), encoding="utf-8")
 
 
-def _write_servo_params(d: Diagnosis, out: Path, source: str, params: ServoParams, trace: Trace) -> None:
+def _write_servo_params(d: Diagnosis, out: Path, source: str, params: ServoParams, trace: Trace, supply: str) -> None:
     notes = fitted_effects(d.named, d.knobs, params.effects)[1] + fitted_inertia(d.knobs["extra_inertia_kg_m2"], params)[1]
     supply_v, supply_notes = fitted_supply_v(trace, params)
     header = (f"fitted by firmware_model.diagnose from {source}; named effects: {', '.join(d.named) or 'none'}",
-              f"supply_voltage_v: the recording's supply, {supply_v:g} V", *supply_notes, *notes)
+              "supply_voltage_v: " + SUPPLY_SOURCES[supply].format(v=supply_v), *supply_notes, *notes)
     fitted_params(d, params, supply_v).to_toml(out / "params.toml", comments=header)
 
 
@@ -270,7 +289,7 @@ def _write_servo_params(d: Diagnosis, out: Path, source: str, params: ServoParam
 _X_SETUP_KNOBS = ("arm_weight_nm", "drive_ceiling", "delay_s", "position_offset_units", "position_gain")
 
 
-def _write_x_physics(d: Diagnosis, out: Path, source: str, params: object, trace: Trace) -> None:
+def _write_x_physics(d: Diagnosis, out: Path, source: str, params: object, trace: Trace, supply: str) -> None:
     from dataclasses import asdict
 
     from .xreplay import physics_with

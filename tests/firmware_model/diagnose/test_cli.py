@@ -94,3 +94,114 @@ def test_an_empty_effect_entry_is_named(tmp_path, capsys, effects):
         parse_args(["t.csv", "--out", str(tmp_path), "--effects", effects])
     assert exc.value.code == 2
     assert "has an empty entry (a stray comma?)" in capsys.readouterr().err
+
+
+def _trace_file(path: Path, voltage: int | None = None) -> Path:
+    volts = "" if voltage is None else f",{voltage}"
+    path.write_text(_AX_HEADER.strip() + (",voltage\n" if voltage is not None else "\n")
+                    + "".join(f"{i / 100},600,0,{512 + min(i, 60)}{volts}\n" for i in range(200)), encoding="utf-8")
+    return path
+
+
+def test_a_trace_without_its_supply_takes_voltage_and_says_what_it_assumed(tmp_path):
+    """A trace without a voltage column (tools/record.py wrote none) was fitted at the model's 9.6 V without a
+    word, and --voltage, the one way to say a servo ran on 12 V, was refused."""
+    from firmware_model.diagnose.cli import load_input, parse_args
+    from firmware_model.params import ServoParams
+
+    path = _trace_file(tmp_path / "measured.csv")
+    assumed = load_input(parse_args([str(path), "--out", str(tmp_path / "o")]), ServoParams())
+    assert "assumed: 9.6 V (the model's default; the trace has no voltage column) — override with --voltage" in assumed.notes
+    assert not assumed.trace.has("voltage") and assumed.supply == "assumed"
+    assert assumed.facts["voltage_v"] == 9.6 and assumed.facts["assumed"] == ["9.6 V"]
+    given = load_input(parse_args([str(path), "--out", str(tmp_path / "o"), "--voltage", "12"]), ServoParams())
+    assert given.trace["voltage"].tolist() == [120] * 200 and given.supply == "given"
+    assert not any(note.startswith("assumed") for note in given.notes) and given.facts["voltage_v"] == 12.0
+    with pytest.raises(ValueError, match=r"--voltage 13.0 V is outside"):
+        load_input(parse_args([str(path), "--out", str(tmp_path / "o"), "--voltage", "13"]), ServoParams())
+
+
+def test_voltage_for_a_trace_that_records_its_supply_is_refused_with_the_reason(tmp_path):
+    from firmware_model.diagnose.cli import load_input, parse_args
+    from firmware_model.params import ServoParams
+
+    path = _trace_file(tmp_path / "measured.csv", voltage=110)
+    with pytest.raises(ValueError, match=r"^--voltage: .*measured.csv records its supply \(a voltage column\)"):
+        load_input(parse_args([str(path), "--out", str(tmp_path / "o"), "--voltage", "12"]), ServoParams())
+    recorded = load_input(parse_args([str(path), "--out", str(tmp_path / "o")]), ServoParams())
+    assert recorded.supply == "recorded" and not any(note.startswith("assumed") for note in recorded.notes)
+
+
+def test_a_supply_given_for_a_trace_is_fitted_and_served(tmp_path):
+    """End to end (its own process: plotting keeps font files open): the twin carries the supply given."""
+    import subprocess
+    import sys
+
+    from firmware_model.params import ServoParams
+
+    path = _trace_file(tmp_path / "measured.csv")
+    r = subprocess.run([sys.executable, "-m", "firmware_model.diagnose", str(path), "--out", str(tmp_path / "o"), "-q",
+                        "--voltage", "11", "--effects", "coulomb_friction"], capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    assert ServoParams.from_toml(tmp_path / "o" / "params.toml").supply_voltage_v == 11.0
+    assert "# supply_voltage_v: the supply given (--voltage), 11 V" in (tmp_path / "o" / "params.toml").read_text()
+
+
+@pytest.fixture
+def unwritable_folder(tmp_path):
+    """A folder this process cannot create a file in: a read-only one, or (as root, whom modes do not stop) a
+    kernel folder."""
+    import tempfile
+
+    def writable(folder: Path) -> bool:
+        try:
+            with tempfile.NamedTemporaryFile(dir=folder):
+                return True
+        except OSError:
+            return False
+
+    mine = tmp_path / "read-only"
+    mine.mkdir()
+    mine.chmod(0o555)
+    try:
+        folder = next((f for f in (mine, Path("/sys/kernel"), Path("/proc/self")) if f.is_dir() and not writable(f)),
+                      None)
+        if folder is None:
+            pytest.skip("no folder here that this process cannot write")
+        yield folder
+    finally:
+        mine.chmod(0o755)
+
+
+def test_an_out_that_cannot_be_written_is_refused_before_the_fit(tmp_path, capsys, monkeypatch, unwritable_folder):
+    """--out /sys/kernel ran the whole fit, then ended in a PermissionError traceback."""
+    from firmware_model.diagnose import cli
+
+    def no_fit(*args, **kwargs):
+        raise AssertionError("the fit ran before --out was found unwritable")
+
+    monkeypatch.setattr(cli, "diagnose", no_fit)
+    path = _trace_file(tmp_path / "measured.csv")
+    assert cli.main([str(path), "--out", str(unwritable_folder), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"error: --out {unwritable_folder}: cannot write a file in it (") and err.count("\n") == 1, err
+    cli._check_out(str(tmp_path / "new" / "out"))  # a folder it can write: made, and left empty by the probe
+    assert list((tmp_path / "new" / "out").iterdir()) == []
+
+
+def test_outputs_that_cannot_be_written_after_the_fit_are_one_line(tmp_path, capsys, monkeypatch):
+    """A disk filling up (or a folder changed) between the check and the writing: one line and exit 2."""
+    import errno
+    from types import SimpleNamespace
+
+    from firmware_model.diagnose import cli
+
+    def full_disk(trace, d, out, **kwargs):
+        raise OSError(errno.ENOSPC, "No space left on device", str(Path(out) / "measured_vs_model.png"))
+
+    monkeypatch.setattr(cli, "diagnose", lambda *args, **kwargs: SimpleNamespace(recording={}, not_offered={}))
+    monkeypatch.setattr(cli, "write_outputs", full_disk)
+    path = _trace_file(tmp_path / "measured.csv")
+    assert cli.main([str(path), "--out", str(tmp_path / "o"), "-q"]) == 2
+    assert capsys.readouterr().err == (f"error: --out {tmp_path / 'o'}: cannot write measured_vs_model.png "
+                                       "(No space left on device)\n")

@@ -104,6 +104,16 @@ def test_the_report_gives_every_candidates_fit_accepted_or_not(written):
                 assert f"{k} {v:.4g} ± {c.uncertainty[k]:.2g}" in row, row
 
 
+def test_a_supply_the_trace_does_not_hold_is_written_as_assumed(written):
+    """A trace without a voltage column is fitted at the parameters' supply: params.toml called that "the
+    recording's supply", which a reader then trusted over the servo's own."""
+    trace, _, folder = written
+    assert not trace.has("voltage")
+    header = (folder / "params.toml").read_text(encoding="utf-8")
+    assert "# supply_voltage_v: assumed 9.6 V: the recording does not hold its supply" in header, header
+    assert "the recording's supply" not in header
+
+
 def test_the_served_supply_is_the_recordings_with_a_note_where_it_cannot_be():
     """One supply for the served servo: the recording's median, said when it varied or lies outside the model's range."""
     from firmware_model.diagnose.output import fitted_supply_v
