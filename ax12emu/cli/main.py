@@ -511,7 +511,7 @@ def _from_the_served_servo(arguments: list[str]) -> list[str]:
     """
     from ax12emu.servo.model_factory import ax_bus_model, datasheet_params
     from firmware_model.diagnose.cli import parse_args as diagnose_args
-    from firmware_model.diagnose.wizard import is_wizard_export, read_wizard
+    from firmware_model.diagnose.wizard import is_wizard_export, read_wizard_model
 
     try:
         # Said once, by the workflow itself: a usage error (stderr) and --help (stdout) alike.
@@ -521,8 +521,8 @@ def _from_the_served_servo(arguments: list[str]) -> list[str]:
         return arguments
     if args.params is not None or not is_wizard_export(args.trace):
         return arguments
-    try:
-        name = read_wizard(args.trace).model_name
+    try:  # the model line alone: the workflow reads the rows, once
+        name, _ = read_wizard_model(args.trace)
     except (ValueError, OSError):
         return arguments
     spec = ax_bus_model(name)

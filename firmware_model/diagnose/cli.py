@@ -48,7 +48,7 @@ from .nuisance import first_movement_onset, first_movement_row, locate_onset
 from .output import json_safe, verdict_json, verdict_text, write_outputs
 from .schedule import CONTROL_STEP_S
 from .search import Diagnosis, diagnose
-from .trace import Trace, TraceFormatError, read_trace, rest_level
+from .trace import Trace, TraceFormatError, check_span, read_trace, rest_level
 from .wizard import (
     ITEM_COLUMNS,
     SPEED_LIMITED_SHARE,
@@ -148,30 +148,6 @@ def parse_args(argv: list[str] | None = None, prog: str = "python -m firmware_mo
     return args
 
 
-#: The longest recording the workflow simulates (s): every fit steps the model through all of it at 1 kHz for
-#: dozens of parameter sets at once, and the arrays grow with it (a 3,000 s trace took 4.6 GB).  Recordings the
-#: workflow is meant for last seconds to a minute or two; a longer span is usually a time column in ms, not s.
-MAX_SPAN_S = 300.0
-
-
-#: The most rows the workflow reads: it holds every row for dozens of parameter sets at once, about 3 GB per
-#: 100,000 rows (120 s logged at 1 kHz took 3.4 GB); the span's limit alone let a 300 s log at 1 kHz ask for 8.5.
-MAX_ROWS = 100_000
-
-
-def check_span(t_s: np.ndarray, source: str, unit_s: float = 1.0) -> None:
-    """ValueError naming the widest gap when the rows span more than :data:`MAX_SPAN_S` (times in ``unit_s``), or
-    when they are more than :data:`MAX_ROWS`."""
-    if len(t_s) > MAX_ROWS:
-        every = -(-len(t_s) // MAX_ROWS)
-        raise ValueError(f"{source}: {len(t_s):,} rows, more than the {MAX_ROWS:,} the workflow holds in memory; keep "
-                         f"one row in {every} (or cut the recording)")
-    span_s = float(t_s[-1] - t_s[0]) * unit_s if len(t_s) else 0.0
-    if span_s > MAX_SPAN_S:
-        widest = int(np.argmax(np.diff(t_s))) + 1
-        raise ValueError(f"{source}: the rows span {span_s:.6g} s, more than the {MAX_SPAN_S:g} s the workflow "
-                         f"simulates (the widest gap: row {widest + 1} of the data, from {t_s[widest - 1]:.6g} to "
-                         f"{t_s[widest]:.6g}); cut the recording, or check the time column's unit")
 
 
 def load_input(args: argparse.Namespace, params: ServoParams, say=lambda msg: None) -> Input:

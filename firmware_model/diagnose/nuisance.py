@@ -272,10 +272,23 @@ def first_movement_onset(trace: Trace, params: ServoParams = ServoParams(), step
     model = record.angle[:, 0] / float(RAD_PER_POSITION_UNIT)
     reach = np.flatnonzero(np.abs(model - rest_level(pos)) >= MOVEMENT_UNITS - 0.5)
     if len(reach) == 0:
-        raise ValueError("the model does not move under the assumed goal: check --goal")
+        raise ValueError(_still_model(probe, params, float(t[-1])))
     lag_s = reach[0] * step_s
     lo, hi = (t[m - 1] if m > 0 else t[0]) - lag_s, t[m] - lag_s
     return float(max((lo + hi) / 2.0, 0.0))
+
+
+def _still_model(probe: Trace, params: ServoParams, span_s: float) -> str:
+    """Why no write time can be estimated when the model never moves: what was simulated, and what holds it still.
+
+    Why it names the span: a time column in the wrong unit (seconds in a column of ms) leaves the model a
+    thousandth of the recording to move in, and the goal is the least likely culprit of the three.
+    """
+    volts = float(np.median(probe["voltage"])) / 10.0 if probe.has("voltage") else params.supply_voltage_v
+    return (f"the model does not move {MOVEMENT_UNITS} units from {rest_level(probe['present_position']):g} toward the "
+            f"goal {int(probe['goal_position'][-1])} in the {span_s:.4g} s simulated ({len(probe)} rows) at {volts:.1f} V: "
+            "the goal, the supply or the model's parameters may hold it still (--goal, --voltage, --params), or the "
+            "time column is not in the unit it says")
 
 
 def locate_onset(build: Callable[[float], Trace], params: ServoParams = ServoParams(),

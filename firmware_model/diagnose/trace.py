@@ -56,7 +56,11 @@ layout with the X registers' columns (:data:`X_COLUMNS`):
 
 What does not change within a recording is metadata (:data:`X_META`): the
 operating mode and the gains, the data sheet the physics is built from (gear
-ratio, ratings, current unit) and what was on the horn.  Example::
+ratio, ratings, current unit) and what was on the horn.  Each value is checked
+as it is read, like a cell: a key :data:`X_META` does not list (a misspelt
+gain would leave the gain at its default), a value of the wrong JSON type or
+one no servo has (a register outside its range, a supply in mV) is a
+:class:`TraceFormatError` naming its line and key.  Example::
 
     #@ servo = "x"
     #@ model = "XL330-M288"
@@ -71,17 +75,22 @@ ratio, ratings, current unit) and what was on the horn.  Example::
 from __future__ import annotations
 
 import csv
+import difflib
 import io
 import json
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
-__all__ = ["Trace", "TraceFormatError", "read_trace", "write_trace", "REQUIRED", "OPTIONAL", "COLUMNS",
+from ..xseries.interface import OperatingMode
+
+__all__ = ["Trace", "TraceFormatError", "read_trace", "write_trace", "check_span", "MAX_ROWS", "MAX_SPAN_S", "REQUIRED", "OPTIONAL", "COLUMNS",
            "COMMAND_COLUMNS", "command_time_errors", "TraceColumns", "FORMATS", "X_COLUMNS", "X_META", "REST_READINGS",
-           "rest_level", "departures"]
+           "rest_level", "departures", "MetaKey", "x_meta_error", "SUPPLY_RATING_SHARE", "POSITION_MODES"]
 
 #: Columns every trace has, in the order the writer uses.
 REQUIRED = ("t", "goal_position", "moving_speed", "present_position")
@@ -155,21 +164,129 @@ X_COLUMNS = TraceColumns(
 )
 #: Column sets by the ``servo`` metadata value (absent: the AX-12's).
 FORMATS = {"ax": TraceColumns(REQUIRED, OPTIONAL, _INT_RANGES, COMMAND_COLUMNS), "x": X_COLUMNS}
-#: X-series metadata keys, what each means (the values are JSON).
+#: A supply is taken as the X-series servo's from this share of its data sheet's lowest rated voltage to this share
+#: of its highest: the physics is built from the ratings and scales with the supply a little beyond them (the
+#: real XL330 pendulum logs ran at 7.4 V, 1.23 times its highest rating), while a supply off by half or more is a
+#: slip of unit (mV) or another servo's sheet.
+SUPPLY_RATING_SHARE = (0.5, 1.5)
+#: The operating modes the diagnosis replays: the position modes, whose command is Goal Position.
+POSITION_MODES = (OperatingMode.POSITION, OperatingMode.EXTENDED_POSITION, OperatingMode.CURRENT_BASED_POSITION)
+#: The position controller's registers' range (e-manual, X-series control table: Position P/I/D Gain(84, 82, 80),
+#: Feedforward 1st/2nd Gain(90, 88)).
+_GAIN_RANGE = (0, 16383)
+
+
+def _is_number(value: object) -> bool:
+    """A finite JSON number (not true/false, which JSON keeps apart and Python would count as 1 and 0)."""
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _whole(low: int, high: int, what: str = "the register's range") -> Callable[[object, dict], str | None]:
+    def check(value: object, meta: dict) -> str | None:
+        if _is_number(value) and value == int(value) and low <= value <= high:
+            return None
+        return f"must be a whole number {low}..{high} ({what})"
+    return check
+
+
+def _one_of(values: tuple[int, ...], why: str) -> Callable[[object, dict], str | None]:
+    def check(value: object, meta: dict) -> str | None:
+        return None if _is_number(value) and value in values else f"must be one of {', '.join(map(str, values))}: {why}"
+    return check
+
+
+def _number(low: float, high: float = math.inf, low_open: bool = False, unit: str = "") -> Callable[[object, dict], str | None]:
+    def check(value: object, meta: dict) -> str | None:
+        if _is_number(value) and (low < value if low_open else low <= value) and value <= high:
+            return None
+        bound = (f"above {low:g}" if low_open else f"of at least {low:g}") if high == math.inf else f"in {low:g}..{high:g}"
+        return f"must be a number {bound}{unit}"
+    return check
+
+
+def _text(value: object, meta: dict) -> str | None:
+    return None if isinstance(value, str) else "must be a JSON string"
+
+
+def _unit(value: object, meta: dict) -> str | None:
+    ok = value is None or (_is_number(value) and value > 0)
+    return None if ok else "must be a number of A above 0 (0.001: 1 mA), or null where the servo senses no current"
+
+
+def _ratings(value: object, meta: dict) -> str | None:
+    rows = value if isinstance(value, list) and value else [None]
+    if all(isinstance(r, list) and len(r) == 4 and all(_is_number(x) and x > 0 for x in r) for r in rows):
+        return None
+    return "must be [[voltage_v, stall_torque_nm, stall_current_a, no_load_speed_rpm], ...], all above 0"
+
+
+def _supply(value: object, meta: dict) -> str | None:
+    if not _is_number(value) or value <= 0:
+        return "must be a number of volts above 0"
+    ratings = meta.get("ratings")
+    if _ratings(ratings, meta) is not None:  # no sheet to compare with: the missing sheet is said when it is used
+        return None
+    volts = [r[0] for r in ratings]
+    low, high = SUPPLY_RATING_SHARE[0] * min(volts), SUPPLY_RATING_SHARE[1] * max(volts)
+    if low <= value <= high:
+        return None
+    return (f"{value:g} V is outside {low:g}..{high:g} V, where the data sheet's ratings ({', '.join(f'{v:g}' for v in volts)} V) "
+            "hold (a supply in mV?)")
+
+
+class MetaKey(NamedTuple):
+    """One X-series metadata key: what it means, and its check (``check(value, meta)``: None, or why not)."""
+
+    meaning: str
+    check: Callable[[object, dict], str | None]
+
+
+#: X-series metadata keys (the values are JSON): what each means and what it may be; any other key is an error.
 X_META = {
-    "servo": '"x"',
-    "model": "the model's name, for the report",
-    "gear_ratio": "the data sheet's gear ratio",
-    "ratings": "the data sheet's [[voltage_v, stall_torque_nm, stall_current_a, no_load_speed_rpm], ...]",
-    "current_unit_a": "Present Current's unit, A (null: no current sensing, the XL430)",
-    "position_output_scale": "the position controller's output against the e-manual's (0.5 measured on the XL330)",
-    "operating_mode": "Operating Mode(11): 3 position, 4 extended position, 5 current-based position",
-    "position_p_gain": "and position_i_gain, position_d_gain, feedforward_1st_gain, feedforward_2nd_gain, "
-                       "pwm_limit, current_limit, velocity_limit, drive_mode: the registers as set",
-    "supply_v": "the supply, V, where the trace has no voltage column",
-    "load_inertia_kg_m2": "an inertia on the horn",
-    "gravity_moment_nm": "a pendulum on the horn (m g l), hanging down at gravity_zero_pulses (default 2048)",
+    "servo": MetaKey('"x"', _text),
+    "model": MetaKey("the model's name, for the report", _text),
+    "gear_ratio": MetaKey("the data sheet's gear ratio", _number(0.0, low_open=True)),
+    "ratings": MetaKey("the data sheet's [[voltage_v, stall_torque_nm, stall_current_a, no_load_speed_rpm], ...]",
+                       _ratings),
+    "current_unit_a": MetaKey("Present Current's unit, A (null: no current sensing, the XL430)", _unit),
+    "position_output_scale": MetaKey("the position controller's output against the e-manual's (0.5 measured on the "
+                                     "XL330)", _number(0.0, low_open=True)),
+    "operating_mode": MetaKey("Operating Mode(11): 3 position, 4 extended position, 5 current-based position",
+                              _one_of(POSITION_MODES, "the diagnosis replays the position modes, whose command is "
+                                                      "Goal Position")),
+    **{key: MetaKey(f"{name} as set", _whole(*_GAIN_RANGE)) for key, name in (
+        ("position_p_gain", "Position P Gain(84)"), ("position_i_gain", "Position I Gain(82)"),
+        ("position_d_gain", "Position D Gain(80)"), ("feedforward_1st_gain", "Feedforward 1st Gain(90)"),
+        ("feedforward_2nd_gain", "Feedforward 2nd Gain(88)"))},
+    "pwm_limit": MetaKey("PWM Limit(36) as set", _whole(0, 885)),
+    # the largest Current Limit and Velocity Limit of the X series' tables are well under these register widths
+    "current_limit": MetaKey("Current Limit(38) as set", _whole(0, 32767)),
+    "velocity_limit": MetaKey("Velocity Limit(44) as set", _whole(0, 32767)),
+    "drive_mode": MetaKey("Drive Mode(10) as set", _whole(0, 13, "bits 0, 2 and 3")),
+    "supply_v": MetaKey("the supply, V, where the trace has no voltage column", _supply),
+    "load_inertia_kg_m2": MetaKey("an inertia on the horn", _number(0.0, unit=" kg m^2")),
+    "gravity_moment_nm": MetaKey("a pendulum on the horn (m g l), hanging down at gravity_zero_pulses",
+                                 _number(0.0, unit=" N m")),
+    "gravity_zero_pulses": MetaKey("where the pendulum hangs down, pulses (default 2048)",
+                                   _number(-(2**31), 2**31 - 1, unit=" pulses")),
 }
+
+
+def x_meta_error(meta: dict) -> tuple[str, str] | None:
+    """The first X-series metadata key that :data:`X_META` does not list or whose value it refuses, with why, as
+    (key, message); None if every key is well.  The keys are checked in the file's order."""
+    for key, value in meta.items():
+        if key not in X_META:
+            near = difflib.get_close_matches(key, X_META, n=1)
+            hint = f"did you mean {near[0]}?" if near else f"the keys are {', '.join(X_META)}"
+            return key, f"#@ {key}: not an X-series metadata key ({hint})"
+        why = X_META[key].check(value, meta)
+        if why is not None:
+            if isinstance(value, str) and X_META[key].check is not _text:
+                why += "; write it as a JSON number, without quotes or unit"
+            shown = json.dumps(value)
+            return key, f"#@ {key} = {shown if len(shown) <= 40 else shown[:37] + '...'}: {why}"
+    return None
 
 
 class TraceFormatError(ValueError):
@@ -285,6 +402,7 @@ def parse_trace(text: str, source: str = "trace") -> Trace:
     """:func:`read_trace` on a string (``source`` names it in errors)."""
     comments: list[str] = []
     meta: dict = {}
+    meta_lines: dict[str, int] = {}
     fmt = FORMATS["ax"]
     header: list[str] | None = None
     rows: list[list[float | int]] = []
@@ -299,6 +417,7 @@ def parse_trace(text: str, source: str = "trace") -> Trace:
                 if not sep or header is not None:
                     raise ValueError("metadata is '#@ key = JSON value', before the header")
                 meta[key.strip()] = json.loads(value)
+                meta_lines[key.strip()] = line_no
             except ValueError as exc:
                 raise TraceFormatError(f"bad metadata: {exc}", line_no, None, source) from None
             servo = meta.get("servo", "ax")
@@ -311,6 +430,9 @@ def parse_trace(text: str, source: str = "trace") -> Trace:
             continue
         cells = next(csv.reader([stripped]))
         if header is None:
+            bad_meta = x_meta_error(meta) if fmt is X_COLUMNS else None
+            if bad_meta:  # all of it read (the servo may be named last), before any row
+                raise TraceFormatError(bad_meta[1], meta_lines[bad_meta[0]], None, source)
             header = [c.strip() for c in cells]
             for col in header:
                 if not col:
@@ -379,3 +501,29 @@ def write_trace(trace: Trace, path: str | Path) -> None:
                 cells.append(str(int(col[i])))
         out.write(",".join(cells) + "\n")
     Path(path).write_text(out.getvalue(), encoding="utf-8")
+
+
+#: The longest recording the workflow simulates (s): every fit steps the model through all of it at 1 kHz for
+#: dozens of parameter sets at once, and the arrays grow with it (a 3,000 s trace took 4.6 GB).  Recordings the
+#: workflow is meant for last seconds to a minute or two; a longer span is usually a time column in ms, not s.
+MAX_SPAN_S = 300.0
+
+
+#: The most rows the workflow reads: it holds every row for dozens of parameter sets at once, about 3 GB per
+#: 100,000 rows (120 s logged at 1 kHz took 3.4 GB); the span's limit alone let a 300 s log at 1 kHz ask for 8.5.
+MAX_ROWS = 100_000
+
+
+def check_span(t_s: np.ndarray, source: str, unit_s: float = 1.0) -> None:
+    """ValueError naming the widest gap when the rows span more than :data:`MAX_SPAN_S` (times in ``unit_s``), or
+    when they are more than :data:`MAX_ROWS`."""
+    if len(t_s) > MAX_ROWS:
+        every = -(-len(t_s) // MAX_ROWS)
+        raise ValueError(f"{source}: {len(t_s):,} rows, more than the {MAX_ROWS:,} the workflow holds in memory; keep "
+                         f"one row in {every} (or cut the recording)")
+    span_s = float(t_s[-1] - t_s[0]) * unit_s if len(t_s) else 0.0
+    if span_s > MAX_SPAN_S:
+        widest = int(np.argmax(np.diff(t_s))) + 1
+        raise ValueError(f"{source}: the rows span {span_s:.6g} s, more than the {MAX_SPAN_S:g} s the workflow "
+                         f"simulates (the widest gap: row {widest + 1} of the data, from {t_s[widest - 1]:.6g} to "
+                         f"{t_s[widest]:.6g}); cut the recording, or check the time column's unit")

@@ -26,7 +26,21 @@ rows are skipped and counted (:attr:`WizardExport.skipped`, with the line
 numbers in :attr:`WizardExport.skipped_lines`), never guessed at: a row is
 kept only if every field parses and its time is later than the last kept
 row's.  Anything wrong with the header is an error
-(:class:`WizardFormatError`, a ``ValueError`` naming the file and line).
+(:class:`WizardFormatError`, a ``ValueError`` naming the file and line), and
+so is a file with under two readable rows (naming the first skipped row and
+why it was skipped).
+
+**Re-saved by a spreadsheet.**  Empty fields at the end of a line are
+ignored (a spreadsheet pads ragged CSV to a rectangle with commas), and the
+separator is the one the first line uses after ``DYNAMIXEL Graph``
+(:data:`SEPARATORS`: a spreadsheet in a comma-decimal locale saves with
+``;``).
+
+**The workflow's limits.**  :func:`read_wizard` refuses an export over the
+workflow's row count or time span (:func:`.trace.check_span`) from its stamps,
+before the reading clock is rebuilt: that costs about 1.5 ms a row, minutes
+on an export the workflow would refuse anyway.  :func:`read_wizard_model`
+reads only the two lines that name the servo.
 
 **When a row was read.**  The Wizard stamps each row on its graph timer's
 16 ms tick (:data:`TICK_S`) with the newest reading since the last tick,
@@ -50,7 +64,7 @@ the trace's signed form (positive when the position increases).
 
 API::
 
-    from firmware_model.diagnose.wizard import is_wizard_export, read_wizard, to_trace
+    from firmware_model.diagnose.wizard import is_wizard_export, read_wizard, read_wizard_model, to_trace
 
     if is_wizard_export("AX12A_NOLOAD_1.csv"):
         ex = read_wizard("AX12A_NOLOAD_1.csv")   # WizardExport
@@ -59,23 +73,27 @@ API::
         ex.values["present_position"]             # int64 array (n,); also goal_position, present_speed, ...
         ex.rows_read, ex.skipped                  # 206, {"garbled": 1, "repeated_time": 0, "time_back": 2}
         trace = to_trace(ex, goal_position=500, onset_s=1.87, moving_speed=0, voltage_v=12.0)
+        read_wizard_model("AX12A_NOLOAD_1.csv")   # ("AX-12A", 12), from the first two lines alone
 """
 
 from __future__ import annotations
 
 import io
+import itertools
 import math
+from array import array
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from ..units import DIRECTION_BIT
-from .trace import Trace, TraceFormatError
+from .trace import Trace, TraceFormatError, check_span
 
 __all__ = ["WizardExport", "WizardFormatError", "ITEM_COLUMNS", "SIGNED_ITEMS", "MAGIC", "is_wizard_export", "cruise_units_s",
            "CRUISE_SHARE", "SPEED_LIMITED_SHARE",
-           "read_wizard", "parse_wizard", "to_trace", "reading_times", "TICK_S"]
+           "read_wizard", "read_wizard_model", "parse_wizard", "to_trace", "reading_times", "TICK_S", "SEPARATORS"]
 
 #: The Wizard graph timer's tick (s): every stamp is a whole number of ticks (+-1 ms) from the first.
 TICK_S = 0.016
@@ -94,6 +112,9 @@ MIN_CLOCK_ROWS = 8
 
 #: First field of the first line of every Wizard 2 graph export.
 MAGIC = "DYNAMIXEL Graph"
+#: Field separators an export is read with: the Wizard's own ',' and what a spreadsheet re-saves it with (';' in a
+#: comma-decimal locale, a tab as "text"); the character after :data:`MAGIC` on the first line says which.
+SEPARATORS = (",", ";", "\t")
 #: Wizard item name -> trace column (see :mod:`.trace`).  Other items are listed as ignored.
 ITEM_COLUMNS = {
     "Present Position": "present_position",
@@ -184,24 +205,96 @@ class WizardExport:
         return out
 
 
+def _separator(first_line: str) -> str | None:
+    """The separator the first line uses after :data:`MAGIC` (``,`` where nothing follows it); None if the line
+    does not start with :data:`MAGIC`, i.e. the file is no Wizard export."""
+    line = first_line.strip()
+    if not line.startswith(MAGIC):
+        return None
+    rest = line[len(MAGIC):].lstrip(" ")
+    if not rest:
+        return ","
+    return rest[0] if rest[0] in SEPARATORS else None
+
+
 def is_wizard_export(path: str | Path) -> bool:
-    """Whether the file starts like a Wizard graph export (its first field is ``DYNAMIXEL Graph``)."""
+    """Whether the file starts like a Wizard graph export (``DYNAMIXEL Graph``, then one of :data:`SEPARATORS`)."""
     try:
         with open(path, encoding="utf-8-sig", errors="replace") as f:
             first = f.readline()
     except OSError:
         return False
-    return first.split(",")[0].strip() == MAGIC
+    return _separator(first) is not None
 
 
-def read_wizard(path: str | Path) -> WizardExport:
-    """Read a Wizard graph export; raise :class:`WizardFormatError` (file and line) if it is malformed."""
+def read_wizard(path: str | Path, limits: Callable[[np.ndarray, str], None] | None = check_span) -> WizardExport:
+    """Read a Wizard graph export; raise :class:`WizardFormatError` (file and line) if it is malformed.
+
+    ``limits(t_s, source)`` runs on the kept rows' stamps (s) before the reading clock is rebuilt, and raises
+    ``ValueError`` for an export too large to go on with (default: the diagnosis workflow's; None: no limit).
+    """
     path = Path(path)
     try:
         text = path.read_bytes().decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         raise WizardFormatError(f"not UTF-8 text ({exc.reason})", source=str(path)) from None
-    return parse_wizard(text, source=str(path))
+    return parse_wizard(text, source=str(path), limits=limits)
+
+
+def read_wizard_model(path: str | Path) -> tuple[str, int]:
+    """The servo an export is from, (model name, model number), read from its first two lines alone.
+
+    Why: knowing which servo's model to start from needs only those, and parsing a large export's rows twice
+    doubles what the workflow takes to read it.  :class:`WizardFormatError` if the two lines are not an export's
+    first; ``OSError`` if the file cannot be read.
+    """
+    source = str(path)
+    try:
+        with open(path, encoding="utf-8-sig") as f:
+            head = list(itertools.islice(_lines(f), 2))
+    except UnicodeDecodeError as exc:
+        raise WizardFormatError(f"not UTF-8 text ({exc.reason})", source=source) from None
+    sep = _magic(head, source)
+    if len(head) < 2:
+        raise WizardFormatError("header ends early: expected the model line", head[0][0], None, source)
+    return _model(head[1], sep, source)
+
+
+def _lines(raw: Iterable[str]) -> Iterator[tuple[int, str]]:
+    """(1-based line number, text stripped) of each line that is not blank."""
+    for n, line in enumerate(raw, start=1):
+        stripped = line.strip()
+        if stripped:
+            yield n, stripped
+
+
+def _fields(line: str, sep: str) -> list[str]:
+    """A line's fields, stripped, without the empty ones at its end (a spreadsheet pads ragged rows with them)."""
+    cells = [c.strip() for c in line.split(sep)]
+    while len(cells) > 1 and not cells[-1]:
+        cells.pop()
+    return cells
+
+
+def _magic(head: list[tuple[int, str]], source: str) -> str:
+    """The separator of an export whose first non-blank lines are ``head``; WizardFormatError if it is none."""
+    if not head:
+        raise WizardFormatError(f"empty file: no {MAGIC!r} header", None, None, source)
+    n, s = head[0]
+    sep = _separator(s)
+    if sep is None:
+        raise WizardFormatError(f"not a Wizard graph export: the first line is {s[:40]!r}, expected {MAGIC!r},<version>",
+                                n, None, source)
+    return sep
+
+
+def _model(line: tuple[int, str], sep: str, source: str) -> tuple[str, int]:
+    """(model name, model number) from the model line ``<name>,<model number>``."""
+    n, s = line
+    model = _fields(s, sep)
+    if len(model) != 2 or _int(model[1]) is None:
+        raise WizardFormatError(f"expected the model line '<name>,<model number>', got {s[:40]!r}", n, None, source)
+    return model[0], _int(model[1])
 
 
 def _int(text: str) -> int | None:
@@ -215,82 +308,23 @@ def _int(text: str) -> int | None:
     return int(value)
 
 
-def parse_wizard(text: str, source: str = "wizard export") -> WizardExport:
+def parse_wizard(text: str, source: str = "wizard export",
+                 limits: Callable[[np.ndarray, str], None] | None = check_span) -> WizardExport:
     """:func:`read_wizard` on a string (``source`` names it in errors)."""
-    lines = [(n, raw.strip()) for n, raw in enumerate(io.StringIO(text), start=1)]
-    header = [(n, s) for n, s in lines if s][:3]
-
-    def fail(message: str, line: int | None) -> WizardFormatError:
-        return WizardFormatError(message, line, None, source)
-
-    if not header:
-        raise fail("empty file: no 'DYNAMIXEL Graph' header", None)
-    n, s = header[0]
-    if s.split(",")[0].strip() != MAGIC:
-        raise fail(f"not a Wizard graph export: the first line is {s[:40]!r}, expected {MAGIC!r},<version>", n)
-    if len(header) < 3:
-        raise fail("header ends early: expected the model line and 'ItemCount,<n>'", header[-1][0])
-    n, s = header[1]
-    model = [c.strip() for c in s.split(",")]
-    if len(model) != 2 or _int(model[1]) is None:
-        raise fail(f"expected the model line '<name>,<model number>', got {s[:40]!r}", n)
-    n, s = header[2]
-    count = [c.strip() for c in s.split(",")]
-    if len(count) != 2 or count[0] != "ItemCount" or _int(count[1]) is None or _int(count[1]) < 1:
-        raise fail(f"expected 'ItemCount,<n>' with n >= 1, got {s[:40]!r}", n)
-    n_items = _int(count[1])
-    rest = [(n, s) for n, s in lines if s and n > header[2][0]]
-    if len(rest) < n_items + 1:
-        raise fail(f"header ends early: ItemCount is {n_items} but only {max(len(rest) - 1, 0)} item line(s) "
-                   "and no column header follow", rest[-1][0] if rest else header[2][0])
-    items = tuple(s.split(",")[0].strip() for _, s in rest[:n_items])
-    for (n, s), item in zip(rest[:n_items], items):
-        if not item or item == TIME_HEADER:
-            raise fail(f"expected an item line '<name>,<colour>,...', got {s[:40]!r}", n)
-    n, s = rest[n_items]
-    cols = [c.strip() for c in s.split(",")]
-    if cols[0] != TIME_HEADER:
-        raise fail(f"expected the column header '{TIME_HEADER},{','.join(items)}', got {s[:60]!r}", n)
-    if tuple(cols[1:]) != items:
-        raise fail(f"column header names {cols[1:]} but the item lines name {list(items)}", n)
-    twice = sorted({i for i in items if i in ITEM_COLUMNS and items.count(i) > 1})
-    if twice:  # which column counts would be a guess
-        raise fail(f"{', '.join(twice)} plotted more than once", n)
-    if _int(model[1]) not in AX_MODEL_NUMBERS:
-        raise fail(f"the export is from a {model[0] or 'servo with no name'} (model number {model[1]}): the workflow reads "
-                   f"the AX series' exports ({', '.join(f'{v} {k}' for k, v in AX_MODEL_NUMBERS.items())}), whose "
-                   "positions are 0..1023 over 300 degrees", header[1][0])
-    ex = WizardExport(source, model[0], _int(model[1]), items, np.zeros(0), {},
+    lines = _lines(io.StringIO(text))
+    sep, (name, number), items, header_line = _header(lines, source)
+    ex = WizardExport(source, name, number, items, np.zeros(0), {},
                       ignored_items=tuple(i for i in items if i not in ITEM_COLUMNS))
-    kept: list[list[int | float]] = []
-    kept_lines: list[int] = []
-    for n, s in rest[n_items + 1:]:
-        ex.rows_seen += 1
-        cells = [c.strip() for c in s.split(",")]
-        t = _number(cells[0]) if len(cells) == len(items) + 1 else None
-        vals = [_int(c) for c in cells[1:]] if t is not None else [None]
-        kind = None
-        if t is None or any(v is None for v in vals):
-            kind = "garbled"
-        elif kept and t == kept[-1][0]:
-            kind = "repeated_time"
-        elif kept and t < kept[-1][0]:
-            kind = "time_back"
-        if kind:
-            ex.skipped[kind] += 1
-            ex.skipped_lines.append(n)
-            continue
-        kept.append([t, *vals])
-        kept_lines.append(n)
-    if len(kept) < 2:
-        raise fail(f"need at least two readable data rows, found {len(kept)} "
-                   f"({ex.rows_skipped} skipped)", rest[-1][0])
-    data = np.array(kept, dtype=float)
+    data, kept_lines, first_skip = _rows(lines, sep, items, ex)
+    if len(data) < 2:
+        why = f"; the first, {first_skip[1]}" if first_skip else ""
+        raise WizardFormatError(f"need at least two readable data rows, found {len(data)} ({ex.rows_skipped} skipped{why})",
+                                first_skip[0] if first_skip else (list(kept_lines) or [header_line])[-1],
+                                None, source)
     ex.t0_ms = float(data[0, 0])
     ex.t_s = (data[:, 0] - data[0, 0]) / 1000.0
-    read = reading_times(ex.t_s)
-    if read is not None:
-        ex.read_s, ex.read_period_s, ex.read_share = read
+    if limits is not None:  # before the clock: an export too large to go on with is refused in a second, not minutes
+        limits(ex.t_s, source)
     for j, item in enumerate(items, start=1):
         col = ITEM_COLUMNS.get(item)
         if col is None:
@@ -298,13 +332,106 @@ def parse_wizard(text: str, source: str = "wizard export") -> WizardExport:
         low, high = ITEM_RANGES[col]
         outside = np.flatnonzero((data[:, j] < low) | (data[:, j] > high))  # before the cast: 1e300 is no int64
         if outside.size:
-            raise fail(f"{item} {data[outside[0], j]:g} is outside the register's {low}..{high}"
-                       + (f" (and {outside.size - 1} more rows)" if outside.size > 1 else ""), kept_lines[outside[0]])
+            raise WizardFormatError(f"{item} {data[outside[0], j]:g} is outside the register's {low}..{high}"
+                                    + (f" (and {outside.size - 1} more rows)" if outside.size > 1 else ""),
+                                    kept_lines[outside[0]], None, source)
         v = data[:, j].astype(np.int64)
         if col in SIGNED_ITEMS:
             v = np.where(v >= DIRECTION_BIT, -(v & (DIRECTION_BIT - 1)), v)
         ex.values[col] = v
+    read = reading_times(ex.t_s)
+    if read is not None:
+        ex.read_s, ex.read_period_s, ex.read_share = read
     return ex
+
+
+def _header(lines: Iterator[tuple[int, str]], source: str) -> tuple[str, tuple[str, int], tuple[str, ...], int]:
+    """(separator, (model name, model number), items, the column header's line) from an export's header lines,
+    taken from ``lines`` (its non-blank lines, :func:`_lines`), which then holds the data rows."""
+
+    def fail(message: str, line: int | None) -> WizardFormatError:
+        return WizardFormatError(message, line, None, source)
+
+    header = list(itertools.islice(lines, 3))
+    sep = _magic(header, source)
+    if len(header) < 3:
+        raise fail("header ends early: expected the model line and 'ItemCount,<n>'", header[-1][0])
+    model = _model(header[1], sep, source)
+    n, s = header[2]
+    count = _fields(s, sep)
+    if len(count) != 2 or count[0] != "ItemCount" or _int(count[1]) is None or _int(count[1]) < 1:
+        raise fail(f"expected 'ItemCount,<n>' with n >= 1, got {s[:40]!r}", n)
+    n_items = _int(count[1])
+    rest = list(itertools.islice(lines, n_items + 1))
+    if len(rest) < n_items + 1:
+        raise fail(f"header ends early: ItemCount is {n_items} but only {max(len(rest) - 1, 0)} item line(s) "
+                   "and no column header follow", rest[-1][0] if rest else n)
+    items = tuple(_fields(s, sep)[0] for _, s in rest[:n_items])
+    for (n, s), item in zip(rest[:n_items], items):
+        if not item or item == TIME_HEADER:
+            raise fail(f"expected an item line '<name>,<colour>,...', got {s[:40]!r}", n)
+    n, s = rest[n_items]
+    cols = _fields(s, sep)
+    if cols[0] != TIME_HEADER:
+        raise fail(f"expected the column header '{TIME_HEADER},{','.join(items)}', got {s[:60]!r}", n)
+    if tuple(cols[1:]) != items:
+        raise fail(f"column header names {cols[1:]} but the item lines name {list(items)}", n)
+    twice = sorted({i for i in items if i in ITEM_COLUMNS and items.count(i) > 1})
+    if twice:  # which column counts would be a guess
+        raise fail(f"{', '.join(twice)} plotted more than once", n)
+    if model[1] not in AX_MODEL_NUMBERS:
+        raise fail(f"the export is from a {model[0] or 'servo with no name'} (model number {model[1]}): the workflow reads "
+                   f"the AX series' exports ({', '.join(f'{v} {k}' for k, v in AX_MODEL_NUMBERS.items())}), whose "
+                   "positions are 0..1023 over 300 degrees", header[1][0])
+    return sep, model, items, n
+
+
+def _rows(lines: Iterator[tuple[int, str]], sep: str, items: tuple[str, ...], ex: WizardExport):
+    """The data rows kept, shape (rows, 1 + items): time ms, then the items' values; their line numbers; and the
+    first skipped row as (line, why) or None.  Skipped rows are counted in ``ex`` by kind (see the module doc).
+
+    Kept in flat arrays of numbers as they are read: a list per row took 1.4 GB on a 4.6-million-row export."""
+    kept = array("d")
+    kept_lines = array("q")
+    last_ms: float | None = None
+    first_skip: tuple[int, str] | None = None
+    for n, s in lines:
+        ex.rows_seen += 1
+        cells = _fields(s, sep)
+        t = _number(cells[0]) if len(cells) == len(items) + 1 else None
+        vals = [_int(c) for c in cells[1:]] if t is not None else [None]
+        kind = None
+        if t is None or any(v is None for v in vals):
+            kind = "garbled"
+        elif last_ms is not None and t == last_ms:
+            kind = "repeated_time"
+        elif last_ms is not None and t < last_ms:
+            kind = "time_back"
+        if kind:
+            ex.skipped[kind] += 1
+            ex.skipped_lines.append(n)
+            if first_skip is None:
+                first_skip = (n, f"{s[:40]!r}: {_skip_reason(kind, cells, items, last_ms)}")
+            continue
+        kept.append(t)
+        kept.extend(vals)
+        kept_lines.append(n)
+        last_ms = t
+    return np.frombuffer(kept, dtype=float).reshape(-1, len(items) + 1), kept_lines, first_skip
+
+
+def _skip_reason(kind: str, cells: list[str], items: tuple[str, ...], last_ms: float | None) -> str:
+    """Why a row was skipped, in words (for the error when no two rows are readable)."""
+    if kind == "repeated_time":
+        return f"its time repeats the last kept row's, {last_ms:g} ms"
+    if kind == "time_back":
+        return f"its time {cells[0]} ms is before the last kept row's, {last_ms:g} ms"
+    if len(cells) != len(items) + 1:
+        return f"{len(cells)} fields where the column header has {len(items) + 1}"
+    if _number(cells[0]) is None:
+        return f"the time {cells[0]!r} is not a number"
+    item, cell = next((i, c) for i, c in zip(items, cells[1:]) if _int(c) is None)
+    return f"{item} {cell!r} is not a whole number"
 
 
 def _clock_scores(rows: np.ndarray, periods: np.ndarray, phase_step_s: float):

@@ -34,7 +34,7 @@ from .evaluate import Evaluator
 from .metrics import CHANNELS
 from .phases import classify
 from .schedule import Schedule, Segment
-from .trace import Trace, TraceFormatError
+from .trace import Trace, TraceFormatError, x_meta_error
 
 __all__ = ["physics_with", "XSetup", "SIM_KNOBS", "SENSING_KNOBS", "x_null_knobs", "replay_x", "simulate_x", "XEvaluator", "MIDDLE_PULSES"]
 
@@ -45,7 +45,6 @@ MIDDLE_PULSES = PULSES_PER_REV // 2
 REGISTER_DEFAULTS = dict(operating_mode=OperatingMode.POSITION, drive_mode=0, position_p_gain=400, position_i_gain=0,
                          position_d_gain=0, feedforward_1st_gain=0, feedforward_2nd_gain=0, pwm_limit=885,
                          current_limit=1750, velocity_limit=445)
-_POSITION_MODES = (OperatingMode.POSITION, OperatingMode.EXTENDED_POSITION, OperatingMode.CURRENT_BASED_POSITION)
 #: Knobs that need a new replay, with their null values (None: from the physics parameters).
 SIM_KNOBS = {"gearbox_efficiency": None, "coulomb_friction_nm": None, "stribeck_friction_nm": None,
              "stribeck_velocity_rad_s": None, "load_friction_motor": None, "load_friction_external": None,
@@ -72,10 +71,15 @@ class XSetup:
 
     @classmethod
     def from_trace(cls, trace: Trace, physics: XPhysicsParams | None = None) -> XSetup:
-        """From ``trace.meta`` (``physics``: start from these instead of the data sheet's); ``TraceFormatError`` if it lacks one."""
+        """From ``trace.meta`` (``physics``: start from these instead of the data sheet's); ``TraceFormatError`` if it
+        lacks one, or a key or value :data:`.trace.X_META` refuses (a trace read from a file was checked as read,
+        at its line; one made in memory is checked here)."""
         meta = trace.meta
         if trace.servo != "x":
             raise TraceFormatError("not an X-series trace (#@ servo = \"x\")")
+        bad = x_meta_error(meta)
+        if bad is not None:
+            raise TraceFormatError(bad[1])
         if physics is None:
             for key in ("gear_ratio", "ratings"):
                 if key not in meta:
@@ -86,9 +90,6 @@ class XSetup:
             except (TypeError, ValueError) as exc:
                 raise TraceFormatError(f"bad data sheet in the metadata: {exc}") from None
         registers = {k: int(meta.get(k, v)) for k, v in REGISTER_DEFAULTS.items()}
-        if registers["operating_mode"] not in _POSITION_MODES:
-            raise TraceFormatError(f"operating_mode {registers['operating_mode']}: the diagnosis replays the position "
-                                   "modes (3, 4, 5), whose command is Goal Position")
         ratings = meta.get("ratings") or [[12.0]]
         supply = float(meta.get("supply_v", ratings[0][0]))
         unit = meta.get("current_unit_a", 0.001)

@@ -39,3 +39,17 @@ def test_given_parameters_an_ax12a_export_and_a_bad_command_line_are_left_as_the
     assert not (tmp_path / "o").exists()
     unknown = [str(_export(tmp_path / "ax99.csv", "AX-99,99")), "--out", str(tmp_path / "o")]
     assert _from_the_served_servo(unknown) == unknown
+
+
+def test_the_model_comes_from_the_export_s_model_line_alone(tmp_path, monkeypatch):
+    """Which servo's parameters to start from is read from the model line, not by parsing the export's rows, which
+    the workflow then parses itself (a 120,000-row export was parsed twice before the row limit refused it)."""
+    from firmware_model.diagnose import wizard
+
+    def no_rows(*args, **kwargs):
+        raise AssertionError("the export's rows were parsed")
+
+    monkeypatch.setattr(wizard, "parse_wizard", no_rows)
+    path = _export(tmp_path / "ax18.csv", "AX-18A,18")
+    out = tmp_path / "report"
+    assert _from_the_served_servo([str(path), "--out", str(out)])[-2:] == ["--params", str(out / BASE_PARAMS_FILE)]

@@ -78,7 +78,7 @@ def test_a_trace_of_more_rows_than_the_workflow_holds_is_refused_before_any_work
     """The span's limit alone let a 300 s log at 1 kHz ask for about 8.5 GB."""
     import numpy as np
 
-    from firmware_model.diagnose.cli import MAX_ROWS, check_span
+    from firmware_model.diagnose.trace import MAX_ROWS, check_span
 
     with pytest.raises(ValueError, match=r"rows, more than the 100,000 the workflow holds in memory; keep one row in 2"):
         check_span(np.arange(MAX_ROWS + 1) * 1e-3, "log.csv")

@@ -174,3 +174,20 @@ def test_a_trace_logged_row_by_row_keeps_its_onsets_after_the_readings():
     ev = Evaluator(trace)
     knobs = dict(ev.null)
     assert np.array_equal(fit_onsets(ev, knobs), fit_onsets(ev, knobs, extend=False))
+
+
+@pytest.mark.parametrize("why, params, stamp_s", [
+    ("a motor that cannot turn the gears", ServoParams(gearbox_efficiency=1e-9), 1.0),
+    ("a time column in s read as ms", ServoParams(), 1e-3),
+])
+def test_a_model_that_never_moves_names_what_was_simulated(why, params, stamp_s):
+    """The goal was blamed ("check --goal") where the parameters or the time column held the model still: the error
+    names the span simulated, the supply and the goal, and each of what may hold it."""
+    build, _, t = _step_response(1.2347, 5)
+    trace = build(0.0)
+    trace = trace.with_columns(t=t * stamp_s)
+    with pytest.raises(ValueError) as info:
+        first_movement_onset(trace, params)
+    message = str(info.value)
+    assert f"in the {t[-1] * stamp_s:.4g} s simulated ({len(t)} rows) at 12.0 V" in message, (why, message)
+    assert "toward the goal 500" in message and "the goal, the supply or the model's parameters" in message, message

@@ -214,3 +214,94 @@ def test_a_step_too_short_to_cruise_has_no_cruise():
 
     with pytest.raises(ValueError, match="cross the middle"):
         cruise_units_s(np.array([0.0, 0.02, 0.04]), np.array([0.0, 0.0, 0.4]))
+
+
+def _padded(text: str) -> str:
+    """``text`` as a spreadsheet re-saves ragged CSV: every line padded with commas to the widest."""
+    lines = text.splitlines()
+    width = max(line.count(",") for line in lines)
+    return "".join(line + "," * (width - line.count(",")) + "\n" for line in lines)
+
+
+@pytest.mark.parametrize("resave", [
+    _padded,                                                  # padded to a rectangle
+    lambda text: _padded(text).replace(",", ";"),             # and saved with ';' (a comma-decimal locale)
+    lambda text: text.replace(",", "\t"),                     # saved as tab-separated text
+    lambda text: HEAD + "".join(line + ",\n" for line in text[len(HEAD):].splitlines()),  # the data rows alone
+])
+def test_an_export_resaved_by_a_spreadsheet_reads_as_the_original(tmp_path, resave):
+    """Empty fields at a line's end are ignored, and the separator is the one after the first line's magic
+    (the padded file was refused at its model line 'AX-12A,12,,,', the ';' one taken for a trace CSV, and rows
+    with a trailing comma all skipped as garbled)."""
+    path = _write(tmp_path, resave(GOOD))
+    assert is_wizard_export(path)
+    ex, good = read_wizard(path), parse_wizard(GOOD)
+    assert (ex.model_name, ex.model_number, ex.items, ex.rows_skipped) == ("AX-12A", 12, ("Present Position",), 0)
+    np.testing.assert_array_equal(ex.t_s, good.t_s)
+    np.testing.assert_array_equal(ex.values["present_position"], good.values["present_position"])
+
+
+@pytest.mark.parametrize("rows, line, why", [
+    ("0,1,2\n16,1,2\n", 6, "'0,1,2': 3 fields where the column header has 2"),
+    ("0.5s,1\n16.5s,1\n", 6, "the time '0.5s' is not a number"),
+    ("0,1.5\n16,2.5\n", 6, "Present Position '1.5' is not a whole number"),
+    ("0,1\n0,1\n", 7, "its time repeats the last kept row's, 0 ms"),
+    ("16,1\n0,1\n", 7, "its time 0 ms is before the last kept row's, 16 ms"),
+])
+def test_no_readable_rows_names_the_first_skipped_and_why(rows, line, why):
+    """Where under two rows are readable, the error points at the first skipped row and says why it was skipped
+    (it said only how many were skipped)."""
+    with pytest.raises(WizardFormatError, match="need at least two readable data rows") as info:
+        parse_wizard(HEAD + rows, "bad.csv")
+    assert str(info.value).startswith(f"bad.csv:{line}: ") and why in str(info.value), str(info.value)
+
+
+def test_an_export_past_the_row_limit_is_refused_before_the_clock_is_rebuilt(monkeypatch):
+    """The workflow's row limit is checked on the stamps, before the reading clock (about 1.5 ms a row) is rebuilt:
+    120,000 rows were refused after 191 s."""
+    from firmware_model.diagnose import wizard
+    from firmware_model.diagnose.trace import MAX_ROWS
+
+    def no_clock(t_s):
+        raise AssertionError(f"the reading clock was rebuilt for {len(t_s)} rows")
+
+    monkeypatch.setattr(wizard, "reading_times", no_clock)
+    n = MAX_ROWS + 1
+    text = HEAD + "".join(f"{16 * k},{k % 1000}\n" for k in range(n))
+    with pytest.raises(ValueError, match=f"{n:,} rows, more than the {MAX_ROWS:,}"):
+        parse_wizard(text, "big.csv")
+
+
+def test_an_export_past_the_span_limit_is_refused_before_the_clock_is_rebuilt(monkeypatch):
+    """The span limit too (a time column in tenths of ms, say), naming the widest gap."""
+    from firmware_model.diagnose import wizard
+    from firmware_model.diagnose.trace import MAX_SPAN_S
+
+    monkeypatch.setattr(wizard, "reading_times", lambda t_s: pytest.fail("the reading clock was rebuilt"))
+    stamps_ms = [16 * k for k in range(20)] + [1000.0 * (MAX_SPAN_S + 16)]
+    with pytest.raises(ValueError, match=f"more than the {MAX_SPAN_S:g} s the workflow simulates"):
+        parse_wizard(HEAD + "".join(f"{t:g},1\n" for t in stamps_ms), "long.csv")
+
+
+def test_the_limits_are_the_callers(monkeypatch):
+    """``limits=None`` reads an export of any size (the clock is rebuilt), another check runs instead of them."""
+    text = HEAD + "".join(f"{16 * k},1\n" for k in range(12))
+    assert parse_wizard(text, limits=None).read_period_s is not None
+    seen = []
+    parse_wizard(text, limits=lambda t_s, source: seen.append((len(t_s), source)))
+    assert seen == [(12, "wizard export")]
+
+
+def test_the_model_is_read_from_the_first_two_lines(tmp_path):
+    """:func:`read_wizard_model` reads the model line alone: an export whose rows are all unreadable still names its
+    servo; a file that is no export is a WizardFormatError at its line."""
+    from firmware_model.diagnose.wizard import read_wizard_model
+
+    path = _write(tmp_path, _padded(GOOD.replace("AX-12A,12", "AX-18A,18")).replace(",", ";") + "x;y;z\n" * 3)
+    assert read_wizard_model(path) == ("AX-18A", 18)
+    with pytest.raises(WizardFormatError, match=r"w.csv:3: expected the model line"):
+        read_wizard_model(_write(tmp_path, "DYNAMIXEL Graph,2\n\nAX-18A\n"))
+    with pytest.raises(WizardFormatError, match=r"w.csv:1: not a Wizard graph export"):
+        read_wizard_model(_write(tmp_path, "t,goal_position\n"))
+    with pytest.raises(WizardFormatError, match=r"w.csv:1: header ends early"):
+        read_wizard_model(_write(tmp_path, "DYNAMIXEL Graph,2\n"))

@@ -9,6 +9,7 @@ it, where the interval is too narrow: see the test), and nothing on a clean trac
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -172,3 +173,77 @@ def test_command_line_on_an_x_trace(tmp_path, capsys, fonts_loaded):
     # an AX-12 effect the X-series library does not have is refused by name
     assert main([str(tmp_path / "x.csv"), "--out", str(tmp_path / "o2"), "-q", "--effects", "backlash"]) == 2
     assert "backlash" in capsys.readouterr().err
+
+
+#: Metadata a user edits by hand, and what the error says: the wrong JSON type was a ValueError or TypeError
+#: traceback when the model was built; a misspelt key, a negative gain or a supply in mV was used silently.
+BAD_META = [
+    ("position_p_gain", '"high"', "must be a whole number 0..16383"),
+    ("position_p_gain", "null", "must be a whole number 0..16383"),
+    ("position_p_gain", "-400", "must be a whole number 0..16383"),
+    ("position_p_gain", "400.7", "must be a whole number 0..16383"),
+    ("supply_v", '"7.4 V"', "without quotes or unit"),
+    ("supply_v", "7400", "7400 V is outside 1.85..9 V, where the data sheet's ratings (3.7, 5, 6 V) hold"),
+    ("supply_v", "0", "must be a number of volts above 0"),
+    ("current_unit_a", '"1 mA"', "must be a number of A above 0"),
+    ("load_inertia_kg_m2", "-0.0049", "must be a number of at least 0 kg m^2"),
+    ("operating_mode", "1", "must be one of 3, 4, 5"),
+    ("ratings", "[[5.0, 0.52]]", "must be [[voltage_v, stall_torque_nm, stall_current_a, no_load_speed_rpm], ...]"),
+    ("model", "1200", "must be a JSON string"),
+]
+
+
+@pytest.mark.parametrize("key, value, words", BAD_META)
+def test_bad_x_metadata_is_one_error_naming_line_and_key(tmp_path, key, value, words):
+    """A metadata value of the wrong type or one no servo has is refused as a cell is: file, line and key."""
+    path = tmp_path / "x.csv"
+    write_trace(commands_trace(), path)
+    lines = path.read_text().splitlines()
+    at = next((i for i, s in enumerate(lines) if s.startswith(f"#@ {key} =")), None)
+    if at is None:  # a key the synthetic trace leaves at its default: added after the servo's line
+        at = lines.index('#@ servo = "x"') + 1
+        lines.insert(at, "")
+    lines[at] = f"#@ {key} = {value}"
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(TraceFormatError) as info:
+        read_trace(path)
+    assert info.value.line == at + 1 and str(info.value).startswith(f"{path}:{at + 1}: #@ {key} = {value}: ")
+    assert words in str(info.value), str(info.value)
+
+
+def test_a_misspelt_x_metadata_key_is_refused_with_the_likely_one(tmp_path):
+    """``#@ position_p_gian = 100`` left the gain at its default of 400, and the fit went on with it."""
+    path = tmp_path / "x.csv"
+    write_trace(commands_trace(), path)
+    text = path.read_text().replace("#@ position_p_gain = 400", "#@ position_p_gian = 100")
+    with pytest.raises(TraceFormatError, match=r"#@ position_p_gian: not an X-series metadata key \(did you mean "
+                                               r"position_p_gain\?\)") as info:
+        parse_trace(text, "x.csv")
+    assert info.value.line == text.splitlines().index("#@ position_p_gian = 100") + 1
+    # the keys are checked once all are read: the servo may be named after them
+    moved = "#@ position_p_gian = 100\n" + text.replace("#@ position_p_gian = 100\n", "")
+    with pytest.raises(TraceFormatError, match=r"x.csv:1: #@ position_p_gian"):
+        parse_trace(moved, "x.csv")
+
+
+def test_the_x_metadata_of_a_trace_made_in_memory_is_checked_when_its_model_is_built():
+    """A trace made in memory (not read, so not checked at its line) is refused by the model's set-up, not run."""
+    from firmware_model.diagnose.xreplay import XSetup
+
+    for key, value, words in BAD_META:
+        tr = commands_trace()
+        tr.meta[key] = json.loads(value)
+        with pytest.raises(TraceFormatError, match=re.escape(words)):
+            XSetup.from_trace(tr)
+    assert XSetup.from_trace(commands_trace()).registers["position_p_gain"] == 400
+
+
+def test_the_command_line_refuses_bad_x_metadata_in_one_line(tmp_path, capsys):
+    from firmware_model.diagnose.cli import main
+
+    path = tmp_path / "x.csv"
+    write_trace(commands_trace(), path)
+    path.write_text(path.read_text().replace("#@ position_p_gain = 400", '#@ position_p_gain = "high"'))
+    assert main([str(path), "--out", str(tmp_path / "out"), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and err.startswith(f"error: {path}:") and "position_p_gain" in err, err
