@@ -49,6 +49,10 @@ _REGISTRY_LOCK = threading.Lock()
 _URL_PARTS = "/?#[]"
 
 
+#: The longest a read waits before it looks again whether its bus was closed.
+CLOSED_POLL_S = 0.1
+
+
 class NameTaken(ValueError):
     """Another in-process bus holds the name."""
 
@@ -188,11 +192,12 @@ class InProcessLink:
                     break
                 if len(self._rx) >= size or not self._attached or (deadline is not None and now >= deadline):
                     break
-                wait = None if deadline is None else deadline - now
+                # Never longer than CLOSED_POLL_S: a bus dropped unclosed marks its link closed without the lock
+                # (a collector may run anywhere), so no notify comes to a read waiting for ever.
+                wait = CLOSED_POLL_S if deadline is None else min(deadline - now, CLOSED_POLL_S)
                 if self._pending:
-                    due = self._pending[0][0] - now
-                    wait = due if wait is None else min(wait, due)
-                self._cond.wait(None if wait is None else max(wait, 0.0))
+                    wait = min(wait, self._pending[0][0] - now)
+                self._cond.wait(max(wait, 0.0))
             out = bytes(self._rx[:size])
             del self._rx[:size]
             return out
@@ -246,7 +251,8 @@ def register(name: str, link: InProcessLink) -> None:
     """Make ``link`` reachable as ``ax12emu://NAME``; :class:`NameTaken` if another bus holds it."""
     check_name(name)
     with _REGISTRY_LOCK:
-        if name in _REGISTRY:
+        held = _REGISTRY.get(name)
+        if held is not None and not held.closed:  # a closed one (its bus dropped, a port still open on it) is gone
             raise NameTaken(f"an in-process bus named {name!r} already exists")
         _REGISTRY[name] = link
 
@@ -257,10 +263,12 @@ def is_registered(name: str) -> bool:
         return name in _REGISTRY
 
 
-def unregister(name: str) -> None:
-    """Forget a name (the bus closed)."""
+def unregister(name: str, link: InProcessLink | None = None) -> None:
+    """Forget a name (the bus closed); with ``link``, only while the name is still that link's (a dropped bus's
+    late release must not take it from a new bus registered since)."""
     with _REGISTRY_LOCK:
-        _REGISTRY.pop(name, None)
+        if link is None or _REGISTRY.get(name) is link:
+            _REGISTRY.pop(name, None)
 
 
 def lookup(name: str) -> InProcessLink:

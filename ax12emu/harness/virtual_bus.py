@@ -231,7 +231,7 @@ def _release(held: _Held) -> None:
         if held.thread.is_alive():  # pragma: no cover
             log.error("serving thread of %s did not stop", held.name)
     if held.link is not None:
-        unregister(held.name)
+        unregister(held.name, held.link)
         held.link.close()  # a port still open on it fails from now on, as an unplugged adapter's
     if held.transport is not None:
         held.transport.close()

@@ -48,7 +48,7 @@ from .nuisance import first_movement_onset, first_movement_row, locate_onset
 from .output import json_safe, verdict_json, verdict_text, write_outputs
 from .schedule import CONTROL_STEP_S
 from .search import Diagnosis, diagnose
-from .trace import Trace, TraceFormatError, check_span, read_trace, rest_level
+from .trace import REST_READINGS, Trace, TraceFormatError, check_span, read_trace, rest_level
 from .wizard import (
     ITEM_COLUMNS,
     SPEED_LIMITED_SHARE,
@@ -184,17 +184,20 @@ def _trace_supply(trace: Trace, args: argparse.Namespace, params: ServoParams, n
             raise ValueError(f"--voltage: {args.trace} is an X-series trace, whose supply is its voltage column or "
                              "#@ supply_v metadata")
         return trace, None
-    if trace.has("voltage"):  # the model is valid over its supply range, as --voltage
-        if args.voltage is not None:
-            raise ValueError(f"--voltage: {args.trace} records its supply (a voltage column); the flag stands in for "
-                             "it only where it does not")
-        for volts in (float(trace["voltage"].min()) / 10.0, float(trace["voltage"].max()) / 10.0):
-            params.check_supply(volts, f"{args.trace}: the voltage column's")
-        return trace, "recorded"
     if args.voltage is not None:
         params.check_supply(args.voltage, "--voltage")
         facts["voltage_v"] = args.voltage
+        if trace.has("voltage"):  # the user's word over the recording's: a supply past the model's range, say
+            recorded = trace["voltage"] / 10.0
+            notes.append(f"--voltage {args.voltage:g} V in place of the recorded {recorded.min():.1f}-{recorded.max():.1f} V")
         return trace.with_columns(voltage=np.full(len(trace), int(round(args.voltage * 10)))), "given"
+    if trace.has("voltage"):  # the model is valid over its supply range, as --voltage
+        for volts in (float(trace["voltage"].min()) / 10.0, float(trace["voltage"].max()) / 10.0):
+            try:
+                params.check_supply(volts, f"{args.trace}: the voltage column's")
+            except ValueError as exc:  # a servo runs past the model's range (an AX-12A to its 14 V alarm)
+                raise ValueError(f"{exc}: give the supply to fit at with --voltage") from None
+        return trace, "recorded"
     whose = "--params' supply_voltage_v" if args.params else "the model's default"
     notes.append(f"assumed: {params.supply_voltage_v:.1f} V ({whose}; the trace has no voltage column) — override "
                  "with --voltage")
@@ -206,7 +209,11 @@ def _check_default_goal(ex: WizardExport) -> None:
     """Refuse to fit an export against :data:`DEFAULT_GOAL` when it comes to rest farther from it than a servo
     settles from its goal: the fit would read the distance as physics (a weak motor, friction) and write a twin
     of it.  Only the user knows the goal written."""
-    rest = rest_level(ex.values["present_position"], end=True)
+    readings = ex.values["present_position"]
+    last = np.asarray(readings[-REST_READINGS:], dtype=float)
+    if np.ptp(last) > 2:  # still moving when the export ends: where it rests is not known, nor is the goal
+        return
+    rest = rest_level(readings, end=True)
     if abs(rest - DEFAULT_GOAL) > SETTLES_WITHIN_UNITS:
         raise ValueError(f"{ex.source}: the export comes to rest at {rest:g}, {abs(rest - DEFAULT_GOAL):g} units from "
                          f"the default goal {DEFAULT_GOAL} (a servo rests within {SETTLES_WITHIN_UNITS} of its goal): "

@@ -130,3 +130,33 @@ def test_a_port_still_open_on_a_dropped_in_process_bus_fails_as_on_the_other_tra
             time.sleep(0.02)
     finally:
         port.close()
+
+
+def test_a_dropped_buss_name_is_free_for_a_new_bus_while_a_port_is_still_open_on_the_old_one(caplog):
+    """The name stayed taken (NameTaken) until the stale port closed, and a blocking read on that port (timeout
+    None) waited for ever where a pty's or a socket's fails."""
+    bus = VirtualBus([1], transport="inprocess", name="rig").start()
+    stale = serial.serial_for_url(bus.port, baudrate=1_000_000, timeout=None)
+    outcome = []
+
+    def read():
+        try:
+            outcome.append(stale.read(6))
+        except serial.SerialException as exc:
+            outcome.append(exc)
+
+    reader = threading.Thread(target=read)
+    reader.start()
+    try:
+        del bus
+        with caplog.at_level(logging.WARNING, logger="ax12emu.harness.virtual_bus"):
+            gc.collect()
+        reader.join(RELEASE_S)
+        assert not reader.is_alive() and isinstance(outcome[0], serial.SerialException), outcome
+        with VirtualBus([1], transport="inprocess", name="rig") as again:
+            port = serial.serial_for_url(again.port, baudrate=1_000_000, timeout=0.5)
+            port.write(bytes((0xFF, 0xFF, 1, 2, 1, 0xFB)))
+            assert port.read(6) == bytes((0xFF, 0xFF, 1, 2, 0, 0xFC))
+            port.close()
+    finally:
+        stale.close()

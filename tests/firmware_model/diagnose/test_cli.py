@@ -121,15 +121,22 @@ def test_a_trace_without_its_supply_takes_voltage_and_says_what_it_assumed(tmp_p
         load_input(parse_args([str(path), "--out", str(tmp_path / "o"), "--voltage", "13"]), ServoParams())
 
 
-def test_voltage_for_a_trace_that_records_its_supply_is_refused_with_the_reason(tmp_path):
+def test_voltage_for_a_trace_that_records_its_supply_takes_its_place_and_says_so(tmp_path):
+    """A servo runs past the model's supply range (an AX-12A raises Input Voltage only at 14 V): a recording at
+    12.2 V was refused, and --voltage, refused for a trace with the column, left no way to fit it."""
     from firmware_model.diagnose.cli import load_input, parse_args
     from firmware_model.params import ServoParams
 
     path = _trace_file(tmp_path / "measured.csv", voltage=110)
-    with pytest.raises(ValueError, match=r"^--voltage: .*measured.csv records its supply \(a voltage column\)"):
-        load_input(parse_args([str(path), "--out", str(tmp_path / "o"), "--voltage", "12"]), ServoParams())
     recorded = load_input(parse_args([str(path), "--out", str(tmp_path / "o")]), ServoParams())
     assert recorded.supply == "recorded" and not any(note.startswith("assumed") for note in recorded.notes)
+    high = _trace_file(tmp_path / "high.csv", voltage=122)
+    with pytest.raises(ValueError, match=r"high.csv: the voltage column's 12.2 V is outside .*: give the supply to fit at "
+                                         r"with --voltage$"):
+        load_input(parse_args([str(high), "--out", str(tmp_path / "o")]), ServoParams())
+    given = load_input(parse_args([str(high), "--out", str(tmp_path / "o"), "--voltage", "12"]), ServoParams())
+    assert given.supply == "given" and given.trace["voltage"].tolist() == [120] * len(given.trace)
+    assert "--voltage 12 V in place of the recorded 12.2-12.2 V" in given.notes
 
 
 def test_a_supply_given_for_a_trace_is_fitted_and_served(tmp_path):

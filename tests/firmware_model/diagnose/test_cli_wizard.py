@@ -212,6 +212,12 @@ def test_an_export_resting_far_from_the_default_goal_asks_for_it(tmp_path):
     from firmware_model.diagnose.cli import SETTLES_WITHIN_UNITS
 
     assert SETTLES_WITHIN_UNITS == 33  # the e-manual's compliance margin 1 and slope 32
+    # an export that ends mid-move shows no rest at all, so nothing about its goal: taken as a step to 500, as before
+    text = wizard_step_export(ServoParams(supply_voltage_v=12.0), 300.0, 2000.0, goal=500).splitlines()
+    cut = next(k for k, line in enumerate(text) if line[:1].isdigit() and int(line.split(",")[1]) > 300)
+    path.write_text("\n".join(text[:cut + 1]) + "\n", encoding="utf-8")  # the export stops at about 300 units
+    moving = load_input(parse_args([str(path), "--out", str(tmp_path / "o")]), ServoParams())
+    assert moving.facts["goal"] == 500 and 300 < moving.trace["present_position"][-1] < 460
 
 
 def test_the_help_says_which_supply_another_ax_models_export_gets(capsys):
