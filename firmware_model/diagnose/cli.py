@@ -78,6 +78,9 @@ _TRACE_OPTIONS = ("voltage",)
 #: (the e-manual's defaults, 1 + 32; the shared real steps rest 1-2 units short of 500).  A recording resting
 #: farther from the default goal was stepped to another one.
 SETTLES_WITHIN_UNITS = POWER_UP["cw_compliance_margin"] + POWER_UP["cw_compliance_slope"]
+#: How far an export's last few readings may move and it still be taken as at rest: the pot's noise puts a still
+#: shaft's reading a unit or two either way (:func:`.trace.rest_level`), and a move covers tens of units a row.
+END_STILL_UNITS = 4
 
 
 @dataclass
@@ -118,8 +121,9 @@ def parse_args(argv: list[str] | None = None, prog: str = "python -m firmware_mo
                                                       f"(X-series traces: {', '.join(X_LIBRARY)})")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress on stderr")
     p.add_argument("--voltage", type=float, metavar="V",
-                   help="supply voltage, where the recording does not hold it (a trace CSV without a voltage column, a "
-                        "Wizard 2 export without Present Voltage); default: --params' supply_voltage_v, else "
+                   help="supply voltage to fit at, in place of a recorded one (a trace CSV's voltage column, a Wizard 2 "
+                        "export's Present Voltage: say so where the servo ran past the model's range); default: the "
+                        "recording's, else --params' supply_voltage_v, else "
                         f"{DEFAULT_VOLTAGE_V} for a Wizard export and the model's {ServoParams().supply_voltage_v} for a "
                         "trace CSV; ax12emu diagnose gives another AX model's Wizard export (an AX-18A's) that model's "
                         "served parameters as --params, so its served supply")
@@ -209,20 +213,30 @@ def _check_default_goal(ex: WizardExport) -> None:
     """Refuse to fit an export against :data:`DEFAULT_GOAL` when it comes to rest farther from it than a servo
     settles from its goal: the fit would read the distance as physics (a weak motor, friction) and write a twin
     of it.  Only the user knows the goal written."""
-    readings = ex.values["present_position"]
-    last = np.asarray(readings[-REST_READINGS:], dtype=float)
-    if np.ptp(last) > 2:  # still moving when the export ends: where it rests is not known, nor is the goal
+    readings = np.asarray(ex.values["present_position"], dtype=float)
+    end = rest_level(readings, end=True)
+    off = end - DEFAULT_GOAL
+    if abs(off) <= SETTLES_WITHIN_UNITS:
         return
-    rest = rest_level(readings, end=True)
-    if abs(rest - DEFAULT_GOAL) > SETTLES_WITHIN_UNITS:
-        raise ValueError(f"{ex.source}: the export comes to rest at {rest:g}, {abs(rest - DEFAULT_GOAL):g} units from "
-                         f"the default goal {DEFAULT_GOAL} (a servo rests within {SETTLES_WITHIN_UNITS} of its goal): "
-                         "give the Goal Position written with --goal")
+    # An export cut off mid-move, still heading for the default goal from short of it, says nothing against it;
+    # one that rests (its last readings within a pot's noise) or has passed the goal and goes on does.
+    last = readings[-REST_READINGS:]
+    heading = float(last[-1] - last[0])
+    if heading * off < 0 and abs(heading) > END_STILL_UNITS:
+        return
+    if abs(heading) > END_STILL_UNITS:
+        where = f"ends moving away from the default goal {DEFAULT_GOAL}, at {last[-1]:g}"
+    else:
+        where = f"comes to rest at {end:g}, {abs(off):g} units from the default goal {DEFAULT_GOAL}"
+    raise ValueError(f"{ex.source}: the export {where} (a servo rests within {SETTLES_WITHIN_UNITS} of its goal): give "
+                     "the Goal Position written with --goal")
 
 
 #: The Wizard flags that stand in for a plotted item, and the trace column each replaces.
+#: (``--voltage`` is not among them: it takes a recorded supply's place, as for a trace CSV, since a servo runs past
+#: the model's supply range.)
 _FLAG_COLUMNS = {"goal": "goal_position", "initial_goal": "goal_position", "onset": "goal_position",
-                 "moving_speed": "moving_speed", "voltage": "voltage"}
+                 "moving_speed": "moving_speed"}
 
 
 def _wizard_input(ex: WizardExport, args: argparse.Namespace, params: ServoParams, say) -> Input:
@@ -236,9 +250,17 @@ def _wizard_input(ex: WizardExport, args: argparse.Namespace, params: ServoParam
     # Unsaid, the supply is the parameter file's (a twin's params.toml carries the supply it was fitted at), else 12 V.
     volts = args.voltage if args.voltage is not None else params.supply_voltage_v if args.params else DEFAULT_VOLTAGE_V
     params.check_supply(volts, "--voltage")
+    in_place_of = None  # the recorded supply --voltage replaces
     if "voltage" in ex.values:  # what the servo ran at: within the model's range, as --voltage is
-        volts = float(np.median(ex.values["voltage"])) / 10.0
-        params.check_supply(volts, f"{ex.source}: the recorded Present Voltage (median)")
+        recorded_v = float(np.median(ex.values["voltage"])) / 10.0
+        if args.voltage is not None:
+            in_place_of = recorded_v
+        else:
+            try:
+                params.check_supply(recorded_v, f"{ex.source}: the recorded Present Voltage (median)")
+            except ValueError as exc:  # a servo runs past the model's range (an AX-12A to its 14 V alarm)
+                raise ValueError(f"{exc}: give the supply to fit at with --voltage") from None
+            volts = recorded_v
     if "present_position" not in ex.values:
         raise ValueError(f"{ex.source}: the export has no Present Position column: nothing to compare the model with")
     if args.goal is None and "goal_position" not in ex.values:
@@ -246,13 +268,18 @@ def _wizard_input(ex: WizardExport, args: argparse.Namespace, params: ServoParam
     initial = int(ex.values["present_position"][0]) if args.initial_goal is None else args.initial_goal
 
     def build(onset_s: float, known: bool = False) -> Trace:
-        return to_trace(ex, goal, onset_s, speed, volts, initial, onset_known=known)
+        trace = to_trace(ex, goal, onset_s, speed, volts, initial, onset_known=known)
+        if in_place_of is None:
+            return trace
+        return trace.with_columns(voltage=np.full(len(trace), int(round(volts * 10)), dtype=np.int64))
 
     recorded = [c for c in ("goal_position", "moving_speed", "voltage") if c in ex.values]
     facts = {"format": "wizard", "model": ex.model_name, "rows_seen": ex.rows_seen, "rows_read": ex.rows_read,
              "skipped": dict(ex.skipped), "items_ignored": list(ex.ignored_items), "recorded": recorded,
              "reading_period_s": ex.read_period_s, "rows_on_reading_clock": ex.read_share if ex.read_s is not None else None}
     notes = [ex.summary()]
+    if in_place_of is not None:
+        notes.append(f"--voltage {volts:g} V in place of the recorded {in_place_of:.1f} V (median)")
     if ex.model_number != AX12A_MODEL_NUMBER and args.params is None:
         notes.append(f"the export is from an {ex.model_name}; the model is an AX-12A's (its parameters are not "
                      "that servo's unless --params says otherwise)")
@@ -296,7 +323,7 @@ def _wizard_input(ex: WizardExport, args: argparse.Namespace, params: ServoParam
         notes.append("assumed: " + ", ".join(assumed)
                      + " — override with --goal, --initial-goal, --onset, --moving-speed, --voltage")
     facts["assumed"] = assumed
-    supply = "recorded" if "voltage" in ex.values else "given" if args.voltage is not None else "assumed"
+    supply = "given" if args.voltage is not None else "recorded" if "voltage" in ex.values else "assumed"
     return Input(trace, "wizard", notes, facts, supply)
 
 

@@ -115,19 +115,27 @@ def test_wizard_options_refused_for_a_trace_and_bad_voltage(tmp_path, capsys):
 
 def test_a_flag_for_a_plotted_item_is_refused_and_a_recorded_supply_is_checked(tmp_path, capsys):
     """--goal with Goal Position plotted was ignored while the report still offered it; a plotted Present Voltage
-    outside the model's range was simulated where --voltage is refused."""
+    outside the model's range was simulated.  --voltage takes a recorded supply's place (a servo runs past the
+    model's range: an AX-12A alarms only at 14 V), and the refusal says so; it was refused, a dead end."""
+    from firmware_model.diagnose.cli import load_input, parse_args
+    from firmware_model.params import ServoParams
+
     lines = ["DYNAMIXEL Graph,2", "AX-12A,12", "ItemCount,3", "Present Position,#ffff00,0,1,0",
              "Goal Position,#00ff00,0,1,0", "Present Voltage,#0000ff,0,1,0",
              "Time[ms],Present Position,Goal Position,Present Voltage"]
     lines += [f"{16 * i},{min(1 + 20 * max(i - 5, 0), 500)},{1 if i < 5 else 500},{{volts}}" for i in range(60)]
     f = tmp_path / "w.csv"
     f.write_text("\n".join(lines).replace("{volts}", "120") + "\n")
-    for flag in (["--goal", "300"], ["--onset", "0.05"], ["--voltage", "9"]):
+    for flag in (["--goal", "300"], ["--onset", "0.05"]):
         assert main([str(f), "--out", str(tmp_path / "o"), *flag]) == 2
         assert "the export records" in capsys.readouterr().err
     f.write_text("\n".join(lines).replace("{volts}", "135") + "\n")  # 13.5 V: outside the AX-12A's 7..12 V
     assert main([str(f), "--out", str(tmp_path / "o")]) == 2
-    assert "the recorded Present Voltage (median) 13.5 V is outside" in capsys.readouterr().err
+    assert ("the recorded Present Voltage (median) 13.5 V is outside the valid 7.0-12.0 V: give the supply to fit at "
+            "with --voltage") in capsys.readouterr().err
+    given = load_input(parse_args([str(f), "--out", str(tmp_path / "o"), "--voltage", "12"]), ServoParams())
+    assert given.supply == "given" and set(given.trace["voltage"].tolist()) == {120}
+    assert "--voltage 12 V in place of the recorded 13.5 V (median)" in given.notes
 
 
 def test_params_with_an_effect_the_fit_cannot_simulate_exit_2(tmp_path, capsys):
@@ -212,6 +220,18 @@ def test_an_export_resting_far_from_the_default_goal_asks_for_it(tmp_path):
     from firmware_model.diagnose.cli import SETTLES_WITHIN_UNITS
 
     assert SETTLES_WITHIN_UNITS == 33  # the e-manual's compliance margin 1 and slope 32
+    # a rest read with a pot's noise (a spread of 4 units) is still a rest
+    text = wizard_step_export(ServoParams(supply_voltage_v=12.0), 300.0, 2000.0, goal=800, noise_units=1.0,
+                              seed=1).splitlines()
+    path.write_text("\n".join(text) + "\n", encoding="utf-8")
+    with pytest.raises(ValueError, match=r"comes to rest at 79\d, 29\d units from the default goal 500"):
+        load_input(parse_args([str(path), "--out", str(tmp_path / "o")]), ServoParams())
+    # cut off while still moving away from 500, past it: that was no step to 500
+    text = wizard_step_export(ServoParams(supply_voltage_v=12.0), 300.0, 2000.0, goal=900).splitlines()
+    cut = next(k for k, line in enumerate(text) if line[:1].isdigit() and int(line.split(",")[1]) > 700)
+    path.write_text("\n".join(text[:cut + 1]) + "\n", encoding="utf-8")
+    with pytest.raises(ValueError, match=r"ends moving away from the default goal 500, at 7\d\d"):
+        load_input(parse_args([str(path), "--out", str(tmp_path / "o")]), ServoParams())
     # an export that ends mid-move shows no rest at all, so nothing about its goal: taken as a step to 500, as before
     text = wizard_step_export(ServoParams(supply_voltage_v=12.0), 300.0, 2000.0, goal=500).splitlines()
     cut = next(k for k, line in enumerate(text) if line[:1].isdigit() and int(line.split(",")[1]) > 300)
@@ -227,4 +247,4 @@ def test_the_help_says_which_supply_another_ax_models_export_gets(capsys):
     help_text = " ".join(capsys.readouterr().out.split())
     assert "another AX model's Wizard export (an AX-18A's) that model's served parameters as --params, so its served " \
            "supply" in help_text
-    assert "a trace CSV without a voltage column" in help_text
+    assert "in place of a recorded one" in help_text
