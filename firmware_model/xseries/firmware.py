@@ -493,7 +493,9 @@ class XFirmware:
             # would cross Temperature Limit on the way (then step, so the error comes on time).
             power_w = self.physics.current_a ** 2 * self.resistance_ohm
             settles_c = self.thermal.ambient_c + power_w * self.thermal.thermal_resistance_k_w
-            if settles_c <= self._cmd.temperature_limit or not self._cmd.shutdown & HW_ERROR_OVERHEATING:
+            # (nor when already past it: a servo rebooted hot detects Overheating again at its first step)
+            limit_c = self._cmd.temperature_limit
+            if max(settles_c, self.temperature_c) <= limit_c or not self._cmd.shutdown & HW_ERROR_OVERHEATING:
                 self._relax_temperature(settles_c, n * step_s)
                 self._steps += n
                 self._check_readings()
@@ -552,11 +554,12 @@ class XFirmware:
                     self._traj_pulses, self._traj_velocity_pulses_s, self._traj_accel_pulses_s2 = self._profile.at(
                         self.time_s - self._profile_start_s
                     )
-                demand = self._position_pid()
                 if mode == OperatingMode.CURRENT_BASED_POSITION:
                     limit_units = min(abs(cmd.goal_current), cmd.current_limit)
+                    demand = self._position_pid(limit_units)
                     pwm, saturated = self._current_loop(min(max(demand, -limit_units), limit_units), pwm_limit, sign)
                 else:
+                    demand = self._position_pid(pwm_limit)
                     saturated = abs(demand) >= pwm_limit
                     pwm = min(max(demand, -pwm_limit), pwm_limit)
             elif mode == OperatingMode.VELOCITY:
@@ -587,8 +590,13 @@ class XFirmware:
             and self._state() == before
         )
 
-    def _position_pid(self) -> float:
-        """PID plus feed-forward on the trajectory: PWM units (or current units in current-based position), unclipped."""
+    def _position_pid(self, limit: float) -> float:
+        """PID plus feed-forward on the trajectory: PWM units (or current units in current-based position), unclipped.
+
+        ``limit``: what the output is clipped to (Goal PWM within PWM Limit; Goal Current within Current Limit in
+        current-based position), where the integral stops growing: held to full scale instead, it wound up behind
+        a lowered Goal PWM or Goal Current while a load held the shaft back, and overshot when the load let go.
+        """
         cmd = self._cmd
         error = self._traj_pulses - self._present_pulses()
         difference = error - self._prev_error
@@ -603,8 +611,7 @@ class XFirmware:
         if cmd.position_i_gain:
             ki = scale * cmd.position_i_gain / 65536.0
             integral = self._integral + error
-            limit = max(cmd.current_limit, 1) if cmd.operating_mode == OperatingMode.CURRENT_BASED_POSITION else PWM_FULL_SCALE
-            if abs(output + ki * integral) < limit or integral * error < 0:
+            if abs(output + ki * integral) < max(limit, 1) or integral * error < 0:
                 self._integral = integral  # anti-windup: no further integration while saturated
             output += ki * self._integral
         return output

@@ -377,6 +377,39 @@ def test_overload_shuts_down_and_reboot_clears_it():
     assert servo.sense().torque_enable == 1
 
 
+def test_a_servo_rebooted_hotter_than_its_limit_reports_overheating_again_at_rest():
+    """Rebooted while still past Temperature Limit, with the torque off and the shaft still, the servo took the
+    closed-form path of a servo at rest, which only looked for a temperature climbing across the limit: Hardware
+    Error Status read 0 for the minute it took to cool, and a torque-on was taken."""
+    servo, cmd = make(torque_enable=0)
+    servo.temperature_c = cmd.temperature_limit + 15.0
+    run(servo, 0.01)
+    assert servo.sense().hardware_error_status == HW_ERROR_OVERHEATING
+    servo.reboot()
+    run(servo, 1.0)
+    hot = servo.sense()
+    assert hot.present_temperature > cmd.temperature_limit and hot.hardware_error_status == HW_ERROR_OVERHEATING
+
+
+@pytest.mark.parametrize(("mode", "limit"), [(OperatingMode.POSITION, {"goal_pwm": 150}),
+                                              (OperatingMode.CURRENT_BASED_POSITION, {"goal_current": 100})])
+def test_the_position_integral_stops_at_a_lowered_goal_pwm_or_goal_current(mode, limit):
+    """The integral stopped only at full scale (885, or Current Limit): held back by a load the lowered Goal PWM or
+    Goal Current could not beat, it wound up, and once let go the shaft overshot its goal by 79 and 316 pulses,
+    where without integral action it overshoots by 9 and 200 (the drive's own swing at that limit)."""
+
+    def overshoot(i_gain: int) -> int:
+        servo, cmd = make(torque_enable=1, operating_mode=mode, position_i_gain=i_gain, **limit)
+        goal = servo.sense().present_position
+        servo.set_external_torque(-1.0 if mode == OperatingMode.POSITION else -0.6)
+        run(servo, 3.0)
+        assert goal - servo.sense().present_position > 300  # held well back: the drive at its lowered limit
+        servo.set_external_torque(0.0)
+        return max(s.present_position for s in run(servo, 2.0)) - goal
+
+    assert overshoot(2000) <= overshoot(0) + 10
+
+
 def test_overload_not_selected_by_shutdown_is_not_reported():
     servo, cmd = make(torque_enable=1, shutdown=0x04, overload_time_s=0.5)
     write(servo, cmd, goal_position=servo.sense().present_position + 1000)
