@@ -173,6 +173,16 @@ def _firmware(servo: Any) -> Any:
     return getattr(getattr(servo, "plant", None), "firmware", None)
 
 
+def _as_a_request_finds_it(holder: Any) -> None:
+    """Bring ``holder``'s servos to where a client's request would find them now (its ``advance``: a write's
+    consequence shown, as the firmware's loop runs before the next packet, and the clock's time reached).
+
+    Why: read straight from the table, a register lagged a write until the next packet or step (Torque Enable 0
+    beside the old Present PWM and Current; Present Position without a new Homing Offset), where a client's own
+    read, a moment later, saw the consequence."""
+    holder.advance()
+
+
 def _servo_with(bus: AnyBus, servo_id: int, name: str, protocol: float | None = None) -> tuple[Any, Any]:
     """:func:`_find`; KeyError naming the register its model's table lacks."""
     holder, servo = _find(bus, servo_id, protocol)
@@ -616,7 +626,13 @@ class VirtualBus:
 
         ``protocol``: 1.0 or 2.0, needed on a mixed wire for an ID both protocols have.
         """
-        return self.call(lambda bus: _servo_with(bus, servo_id, name, protocol)[1].table.get(name))
+
+        def _read(bus: AnyBus) -> int:
+            holder, servo = _servo_with(bus, servo_id, name, protocol)
+            _as_a_request_finds_it(holder)
+            return servo.table.get(name)
+
+        return self.call(_read)
 
     def write(self, servo_id: int, name: str, value: int, *, protocol: float | None = None) -> None:
         """Set a register as the firmware would (no access or range check); an ``id`` write moves the servo."""
@@ -635,7 +651,9 @@ class VirtualBus:
         """Every register by name."""
 
         def _table(bus: Bus) -> dict[str, int]:
-            table = _find(bus, servo_id, protocol)[1].table
+            holder, servo = _find(bus, servo_id, protocol)
+            _as_a_request_finds_it(holder)
+            table = servo.table
             return {e.name: table.get(e.name) for e in table.layout.entries}
 
         return self.call(_table)

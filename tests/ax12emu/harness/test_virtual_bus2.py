@@ -122,6 +122,23 @@ def test_a_current_loop_driven_backwards_hard_still_obeys_its_goal(servo, mode, 
         assert abs(bus.angle_deg(1) - stopped_at) < 1.0, (start, stopped_at, bus.angle_deg(1))  # it ran ~190 deg/s
 
 
+def test_read_and_table_show_a_writes_consequence_as_a_clients_next_read_would():
+    """Straight from the table, they lagged a write until the next packet or step: Torque Enable 0 beside the old
+    Present PWM and Current, Present Position without the Homing Offset just written."""
+    with VirtualBus([1], servo="xm430-w350", transport="inprocess", virtual_time=True) as bus:
+        bus.write(1, "operating_mode", 1)  # velocity
+        bus.write(1, "torque_enable", 1)
+        bus.write(1, "goal_velocity", 100)
+        bus.step(0.5)
+        assert bus.read(1, "present_pwm") != 0
+        bus.write(1, "torque_enable", 0)
+        assert (bus.read(1, "present_pwm"), bus.read(1, "present_current")) == (0, 0)
+        bus.step(0.5)
+        at = bus.read(1, "present_position")
+        bus.write(1, "homing_offset", 500)
+        assert bus.table(1)["present_position"] == at + 500
+
+
 def test_served_on_a_pty_too():
     """The same servos behind a pty, at another start baud (baud_bps)."""
     with VirtualBus([3], servo="xl330-m077", baud_bps=1_000_000) as bus:
