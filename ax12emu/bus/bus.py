@@ -152,6 +152,16 @@ class Bus(ServosById[VirtualServo]):
             self.faults.after_physics()
         return moved
 
+    def catch_up_for_request(self, now_s: float | None = None) -> None:
+        """Bring the physics to where a request at ``now_s`` (default: the clock's present) finds it: to that time
+        and, after a packet that wrote registers, one control step past it (``Plant.catch_up``), so it sees the
+        consequence of the writes before it."""
+        if now_s is None:
+            now_s = self.clock.now_s()
+        self.plant.catch_up(now_s - self.request_lag_s, now_s)
+        if self.faults is not None:
+            self.faults.after_physics()
+
     def advance_in_pieces(self) -> Iterator[None]:
         """:meth:`advance` in the plant's pieces (see ``Plant.tick``), for a serving loop to interleave with packets."""
         yield from self.plant.tick(self.clock.now_s())
@@ -227,10 +237,8 @@ class Bus(ServosById[VirtualServo]):
         sees the consequence of the writes before it, as on a real servo.
         """
         now_s = self.clock.now_s()
-        self.plant.catch_up(now_s - self.request_lag_s, now_s)
+        self.catch_up_for_request(now_s)
         faults = self.faults
-        if faults is not None:
-            faults.after_physics()
         targets = self.servos if packet.id == BROADCAST_ID else self._by_id.get(packet.id, ())
         debug = log.isEnabledFor(logging.DEBUG)
         if debug and (targets or self.logs_every_packet):  # inside an MX wire: its packets are the MX bus's to log

@@ -180,7 +180,10 @@ def _as_a_request_finds_it(holder: Any) -> None:
     Why: read straight from the table, a register lagged a write until the next packet or step (Torque Enable 0
     beside the old Present PWM and Current; Present Position without a new Homing Offset), where a client's own
     read, a moment later, saw the consequence."""
-    holder.advance()
+    if isinstance(holder, Bus):  # the AX-12 bus takes a write's step where a request comes (its advance only what is due)
+        holder.catch_up_for_request()
+    else:
+        holder.advance()
 
 
 def _servo_with(bus: AnyBus, servo_id: int, name: str, protocol: float | None = None) -> tuple[Any, Any]:

@@ -48,7 +48,7 @@ from .nuisance import first_movement_onset, first_movement_row, locate_onset
 from .output import json_safe, verdict_json, verdict_text, write_outputs
 from .schedule import CONTROL_STEP_S
 from .search import Diagnosis, diagnose
-from .trace import REST_READINGS, Trace, TraceFormatError, check_span, read_trace, rest_level
+from .trace import Trace, TraceFormatError, check_span, read_trace, rest_level
 from .wizard import (
     ITEM_COLUMNS,
     SPEED_LIMITED_SHARE,
@@ -78,9 +78,11 @@ _TRACE_OPTIONS = ("voltage",)
 #: (the e-manual's defaults, 1 + 32; the shared real steps rest 1-2 units short of 500).  A recording resting
 #: farther from the default goal was stepped to another one.
 SETTLES_WITHIN_UNITS = POWER_UP["cw_compliance_margin"] + POWER_UP["cw_compliance_slope"]
-#: How far an export's last few readings may move and it still be taken as at rest: the pot's noise puts a still
-#: shaft's reading a unit or two either way (:func:`.trace.rest_level`), and a move covers tens of units a row.
-END_STILL_UNITS = 4
+#: An export ends moving when its last MOVING_READINGS readings go one way only and cover MOVING_UNITS or more: a
+#: still shaft's readings wander a unit or two either way (:func:`.trace.rest_level`) and creep by one, eight of
+#: them in one direction by chance hardly ever; a move covers that in a row or a few, even at a low Moving Speed.
+MOVING_READINGS = 8
+MOVING_UNITS = 3
 
 
 @dataclass
@@ -219,12 +221,16 @@ def _check_default_goal(ex: WizardExport) -> None:
     if abs(off) <= SETTLES_WITHIN_UNITS:
         return
     # An export cut off mid-move, still heading for the default goal from short of it, says nothing against it;
-    # one that rests (its last readings within a pot's noise) or has passed the goal and goes on does.
-    last = readings[-REST_READINGS:]
+    # one that rests or has passed the goal and goes on does.  Moving: its last readings go one way, never back,
+    # and far enough that a pot's noise (a unit or two either way, and a still shaft's creep of one) cannot.
+    last = readings[-MOVING_READINGS:]
+    steps = np.diff(last)
     heading = float(last[-1] - last[0])
-    if heading * off < 0 and abs(heading) > END_STILL_UNITS:
+    monotone = bool(np.all(steps >= 0) or np.all(steps <= 0))
+    moving = monotone and abs(heading) >= MOVING_UNITS
+    if moving and heading * off < 0:
         return
-    if abs(heading) > END_STILL_UNITS:
+    if moving:
         where = f"ends moving away from the default goal {DEFAULT_GOAL}, at {last[-1]:g}"
     else:
         where = f"comes to rest at {end:g}, {abs(off):g} units from the default goal {DEFAULT_GOAL}"

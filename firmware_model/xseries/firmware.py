@@ -249,6 +249,9 @@ class XFirmware:
     def _reset_control(self) -> None:
         self._integral = 0.0
         self._prev_error = 0.0
+        #: The current loop held its duty at the PWM bound last step (Goal PWM in current-based position): the
+        #: position integral, whose output it could not deliver, stops growing as it does at the current bound.
+        self._drive_at_pwm_bound = False
         self._velocity_integral = 0.0
         self._current_correction = 0.0
 
@@ -556,8 +559,9 @@ class XFirmware:
                     )
                 if mode == OperatingMode.CURRENT_BASED_POSITION:
                     limit_units = min(abs(cmd.goal_current), cmd.current_limit)
-                    demand = self._position_pid(limit_units)
+                    demand = self._position_pid(limit_units, held=self._drive_at_pwm_bound)
                     pwm, saturated = self._current_loop(min(max(demand, -limit_units), limit_units), pwm_limit, sign)
+                    self._drive_at_pwm_bound = saturated
                 else:
                     demand = self._position_pid(pwm_limit)
                     saturated = abs(demand) >= pwm_limit
@@ -590,12 +594,13 @@ class XFirmware:
             and self._state() == before
         )
 
-    def _position_pid(self, limit: float) -> float:
+    def _position_pid(self, limit: float, held: bool = False) -> float:
         """PID plus feed-forward on the trajectory: PWM units (or current units in current-based position), unclipped.
 
         ``limit``: what the output is clipped to (Goal PWM within PWM Limit; Goal Current within Current Limit in
         current-based position), where the integral stops growing: held to full scale instead, it wound up behind
         a lowered Goal PWM or Goal Current while a load held the shaft back, and overshot when the load let go.
+        ``held``: the stage after it held its output at a bound of its own last step (the current loop at Goal PWM).
         """
         cmd = self._cmd
         error = self._traj_pulses - self._present_pulses()
@@ -611,7 +616,7 @@ class XFirmware:
         if cmd.position_i_gain:
             ki = scale * cmd.position_i_gain / 65536.0
             integral = self._integral + error
-            if abs(output + ki * integral) < max(limit, 1) or integral * error < 0:
+            if (abs(output + ki * integral) < max(limit, 1) and not held) or integral * error < 0:
                 self._integral = integral  # anti-windup: no further integration while saturated
             output += ki * self._integral
         return output

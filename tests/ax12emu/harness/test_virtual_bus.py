@@ -242,3 +242,16 @@ def test_seed_seeds_the_faults_a_fault_config_starts():
         assert bus.faults.seed == 9
     with pytest.raises(ValueError, match=r"seed=1 and faults=FaultConfig\(seed=2\) give two seeds"):
         VirtualBus(seed=1, faults=FaultConfig(drop=0.5, seed=2))
+
+
+def test_read_after_a_clients_write_shows_what_the_clients_next_read_would():
+    """The AX-12 bus's advance takes only steps already due, so read and table lagged a client's write (Moving 0
+    after a Goal Position write, where the client's own next read finds 1) until the next step."""
+    with VirtualBus([1], transport="inprocess", virtual_time=True) as bus:
+        port = serial.serial_for_url(bus.port, baudrate=1_000_000, timeout=0.5)
+        try:
+            port.write(encode_instruction(1, 0x03, bytes((30, 900 & 0xFF, 900 >> 8))))  # Goal Position 900
+            assert port.read(6) == encode_status(1, 0)
+            assert bus.read(1, "moving") == 1 and bus.table(1)["moving"] == 1
+        finally:
+            port.close()

@@ -226,6 +226,13 @@ def test_an_export_resting_far_from_the_default_goal_asks_for_it(tmp_path):
     path.write_text("\n".join(text) + "\n", encoding="utf-8")
     with pytest.raises(ValueError, match=r"comes to rest at 79\d, 29\d units from the default goal 500"):
         load_input(parse_args([str(path), "--out", str(tmp_path / "o")]), ServoParams())
+    # a rest whose last two readings alone seem to head for 500 (801 ... 796): the whole run of them says rest
+    rows = [k for k, line in enumerate(text) if line[:1].isdigit()]
+    for k, value in zip(rows[-5:], (801, 797, 798, 799, 796)):
+        text[k] = f"{text[k].split(',')[0]},{value}"
+    path.write_text("\n".join(text) + "\n", encoding="utf-8")
+    with pytest.raises(ValueError, match=r"comes to rest at 79\d, 29\d units from the default goal 500"):
+        load_input(parse_args([str(path), "--out", str(tmp_path / "o")]), ServoParams())
     # cut off while still moving away from 500, past it: that was no step to 500
     text = wizard_step_export(ServoParams(supply_voltage_v=12.0), 300.0, 2000.0, goal=900).splitlines()
     cut = next(k for k, line in enumerate(text) if line[:1].isdigit() and int(line.split(",")[1]) > 700)

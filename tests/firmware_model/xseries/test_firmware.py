@@ -392,16 +392,18 @@ def test_a_servo_rebooted_hotter_than_its_limit_reports_overheating_again_at_res
 
 
 @pytest.mark.parametrize(("mode", "limit"), [(OperatingMode.POSITION, {"goal_pwm": 150}),
-                                              (OperatingMode.CURRENT_BASED_POSITION, {"goal_current": 100})])
+                                              (OperatingMode.CURRENT_BASED_POSITION, {"goal_current": 100}),
+                                              (OperatingMode.CURRENT_BASED_POSITION, {"goal_pwm": 150})])
 def test_the_position_integral_stops_at_a_lowered_goal_pwm_or_goal_current(mode, limit):
     """The integral stopped only at full scale (885, or Current Limit): held back by a load the lowered Goal PWM or
     Goal Current could not beat, it wound up, and once let go the shaft overshot its goal by 79 and 316 pulses,
-    where without integral action it overshoots by 9 and 200 (the drive's own swing at that limit)."""
+    where without integral action it overshoots by 9 and 200 (the drive's own swing at that limit); in current-based
+    position the current loop's Goal PWM bound too (111 against 22)."""
 
     def overshoot(i_gain: int) -> int:
         servo, cmd = make(torque_enable=1, operating_mode=mode, position_i_gain=i_gain, **limit)
         goal = servo.sense().present_position
-        servo.set_external_torque(-1.0 if mode == OperatingMode.POSITION else -0.6)
+        servo.set_external_torque(-0.6 if "goal_current" in limit else -1.0)
         run(servo, 3.0)
         assert goal - servo.sense().present_position > 300  # held well back: the drive at its lowered limit
         servo.set_external_torque(0.0)
