@@ -86,11 +86,11 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..xseries.interface import OperatingMode
+from ..xseries.interface import POSITION_MODES
 
 __all__ = ["Trace", "TraceFormatError", "read_trace", "write_trace", "check_span", "MAX_ROWS", "MAX_SPAN_S", "REQUIRED", "OPTIONAL", "COLUMNS",
            "COMMAND_COLUMNS", "command_time_errors", "TraceColumns", "FORMATS", "X_COLUMNS", "X_META", "REST_READINGS",
-           "rest_level", "departures", "MetaKey", "x_meta_error", "SUPPLY_RATING_SHARE", "POSITION_MODES"]
+           "rest_level", "departures", "MetaKey", "x_meta_error", "SUPPLY_RATING_SHARE"]
 
 #: Columns every trace has, in the order the writer uses.
 REQUIRED = ("t", "goal_position", "moving_speed", "present_position")
@@ -169,8 +169,6 @@ FORMATS = {"ax": TraceColumns(REQUIRED, OPTIONAL, _INT_RANGES, COMMAND_COLUMNS),
 #: real XL330 pendulum logs ran at 7.4 V, 1.23 times its highest rating), while a supply off by half or more is a
 #: slip of unit (mV) or another servo's sheet.
 SUPPLY_RATING_SHARE = (0.5, 1.5)
-#: The operating modes the diagnosis replays: the position modes, whose command is Goal Position.
-POSITION_MODES = (OperatingMode.POSITION, OperatingMode.EXTENDED_POSITION, OperatingMode.CURRENT_BASED_POSITION)
 #: The position controller's registers' range (e-manual, X-series control table: Position P/I/D Gain(84, 82, 80),
 #: Feedforward 1st/2nd Gain(90, 88)).
 _GAIN_RANGE = (0, 16383)

@@ -73,6 +73,7 @@ from .interface import (
     HW_ERROR_INPUT_VOLTAGE,
     HW_ERROR_OVERHEATING,
     HW_ERROR_OVERLOAD,
+    POSITION_MODES,
     OperatingMode,
     XCommands,
     XSensed,
@@ -127,7 +128,6 @@ EXTENDED_GOAL_LIMIT = 1_048_575
 #: Position Control Mode accepts Homing Offset only within this range (e-manual "Homing Offset(20)").
 POSITION_MODE_HOMING_LIMIT = 1024
 
-_POSITION_MODES = (OperatingMode.POSITION, OperatingMode.EXTENDED_POSITION, OperatingMode.CURRENT_BASED_POSITION)
 _RAD_S_TO_VELOCITY_UNITS = 1.0 / (PULSE_RAD * VELOCITY_UNIT_PULSES_S)
 _INT32_MIN = -(2**31)
 _INT32_SPAN = 2**32
@@ -424,7 +424,7 @@ class XFirmware:
         if cmd.operating_mode == OperatingMode.VELOCITY:
             self._start_velocity_ramp(time_based)
             return
-        if cmd.operating_mode not in _POSITION_MODES:
+        if cmd.operating_mode not in POSITION_MODES:
             return
         planned = self._planned_from
         if planned is not None and planned[0] == self.time_s:
@@ -550,7 +550,7 @@ class XFirmware:
             pwm_limit = min(cmd.pwm_limit, PWM_FULL_SCALE) if not self._cut_errors else 0
             if mode != OperatingMode.PWM:
                 pwm_limit = min(abs(cmd.goal_pwm), pwm_limit)  # "Goal PWM ... is used to limit PWM value"
-            if mode in _POSITION_MODES:
+            if mode in POSITION_MODES:
                 if self.single_turn_position and mode == OperatingMode.POSITION:
                     self._keep_within_one_turn()
                 if self._profile is not None:
@@ -799,7 +799,7 @@ class XFirmware:
             present_current = int(round(current_a / self.current_unit_a))
         else:
             present_current = min(max(int(round(1000.0 * current_a / self.load_full_scale_a)), -1000), 1000)
-        position_mode = cmd.operating_mode in _POSITION_MODES
+        position_mode = cmd.operating_mode in POSITION_MODES
         profile_on = self._torque_on and position_mode and self._profile_running()
         status = self._profile_kind
         if profile_on:

@@ -29,6 +29,7 @@ __all__ = [
     "HW_ERROR_ELECTRICAL_SHOCK",
     "HW_ERROR_OVERLOAD",
     "OperatingMode",
+    "POSITION_MODES",
     "XCommands",
     "XSensed",
     "XServoModel",
@@ -52,6 +53,10 @@ class OperatingMode:
     EXTENDED_POSITION = 4
     CURRENT_BASED_POSITION = 5
     PWM = 16
+
+
+#: The modes whose command is Goal Position (the position controller runs in them).
+POSITION_MODES = (OperatingMode.POSITION, OperatingMode.EXTENDED_POSITION, OperatingMode.CURRENT_BASED_POSITION)
 
 
 @dataclass
