@@ -176,8 +176,7 @@ def load_input(args: argparse.Namespace, params: ServoParams, say=lambda msg: No
         facts = {"format": "trace", "rows": len(trace), "records_command_times": trace.records_command_times}
         trace, supply = _trace_supply(trace, args, params, notes, facts)
         return Input(trace, "trace", notes, facts, supply)
-    export = read_wizard(args.trace)
-    check_span(export.t_s, args.trace)
+    export = read_wizard(args.trace)  # checked against the workflow's limits as it is read (check_span)
     return _wizard_input(export, args, params, say)
 
 
