@@ -369,19 +369,15 @@ def _open_live(args: argparse.Namespace, server, transport, bus):
         bus.close()
         raise SystemExit(2) from None
     except OSError as exc:
+        from ax12emu.serve.transports.tcp import address_error
+
         transport.close()
         bus.close()
-        raise _naming("--web", getattr(args, "web_address", None) or ("", ""), exc) from None
+        raise address_error("--web", getattr(args, "web_address", None) or ("", ""), exc) from None
     except BaseException:
         transport.close()
         bus.close()
         raise
-
-
-def _naming(flag: str, address: tuple, exc: OSError) -> OSError:
-    """``exc`` saying which flag's address it is about (``--tcp`` and ``--web`` each bind one), not the bare errno."""
-    host, port = address
-    return OSError(exc.errno, f"{flag} {host}:{port}: {exc.strerror or exc}")
 
 
 def _claimed(directory: str | Path) -> StateStore:
@@ -400,14 +396,14 @@ def _claimed(directory: str | Path) -> StateStore:
 def _open_transport(args: argparse.Namespace):
     """The pty (default) or TCP transport the serve flags ask for."""
     from ax12emu.serve import open_transport
-    from ax12emu.serve.transports.tcp import is_loopback
+    from ax12emu.serve.transports.tcp import address_error, is_loopback
 
     if args.tcp:
         host, port = args.tcp_address
         try:
             transport = open_transport("tcp", host=host, port=port)
         except OSError as exc:
-            raise _naming("--tcp", (host, port), exc) from None
+            raise address_error("--tcp", (host, port), exc) from None
         if not is_loopback(host):
             log.warning("serving on %s, reachable from other machines", transport.url)
         return transport

@@ -205,12 +205,6 @@ def _serve(server: Any, name: str, dropped: "_Dropped") -> None:
         _release(dropped.held)
 
 
-def _named(what: str, address: tuple[str, int], exc: OSError) -> OSError:
-    """``exc`` naming the argument whose address it is about (``tcp_address`` and ``web`` each bind one), errno kept."""
-    host, port = address
-    return OSError(exc.errno, f"{what} {host}:{port}: {exc.strerror or exc}")
-
-
 @dataclasses.dataclass(frozen=True)
 class _Held:
     """What a started VirtualBus holds open, none of which refers back to it: so a collected bus can still be
@@ -485,6 +479,7 @@ class VirtualBus:
     def _start_wire(self) -> None:
         """Open the pty or TCP port and start the serving thread on it."""
         from ax12emu.serve import BusServer, open_transport
+        from ax12emu.serve.transports.tcp import address_error, is_loopback
 
         if self.transport_name == "pty":
             self._transport = open_transport("pty")
@@ -493,8 +488,7 @@ class VirtualBus:
             try:
                 self._transport = open_transport("tcp", host=host, port=port)
             except OSError as exc:
-                raise _named("tcp_address", (host, port), exc) from None
-            from ax12emu.serve.transports.tcp import is_loopback
+                raise address_error("tcp_address", (host, port), exc) from None
 
             if not is_loopback(host):  # (allow_remote=True): said, as serve --allow-remote says it
                 log.warning("VirtualBus %s serving on %s, reachable from other machines", self.name, self._transport.url)
@@ -520,6 +514,7 @@ class VirtualBus:
             return
         from ax12emu.live import ByteTap, LiveView
         from ax12emu.live.buses import decoder_options
+        from ax12emu.serve.transports.tcp import address_error
 
         # Its threads hold the bus weakly: a page left open must not keep a dropped bus from being collected.
         controls = weakref.proxy(self)
@@ -536,7 +531,7 @@ class VirtualBus:
         try:
             self._live.start()
         except OSError as exc:
-            raise _named("web", self._web_address, exc) from None
+            raise address_error("web", self._web_address, exc) from None
 
     @property
     def web_url(self) -> str | None:

@@ -26,7 +26,7 @@ import time
 
 from .base import Transport
 
-__all__ = ["TcpTransport", "parse_host_port"]
+__all__ = ["TcpTransport", "parse_host_port", "address_error"]
 
 log = logging.getLogger(__name__)
 
@@ -56,6 +56,13 @@ HANGUP_GRACE_S = 0.002
 #: How long a client that has half-closed is kept for the replies it is owed: a servo answers within
 #: its Return Delay Time (at most 508 us), an injected ``--delay`` within its own bound.
 HALF_CLOSE_LINGER_S = 1.0
+
+
+def address_error(what: str, address: tuple, exc: OSError) -> OSError:
+    """``exc`` naming what asked for the address it could not bind (a flag, an argument: ``--tcp`` and ``--web``
+    each bind one, so the bare "Address already in use" left the user to guess which), errno kept."""
+    host, port = address
+    return OSError(exc.errno, f"{what} {host}:{port}: {exc.strerror or exc}")
 
 
 def is_loopback(host: str) -> bool:
